@@ -1,0 +1,134 @@
+"""File I/O with the workflow's guarantees: atomic writes and byte-stable encodings.
+
+Every writer goes through a temporary file in the target folder followed by
+``os.replace``, so a job killed mid-write never leaves a half-written output that a
+rerun could trust. JSON is written with sorted keys and fixed float formatting so
+that the same numbers give the same bytes.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def _atomic(path: str | Path, write: Callable[[Any], None], mode: str) -> None:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    try:
+        with os.fdopen(fd, mode) as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+    _atomic(path, lambda fh: fh.write(data), "wb")
+
+
+def atomic_write_text(path: str | Path, text: str) -> None:
+    _atomic(path, lambda fh: fh.write(text), "w")
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.floating):
+        return _jsonable(float(obj))
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, float):
+        if obj != obj or obj in (float("inf"), float("-inf")):
+            return None
+        # 12 significant digits: stable bytes, far below any tolerance of the project
+        return float(f"{obj:.12g}")
+    return obj
+
+
+def dumps_json(obj: Any) -> str:
+    return json.dumps(_jsonable(obj), indent=2, sort_keys=True) + "\n"
+
+
+def write_json(path: str | Path, obj: Any) -> None:
+    atomic_write_text(path, dumps_json(obj))
+
+
+def read_json(path: str | Path) -> Any:
+    with open(path) as fh:
+        return json.load(fh)
+
+
+def write_npy(path: str | Path, array: np.ndarray) -> None:
+    buf = io.BytesIO()
+    np.save(buf, np.ascontiguousarray(array), allow_pickle=False)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def write_image(path: str | Path, image: np.ndarray) -> None:
+    """Write a PNG (uint8 or uint16, gray or RGB) deterministically and atomically.
+
+    OpenCV's PNG encoder is used (fixed compression level, no timestamps), with RGB
+    input converted to OpenCV's BGR order.
+    """
+    import cv2  # noqa: PLC0415  (imported late: see DESIGN.md on cv2/pycolmap order)
+
+    image = np.ascontiguousarray(image)
+    if image.dtype not in (np.uint8, np.uint16):
+        raise TypeError(f"write_image needs uint8 or uint16, got {image.dtype}")
+    if image.ndim == 3 and image.shape[2] == 3:
+        image = image[:, :, ::-1]
+    ok, enc = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 3])
+    if not ok:
+        raise OSError(f"PNG encoding failed for {path}")
+    atomic_write_bytes(path, enc.tobytes())
+
+
+def read_image(path: str | Path) -> np.ndarray:
+    """Read a PNG as stored (uint8 or uint16; RGB order for colour)."""
+    import cv2  # noqa: PLC0415
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: image not found")
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise OSError(f"{path}: not a readable image")
+    if img.ndim == 3 and img.shape[2] == 4:
+        img = img[:, :, :3]
+    if img.ndim == 3:
+        img = img[:, :, ::-1]
+    return np.ascontiguousarray(img)
+
+
+def to_float(image: np.ndarray) -> np.ndarray:
+    """uint8/uint16 image to float32 in [0, 1]."""
+    if image.dtype == np.uint8:
+        return image.astype(np.float32) / 255.0
+    if image.dtype == np.uint16:
+        return image.astype(np.float32) / 65535.0
+    return image.astype(np.float32)
+
+
+def to_uint8(image: np.ndarray) -> np.ndarray:
+    return np.clip(np.rint(np.asarray(image) * 255.0), 0, 255).astype(np.uint8)

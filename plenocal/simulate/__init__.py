@@ -1,0 +1,1 @@
+"""The simulator: a physically based plenoptic 2.0 camera array with ground truth."""

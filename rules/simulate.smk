@@ -1,0 +1,1 @@
+"""Simulator and ground truth rules (synthetic datasets only)."""
