@@ -31,7 +31,6 @@ turn of every micro image (Keplerian relay). The tile centre ``u = o_i`` samples
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
