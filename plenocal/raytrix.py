@@ -27,6 +27,7 @@ entity declarations, external entities and DTD tricks.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -173,10 +174,19 @@ def parse_calib(text: str | bytes, source: str = "<string>") -> RayCalib:
         lens_base_x=bx, lens_base_y=by, lens_types=tuple(sorted(types, key=lambda t: t.id)),
         sub_grid_base=sub, tcp=_number(root, "tcp", source, required=False),
         is_real=int(float(is_real.text)) if is_real is not None and is_real.text else None,
-        distortion_xml=tostring(dist, encoding="unicode") if dist is not None else None,
-        k_matrix_xml=tostring(kmat, encoding="unicode") if kmat is not None else None,
+        distortion_xml=_canonical(dist) if dist is not None else None,
+        k_matrix_xml=_canonical(kmat) if kmat is not None else None,
         source=source,
     )
+
+
+def _canonical(el: Element) -> str:
+    """An element as compact XML text (whitespace between tags dropped), for round trips."""
+    el = copy.deepcopy(el)
+    for node in el.iter():
+        node.text = node.text.strip() if node.text and node.text.strip() else None
+        node.tail = None
+    return tostring(el, encoding="unicode")
 
 
 def read_calib(path: str | Path) -> RayCalib:

@@ -1,0 +1,72 @@
+"""Config validation: wrong types, unknown keys and impossible values stop the run
+with a message that names the key and the reason; defaults are filled in."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import pytest
+import yaml
+
+from plenocal.config import ConfigError, validate_config
+
+ROOT = Path(__file__).resolve().parents[1]
+BASE = yaml.safe_load((ROOT / "config.yaml").read_text())
+
+
+def _cfg():
+    return copy.deepcopy(BASE)
+
+
+def test_default_config_valid_and_defaults_filled():
+    c = validate_config(_cfg())
+    sim = c["datasets"]["synthetic"]["simulate"]
+    assert sim["render"]["samples"] >= 1
+    assert c["convert"]["view_spacing_px"] is None
+    assert c["sfm"]["seed"] == 0
+
+
+def test_tiny_config_valid():
+    validate_config(yaml.safe_load((ROOT / "tests" / "tiny" / "config.yaml").read_text()))
+
+
+@pytest.mark.parametrize("path, value, key, why", [
+    (("datasets", "synthetic", "views"), 4, "datasets.synthetic.views", "odd"),
+    (("datasets", "synthetic", "views"), "five", "datasets.synthetic.views", "integer"),
+    (("datasets", "synthetic", "simulate", "array", "step_m"), -0.01,
+     "datasets.synthetic.simulate.array.step_m", "> 0"),
+    (("datasets", "synthetic", "simulate", "main_lens", "focus_distance_m"), 0.03,
+     "datasets.synthetic.simulate.main_lens.focus_distance_m", "focal length"),
+    (("datasets", "synthetic", "simulate", "scene", "near_m"), 0.9,
+     "datasets.synthetic.simulate.scene.near_m", "far_m"),
+    (("datasets", "synthetic", "simulate", "scene", "near_m"), 0.36,
+     "datasets.synthetic.simulate.scene.near_m", "virtual depth"),
+    (("sfm", "mapper"), "magic", "sfm.mapper", "one of"),
+    (("convert", "tile_size"), 1.5, "convert.tile_size", "integer"),
+    (("scale", "low_percentile"), 95, "scale.low_percentile", "high_percentile"),
+])
+def test_bad_values_name_key_and_reason(path, value, key, why):
+    c = _cfg()
+    node = c
+    for p in path[:-1]:
+        node = node[p]
+    node[path[-1]] = value
+    with pytest.raises(ConfigError) as exc:
+        validate_config(c)
+    msg = str(exc.value)
+    assert key in msg and why in msg, msg
+
+
+def test_unknown_key_is_named():
+    c = _cfg()
+    c["convert"]["tile"] = 6
+    with pytest.raises(ConfigError, match=r"convert.*unknown key\(s\) tile"):
+        validate_config(c)
+
+
+def test_unknown_top_level_key():
+    c = _cfg()
+    c["colmap"] = {}
+    with pytest.raises(ConfigError, match="unknown key"):
+        validate_config(c)

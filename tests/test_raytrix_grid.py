@@ -1,0 +1,132 @@
+"""Raytrix calibration reader/writer and the microlens grid, against every fixture."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from plenocal.grid import MicrolensGrid
+from plenocal.raytrix import CalibError, calib_to_xml, parse_calib, read_calib
+
+# shared/ lies beside the repository (in CI too)
+FIXTURES = Path(__file__).resolve().parents[2] / "shared" / "fixtures" / "raytrix-calib"
+# sensor sizes of the published sequences (README of the fixtures; others 4K UHD)
+SIZES = {"ChessPieces": (3840, 2160), "Fujita2": (2048, 2048), "NagoyaFrog": (2048, 2048),
+         "TempleBoatGiantR32": (6464, 4852)}
+FILES = sorted(FIXTURES.glob("*.xml"))
+
+
+def test_fixtures_present():
+    assert len(FILES) == 7, f"expected the 7 Raytrix fixtures in {FIXTURES}"
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: p.stem)
+def test_fixture_grid_puts_lenses_where_the_file_says(path: Path):
+    calib = read_calib(path)
+    W, H = SIZES.get(path.stem, (3840, 2160))
+    grid = MicrolensGrid(calib, W, H)
+    # the lens at the grid origin is at image centre + offset (file y axis points up)
+    expected = np.array([(W - 1) / 2 + calib.offset[0], (H - 1) / 2 - calib.offset[1]])
+    d = np.linalg.norm(grid.centres - expected, axis=1)
+    assert d.min() < 1e-9
+    # every neighbour at exactly one diameter, in the six lattice directions
+    nb = grid.neighbours
+    have = nb >= 0
+    dist = np.linalg.norm(grid.centres[nb[have]] - np.repeat(grid.centres, 6, axis=0)[
+        have.ravel()], axis=1)
+    np.testing.assert_allclose(dist, calib.diameter, rtol=1e-9)
+    # lattice direction: the rotation in the file, modulo the 60 degrees of a hex grid
+    v = grid.neighbour_vectors[0]
+    angle_up = math.atan2(-v[1], v[0])  # back to the file's y-up frame
+    diff = (angle_up - calib.rotation) % (math.pi / 3)
+    assert min(diff, math.pi / 3 - diff) < 1e-6
+    # lenses cover the sensor densely: count ~ area / (D^2 sqrt(3)/2)
+    expected_n = W * H / (calib.diameter ** 2 * math.sqrt(3) / 2)
+    assert abs(len(grid) - expected_n) / expected_n < 0.05
+    # lens types: every lens has one; with three types each takes a third and a lens
+    # never shares its type with a direct neighbour
+    if len(calib.lens_types) == 3:
+        counts = np.bincount(grid.types, minlength=3)
+        assert (np.abs(counts / len(grid) - 1 / 3) < 0.02).all()
+        same = grid.types[nb[have]] == np.repeat(grid.types, 6)[have.ravel()]
+        assert not same.any()
+
+
+def test_type_offsets_follow_the_file():
+    """ChessPieces: type 1 is the right neighbour (+lens_base_x) of a type-0 lens."""
+    calib = read_calib(FIXTURES / "ChessPieces.xml")
+    grid = MicrolensGrid(calib, 3840, 2160)
+    origin = int(np.argmin(np.linalg.norm(grid.centres - grid.origin, axis=1)))
+    assert grid.types[origin] == 0
+    right = grid.neighbours[origin, 0]  # HEX_STEPS[0] = (1, 0): +x in the image
+    assert grid.centres[right, 0] > grid.centres[origin, 0]
+    assert grid.types[right] == 1
+
+
+def test_temple_boat_rotation_applied():
+    """A slightly rotated MLA: the lens 40 pitches right of the origin moves up by
+    40 D sin(rotation) (counter-clockwise in the file's y-up frame)."""
+    calib = read_calib(FIXTURES / "TempleBoatGiantR32.xml")
+    grid = MicrolensGrid(calib, 6464, 4852)
+    target = grid.origin + 40 * calib.diameter * np.array(
+        [math.cos(calib.rotation), -math.sin(calib.rotation)])
+    d = np.linalg.norm(grid.centres - target, axis=1)
+    assert d.min() < 1e-6
+    assert 40 * calib.diameter * math.sin(calib.rotation) > 1.0  # the test is not vacuous
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: p.stem)
+def test_round_trip(path: Path):
+    calib = read_calib(path)
+    again = parse_calib(calib_to_xml(calib), source="roundtrip")
+    assert again == calib
+
+
+GOOD = (FIXTURES / "Fujita2.xml").read_text() if FIXTURES.is_dir() else ""
+
+
+@pytest.mark.parametrize("mutate, key", [
+    (lambda s: s.replace("<diameter units=\"pix\">23.202295303345</diameter>", ""), "diameter"),
+    (lambda s: s.replace("23.202295303345", "twenty"), "diameter"),
+    (lambda s: s.replace("<rotation units=\"rad\">1.570796370506</rotation>",
+                         "<rotation units=\"rad\">nan</rotation>"), "rotation"),
+    (lambda s: s.replace("<max>3.200000047684</max>", ""), "depth_range"),
+    (lambda s: s.replace("</RayCalibData>", ""), "malformed"),
+    (lambda s: s.replace("RayCalibData", "Other"), "RayCalibData"),
+    (lambda s: s.replace("<lens_base_y units=\"lens\">\n    <x>0.866025388241</x>",
+                         "<lens_base_y units=\"lens\">\n    <x>0.2</x>"), "lens_base"),
+])
+def test_malformed_files_name_file_and_key(tmp_path: Path, mutate, key):
+    p = tmp_path / "bad.xml"
+    p.write_text(mutate(GOOD))
+    with pytest.raises(CalibError) as exc:
+        read_calib(p)
+    assert str(p) in str(exc.value)
+    assert key in str(exc.value)
+
+
+def test_entity_expansion_refused(tmp_path: Path):
+    bomb = ('<?xml version="1.0"?>\n<!DOCTYPE r [<!ENTITY a "aaaaaaaaaa">'
+            '<!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;">]>\n'
+            '<RayCalibData><diameter>&b;</diameter></RayCalibData>')
+    p = tmp_path / "bomb.xml"
+    p.write_text(bomb)
+    with pytest.raises(CalibError, match="unsafe XML"):
+        read_calib(p)
+
+
+def test_external_entity_refused(tmp_path: Path):
+    xxe = ('<?xml version="1.0"?>\n<!DOCTYPE r [<!ENTITY x SYSTEM "file:///etc/passwd">]>\n'
+           '<RayCalibData><diameter>&x;</diameter></RayCalibData>')
+    p = tmp_path / "xxe.xml"
+    p.write_text(xxe)
+    with pytest.raises(CalibError, match="unsafe XML"):
+        read_calib(p)
+
+
+def test_missing_file_is_a_clear_error(tmp_path: Path):
+    with pytest.raises(CalibError, match="cannot read"):
+        read_calib(tmp_path / "nope.xml")
