@@ -1,0 +1,167 @@
+"""Workflow benchmark (issue 8): where the time and memory go, side by side in one run.
+
+Runs the workflow in a scratch copy of the repository and prints (and writes to
+``BENCHMARKS.md`` sections) :
+
+* the full run from scratch with ``snakemake -j2``: wall time, per-rule time and
+  peak memory from the rules' ``benchmark:`` files;
+* a no-op rerun (nothing to do) and a rerun after a verification-only change;
+* optionally the growth of the run time with the work (``--scaling``): arrays of
+  3x2, 5x3 and 7x3 shots, and 3x3 versus 5x5 views per shot.
+
+Usage::
+
+    python bench/bench_workflow.py [--config config.yaml] [--scaling] [--out BENCHMARKS.md]
+
+Timings on these machines are noisy: compare figures from one run (ratios).
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import csv
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+WORKFLOW_FILES = ["Snakefile", "rules", "scripts", "config.schema.yaml", "profiles", "report",
+                  "envs"]
+
+
+def make_copy(dest: Path, config: dict) -> Path:
+    dest.mkdir(parents=True, exist_ok=True)
+    for name in WORKFLOW_FILES:
+        src = ROOT / name
+        if src.is_dir():
+            shutil.copytree(src, dest / name, dirs_exist_ok=True)
+        elif src.exists():
+            shutil.copy2(src, dest / name)
+    (dest / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
+    return dest
+
+
+def snakemake(workdir: Path, *args: str, log: Path | None = None) -> tuple[float, str]:
+    cmd = [sys.executable, "-m", "snakemake", "-j2", "--workflow-profile", "none", *args]
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    out = proc.stdout + proc.stderr
+    if log is not None:
+        log.write_text(out)
+    if proc.returncode != 0:
+        raise RuntimeError(f"snakemake {' '.join(args)} failed in {workdir}:\n{out[-4000:]}")
+    return wall, out
+
+
+def jobs_planned(out: str) -> int:
+    """Total job count from a dry run's job table (0 when nothing to do)."""
+    for line in out.splitlines():
+        parts = line.split()
+        if len(parts) == 2 and parts[0] == "total" and parts[1].isdigit():
+            return int(parts[1])
+    return 0
+
+
+def rule_benchmarks(workdir: Path) -> dict[str, dict[str, float]]:
+    """Sum of seconds, job count and peak max_rss (MB) per rule from benchmark files."""
+    stats: dict[str, dict[str, float]] = defaultdict(lambda: {"s": 0.0, "jobs": 0,
+                                                              "max_rss": 0.0})
+    for tsv in sorted(workdir.glob("results/*/benchmarks/*/*.tsv")):
+        rule = tsv.parent.name
+        with open(tsv) as fh:
+            rows = list(csv.DictReader(fh, delimiter="\t"))
+        for row in rows:
+            stats[rule]["s"] += float(row.get("s", 0) or 0)
+            stats[rule]["jobs"] += 1
+            rss = row.get("max_rss", "NA")
+            if rss not in ("NA", "", None):
+                stats[rule]["max_rss"] = max(stats[rule]["max_rss"], float(rss))
+    return dict(stats)
+
+
+def full_run(config: dict, label: str, scratch: Path) -> dict:
+    work = make_copy(scratch / label, config)
+    wall, _ = snakemake(work, log=scratch / f"{label}.log")
+    noop_wall, out = snakemake(work, "-n", log=scratch / f"{label}.noop.log")
+    planned = jobs_planned(out)
+    return {"work": work, "wall": wall, "noop_wall": noop_wall, "noop_jobs": planned,
+            "rules": rule_benchmarks(work)}
+
+
+def verification_change(work: Path, config: dict) -> tuple[float, int]:
+    cfg = copy.deepcopy(config)
+    cfg.setdefault("verify", {})
+    # a verification-only setting: the border excluded from PSNR
+    cfg["verify"]["psnr_border_px"] = int(cfg["verify"].get("psnr_border_px", 6)) + 1
+    (work / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    _, out = snakemake(work, "-n")
+    jobs = jobs_planned(out)
+    wall, _ = snakemake(work)
+    return wall, jobs
+
+
+def table(rules: dict[str, dict[str, float]]) -> str:
+    lines = ["| rule | jobs | total s | peak RSS MB |", "|---|---:|---:|---:|"]
+    for rule, s in sorted(rules.items(), key=lambda kv: -kv[1]["s"]):
+        lines.append(f"| {rule} | {int(s['jobs'])} | {s['s']:.1f} | {s['max_rss']:.0f} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--config", default=str(ROOT / "config.yaml"))
+    ap.add_argument("--scaling", action="store_true", help="also run 3x2/5x3/7x3, 3x3/5x5")
+    ap.add_argument("--out", default=str(ROOT / "BENCHMARKS.md"))
+    ap.add_argument("--keep", action="store_true", help="keep the scratch folder")
+    args = ap.parse_args()
+    config = yaml.safe_load(Path(args.config).read_text())
+    scratch = Path(tempfile.mkdtemp(prefix="plenocal-bench-"))
+    report = ["# Benchmarks", "", f"Config: `{args.config}`; 2 cores (`snakemake -j2`).", ""]
+    try:
+        res = full_run(config, "full", scratch)
+        print(f"full run from scratch: {res['wall']:.1f} s")
+        print(f"no-op rerun: {res['noop_wall']:.2f} s, {res['noop_jobs']} jobs planned")
+        print(table(res["rules"]))
+        vwall, vjobs = verification_change(res["work"], config)
+        print(f"rerun after a verification-only change: {vwall:.1f} s, {vjobs} jobs")
+        report += [
+            "## Full run", "",
+            f"* from scratch: **{res['wall']:.1f} s** (target <= 600 s)",
+            f"* no-op rerun (`snakemake -n` after the run): **{res['noop_wall']:.2f} s**, "
+            f"{res['noop_jobs']} jobs planned (target <= 5 s, 0 jobs)",
+            f"* rerun after a verification-only change: {vwall:.1f} s, {vjobs} jobs",
+            "", table(res["rules"]), "",
+        ]
+        if args.scaling:
+            rows = ["| shots | views | wall s | s per view |", "|---|---|---:|---:|"]
+            ds_name = next(iter(config["datasets"]))
+            for cols, rows_, n in [(3, 2, 5), (5, 3, 5), (7, 3, 5), (7, 3, 3)]:
+                cfg = copy.deepcopy(config)
+                ds = cfg["datasets"][ds_name]
+                ds["views"] = n
+                ds["simulate"]["array"].update(cols=cols, rows=rows_)
+                r = full_run(cfg, f"scale_{cols}x{rows_}_{n}", scratch)
+                n_views = (cols * rows_ + ds["simulate"]["handheld"]["count"]) * n * n
+                rows.append(f"| {cols}x{rows_} | {n}x{n} | {r['wall']:.1f} | "
+                            f"{r['wall'] / n_views:.3f} |")
+                print(rows[-1])
+            report += ["## Growth with the work", "", *rows, ""]
+    finally:
+        if not args.keep:
+            shutil.rmtree(scratch, ignore_errors=True)
+        else:
+            print(f"scratch kept in {scratch}")
+    Path(args.out).write_text("\n".join(report) + "\n")
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
