@@ -1,0 +1,532 @@
+"""Registration B: the N x N subaperture set of one plenoptic camera (Section II-C).
+
+Inputs: the datasheet (``camera.yaml``), the converter's ``disparity.json`` of every
+shot, and the multiview focal length ``F_m`` (pixels) from registration A. Output:
+``rig.json`` with every view's intrinsics ``K`` and its pose relative to the central
+view (``cam_to_central``, metres, OpenCV axes), the paper's symbols, the inverse
+check of Eqs. 2-3 and both view models:
+
+``paper``
+    Section II-C verbatim: principal point centred, views on a plane spaced
+    ``B = F tan(beta)``, turned by ``n alpha`` per axis towards the convergence
+    point at ``X_c = B / tan(alpha)`` (Eq. 4, :func:`plenocal.optics.view_extrinsic`).
+
+``exact``
+    What the optics of this converter give (:func:`exact_model`): no rotation,
+    centres spaced ``B_e = L q / s``, principal point shifted per step.
+
+Units: lengths in millimetres and angles in radians inside ``symbols``, ``paper``
+and ``exact``; poses in metres. Pixel centres at integer coordinates.
+
+Disparity sign. The paper's Eq. 1 (``X = B F / (C + d P)``) uses ``d = u_h - u_{h+1}``,
+the shift of a point from a view to its right-hand neighbour, counted positive to the
+left: ``d = F_m (B / X - tan(alpha))``, larger for nearer objects (negative beyond
+the convergence distance). The converter may report the opposite sign; see
+:func:`read_disparity`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from statistics import median
+
+import numpy as np
+import yaml
+
+from plenocal import optics as o
+from plenocal.camera import PinholeCamera, intrinsics, invert_pose, rotation_angle_deg
+from plenocal.io import read_json
+from plenocal.viewgeom import central_view, parse_view, view_names, view_position
+
+RIG_MODELS = ("exact", "paper")
+
+
+# ---------------------------------------------------------------------------
+# Inputs
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Datasheet:
+    """What ``camera.yaml`` gives (millimetres)."""
+
+    pixel_size: float  # p
+    sensor_width: int
+    sensor_height: int
+    focus_distance: float  # X_o
+    focal_length_nominal: float  # main lens, nominal (information only: F comes from F_m P)
+    mla_pitch: float  # D, physical
+    f_numbers: tuple[float, ...]
+    k: float
+    sensor_distance: float | None  # s, if the datasheet gives it
+    array_step: float | None
+    near: float | None  # measured X_n
+    far: float | None  # measured X_f
+
+
+def _need(doc: Mapping, path: str, source: str | Path):
+    cur: object = doc
+    for part in path.split("."):
+        if not isinstance(cur, Mapping) or part not in cur:
+            raise ValueError(f"{source}: missing key {path!r} (the datasheet must give it; "
+                             "see plenocal/rig.py read_datasheet for the expected keys)")
+        cur = cur[part]
+    return cur
+
+
+def _opt(doc: Mapping, path: str):
+    cur: object = doc
+    for part in path.split("."):
+        if not isinstance(cur, Mapping) or part not in cur or cur[part] is None:
+            return None
+        cur = cur[part]
+    return cur
+
+
+def read_datasheet(path: str | Path) -> Datasheet:
+    """Read ``camera.yaml``: pixel_size_mm, sensor_width_px, sensor_height_px,
+    main_lens.{focus_distance_mm, focal_length_mm}, mla.{pitch_mm, f_numbers, k,
+    sensor_distance_mm (optional)}, array.step_mm, scene.{near_mm, far_mm}."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: camera datasheet not found (camera.yaml is written "
+                                "by the simulator, or put next to a real capture's calib.xml)")
+    with open(path) as fh:
+        doc = yaml.safe_load(fh) or {}
+    fn = _need(doc, "mla.f_numbers", path)
+    fns = tuple(float(x) for x in (fn if isinstance(fn, list | tuple) else [fn]))
+    opt_f = lambda key: None if _opt(doc, key) is None else float(_opt(doc, key))  # noqa: E731
+    ds = Datasheet(
+        pixel_size=float(_need(doc, "pixel_size_mm", path)),
+        sensor_width=int(_need(doc, "sensor_width_px", path)),
+        sensor_height=int(_need(doc, "sensor_height_px", path)),
+        focus_distance=float(_need(doc, "main_lens.focus_distance_mm", path)),
+        focal_length_nominal=float(_opt(doc, "main_lens.focal_length_mm") or float("nan")),
+        mla_pitch=float(_need(doc, "mla.pitch_mm", path)),
+        f_numbers=fns,
+        k=float(_need(doc, "mla.k", path)),
+        sensor_distance=opt_f("mla.sensor_distance_mm"),
+        array_step=opt_f("array.step_mm"),
+        near=opt_f("scene.near_mm"),
+        far=opt_f("scene.far_mm"),
+    )
+    if ds.pixel_size <= 0 or ds.mla_pitch <= 0 or ds.focus_distance <= 0:
+        raise ValueError(f"{path}: pixel_size_mm, mla.pitch_mm and main_lens.focus_distance_mm "
+                         "must be positive")
+    return ds
+
+
+@dataclass(frozen=True)
+class Conversion:
+    """What the converter reports for one shot (``disparity.json``).
+
+    ``d_min``/``d_max`` are in the paper's sign convention (see the module docstring):
+    ``d_max`` belongs to the nearest object."""
+
+    d_min: float
+    d_max: float
+    q: float  # view spacing on the sensor, pixels
+    tile: float  # T, output pixels per micro-image pitch
+    pitch_px: float  # D, micro-image pitch, sensor pixels
+    safe_diameter_px: float  # D'
+    width: int  # view size
+    height: int
+    n_views: int | None = None
+
+
+_ALIASES = {
+    "d_min": ("D_min", "d_min", "disparity_min"),
+    "d_max": ("D_max", "d_max", "disparity_max"),
+    "q": ("q_px", "q", "view_spacing_px"),
+    "tile": ("tile", "T", "tile_size"),
+    "pitch_px": ("D_px", "diameter_px", "pitch_px", "micro_image_pitch_px", "D"),
+    "safe_diameter_px": ("safe_diameter_px", "D_safe_px", "D_safe", "D'"),
+    "width": ("width", "view_width"),
+    "height": ("height", "view_height"),
+    "n_views": ("n_views", "views", "N"),
+}
+
+
+def _lookup(doc: Mapping, name: str, source: str | Path, required: bool = True):
+    for key in _ALIASES[name]:
+        if key in doc and doc[key] is not None:
+            return doc[key]
+    if required:
+        raise ValueError(f"{source}: missing {name} (one of the keys "
+                         f"{', '.join(_ALIASES[name])}); rerun the convert rule")
+    return None
+
+
+def disparity_sign(doc: Mapping, source: str | Path) -> float:
+    """+1 if the file's disparities follow the paper (nearer = larger, ``u_h - u_{h+1}``),
+    -1 if they are view shifts ``u_{h+1} - u_h`` (nearer = smaller).
+
+    Read from a key ``convention`` (or ``sign_convention``/``disparity_convention``):
+    ``"paper"``, ``"nearer_positive"``, ``"u_left_minus_u_right"`` -> +1;
+    ``"shift"``, ``"view_shift"``, ``"u_right_minus_u_left"``, ``"farther_positive"`` -> -1.
+    """
+    for key in ("convention", "sign_convention", "disparity_convention"):
+        if key in doc:
+            value = str(doc[key]).strip().lower()
+            break
+    else:
+        raise ValueError(f"{source}: no 'convention' key saying which sign the disparities "
+                         "D_min/D_max use ('paper': u_h - u_(h+1), larger for nearer objects; "
+                         "'shift': u_(h+1) - u_h)")
+    if value in ("paper", "nearer_positive", "u_left_minus_u_right", "u_h - u_h+1"):
+        return 1.0
+    if value in ("shift", "view_shift", "u_right_minus_u_left", "farther_positive",
+                 "u_h+1 - u_h"):
+        return -1.0
+    raise ValueError(f"{source}: unknown disparity convention {value!r} (use 'paper' or "
+                     "'shift')")
+
+
+def read_disparity(path: str | Path) -> Conversion:
+    """Read one shot's ``disparity.json`` and convert its range to the paper's sign."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: disparity.json not found; run the convert rule first")
+    doc = read_json(path)
+    sign = disparity_sign(doc, path)
+    a = sign * float(_lookup(doc, "d_min", path))
+    b = sign * float(_lookup(doc, "d_max", path))
+    n = _lookup(doc, "n_views", path, required=False)
+    return Conversion(
+        d_min=min(a, b), d_max=max(a, b),
+        q=float(_lookup(doc, "q", path)),
+        tile=float(_lookup(doc, "tile", path)),
+        pitch_px=float(_lookup(doc, "pitch_px", path)),
+        safe_diameter_px=float(_lookup(doc, "safe_diameter_px", path)),
+        width=int(_lookup(doc, "width", path)),
+        height=int(_lookup(doc, "height", path)),
+        n_views=None if n is None else int(n),
+    )
+
+
+def combine_conversions(convs: Sequence[Conversion], names: Sequence[str] | None = None
+                        ) -> Conversion:
+    """One conversion for the dataset (same camera for every shot): the median of the
+    disparity range across shots; the geometry (q, T, D, size) must agree."""
+    if not convs:
+        raise ValueError("registration B needs the disparity.json of at least one shot")
+    first = convs[0]
+    names = list(names) if names is not None else [str(i) for i in range(len(convs))]
+    for name, c in zip(names, convs, strict=True):
+        if (c.width, c.height, c.tile) != (first.width, first.height, first.tile) or \
+                abs(c.q - first.q) > 1e-6 * max(1.0, abs(first.q)):
+            raise ValueError(f"shot {name}: view size / tile / q differ from shot {names[0]} "
+                             "- every shot must be converted with the same settings")
+    return Conversion(
+        d_min=float(median(c.d_min for c in convs)),
+        d_max=float(median(c.d_max for c in convs)),
+        q=first.q, tile=first.tile,
+        pitch_px=float(median(c.pitch_px for c in convs)),
+        safe_diameter_px=float(median(c.safe_diameter_px for c in convs)),
+        width=first.width, height=first.height, n_views=first.n_views,
+    )
+
+
+# ---------------------------------------------------------------------------
+# The paper's model (Section II-C, Eqs. 1-4)
+# ---------------------------------------------------------------------------
+
+
+def paper_symbols(ds: Datasheet, conv: Conversion, F_m: float, n_views: int) -> dict:
+    """Every symbol of Section II-C (mm, rad), with the converter's q.
+
+    ``P = p w/W``; for this converter ``w/W = D_px / T`` exactly (T output pixels per
+    micro-image pitch). ``q_paper`` is the paper's ``D' sin45 / N``; the views were cut
+    at the converter's ``q`` (equal unless convert.view_spacing_px overrides it)."""
+    p = ds.pixel_size
+    P = o.multiview_pixel_size(p, conv.pitch_px, conv.tile)
+    F = o.main_lens_focal(F_m, P)
+    F_n = o.middle_f_number(ds.f_numbers)
+    f = o.microlens_focal(F_n, ds.mla_pitch)
+    s = ds.sensor_distance if ds.sensor_distance is not None else o.mla_sensor_distance(ds.k, f)
+    e = o.focus_shift(F, ds.focus_distance)
+    t = o.sharp_image_distance(s, f)
+    q_paper = o.view_spacing(conv.safe_diameter_px, n_views)
+    q_px = conv.q
+    q = q_px * p
+    beta = o.ray_angle(q, s)
+    B = o.baseline(F, beta)
+    C = o.convergence_offset(e, t, beta)
+    alpha = o.rotation_angle(C, F)
+    X_c = o.convergence_distance(B, alpha)
+    X_n = o.object_distance(B, F, C, conv.d_max, P)
+    X_f = o.object_distance(B, F, C, conv.d_min, P)
+    return {
+        "p": p, "P": P, "P_sensor_ratio": p * ds.sensor_width / conv.width, "F_m_px": F_m,
+        "F": F, "F_n": F_n, "D": ds.mla_pitch, "f": f, "k": ds.k, "s": s, "e": e, "t": t,
+        "D_px": conv.pitch_px, "D_safe_px": conv.safe_diameter_px, "T": conv.tile,
+        "q_px": q_px, "q_paper_px": q_paper, "q": q, "beta": beta, "B": B, "C": C,
+        "alpha": alpha, "X_c": X_c, "X_o": ds.focus_distance, "N": n_views,
+        "D_min_px": conv.d_min, "D_max_px": conv.d_max, "X_n": X_n, "X_f": X_f,
+    }
+
+
+def inverse_check(sym: Mapping, near: float | None, far: float | None, B_model: float,
+                  alpha_model: float, tolerance: float = 0.05) -> dict:
+    """Eqs. 2-3: B and alpha from the MEASURED X_n/X_f and the disparities, against a
+    model's B and alpha (mm, rad); pass when both relative differences are within
+    ``tolerance``. Also Eq. 1's X_n/X_f against the measured ones (information)."""
+    if near is None or far is None:
+        return {"verdict": "skipped", "reason": "camera.yaml gives no scene.near_mm/far_mm"}
+    P, F = sym["P"], sym["F"]
+    if sym["D_max_px"] == sym["D_min_px"]:
+        return {"verdict": "skipped", "reason": "D_max equals D_min: no depth range measured"}
+    B2 = o.baseline_from_range(P, sym["D_max_px"], sym["D_min_px"], F, near, far)
+    a3 = o.alpha_from_range(B2, F, near, sym["D_max_px"], P)
+    rel_B = B_model / B2 - 1.0
+    rel_a = math.tan(alpha_model) / math.tan(a3) - 1.0 if a3 != 0 else float("inf")
+    ok = abs(rel_B) <= tolerance and abs(rel_a) <= tolerance
+    return {
+        "X_n_measured": near, "X_f_measured": far,
+        "B_eq2": B2, "alpha_eq3": a3, "B_model": B_model, "alpha_model": alpha_model,
+        "rel_diff_B": rel_B, "rel_diff_alpha": rel_a, "tolerance": tolerance,
+        "verdict": "pass" if ok else "fail",
+    }
+
+
+# ---------------------------------------------------------------------------
+# The exact model
+# ---------------------------------------------------------------------------
+
+
+def exact_model(sym: Mapping) -> dict:
+    """The view geometry that the optics of Fig. 2 give for this converter (mm, rad).
+
+    Derivation (thin lenses, OpenCV camera axes, main lens at z = 0, MLA at distance
+    ``L`` behind it, sensor ``s`` behind the MLA; :meth:`PlenopticOptics.chief_rays`).
+    A micro-image centre ``m`` is the central projection of its lens centre ``c``
+    from the main-lens centre: ``m = c (L + s) / L``. View (h, v) samples, in every
+    micro image, the sensor point ``x = m + delta`` with the same offset ``delta``
+    (``-h q p`` in x: the readout turns the image by 180 degrees). Its chief ray runs
+    from ``x`` through ``c`` with slope ``(c - x) / s`` and reaches the main lens at::
+
+        c + L (c - m - delta) / s = c + L (-c s / L - delta) / s = -L delta / s,
+
+    a point that does not depend on the lens: every chief ray of one view passes
+    through ONE point of the main-lens plane, which is the view's centre of
+    projection (a thin lens does not move the point where a ray crosses it). So the
+    views are not rotated; their centres lie on the main-lens plane, spaced
+
+        B_e = L q_mm / s      (+x for +h, +y for +v),
+
+    and after the main lens the slope of view (h, v)'s ray through its tile centre
+    ``o_i`` is ``-c/L + delta (L - F) / (s F)``. The first term is the central view's
+    pinhole with ``F_m = L T / D`` (so ``F_m P = L + s``, which gives ``L`` from
+    registration A's focal length: ``L = F_m P - s``); the second is a constant
+    direction offset, i.e. the principal point moves by
+
+        F_m B_e / Z0 pixels per step (+x for +h, +y for +v),  Z0 = F L / (L - F),
+
+    ``Z0`` being the distance of the plane conjugate to the MLA, where all views see a
+    point at the same pixel (zero disparity). ``F`` is the true main-lens focal length:
+    the lens images the focus plane ``X_o`` sharply ``t = s f/(s - f)`` in front of the
+    MLA, i.e. at ``L - t``, so ``F = X_o (L - t) / (X_o + L - t)``.
+
+    Relation to the paper: its ``B = F_paper tan(beta)`` uses ``F_paper = F_m P = L + s``
+    where the centres are ``L tan(beta)`` apart, so ``B_paper / B_e = (L + s) / L``; its
+    rotation ``alpha`` plays the role of the principal-point shift
+    (``tan(alpha_e) = shift / F_m = B_e / Z0``): a view turned by ``alpha`` and a view
+    with the principal point shifted by ``F_m tan(alpha)`` agree to first order in
+    alpha. The exact disparity between neighbours is ``F_m B_e (1/X - 1/Z0)``, exactly
+    Eq. 1 with ``B_e`` and ``alpha_e``; hence Eqs. 2-3 recover ``B_e`` and ``alpha_e``.
+    """
+    s, t, P, F_m, q = sym["s"], sym["t"], sym["P"], sym["F_m_px"], sym["q"]
+    L = F_m * P - s
+    X_o = sym["X_o"]
+    if L <= t:
+        raise ValueError(f"exact model: main lens-MLA distance L = F_m P - s = {L:.4g} mm is "
+                         f"not beyond the sharp image distance t = {t:.4g} mm; is registration "
+                         "A's focal length in multiview pixels?")
+    F_true = X_o * (L - t) / (X_o + L - t)
+    Z0 = F_true * L / (L - F_true)
+    B_e = L * q / s
+    pp_shift = F_m * B_e / Z0
+    alpha_e = math.atan(B_e / Z0)
+    X_n = X_f = None
+    if sym["D_max_px"] != -F_m * B_e / Z0:
+        X_n = F_m * B_e / (sym["D_max_px"] + F_m * B_e / Z0)
+    if sym["D_min_px"] != -F_m * B_e / Z0:
+        X_f = F_m * B_e / (sym["D_min_px"] + F_m * B_e / Z0)
+    return {
+        "L": L, "F_true": F_true, "e_true": L - t - F_true, "Z0": Z0, "B": B_e,
+        "pp_shift_px": pp_shift, "alpha_equivalent": alpha_e, "X_n": X_n, "X_f": X_f,
+        "B_paper_over_B": sym["B"] / B_e, "alpha_paper_over_alpha": sym["alpha"] / alpha_e,
+    }
+
+
+# ---------------------------------------------------------------------------
+# Views (Eq. 4) and the rig document
+# ---------------------------------------------------------------------------
+
+
+def view_cameras(model: str, n_views: int, width: int, height: int, F_m: float,
+                 B_mm: float, alpha: float = 0.0, pp_shift_px: float = 0.0
+                 ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """K and cam_to_central (metres) of every view ``r_c`` of an N x N set.
+
+    ``paper``: K centred, pose Eq. 4 ``[R(h alpha, v alpha) | (h B, v B, 0)]``.
+    ``exact``: no rotation, centre ``(h B, v B, 0)``, principal point
+    ``((W-1)/2 + h shift, (H-1)/2 + v shift)``."""
+    if model not in RIG_MODELS:
+        raise ValueError(f"rig model must be one of {', '.join(RIG_MODELS)} (got {model!r})")
+    cx0, cy0 = (width - 1) / 2.0, (height - 1) / 2.0
+    B = B_mm / 1000.0
+    out = {}
+    for name in view_names(n_views):
+        h, v = view_position(*parse_view(name), n_views)
+        if model == "paper":
+            K = intrinsics(F_m, cx0, cy0)
+            M = o.view_extrinsic(h, v, B, alpha)
+        else:
+            K = intrinsics(F_m, cx0 + h * pp_shift_px, cy0 + v * pp_shift_px)
+            M = np.eye(4)
+            M[:3, 3] = (h * B, v * B, 0.0)
+        out[name] = (K, M)
+    return out
+
+
+def depth_range_m(near_mm: float, far_mm: float, margin: float = 0.1) -> tuple[float, float]:
+    """The depth range written for the MPEG tools (metres): the scene range widened by
+    ``margin`` on each side (hand-held shots come closer or go farther than the array)."""
+    return near_mm * (1.0 - margin) / 1000.0, far_mm * (1.0 + margin) / 1000.0
+
+
+def build_rig(ds: Datasheet, convs: Sequence[Conversion], F_m: float, n_views: int,
+              model: str = "exact", tolerance: float = 0.05,
+              shot_names: Sequence[str] | None = None) -> dict:
+    """The content of ``rig.json`` (both models computed; ``model`` fills ``views``)."""
+    if model not in RIG_MODELS:
+        raise ValueError(f"config rig.model must be one of {', '.join(RIG_MODELS)} "
+                         f"(got {model!r})")
+    if not F_m > 0:
+        raise ValueError(f"registration A's focal length must be positive (got {F_m})")
+    conv = combine_conversions(convs, shot_names)
+    if conv.n_views is not None and conv.n_views != n_views:
+        raise ValueError(f"disparity.json says {conv.n_views} views per side, the config "
+                         f"{n_views}: convert again with the current config")
+    sym = paper_symbols(ds, conv, F_m, n_views)
+    ex = exact_model(sym)
+    check_paper = inverse_check(sym, ds.near, ds.far, sym["B"], sym["alpha"], tolerance)
+    check_exact = inverse_check(sym, ds.near, ds.far, ex["B"], ex["alpha_equivalent"],
+                                tolerance)
+    W, H = conv.width, conv.height
+    if model == "paper":
+        cams = view_cameras("paper", n_views, W, H, F_m, sym["B"], alpha=sym["alpha"])
+    else:
+        cams = view_cameras("exact", n_views, W, H, F_m, ex["B"], pp_shift_px=ex["pp_shift_px"])
+    near = ds.near if ds.near is not None else sym["X_n"]
+    far = ds.far if ds.far is not None else sym["X_f"]
+    if not (near and far and 0 < near < far):
+        raise ValueError(f"no usable depth range: near {near} mm, far {far} mm (give "
+                         "scene.near_mm/far_mm in camera.yaml)")
+    return {
+        "model": model,
+        "units": "m",
+        "width": W,
+        "height": H,
+        "n_views": n_views,
+        "focal_px": F_m,
+        "depth_range_m": list(depth_range_m(near, far)),
+        "views": {k: {"K": K, "cam_to_central": M} for k, (K, M) in cams.items()},
+        "symbols": sym,
+        "paper": {"B": sym["B"], "alpha": sym["alpha"], "X_c": sym["X_c"],
+                  "pp_shift_px": 0.0, "check": check_paper},
+        "exact": dict(ex, check=check_exact),
+        "check": check_exact if model == "exact" else check_paper,
+        "shots": list(shot_names) if shot_names is not None else None,
+        "datasheet": asdict(ds),
+        "disparity": asdict(conv),
+    }
+
+
+def read_rig(path: str | Path) -> dict:
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: rig.json not found; run the rig_b rule first")
+    return read_json(path)
+
+
+def rig_views(rig: Mapping) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """(K, cam_to_central) of every view of a ``rig.json`` document."""
+    return {k: (np.asarray(v["K"], dtype=float), np.asarray(v["cam_to_central"], dtype=float))
+            for k, v in rig["views"].items()}
+
+
+# ---------------------------------------------------------------------------
+# Comparison with ground truth (one N x N set)
+# ---------------------------------------------------------------------------
+
+
+def _slope(x: np.ndarray, y: np.ndarray) -> float:
+    A = np.stack([x, np.ones_like(x)], axis=1)
+    return float(np.linalg.lstsq(A, y, rcond=None)[0][0])
+
+
+def set_geometry(views: Mapping[str, tuple[np.ndarray, np.ndarray]], n_views: int,
+                 width: int, height: int) -> dict:
+    """Baseline, principal-point-equivalent shift and alpha-equivalent of one set.
+
+    ``views``: (K, pose relative to the central view, metres). The pp-equivalent of a
+    view is the pixel where the central view's optical axis direction lands in it
+    (K R^T (0, 0, 1)): the shifted principal point for the exact model,
+    ``c + F_m tan(h alpha)`` for the paper's rotated views; its slope per step gives
+    ``alpha_eq = atan(slope / f)``."""
+    hs, vs, xs, ys, us, ws, fs = [], [], [], [], [], [], []
+    cx0, cy0 = (width - 1) / 2.0, (height - 1) / 2.0
+    for name, (K, M) in views.items():
+        h, v = view_position(*parse_view(name), n_views)
+        d = M[:3, :3].T @ np.array([0.0, 0.0, 1.0])
+        uvw = K @ d
+        hs.append(h)
+        vs.append(v)
+        xs.append(M[0, 3])
+        ys.append(M[1, 3])
+        us.append(uvw[0] / uvw[2] - cx0)
+        ws.append(uvw[1] / uvw[2] - cy0)
+        fs.append(K[0, 0])
+    hs, vs = np.array(hs, float), np.array(vs, float)
+    Bx, By = _slope(hs, np.array(xs)), _slope(vs, np.array(ys))
+    px, py = _slope(hs, np.array(us)), _slope(vs, np.array(ws))
+    f = float(np.mean(fs))
+    return {"B_x_m": Bx, "B_y_m": By, "B_m": (Bx + By) / 2, "pp_shift_x_px": px,
+            "pp_shift_y_px": py, "pp_shift_px": (px + py) / 2, "focal_px": f,
+            "alpha_equivalent": math.atan((px + py) / 2 / f)}
+
+
+def compare_with_truth(rig: Mapping, truth: Mapping[str, PinholeCamera]) -> dict:
+    """Compare a ``rig.json`` document with ground-truth cameras of one N x N set
+    (``truth``: view name -> camera in any world frame, metres).
+
+    Both sets are expressed relative to their central view. Reports the baseline,
+    pp-equivalent shift and alpha-equivalent of each with relative errors, the RMSE
+    of the view centres (mm) and the largest rotation difference (degrees)."""
+    n = int(rig["n_views"])
+    W, H = int(rig["width"]), int(rig["height"])
+    centre = central_view(n)
+    missing = sorted(set(view_names(n)) - set(truth))
+    if missing:
+        raise ValueError(f"ground truth lacks views {', '.join(missing)} of the {n}x{n} set")
+    to_c = invert_pose(truth[centre].cam_to_world)
+    gt = {k: (truth[k].K, to_c @ truth[k].cam_to_world) for k in view_names(n)}
+    est = rig_views(rig)
+    g_gt = set_geometry(gt, n, W, H)
+    g_est = set_geometry(est, n, W, H)
+    d_c = np.array([est[k][1][:3, 3] - gt[k][1][:3, 3] for k in view_names(n)])
+    rot = [rotation_angle_deg(est[k][1][:3, :3], gt[k][1][:3, :3]) for k in view_names(n)]
+    return {
+        "truth": g_gt, "estimate": g_est,
+        "rel_err_B": g_est["B_m"] / g_gt["B_m"] - 1.0,
+        "rel_err_alpha": g_est["alpha_equivalent"] / g_gt["alpha_equivalent"] - 1.0
+        if g_gt["alpha_equivalent"] else None,
+        "err_pp_shift_px": g_est["pp_shift_px"] - g_gt["pp_shift_px"],
+        "centre_rmse_mm": float(np.sqrt((d_c ** 2).sum(axis=1).mean()) * 1000.0),
+        "rotation_max_deg": float(max(rot)),
+    }

@@ -1,0 +1,269 @@
+"""Registration B (Section II-C): the paper's symbols by hand, the exact model against
+the thin-lens chief rays, the inverse check of Eqs. 2-3, the two view models' first
+order agreement, and rig.json from files."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from plenocal import optics as o
+from plenocal import rig
+from plenocal.camera import PinholeCamera
+from plenocal.io import write_json
+
+SIN45 = math.sqrt(0.5)
+
+
+def datasheet(**kw) -> rig.Datasheet:
+    base = dict(pixel_size=0.0055, sensor_width=2048, sensor_height=1536, focus_distance=600.0,
+                focal_length_nominal=35.0, mla_pitch=0.13, f_numbers=(2.8,), k=5.0,
+                sensor_distance=None, array_step=10.0, near=470.0, far=740.0)
+    base.update(kw)
+    return rig.Datasheet(**base)
+
+
+def conversion(**kw) -> rig.Conversion:
+    base = dict(d_min=-4.5, d_max=-3.0, q=21.9 * SIN45 / 5, tile=6.0, pitch_px=23.9,
+                safe_diameter_px=21.9, width=301, height=225, n_views=5)
+    base.update(kw)
+    return rig.Conversion(**base)
+
+
+def test_paper_symbols_by_hand():
+    # p = 5.5 um, D = 0.13 mm, F_n 2.8, k = 5, X_o = 600 mm, F_m = 1800 px, T = 6,
+    # D_px = 23.9, N = 5, D' = D_px - 2
+    s = rig.paper_symbols(datasheet(), conversion(), 1800.0, 5)
+    P = 0.0055 * 23.9 / 6  # 0.021908333 mm
+    assert s["P"] == pytest.approx(P, rel=1e-12)
+    F = 1800 * P  # 39.435 mm
+    assert s["F"] == pytest.approx(39.435, rel=1e-12)
+    assert s["f"] == pytest.approx(0.364)
+    assert s["s"] == pytest.approx(0.455)
+    assert s["t"] == pytest.approx(1.82)
+    e = F * F / (600 - F)  # 2.7743 mm
+    assert s["e"] == pytest.approx(e, rel=1e-12)
+    q_px = 21.9 * SIN45 / 5  # 3.09713 px
+    assert s["q_px"] == pytest.approx(3.0971277, rel=1e-6)
+    assert s["q_paper_px"] == pytest.approx(q_px)
+    q = q_px * 0.0055
+    assert s["beta"] == pytest.approx(math.atan(q / 0.455), rel=1e-12)
+    B = F * q / 0.455  # 1.47636 mm
+    assert s["B"] == pytest.approx(1.4763599, rel=1e-6)
+    C = (e + 1.82) * q / 0.455
+    assert s["C"] == pytest.approx(C, rel=1e-12)
+    assert s["alpha"] == pytest.approx(math.atan(C / F), rel=1e-12)
+    assert s["X_c"] == pytest.approx(B * F / C, rel=1e-12)  # = F^2 / (e + t) = 338.5 mm
+    assert s["X_c"] == pytest.approx(F * F / (e + 1.82), rel=1e-12)
+    # Eq. 1 with the paper's sign (nearer = larger disparity)
+    assert s["X_n"] == pytest.approx(B * F / (C - 3.0 * P), rel=1e-12)
+    assert s["X_f"] == pytest.approx(B * F / (C - 4.5 * P), rel=1e-12)
+    assert s["X_n"] < s["X_f"]
+
+
+def test_middle_f_number_and_given_sensor_distance():
+    s = rig.paper_symbols(datasheet(f_numbers=(5.6, 2.8, 4.0), sensor_distance=0.65),
+                          conversion(), 1800.0, 5)
+    assert s["F_n"] == 4.0
+    assert s["f"] == pytest.approx(0.52)
+    assert s["s"] == 0.65
+    assert s["t"] == pytest.approx(0.65 * 0.52 / (0.65 - 0.52))
+
+
+def optics() -> o.PlenopticOptics:
+    return o.PlenopticOptics(0.035, 0.6, 130e-6, 2.8, 5.0, 5.5e-6, 2048, 1536)
+
+
+def true_inputs(opt: o.PlenopticOptics, T: float = 6.0, N: int = 5):
+    """Datasheet, conversion and F_m of a camera whose optics are exactly ``opt``;
+    the disparity range is the exact one for the scene 470-740 mm."""
+    D_px = opt.micro_image_pitch_px
+    F_m = opt.L * T / opt.mla_pitch  # the central view's focal length (see exact_model)
+    q_px = (D_px - 2) * SIN45 / N
+    ds = datasheet()
+    L, s = opt.L * 1e3, opt.s * 1e3
+    B_e = L * q_px * 0.0055 / s
+    Z0 = opt.mla_conjugate_distance * 1e3
+    disp = lambda Z: F_m * B_e * (1 / Z - 1 / Z0)  # noqa: E731  (paper sign)
+    conv = conversion(q=q_px, tile=T, pitch_px=D_px, safe_diameter_px=D_px - 2,
+                      d_min=disp(740.0), d_max=disp(470.0))
+    return ds, conv, F_m
+
+
+def test_exact_model_recovers_the_optics():
+    opt = optics()
+    ds, conv, F_m = true_inputs(opt)
+    sym = rig.paper_symbols(ds, conv, F_m, 5)
+    ex = rig.exact_model(sym)
+    assert ex["L"] == pytest.approx(opt.L * 1e3, rel=1e-12)
+    assert ex["F_true"] == pytest.approx(35.0, rel=1e-12)
+    assert ex["Z0"] == pytest.approx(opt.mla_conjugate_distance * 1e3, rel=1e-12)
+    assert ex["B_paper_over_B"] == pytest.approx((opt.L + opt.s) / opt.L, rel=1e-12)
+    # Eq. 1 of the exact model gives back the scene range the disparities came from
+    assert ex["X_n"] == pytest.approx(470.0, rel=1e-12)
+    assert ex["X_f"] == pytest.approx(740.0, rel=1e-12)
+
+
+@pytest.mark.parametrize("hv", [(1, 0), (-2, 1), (2, 2), (0, -1)])
+def test_exact_views_reproduce_the_chief_rays(hv):
+    """Every tile centre of view (h, v) is sampled along a chief ray of the thin-lens
+    model; the exact-model camera must image every point of that ray on that pixel."""
+    opt = optics()
+    T, N = 6.0, 5
+    ds, conv, F_m = true_inputs(opt, T, N)
+    doc = rig.build_rig(ds, [conv], F_m, N, model="exact")
+    h, v = hv
+    name = f"{v + 2}_{h + 2}"
+    K, M = rig.rig_views(doc)[name]
+    cam = PinholeCamera(K, M, conv.width, conv.height)
+    D_px = conv.pitch_px
+    centre = np.array([(opt.width - 1) / 2, (opt.height - 1) / 2])
+    ij = np.array([(i, j) for i in range(-30, 31, 5) for j in range(-20, 21, 5)], float)
+    lens = centre + ij * D_px
+    sensor = lens + np.array([h, v]) * conv.q
+    origins, dirs = opt.chief_rays(sensor, lens)
+    tile_centres = np.array([(conv.width - 1) / 2, (conv.height - 1) / 2]) + ij * T
+    for Z in (0.47, 0.6, 0.74):
+        X = origins + dirs * (Z / dirs[:, 2:])
+        uv, _ = cam.project(X)
+        np.testing.assert_allclose(uv, tile_centres, atol=1e-7)
+    # and the centre of projection is where all those rays cross the main lens
+    np.testing.assert_allclose(M[:3, 3], origins[0], atol=1e-15)
+
+
+def test_inverse_check_recovers_the_exact_model():
+    opt = optics()
+    ds, conv, F_m = true_inputs(opt)
+    doc = rig.build_rig(ds, [conv], F_m, 5, model="exact")
+    ck = doc["exact"]["check"]
+    assert ck["verdict"] == "pass"
+    assert ck["rel_diff_B"] == pytest.approx(0.0, abs=1e-10)
+    assert ck["rel_diff_alpha"] == pytest.approx(0.0, abs=1e-10)
+    # the paper's forward B is (L + s) / L too large (~1.2 %); its alpha uses
+    # F_m P = L + s (in F and in e) where the true focal length belongs: ~2.2 % large
+    pk = doc["paper"]["check"]
+    assert pk["rel_diff_B"] == pytest.approx((opt.L + opt.s) / opt.L - 1, rel=1e-9)
+    Fp = opt.L + opt.s
+    e_p = Fp ** 2 / (opt.focus_distance - Fp)
+    expected = ((e_p + opt.t) / Fp) / ((opt.L - opt.focal_length) / opt.focal_length) - 1
+    assert pk["rel_diff_alpha"] == pytest.approx(expected, rel=1e-6)
+    assert 0.015 < pk["rel_diff_alpha"] < 0.03
+    assert pk["verdict"] == "pass"  # within the 5 % of the check
+    assert doc["check"] is not None and doc["check"]["verdict"] == "pass"
+
+
+def test_sign_convention_of_the_converter(tmp_path):
+    opt = optics()
+    ds, conv, F_m = true_inputs(opt)
+    base = {"D_px": conv.pitch_px, "D_safe_px": conv.safe_diameter_px, "q_px": conv.q,
+            "tile": conv.tile, "width": conv.width, "height": conv.height, "n_views": 5}
+    write_json(tmp_path / "a.json", dict(base, D_min=conv.d_min, D_max=conv.d_max,
+                                         convention="paper"))
+    write_json(tmp_path / "b.json", dict(base, D_min=-conv.d_max, D_max=-conv.d_min,
+                                         convention="shift"))
+    a = rig.read_disparity(tmp_path / "a.json")
+    b = rig.read_disparity(tmp_path / "b.json")
+    assert (a.d_min, a.d_max) == pytest.approx((conv.d_min, conv.d_max))
+    assert (b.d_min, b.d_max) == pytest.approx((conv.d_min, conv.d_max))
+    write_json(tmp_path / "c.json", dict(base, D_min=1.0, D_max=2.0))
+    with pytest.raises(ValueError, match="convention"):
+        rig.read_disparity(tmp_path / "c.json")
+
+
+def _pixels(views, X):
+    out = {}
+    for k, (K, M) in views.items():
+        out[k] = PinholeCamera(K, M, 301, 225).project(X)[0]
+    return out
+
+
+def _model_gap(q_scale: float, points: np.ndarray) -> tuple[float, float]:
+    """Largest pixel gap between the paper's views (with the exact B and alpha) and the
+    exact views over ``points`` (central-view frame, metres); and the exact alpha."""
+    opt = optics()
+    ds, conv, F_m = true_inputs(opt)
+    conv = rig.Conversion(**{**conv.__dict__, "q": conv.q * q_scale})
+    sym = rig.paper_symbols(ds, conv, F_m, 5)
+    ex = rig.exact_model(sym)
+    paper = rig.view_cameras("paper", 5, 301, 225, F_m, ex["B"], alpha=ex["alpha_equivalent"])
+    exact = rig.view_cameras("exact", 5, 301, 225, F_m, ex["B"], pp_shift_px=ex["pp_shift_px"])
+    a, b = _pixels(paper, points), _pixels(exact, points)
+    return max(float(np.abs(a[k] - b[k]).max()) for k in a), ex["alpha_equivalent"]
+
+
+AXIS = np.stack([np.zeros(4), np.zeros(4), np.linspace(0.47, 0.74, 4)], axis=1)
+FIELD = np.mgrid[-0.05:0.05:5j, -0.04:0.04:5j, 0.47:0.74:4j].reshape(3, -1).T
+
+
+def test_models_agree_to_first_order_in_alpha():
+    """Rotating a view by alpha and shifting its principal point by F_m tan(alpha) agree
+    to first order in alpha: near the axis (field angle ~ alpha) the gap is third
+    order (halving alpha and B divides it by 8); over the field it is
+    ~ F_m alpha tan^2(field angle), first order in alpha but small (0.3 px here)."""
+    gap1, a1 = _model_gap(1.0, AXIS)
+    gap2, a2 = _model_gap(0.5, AXIS)
+    assert a2 == pytest.approx(a1 / 2, rel=1e-3)
+    assert gap1 < 1e-3  # px, against a principal-point shift of ~7.7 px per step
+    assert gap1 / gap2 == pytest.approx(8.0, rel=0.1)
+    f1, _ = _model_gap(1.0, FIELD)
+    f2, _ = _model_gap(0.5, FIELD)
+    assert 0.1 < f1 < 0.5
+    assert f1 / f2 == pytest.approx(2.0, rel=0.1)
+
+
+def test_compare_with_truth_finds_the_paper_errors():
+    opt = optics()
+    ds, conv, F_m = true_inputs(opt)
+    exact = rig.build_rig(ds, [conv], F_m, 5, model="exact")
+    truth = {k: PinholeCamera(K, M, 301, 225) for k, (K, M) in rig.rig_views(exact).items()}
+    # move the truth into some world frame: the comparison works relative to the centre
+    W = np.eye(4)
+    W[:3, :3] = o.rotation_matrix(0.2, -0.1)
+    W[:3, 3] = (0.3, -0.1, 2.0)
+    truth = {k: PinholeCamera(c.K, W @ c.cam_to_world, c.width, c.height)
+             for k, c in truth.items()}
+    c = rig.compare_with_truth(exact, truth)
+    assert abs(c["rel_err_B"]) < 1e-9 and abs(c["rel_err_alpha"]) < 1e-9
+    assert c["centre_rmse_mm"] < 1e-9 and c["rotation_max_deg"] < 1e-6
+    paper = rig.build_rig(ds, [conv], F_m, 5, model="paper")
+    c = rig.compare_with_truth(paper, truth)
+    assert c["rel_err_B"] == pytest.approx(paper["exact"]["B_paper_over_B"] - 1, rel=1e-6)
+    # the paper's alpha (F = L + s in F and e) is ~2.2 % large
+    assert c["rel_err_alpha"] == pytest.approx(paper["exact"]["alpha_paper_over_alpha"] - 1,
+                                               rel=5e-3)
+    assert c["rotation_max_deg"] > 0.01
+
+
+def test_rig_json_from_files(tmp_path):
+    opt = optics()
+    ds, conv, F_m = true_inputs(opt)
+    cam_yaml = {
+        "pixel_size_mm": 0.0055, "sensor_width_px": 2048, "sensor_height_px": 1536,
+        "main_lens": {"focus_distance_mm": 600.0, "focal_length_mm": 35.0},
+        "mla": {"pitch_mm": 0.13, "f_numbers": [2.8], "k": 5.0},
+        "array": {"step_mm": 10.0}, "scene": {"near_mm": 470.0, "far_mm": 740.0},
+    }
+    (tmp_path / "camera.yaml").write_text(yaml.safe_dump(cam_yaml))
+    read = rig.read_datasheet(tmp_path / "camera.yaml")
+    assert read == ds
+    shots = []
+    for i, jitter in enumerate((0.0, 0.05, -0.05)):
+        p = tmp_path / f"s{i}.json"
+        write_json(p, {"D_min": conv.d_min + jitter, "D_max": conv.d_max - jitter,
+                       "convention": "paper", "q_px": conv.q, "tile": conv.tile,
+                       "D_px": conv.pitch_px, "D_safe_px": conv.safe_diameter_px,
+                       "width": conv.width, "height": conv.height})
+        shots.append(rig.read_disparity(p))
+    doc = rig.build_rig(read, shots, F_m, 5, model="paper", shot_names=["a", "b", "c"])
+    assert doc["symbols"]["D_min_px"] == pytest.approx(conv.d_min)  # median across shots
+    assert doc["model"] == "paper" and len(doc["views"]) == 25
+    K, M = rig.rig_views(doc)["2_2"]
+    np.testing.assert_allclose(M, np.eye(4))
+    np.testing.assert_allclose(K[:2, 2], [150.0, 112.0])
+    with pytest.raises(ValueError, match="view size"):
+        rig.combine_conversions([conv, rig.Conversion(**{**conv.__dict__, "width": 99})])
+    with pytest.raises(FileNotFoundError, match="camera.yaml"):
+        rig.read_datasheet(tmp_path / "nope" / "camera.yaml")
