@@ -1,0 +1,74 @@
+"""Merge registration A (shots, SfM units) and registration B (views of a set, metres)
+into every view of every shot: Eq. 6, ``M_ij = M_i^A M_j^B``.
+
+``M_i^A`` is shot i's central-view camera-to-world pose from registration A with its
+translation multiplied by the scale r of Eq. 5 (SfM units -> metres; the paper:
+"multiplying the camera position of the central views in registration A by r");
+``M_j^B`` is view j's pose relative to the central view (``cam_to_central`` of
+``rig.json``). Both are camera-to-world in OpenCV axes, so the product maps view j's
+camera frame to the world. The intrinsics are the rig's (focal length from
+registration A, principal point per view model).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from plenocal.camera import PinholeCamera
+from plenocal.io import read_json
+
+CAM_KEYS = ("poses", "cam_to_world", "shots")
+
+
+def read_reg_a(path: str | Path) -> dict:
+    """``reg_a.json``: ``focal_px`` and every shot's camera-to-world pose (SfM units).
+
+    Poses are read from ``poses``/``cam_to_world``/``shots`` ({cam: 4x4}) or from
+    ``cameras`` ({cam: {"cam_to_world": 4x4}}), whichever is present."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: reg_a.json not found; run registration A (map_a)")
+    doc = read_json(path)
+    if "focal_px" not in doc:
+        raise ValueError(f"{path}: no 'focal_px' (registration A's focal length in pixels)")
+    poses = None
+    for key in CAM_KEYS:
+        if isinstance(doc.get(key), Mapping):
+            poses = {k: np.asarray(v["cam_to_world"] if isinstance(v, Mapping) else v,
+                                   dtype=float) for k, v in doc[key].items()}
+            break
+    if poses is None and isinstance(doc.get("cameras"), Mapping):
+        poses = {k: np.asarray(v["cam_to_world"], dtype=float)
+                 for k, v in doc["cameras"].items()}
+    if not poses:
+        raise ValueError(f"{path}: no shot poses (expected 'poses': {{cam: 4x4 cam_to_world}})")
+    for k, M in poses.items():
+        if M.shape != (4, 4):
+            raise ValueError(f"{path}: pose of {k} is not 4x4")
+    return {"focal_px": float(doc["focal_px"]), "poses": poses}
+
+
+def scaled_pose(M: np.ndarray, r: float) -> np.ndarray:
+    """M_i^A after scaling: the camera position multiplied by r, rotation kept."""
+    out = np.array(M, dtype=float)
+    out[:3, 3] *= r
+    return out
+
+
+def merge_cameras(poses_a: Mapping[str, np.ndarray], views_b: Mapping[str, tuple[np.ndarray,
+                                                                                  np.ndarray]],
+                  r: float, width: int, height: int) -> dict[str, PinholeCamera]:
+    """Eq. 6 for every view j of every shot i: ``"<cam>/<view>" -> PinholeCamera``."""
+    if not r > 0:
+        raise ValueError(f"the scale r must be positive (got {r}); check scale.json")
+    out = {}
+    for cam in sorted(poses_a):
+        MA = scaled_pose(poses_a[cam], r)
+        for view in sorted(views_b):
+            K, MB = views_b[view]
+            out[f"{cam}/{view}"] = PinholeCamera(np.array(K, dtype=float), MA @ MB,
+                                                 int(width), int(height))
+    return out

@@ -1,0 +1,97 @@
+"""The scale between registration A (SfM units) and registration B (metres): Eq. 5.
+
+For the central view of shot i, ``d1`` is its depth map computed with registration A
+and ``d2`` with registration B (z-depth, 0 = invalid). A pixel is valid in a map
+when its depth is positive, finite and within the [low, high] percentile of that
+map's valid depths (the paper keeps the 2nd to 9th deciles: 10th-90th percentile).
+Eq. 5::
+
+    r_i = mean over valid(d1) AND valid(d2) of d2 / d1
+
+and ``r = mean_i r_i``. Because the paper's mean is sensitive to a shot whose depth
+failed, a robust estimate is reported beside it: the median of r_i, and the
+per-shot median of the ratios; the spread (std, min, max, relative spread) of r_i
+says how far the shots agree.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+
+def valid_mask(depth: np.ndarray, low: float = 10.0, high: float = 90.0) -> np.ndarray:
+    """Pixels > 0, finite and within the [low, high] percentile of the map's valid depths."""
+    d = np.asarray(depth, dtype=np.float64)
+    ok = np.isfinite(d) & (d > 0)
+    if not ok.any():
+        return ok
+    lo, hi = np.percentile(d[ok], [low, high])
+    return ok & (d >= lo) & (d <= hi)
+
+
+def shot_ratio(d1: np.ndarray, d2: np.ndarray, low: float = 10.0, high: float = 90.0,
+               name: str = "") -> dict:
+    """Eq. 5 for one shot: r_i (mean of d2/d1), n pixels, and the median of the ratios."""
+    d1 = np.asarray(d1)
+    d2 = np.asarray(d2)
+    if d1.shape != d2.shape:
+        raise ValueError(f"{name}: depth maps of registrations A and B differ in size "
+                         f"({d1.shape} vs {d2.shape}); both must be of the central view")
+    m = valid_mask(d1, low, high) & valid_mask(d2, low, high)
+    n = int(m.sum())
+    if n == 0:
+        raise ValueError(f"{name}: no pixel is valid in both depth maps (A and B); check the "
+                         "depth stage's output for this shot")
+    ratio = d2[m].astype(np.float64) / d1[m].astype(np.float64)
+    return {"r": float(ratio.mean()), "median": float(np.median(ratio)), "n": n,
+            "std": float(ratio.std())}
+
+
+def combine(ratios: Mapping[str, dict]) -> dict:
+    """r = mean_i r_i (the paper), the robust estimates and the spread across shots."""
+    if not ratios:
+        raise ValueError("no shot to compute the scale from")
+    names = sorted(ratios)
+    r_i = np.array([ratios[k]["r"] for k in names])
+    med_i = np.array([ratios[k]["median"] for k in names])
+    r = float(r_i.mean())
+    return {
+        "r_i": {k: ratios[k]["r"] for k in names},
+        "r_i_median_of_ratios": {k: ratios[k]["median"] for k in names},
+        "n_pixels": {k: ratios[k]["n"] for k in names},
+        "r": r,
+        "r_median": float(np.median(r_i)),
+        "r_median_of_ratios": float(np.median(med_i)),
+        "spread": {"std": float(r_i.std(ddof=1)) if len(r_i) > 1 else 0.0,
+                   "min": float(r_i.min()), "max": float(r_i.max()),
+                   "relative": float((r_i.max() - r_i.min()) / r) if r else None,
+                   "n_shots": len(names)},
+    }
+
+
+def load_depth(path: str | Path) -> np.ndarray:
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: depth map not found; run the depth rule first")
+    d = np.load(path, allow_pickle=False)
+    if d.ndim != 2:
+        raise ValueError(f"{path}: a depth map must be 2-D (got shape {d.shape})")
+    return d
+
+
+def scale_from_files(pairs: Mapping[str, tuple[str | Path, str | Path]], low: float = 10.0,
+                     high: float = 90.0, log=None) -> dict:
+    """``pairs``: shot -> (depth of registration A, depth of registration B)."""
+    ratios = {}
+    for cam in sorted(pairs):
+        a, b = pairs[cam]
+        ratios[cam] = shot_ratio(load_depth(a), load_depth(b), low, high, name=cam)
+        if log is not None:
+            log(f"{cam}: r_i = {ratios[cam]['r']:.6g} over {ratios[cam]['n']} pixels")
+    out = combine(ratios)
+    out.update(method="Eq. 5: mean of d_B/d_A over pixels valid in both maps",
+               percentiles=[low, high])
+    return out

@@ -1,0 +1,176 @@
+"""Exports: a 3-D point projected through each export, parsed back independently,
+lands on the same pixel as through the internal PinholeCamera (within 1e-6 px); the
+16-bit normalised-disparity depth maps."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import cv2  # noqa: F401  (before pycolmap, see DESIGN.md)
+import numpy as np
+import pytest
+
+from plenocal import optics as o
+from plenocal.camera import PinholeCamera, intrinsics
+from plenocal.export import colmap_model, depthmaps, mpeg, plain
+
+
+def cameras() -> dict[str, PinholeCamera]:
+    rng = np.random.default_rng(3)
+    out = {}
+    for i, cam in enumerate(["x00_y00", "hand01"]):
+        R_A = o.rotation_matrix(rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3))
+        c, s = math.cos(0.4 * i - 0.1), math.sin(0.4 * i - 0.1)
+        R_A = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]]) @ R_A
+        for view, (h, v) in {"2_2": (0, 0), "0_4": (2, -2), "3_1": (-1, 1)}.items():
+            M = np.eye(4)
+            M[:3, :3] = R_A @ o.rotation_matrix(h * 0.004, v * 0.004)
+            M[:3, 3] = rng.normal(size=3) * 0.05 + R_A @ np.array([h, v, 0.0]) * 0.0015
+            K = intrinsics(1800.0 + i, 150.0 + 7.7 * h, 112.0 + 7.7 * v)
+            out[f"{cam}/{view}"] = PinholeCamera(K, M, 301, 225)
+    return out
+
+
+def points(cam: PinholeCamera) -> np.ndarray:
+    """World points in front of a camera, spread over its image."""
+    uv = np.array([[3.0, 5.0], [150.0, 112.0], [290.5, 220.25], [40.0, 200.0]])
+    z = np.array([0.47, 0.6, 0.74, 0.55])
+    return cam.unproject(uv, z)
+
+
+# -- independent parsers --------------------------------------------------------------
+
+
+def _rot(axis: int, a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    R = np.eye(3)
+    R[i, i] = R[j, j] = c
+    R[i, j], R[j, i] = -s, s
+    return R
+
+
+def tmiv_project(entry: dict, X_cv: np.ndarray) -> np.ndarray:
+    """TMIV's perspective projection, from the JSON fields alone. The world is the
+    project's world expressed in OMAF axes (x fwd = z_cv, y left = -x_cv, z up = -y_cv)."""
+    Xw = np.stack([X_cv[:, 2], -X_cv[:, 0], -X_cv[:, 1]], axis=1)
+    yaw, pitch, roll = np.radians(entry["Rotation"])
+    R = _rot(2, yaw) @ _rot(1, pitch) @ _rot(0, roll)  # q_yaw q_pitch q_roll
+    p = (Xw - np.asarray(entry["Position"])) @ R  # R^T (X - C) row-wise
+    fx, fy = entry["Focal"]
+    cx, cy = entry["Principle_point"]
+    u = -fx * p[:, 1] / p[:, 0] + cx - 0.5  # TMIV pixel (0,0) spans [0, 1)
+    v = -fy * p[:, 2] / p[:, 0] + cy - 0.5
+    return np.stack([u, v], axis=1)
+
+
+def test_mpeg_json_round_trip(tmp_path):
+    cams = cameras()
+    mpeg.write_mpeg(tmp_path / "cameras.json", cams, (0.42, 0.81), content_name="test")
+    doc = json.loads((tmp_path / "cameras.json").read_text())
+    assert doc["Version"] == "4.0" and doc["lengthsInMeters"] is True
+    entries = {e["Name"]: e for e in doc["cameras"]}
+    assert sorted(entries) == sorted(k.replace("/", "_") for k in cams)
+    assert doc["sourceCameraNames"] == sorted(entries)
+    for key, cam in cams.items():
+        e = entries[key.replace("/", "_")]
+        assert e["Projection"] == "Perspective" and e["Resolution"] == [301, 225]
+        assert e["Depth_range"] == [0.42, 0.81] and e["BitDepthDepth"] == 16
+        assert e["ColorSpace"] == "YUV420" and e["DepthColorSpace"] == "YUV420"
+        X = points(cam)
+        uv, _ = cam.project(X)
+        np.testing.assert_allclose(tmiv_project(e, X), uv, atol=1e-6)
+
+
+def test_omaf_axes_and_euler_angles():
+    # a camera looking along world +x_cv (OpenCV) looks to the OMAF right: yaw -90 deg
+    M = np.eye(4)
+    M[:3, :3] = o.rotation_matrix(-math.pi / 2, 0.0)  # optical axis -> +x
+    assert (M[:3, :3] @ [0, 0, 1]) == pytest.approx([1, 0, 0], abs=1e-12)
+    pos, rot = mpeg.omaf_pose(M)
+    assert rot == pytest.approx([-90.0, 0.0, 0.0], abs=1e-9)
+    # identity: looking forward, no rotation
+    pos, rot = mpeg.omaf_pose(np.eye(4))
+    assert rot == pytest.approx([0.0, 0.0, 0.0], abs=1e-12)
+    # looking up (optical axis towards -y_cv): in TMIV's R = Rz Ry Rx a positive pitch
+    # (about y left) turns x forward towards -z (down), so looking up is pitch < 0
+    M = np.eye(4)
+    M[:3, :3] = o.rotation_matrix(0.0, 0.2)  # about x_cv
+    assert (M[:3, :3] @ [0, 0, 1])[1] < 0
+    _, rot = mpeg.omaf_pose(M)
+    assert rot == pytest.approx([0.0, -math.degrees(0.2), 0.0], abs=1e-9)
+    for ypr in ([10.0, -20.0, 30.0], [-170.0, 80.0, -5.0]):
+        assert mpeg.matrix_to_ypr(mpeg.ypr_to_matrix(*ypr)) == pytest.approx(ypr, abs=1e-9)
+
+
+def test_colmap_model_round_trip(tmp_path):
+    import pycolmap  # noqa: PLC0415
+
+    cams = cameras()
+    colmap_model.write_colmap(tmp_path / "colmap", cams)
+    for f in ("cameras.bin", "images.bin", "points3D.bin"):
+        assert (tmp_path / "colmap" / f).is_file()
+    rec = pycolmap.Reconstruction(str(tmp_path / "colmap"))
+    assert rec.num_images() == len(cams) and rec.num_reg_images() == len(cams)
+    # shared intrinsics are shared cameras: hand01 and x00_y00 differ in focal
+    assert rec.num_cameras() == 6
+    by_name = {im.name: im for im in rec.images.values()}
+    for key, cam in cams.items():
+        im = by_name[f"{key}.png"]
+        c = rec.cameras[im.camera_id]
+        assert str(c.model).endswith("PINHOLE") and (c.width, c.height) == (301, 225)
+        fx, fy, cx, cy = c.params
+        T = np.asarray(im.cam_from_world().matrix())
+        X = points(cam)
+        Xc = X @ T[:, :3].T + T[:, 3]
+        uv_colmap = np.stack([fx * Xc[:, 0] / Xc[:, 2] + cx, fy * Xc[:, 1] / Xc[:, 2] + cy], 1)
+        uv, _ = cam.project(X)
+        np.testing.assert_allclose(uv_colmap - 0.5, uv, atol=1e-6)
+
+
+def test_plain_round_trip(tmp_path):
+    cams = cameras()
+    plain.write_plain(tmp_path / "cameras.json", cams, extra={"source": "test"})
+    doc = json.loads((tmp_path / "cameras.json").read_text())
+    assert doc["units"] == "m" and doc["source"] == "test"
+    back = plain.read_plain(tmp_path / "cameras.json")
+    for key, cam in cams.items():
+        X = points(cam)
+        np.testing.assert_allclose(back[key].project(X)[0], cam.project(X)[0], atol=1e-6)
+    with pytest.raises(ValueError, match="<cam>/<view>"):
+        plain.write_plain(tmp_path / "x.json", {"nokey": cams["hand01/2_2"]})
+
+
+def test_depth16():
+    near, far = 0.4, 0.8
+    z = np.array([[0.4, 0.8, 0.0, 0.5333333333333333], [np.nan, 0.3, 2.0, 0.6]])
+    L = depthmaps.depth16(z, near, far)
+    assert L.dtype == np.uint16
+    assert L[0, 0] == 65535  # near
+    assert L[0, 1] == 1  # far: level 0 is reserved for invalid
+    assert L[0, 2] == 0 and L[1, 0] == 0  # invalid
+    assert L[0, 3] == round(65535 * (1 / 0.5333333333333333 - 1.25) / (2.5 - 1.25))  # 32768
+    assert L[1, 1] == 65535 and L[1, 2] == 1  # clipped
+    expected = round(65535 * (1 / 0.6 - 1 / far) / (1 / near - 1 / far))
+    assert L[1, 3] == expected
+    back = depthmaps.depth_from16(L, near, far)
+    assert back[1, 3] == pytest.approx(0.6, rel=1e-4)
+    assert back[0, 2] == 0.0
+    with pytest.raises(ValueError):
+        depthmaps.depth16(z, 0.8, 0.4)
+
+
+def test_depth16_files(tmp_path):
+    from plenocal.io import read_image  # noqa: PLC0415
+
+    z = np.full((5, 7), 0.6)
+    z[0, 0] = 0
+    depthmaps.write_depth16_png(tmp_path / "d.png", z, 0.4, 0.8)
+    img = read_image(tmp_path / "d.png")
+    assert img.dtype == np.uint16 and img[0, 0] == 0 and img[1, 1] == depthmaps.depth16(
+        np.array(0.6), 0.4, 0.8)
+    depthmaps.write_depth16_yuv(tmp_path / "d.yuv", z, 0.4, 0.8)
+    raw = np.frombuffer((tmp_path / "d.yuv").read_bytes(), dtype="<u2")
+    assert raw.size == 5 * 7 + 2 * 3 * 4
+    np.testing.assert_array_equal(raw[:35].reshape(5, 7), img)

@@ -1,0 +1,98 @@
+"""Eq. 6: merging registration A (scaled) and registration B, against hand-built cases."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from plenocal import merge, rig
+from plenocal import optics as o
+from plenocal.camera import intrinsics
+from plenocal.io import write_json
+
+
+def rot_z(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+
+
+def test_eq6_by_hand():
+    R_A = rot_z(0.3) @ o.rotation_matrix(0.1, 0.05)
+    M_A = np.eye(4)
+    M_A[:3, :3] = R_A
+    M_A[:3, 3] = (1.0, -2.0, 0.5)  # SfM units
+    K = intrinsics(1800.0, 150.0, 112.0)
+    # exact-model view: pure translation; paper-model view: translation and rotation
+    M_e = np.eye(4)
+    M_e[:3, 3] = (0.0015, 0.0, 0.0)
+    M_p = o.view_extrinsic(-1, 2, 0.0015, 0.004)
+    cams = merge.merge_cameras({"x00_y00": M_A}, {"1_3": (K, M_e), "4_1": (K, M_p)},
+                               r=0.02, width=301, height=225)
+    assert sorted(cams) == ["x00_y00/1_3", "x00_y00/4_1"]
+    c = cams["x00_y00/1_3"]
+    # centre: the scaled central position plus the rotated in-set offset (metres)
+    np.testing.assert_allclose(c.centre, 0.02 * np.array([1.0, -2.0, 0.5]) + R_A @ [0.0015, 0, 0],
+                               atol=1e-15)
+    np.testing.assert_allclose(c.R, R_A, atol=1e-15)
+    c = cams["x00_y00/4_1"]
+    np.testing.assert_allclose(c.R, R_A @ M_p[:3, :3], atol=1e-15)
+    np.testing.assert_allclose(c.centre, 0.02 * np.array([1.0, -2.0, 0.5])
+                               + R_A @ np.array([-0.0015, 0.003, 0.0]), atol=1e-15)
+    np.testing.assert_allclose(c.K, K)
+    # the central view of registration B is the identity: M_i,centre = scaled M_i^A
+    cams = merge.merge_cameras({"x00_y00": M_A}, {"2_2": (K, np.eye(4))}, 0.02, 301, 225)
+    np.testing.assert_allclose(cams["x00_y00/2_2"].cam_to_world, merge.scaled_pose(M_A, 0.02))
+    with pytest.raises(ValueError, match="scale"):
+        merge.merge_cameras({"x00_y00": M_A}, {"2_2": (K, np.eye(4))}, 0.0, 301, 225)
+
+
+def test_points_seen_by_a_merged_view_agree_with_the_scene():
+    """A scene in metres, registration A seeing it in SfM units (scale 1/r): a point
+    projects through the merged view like through the true view."""
+    r = 0.013
+    R = rot_z(-0.2) @ o.rotation_matrix(0.05, -0.02)
+    true_centre = np.array([0.01, 0.02, -0.1])  # metres
+    M_A = np.eye(4)
+    M_A[:3, :3] = R
+    M_A[:3, 3] = true_centre / r  # SfM units
+    K = intrinsics(1800.0, 150.0 + 7.7, 112.0 - 15.4)
+    M_B = np.eye(4)
+    M_B[:3, 3] = (0.00146, -0.00292, 0.0)
+    cam = merge.merge_cameras({"hand00": M_A}, {"0_3": (K, M_B)}, r, 301, 225)["hand00/0_3"]
+    X_cam = np.array([0.01, -0.02, 0.6])  # in the true view's frame
+    X = true_centre + R @ (M_B[:3, 3] + X_cam)
+    uv, z = cam.project(X)
+    np.testing.assert_allclose(uv, (K @ X_cam)[:2] / X_cam[2], atol=1e-9)
+    assert z == pytest.approx(0.6)
+
+
+def test_read_reg_a(tmp_path):
+    M = np.eye(4)
+    write_json(tmp_path / "a.json", {"focal_px": 1800.0, "poses": {"x00_y00": M}})
+    write_json(tmp_path / "b.json", {"focal_px": 1800.0,
+                                     "cameras": {"x00_y00": {"cam_to_world": M}}})
+    for name in ("a.json", "b.json"):
+        got = merge.read_reg_a(tmp_path / name)
+        assert got["focal_px"] == 1800.0
+        np.testing.assert_allclose(got["poses"]["x00_y00"], M)
+    write_json(tmp_path / "c.json", {"poses": {"x00_y00": M}})
+    with pytest.raises(ValueError, match="focal_px"):
+        merge.read_reg_a(tmp_path / "c.json")
+    with pytest.raises(FileNotFoundError, match="map_a"):
+        merge.read_reg_a(tmp_path / "none.json")
+
+
+def test_merge_with_a_rig_document():
+    ds = rig.Datasheet(0.0055, 2048, 1536, 600.0, 35.0, 0.13, (2.8,), 5.0, None, 10.0, 470.0,
+                       740.0)
+    conv = rig.Conversion(-4.5, -3.0, 3.0971, 6.0, 23.92, 21.92, 301, 225, 5)
+    doc = rig.build_rig(ds, [conv], 1799.5, 5, model="exact")
+    views = rig.rig_views(doc)
+    cams = merge.merge_cameras({"x00_y00": np.eye(4), "x01_y00": np.eye(4)}, views, 1.0,
+                               doc["width"], doc["height"])
+    assert len(cams) == 50
+    a, b = cams["x00_y00/2_3"], cams["x00_y00/2_2"]
+    assert a.centre[0] - b.centre[0] == pytest.approx(doc["exact"]["B"] / 1000)
+    assert a.K[0, 2] - b.K[0, 2] == pytest.approx(doc["exact"]["pp_shift_px"])
