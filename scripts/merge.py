@@ -1,0 +1,42 @@
+"""Rule merge: Eq. 6 for every view of every shot, written in every export format."""
+
+import logging
+
+import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
+
+from plenocal.export.colmap_model import write_colmap
+from plenocal.export.mpeg import write_mpeg
+from plenocal.export.plain import write_plain
+from plenocal.io import read_json
+from plenocal.merge import merge_cameras, read_reg_a
+from plenocal.rig import read_rig, rig_views
+
+snakemake = globals()["snakemake"]
+logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
+                    format="%(asctime)s %(levelname)s %(message)s")
+log = logging.getLogger("merge")
+
+reg_a = read_reg_a(snakemake.input.reg_a)
+rig = read_rig(snakemake.input.rig)
+scale = read_json(snakemake.input.scale)
+r = float(scale.get("r_used", scale["r"]))
+shots = list(snakemake.params.shots)
+missing = [c for c in shots if c not in reg_a["poses"]]
+if missing:
+    raise ValueError(f"{snakemake.input.reg_a}: registration A has no pose for "
+                     f"{', '.join(missing)}; rerun map_a or drop those shots")
+if abs(reg_a["focal_px"] - float(rig["focal_px"])) > 1e-6 * reg_a["focal_px"]:
+    raise ValueError(f"{snakemake.input.rig} was built with focal length {rig['focal_px']} px, "
+                     f"registration A now says {reg_a['focal_px']} px: rerun rig_b")
+poses = {c: reg_a["poses"][c] for c in shots}
+cams = merge_cameras(poses, rig_views(rig), r, int(rig["width"]), int(rig["height"]))
+log.info("Eq. 6: %d shots x %d views = %d cameras, r = %.6g, model %s", len(poses),
+         len(rig["views"]), len(cams), r, rig["model"])
+extra = {"source": "plenocal merge (Eq. 6)", "rig_model": rig["model"], "scale_r": r}
+write_plain(snakemake.output.plain, cams, extra=extra)
+log.info("wrote %s", snakemake.output.plain)
+near, far = rig["depth_range_m"]
+write_mpeg(snakemake.output.mpeg, cams, (near, far), content_name=snakemake.wildcards.dataset)
+log.info("wrote %s (Depth_range %.4f-%.4f m)", snakemake.output.mpeg, near, far)
+write_colmap(snakemake.output.colmap, cams)
+log.info("wrote %s", snakemake.output.colmap)
