@@ -1,0 +1,152 @@
+"""Errors against ground truth: exact inputs give zero error, known perturbations give
+the hand-computed error, and the targets of issues 4 and 5 decide pass/fail."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from plenocal.camera import PinholeCamera, intrinsics, pose
+from plenocal.verify.gt_errors import array_step_m, gt_errors
+
+N = 3
+W, H = 201, 151
+F = 1000.0
+STEP = 0.01
+B = 2e-4  # baseline per view step (m)
+PP = 0.8  # principal-point shift per view step (px)
+
+
+def rot(axis, deg):
+    a = np.asarray(axis, dtype=float)
+    return cv2.Rodrigues(a / np.linalg.norm(a) * math.radians(deg))[0]
+
+
+def shots():
+    out = {}
+    for row in range(2):
+        for col in range(3):
+            out[f"x{col:02d}_y{row:02d}"] = pose(np.eye(3), [col * STEP, row * STEP, 0.0])
+    out["hand00"] = pose(rot([0, 1, 0.3], 8.0), [0.012, -0.02, 0.01])
+    out["hand01"] = pose(rot([1, 0.2, 0], -6.0), [-0.02, 0.015, -0.005])
+    return out
+
+
+def rig_views(baseline=B, pp=PP):
+    views = {}
+    for r in range(N):
+        for c in range(N):
+            h, v = c - 1, r - 1
+            K = intrinsics(F, (W - 1) / 2 + h * pp, (H - 1) / 2 + v * pp)
+            views[f"{r}_{c}"] = (K, pose(np.eye(3), [h * baseline, v * baseline, 0.0]))
+    return views
+
+
+def truth():
+    out = {}
+    for s, M in shots().items():
+        for k, (K, MB) in rig_views().items():
+            out[f"{s}/{k}"] = PinholeCamera(K, M @ MB, W, H)
+    return out
+
+
+def rig_doc(baseline=B, pp=PP):
+    return {"model": "exact", "n_views": N, "width": W, "height": H, "focal_px": F,
+            "views": {k: {"K": K, "cam_to_central": M}
+                      for k, (K, M) in rig_views(baseline, pp).items()}}
+
+
+# the SfM frame: world_sfm = (R0^T (X - t0)) / r_true
+R0 = rot([0.2, 1.0, -0.4], 30.0)
+T0 = np.array([0.3, -0.1, 0.5])
+R_TRUE = 0.02  # metres per SfM unit
+
+
+def to_sfm(M):
+    A = np.eye(4)
+    A[:3, :3] = R0.T
+    A[:3, 3] = -R0.T @ T0
+    out = A @ M
+    out[:3, 3] /= R_TRUE
+    return out
+
+
+def reg_a(focal=F, turn=None):
+    poses = {s: to_sfm(M) for s, M in shots().items()}
+    if turn is not None:
+        poses["x01_y00"] = poses["x01_y00"].copy()
+        poses["x01_y00"][:3, :3] = poses["x01_y00"][:3, :3] @ rot([0, 0, 1], turn)
+    return {"focal_px": focal, "poses": poses}
+
+
+def calib(global_scale=1.0):
+    G = pose(rot([1, 1, 0], 12.0), [0.05, 0.0, -0.2])
+    out = {}
+    for k, cam in truth().items():
+        M = G @ cam.cam_to_world
+        M[:3, 3] *= global_scale
+        out[k] = PinholeCamera(cam.K, M, W, H)
+    return out
+
+
+def test_exact_inputs_give_zero_error_and_pass():
+    t = truth()
+    res = gt_errors(t, reg_a=reg_a(), rig=rig_doc(), r=R_TRUE, calib=calib())
+    a, b, sc, al = (res["registration_a"], res["registration_b"], res["scale"],
+                    res["complete"])
+    assert a["n_shots"] == 8
+    assert a["focal_err_pct"] == pytest.approx(0.0, abs=1e-9)
+    assert a["centre_rmse_pct_step"] == pytest.approx(0.0, abs=1e-6)
+    assert a["rotation_err_deg"]["max"] == pytest.approx(0.0, abs=1e-5)
+    assert a["scale_m_per_sfm_unit"] == pytest.approx(R_TRUE, rel=1e-9)
+    assert a["array_step_m"] == pytest.approx(STEP)
+    assert b["n_sets"] == 8
+    assert b["baseline_err_pct"] == pytest.approx(0.0, abs=1e-6)
+    assert b["pp_shift_err_px"] == pytest.approx(0.0, abs=1e-6)
+    assert b["baseline_m_truth"] == pytest.approx(B)
+    assert sc["err_pct"] == pytest.approx(0.0, abs=1e-9)
+    assert al["n_views"] == 8 * N * N
+    assert al["centre_rmse_mm"] == pytest.approx(0.0, abs=1e-6)
+    assert al["rotation_err_deg"]["max"] == pytest.approx(0.0, abs=1e-5)
+    assert all(c["pass"] for c in res["checks"]), res["checks"]
+
+
+def test_known_perturbations_are_measured():
+    res = gt_errors(truth(), reg_a=reg_a(focal=F * 1.003, turn=0.1),
+                    rig=rig_doc(baseline=B * 1.015, pp=PP + 0.7), r=R_TRUE * 1.005,
+                    calib=calib(global_scale=1.001))
+    a, b = res["registration_a"], res["registration_b"]
+    assert a["focal_err_pct"] == pytest.approx(0.3, rel=1e-6)
+    assert a["rotation_err_deg"]["max"] == pytest.approx(0.1, rel=1e-4)
+    assert a["per_shot"]["x01_y00"]["rotation_err_deg"] == pytest.approx(0.1, rel=1e-4)
+    assert b["baseline_err_pct"] == pytest.approx(1.5, rel=1e-6)
+    assert b["pp_shift_err_px"] == pytest.approx(0.7, rel=1e-6)
+    # alpha-equivalent = atan(pp / f): relative error of the shift, to first order
+    assert b["alpha_err_pct"] == pytest.approx(100 * (math.atan((PP + 0.7) / F)
+                                                      / math.atan(PP / F) - 1), rel=1e-6)
+    assert res["scale"]["err_pct"] == pytest.approx(0.5, rel=1e-6)
+    # a metric scale error of +0.1 % shows as the similarity scale back to the truth
+    assert res["complete"]["residual_scale_err_pct"] == pytest.approx(
+        100 * (1 / 1.001 - 1), rel=1e-6)
+    assert res["complete"]["centre_rmse_mm"] > 0.0
+    verdict = {c["name"]: c["pass"] for c in res["checks"]}
+    assert verdict["a_focal_pct"] is True  # 0.3 % <= 0.5 %
+    assert verdict["a_rotation_deg"] is False  # 0.1 deg > 0.05 deg
+    assert verdict["b_baseline_pct"] is False  # 1.5 % > 1 %
+    assert verdict["b_pp_px"] is False  # 0.7 px > 0.5 px
+    assert verdict["scale_pct"] is True
+
+
+def test_missing_stages_leave_checks_open_and_bad_truth_is_named():
+    res = gt_errors(truth(), calib=calib())
+    verdict = {c["name"]: c["pass"] for c in res["checks"]}
+    assert verdict["a_focal_pct"] is None and verdict["all_centre_mm"] is True
+    lonely = {"x00_y00/1_1": truth()["x00_y00/1_1"]}
+    with pytest.raises(ValueError, match="array step"):
+        array_step_m(lonely, N)
+    with pytest.raises(ValueError, match="share 1 views"):
+        gt_errors(truth(), calib={"x00_y00/1_1": calib()["x00_y00/1_1"]})
+
