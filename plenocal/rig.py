@@ -460,6 +460,16 @@ def rig_views(rig: Mapping) -> dict[str, tuple[np.ndarray, np.ndarray]]:
             for k, v in rig["views"].items()}
 
 
+def model_views(rig: Mapping, model: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """(K, cam_to_central) of either view model from a ``rig.json`` document, whichever
+    model its ``views`` hold (both models' numbers are stored)."""
+    n, W, H, F_m = int(rig["n_views"]), int(rig["width"]), int(rig["height"]), rig["focal_px"]
+    if model == "paper":
+        return view_cameras("paper", n, W, H, F_m, rig["paper"]["B"], alpha=rig["paper"]["alpha"])
+    return view_cameras(model, n, W, H, F_m, rig["exact"]["B"],
+                        pp_shift_px=rig["exact"]["pp_shift_px"])
+
+
 # ---------------------------------------------------------------------------
 # Comparison with ground truth (one N x N set)
 # ---------------------------------------------------------------------------

@@ -263,6 +263,11 @@ def test_rig_json_from_files(tmp_path):
     K, M = rig.rig_views(doc)["2_2"]
     np.testing.assert_allclose(M, np.eye(4))
     np.testing.assert_allclose(K[:2, 2], [150.0, 112.0])
+    for model in ("paper", "exact"):  # both models can be rebuilt from the document
+        built = rig.build_rig(read, shots, F_m, 5, model=model)
+        for k, (K2, M2) in rig.model_views(doc, model).items():
+            np.testing.assert_allclose(K2, built["views"][k]["K"], rtol=1e-12)
+            np.testing.assert_allclose(M2, built["views"][k]["cam_to_central"], atol=1e-15)
     with pytest.raises(ValueError, match="view size"):
         rig.combine_conversions([conv, rig.Conversion(**{**conv.__dict__, "width": 99})])
     with pytest.raises(FileNotFoundError, match="camera.yaml"):
