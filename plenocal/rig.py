@@ -181,6 +181,8 @@ def disparity_sign(doc: Mapping, source: str | Path) -> float:
     if value in ("shift", "view_shift", "u_right_minus_u_left", "farther_positive",
                  "u_h+1 - u_h"):
         return -1.0
+    if ("paper" in value) != ("shift" in value):  # e.g. "paper (Eq. 1)", "view shift in px"
+        return 1.0 if "paper" in value else -1.0
     raise ValueError(f"{source}: unknown disparity convention {value!r} (use 'paper' or "
                      "'shift')")
 
