@@ -1,0 +1,244 @@
+"""The COLMAP boundary: image staging, SIFT extraction, matching, and the conversions
+between COLMAP's reconstruction and the internal convention.
+
+COLMAP stores cam_from_world and puts the centre of pixel (0, 0) at (0.5, 0.5); the
+project uses camera-to-world poses and pixel centres at integers (DESIGN.md). Every
+crossing goes through :func:`pinhole_from_colmap` or :func:`known_pose_reconstruction`
+(``plenocal.camera.k_to_colmap``/``k_from_colmap``), nowhere else.
+
+Determinism: pycolmap's PRNG is seeded (``pycolmap.set_random_seed``) and RANSAC gets
+an explicit seed; images are imported in sorted name order, so image ids, and
+everything downstream, do not depend on the file system.
+
+``pycolmap`` is imported inside the functions: a process must import cv2 first
+(DESIGN.md, Known traps).
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import shutil
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+import numpy as np
+
+from plenocal.camera import PinholeCamera, invert_pose, k_from_colmap, k_to_colmap
+
+log = logging.getLogger(__name__)
+
+
+def stage_images(images: Mapping[str, str | Path], folder: str | Path,
+                 ext: str = ".png") -> list[str]:
+    """Copy ``images`` (name -> source file) to ``folder/<name><ext>``; names may hold
+    '/' (sub-folders, e.g. ``<cam>/<view>``). Returns the COLMAP image names, sorted."""
+    folder = Path(folder)
+    names = []
+    for name in sorted(images):
+        src = Path(images[name])
+        if not src.is_file():
+            raise FileNotFoundError(f"{src}: image of view {name!r} not found; run the "
+                                    "convert stage first (or check the dataset folder)")
+        dst = folder / f"{name}{ext}"
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(src, dst)
+        names.append(f"{name}{ext}")
+    return names
+
+
+def image_size(path: str | Path) -> tuple[int, int]:
+    """(width, height) of an image file."""
+    from plenocal.io import read_image  # noqa: PLC0415
+
+    img = read_image(path)
+    return int(img.shape[1]), int(img.shape[0])
+
+
+def _extraction_options(max_num_features: int, num_threads: int):
+    import pycolmap  # noqa: PLC0415
+
+    opts = pycolmap.FeatureExtractionOptions()
+    opts.num_threads = num_threads
+    opts.use_gpu = False
+    opts.sift.max_num_features = max_num_features
+    return opts
+
+
+def extract_features(database: str | Path, image_dir: str | Path,
+                     groups: list[tuple[list[str], PinholeCamera | None]], *,
+                     model: str = "PINHOLE", max_num_features: int = 8192,
+                     num_threads: int = 1, seed: int = 0) -> None:
+    """SIFT into a new database. ``groups``: (image names, camera) pairs; all images of
+    a group share one COLMAP camera. A group's camera, where given, is written with its
+    intrinsics (``model`` PINHOLE or SIMPLE_PINHOLE, marked as a known focal length);
+    where None, the camera gets COLMAP's default focal (1.2 max(W, H)) and the principal
+    point at the image centre."""
+    import pycolmap  # noqa: PLC0415
+
+    pycolmap.set_random_seed(seed)
+    database = Path(database)
+    if database.exists():
+        database.unlink()
+    database.parent.mkdir(parents=True, exist_ok=True)
+    for names, cam in groups:
+        if not names:
+            continue
+        names = sorted(names)
+        reader = pycolmap.ImageReaderOptions()
+        reader.camera_model = model
+        if cam is not None:
+            K = k_to_colmap(cam.K)
+            if model == "SIMPLE_PINHOLE":
+                params = [0.5 * (K[0, 0] + K[1, 1]), K[0, 2], K[1, 2]]
+            else:
+                params = [K[0, 0], K[1, 1], K[0, 2], K[1, 2]]
+            camera = pycolmap.Camera.create_from_model_name(0, model, 1.0, int(cam.width),
+                                                            int(cam.height))
+            camera.params = params
+            camera.has_prior_focal_length = True
+            with pycolmap.Database.open(str(database)) as db:
+                cam_id = db.write_camera(camera)
+            reader.existing_camera_id = cam_id
+        pycolmap.extract_features(str(database), str(image_dir), image_names=names,
+                                  camera_mode=pycolmap.CameraMode.SINGLE,
+                                  reader_options=reader,
+                                  extraction_options=_extraction_options(max_num_features,
+                                                                         num_threads),
+                                  device=pycolmap.Device.cpu)
+        log.info("features: %d images of group %s", len(names), names[0])
+
+
+def database_images(database: str | Path) -> dict[str, object]:
+    """COLMAP image name -> ``pycolmap.Image`` as stored in the database."""
+    import pycolmap  # noqa: PLC0415
+
+    with pycolmap.Database.open(str(database)) as db:
+        return {im.name: im for im in db.read_all_images()}
+
+
+def _verification_options(seed: int, max_error_px: float = 4.0):
+    import pycolmap  # noqa: PLC0415
+
+    opts = pycolmap.TwoViewGeometryOptions()
+    opts.ransac.random_seed = seed
+    opts.ransac.max_error = max_error_px
+    return opts
+
+
+def _matching_options(num_threads: int):
+    import pycolmap  # noqa: PLC0415
+
+    opts = pycolmap.FeatureMatchingOptions()
+    opts.num_threads = num_threads
+    opts.use_gpu = False
+    return opts
+
+
+def match(database: str | Path, pairs: Iterable[tuple[str, str]] | None = None, *,
+          seed: int = 0, num_threads: int = 1, work_dir: str | Path | None = None) -> int:
+    """Match and geometrically verify: every pair (``pairs`` None: exhaustive) or the
+    given image-name pairs. Returns the number of verified pairs."""
+    import pycolmap  # noqa: PLC0415
+
+    pycolmap.set_random_seed(seed)
+    database = Path(database)
+    if pairs is None:
+        pycolmap.match_exhaustive(str(database), matching_options=_matching_options(num_threads),
+                                  verification_options=_verification_options(seed),
+                                  device=pycolmap.Device.cpu)
+    else:
+        pair_file = Path(work_dir or database.parent) / f".{database.stem}.pairs.txt"
+        pair_file.write_text("".join(f"{a} {b}\n" for a, b in pairs))
+        popts = pycolmap.ImportedPairingOptions()
+        popts.match_list_path = str(pair_file)
+        pycolmap.match_image_pairs(str(database), matching_options=_matching_options(num_threads),
+                                   pairing_options=popts,
+                                   verification_options=_verification_options(seed),
+                                   device=pycolmap.Device.cpu)
+        pair_file.unlink()
+    with pycolmap.Database.open(str(database)) as db:
+        n = db.num_verified_image_pairs()
+    log.info("matching: %d verified image pairs", n)
+    return n
+
+
+def set_pairs(names: Iterable[str]) -> list[tuple[str, str]]:
+    """Pairs for ``<cam>/<view>.png`` images: every pair within a shot, and across shots
+    the pairs of the same view (what overlaps most); a single view per shot gives the
+    exhaustive list. Sorted, so that the matching order is fixed."""
+    names = sorted(names)
+    out = []
+    for a, b in itertools.combinations(names, 2):
+        ca, va = a.split("/", 1) if "/" in a else (a, "")
+        cb, vb = b.split("/", 1) if "/" in b else (b, "")
+        if ca == cb or va == vb:
+            out.append((a, b))
+    return out
+
+
+def pinhole_from_colmap(image, camera) -> PinholeCamera:
+    """A registered ``pycolmap.Image`` and its ``pycolmap.Camera`` in the internal
+    convention (camera-to-world, pixel centres at integers)."""
+    K = k_from_colmap(np.asarray(camera.calibration_matrix(), dtype=float))
+    M = np.eye(4)
+    M[:3, :] = np.asarray(image.cam_from_world().matrix(), dtype=float)
+    return PinholeCamera(K, invert_pose(M), int(camera.width), int(camera.height))
+
+
+def _rigid(cam_to_world: np.ndarray):
+    import pycolmap  # noqa: PLC0415
+
+    M = invert_pose(np.asarray(cam_to_world, dtype=float))
+    U, _, Vt = np.linalg.svd(M[:3, :3])
+    return pycolmap.Rigid3d(pycolmap.Rotation3d(U @ Vt), M[:3, 3].copy())
+
+
+def known_pose_reconstruction(database: str | Path, cameras: Mapping[str, PinholeCamera],
+                              update_intrinsics: bool = True):
+    """A ``pycolmap.Reconstruction`` with the database's cameras, rigs, frames and
+    images (their ids: ``triangulate_points`` needs them, DESIGN.md Known traps), every
+    image of ``cameras`` (keyed by COLMAP image name) registered at its known pose and,
+    with ``update_intrinsics``, its camera set to the known K. Images of the database
+    absent from ``cameras`` stay unregistered."""
+    import pycolmap  # noqa: PLC0415
+
+    rec = pycolmap.Reconstruction()
+    with pycolmap.Database.open(str(database)) as db:
+        db_cams = {c.camera_id: c for c in db.read_all_cameras()}
+        rigs = db.read_all_rigs()
+        frames = db.read_all_frames()
+        images = db.read_all_images()
+    by_name = {im.name: im for im in images}
+    missing = sorted(set(cameras) - set(by_name))
+    if missing:
+        raise ValueError(f"views not in the database {database}: {', '.join(missing[:10])}")
+    for name, cam in cameras.items():
+        c = db_cams[by_name[name].camera_id]
+        if (int(c.width), int(c.height)) != (int(cam.width), int(cam.height)):
+            raise ValueError(f"{name}: image is {c.width}x{c.height}, the calibration says "
+                             f"{cam.width}x{cam.height}")
+        if update_intrinsics:
+            K = k_to_colmap(cam.K)
+            if c.model_name == "SIMPLE_PINHOLE":
+                c.params = [0.5 * (K[0, 0] + K[1, 1]), K[0, 2], K[1, 2]]
+            else:
+                c.params = [K[0, 0], K[1, 1], K[0, 2], K[1, 2]]
+    for cid in sorted(db_cams):
+        rec.add_camera(db_cams[cid])
+    for rig in rigs:
+        rec.add_rig(rig)
+    image_of_frame = {im.frame_id: im for im in images}
+    for frame in frames:
+        im = image_of_frame.get(frame.frame_id)
+        if im is not None and im.name in cameras:
+            frame.rig_from_world = _rigid(cameras[im.name].cam_to_world)
+        rec.add_frame(frame)
+    for im in sorted(images, key=lambda i: i.image_id):
+        rec.add_image(pycolmap.Image(name=im.name, camera_id=im.camera_id,
+                                     image_id=im.image_id, frame_id=im.frame_id))
+    for frame in frames:
+        im = image_of_frame.get(frame.frame_id)
+        if im is not None and im.name in cameras:
+            rec.register_frame(frame.frame_id)
+    return rec

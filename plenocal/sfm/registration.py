@@ -1,0 +1,265 @@
+"""Registration A (Section II-B of the paper): structure-from-motion of the central
+subaperture view of every array shot plus every hand-held shot.
+
+- one shared SIMPLE_PINHOLE camera (all shots come from the same camera), principal
+  point fixed at the image centre and no distortion: the views are recombined from
+  micro images, so the paper assumes both;
+- exhaustive SIFT matching with geometric verification;
+- incremental mapping (or COLMAP's global mapper, option ``mapper: global``) with a
+  fixed seed, refining the focal length only.
+
+The hand-held shots are required: a parallel array alone leaves the focal length
+undetermined (it trades off against depth at a tiny reprojection error, [27] of the
+paper). A view that does not register, or a scene split into several models, stops
+the stage with an error naming the views.
+
+Output ``reg_a.json`` (SfM units, internal convention)::
+
+    {"units": "sfm", "focal_px": f, "width": W, "height": H, "mapper": ...,
+     "cameras": {"<cam>": {"K": 3x3, "cam_to_world": 4x4}},
+     "mean_reprojection_error_px": ..., "num_points3D": ..., ...}
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import tempfile
+import time
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from plenocal.sfm import colmap as cm
+
+log = logging.getLogger(__name__)
+
+
+class RegistrationError(RuntimeError):
+    """Registration A could not register every view."""
+
+
+def check_shots(cams: list[str]) -> None:
+    """Registration A needs hand-held shots besides the array (Section II-B)."""
+    hand = [c for c in cams if c.startswith("hand")]
+    array = [c for c in cams if not c.startswith("hand")]
+    if not hand:
+        raise RegistrationError(
+            "registration A needs hand-held shots (hand00.png, ...): with the parallel "
+            f"array alone ({len(array)} shots) the focal length is undetermined - it trades "
+            "off against depth at a tiny reprojection error (Section II-B of the paper). "
+            "Add a few shots taken by hand with rotations of several degrees.")
+    if len(cams) < 3:
+        raise RegistrationError(f"registration A needs at least 3 shots, got {cams}")
+
+
+def features_a(views: Mapping[str, str | Path], image_dir: str | Path,
+               database: str | Path, *, max_num_features: int = 8192, seed: int = 0,
+               num_threads: int = 1) -> dict:
+    """Stage the central views (``views``: cam -> png) as ``<cam>.png`` in ``image_dir``
+    and extract SIFT into a new ``database`` with one SIMPLE_PINHOLE camera for all."""
+    check_shots(sorted(views))
+    sizes = {cam: cm.image_size(p) for cam, p in sorted(views.items())}
+    if len(set(sizes.values())) != 1:
+        detail = ", ".join(f"{c}: {w}x{h}" for c, (w, h) in sizes.items())
+        raise RegistrationError(f"the central views differ in size ({detail}); one shared "
+                                "camera needs one size: reconvert every shot alike")
+    image_dir = Path(image_dir)
+    if image_dir.exists():
+        shutil.rmtree(image_dir)
+    names = cm.stage_images(views, image_dir)
+    cm.extract_features(database, image_dir, [(names, None)], model="SIMPLE_PINHOLE",
+                        max_num_features=max_num_features, num_threads=num_threads, seed=seed)
+    import pycolmap  # noqa: PLC0415
+
+    with pycolmap.Database.open(str(database)) as db:
+        kp = {im.name: db.num_keypoints_for_image(im.image_id) for im in db.read_all_images()}
+        ncam = db.num_cameras()
+    if ncam != 1:
+        raise RegistrationError(f"expected one shared camera in {database}, found {ncam}")
+    poor = sorted(n for n, k in kp.items() if k < 100)
+    for n in sorted(kp):
+        log.info("features_a: %s %d keypoints", n, kp[n])
+    if poor:
+        log.warning("few features (< 100) in %s: texture-poor views may not register",
+                    ", ".join(poor))
+    return {"num_images": len(kp), "keypoints": kp}
+
+
+def match_a(database: str | Path, *, seed: int = 0, num_threads: int = 1) -> dict:
+    """Exhaustive matching with geometric verification."""
+    n = cm.match(database, None, seed=seed, num_threads=num_threads)
+    if n == 0:
+        raise RegistrationError(f"{database}: no image pair passed geometric verification; "
+                                "the views need more texture or overlap")
+    return {"num_verified_pairs": n}
+
+
+def incremental_options(seed: int, num_threads: int):
+    import pycolmap  # noqa: PLC0415
+
+    o = pycolmap.IncrementalPipelineOptions()
+    o.random_seed = seed
+    o.mapper.random_seed = seed
+    o.triangulation.random_seed = seed
+    o.num_threads = num_threads
+    o.mapper.num_threads = num_threads
+    o.ba_refine_focal_length = True
+    o.ba_refine_principal_point = False
+    o.ba_refine_extra_params = False
+    o.mapper.abs_pose_refine_focal_length = True
+    o.mapper.abs_pose_refine_extra_params = False
+    o.multiple_models = True
+    o.min_model_size = 2
+    return o
+
+
+def global_options(seed: int, num_threads: int):
+    import pycolmap  # noqa: PLC0415
+
+    o = pycolmap.GlobalPipelineOptions()
+    o.random_seed = seed
+    o.num_threads = num_threads
+    o.multiple_models = True
+    o.min_model_size = 2
+    m = o.mapper
+    m.random_seed = seed
+    m.num_threads = num_threads
+    m.rotation_averaging.random_seed = seed
+    m.global_positioning.random_seed = seed
+    m.global_positioning.use_gpu = False
+    ba = m.bundle_adjustment
+    ba.refine_focal_length = True
+    ba.refine_principal_point = False
+    ba.refine_extra_params = False
+    ba.ceres.use_gpu = False
+    m.retriangulation.random_seed = seed
+    return o
+
+
+def run_mapper(database: str | Path, image_dir: str | Path, *, mapper: str = "incremental",
+               seed: int = 0, num_threads: int = 1) -> dict:
+    """Run the mapper; returns {model index: Reconstruction}."""
+    import pycolmap  # noqa: PLC0415
+
+    pycolmap.set_random_seed(seed)
+    out = Path(tempfile.mkdtemp(prefix=".mapper_", dir=Path(database).parent))
+    try:
+        if mapper == "incremental":
+            recs = pycolmap.incremental_mapping(str(database), str(image_dir), str(out),
+                                                options=incremental_options(seed, num_threads))
+        elif mapper == "global":
+            recs = pycolmap.global_mapping(str(database), str(image_dir), str(out),
+                                           options=global_options(seed, num_threads))
+        else:
+            raise ValueError(f"sfm.mapper must be incremental or global, not {mapper!r}")
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+    return dict(recs)
+
+
+def check_models(recs: dict, all_names: list[str], mapper: str) -> object:
+    """The single model holding every view, or a RegistrationError naming the views."""
+    hint = ("try: more texture or overlap between the shots, more hand-held shots, "
+            "more features (sfm.max_num_features)"
+            + (", or sfm.mapper: global" if mapper == "incremental" else
+               ", or sfm.mapper: incremental"))
+    if not recs:
+        raise RegistrationError(f"registration A ({mapper}) built no model from "
+                                f"{len(all_names)} views; {hint}")
+    models = sorted(recs.values(), key=lambda r: -r.num_reg_images())
+    if len(models) > 1:
+        parts = "; ".join(
+            f"model {i}: " + ", ".join(sorted(r.image(j).name[:-4] for j in r.reg_image_ids()))
+            for i, r in enumerate(models))
+        raise RegistrationError(f"registration A ({mapper}) split the scene into "
+                                f"{len(models)} models ({parts}); {hint}")
+    rec = models[0]
+    reg = {rec.image(j).name for j in rec.reg_image_ids()}
+    missing = sorted(n[:-4] for n in all_names if n not in reg)
+    if missing:
+        raise RegistrationError(f"registration A ({mapper}) did not register "
+                                f"{', '.join(missing)}; {hint}")
+    if rec.num_cameras() != 1:
+        raise RegistrationError(f"registration A expected one shared camera, the model has "
+                                f"{rec.num_cameras()}")
+    return rec
+
+
+def reg_a_dict(rec, mapper: str) -> dict:
+    """The reg_a.json document of a single-camera reconstruction (internal convention)."""
+    cams = {}
+    camera = None
+    for image_id in sorted(rec.reg_image_ids()):
+        image = rec.image(image_id)
+        camera = rec.camera(image.camera_id)
+        pc = cm.pinhole_from_colmap(image, camera)
+        cams[image.name[:-4]] = {"K": pc.K, "cam_to_world": pc.cam_to_world}
+    if camera is None:
+        raise RegistrationError("registration A: the model has no registered image")
+    errs = []
+    for p in rec.points3D.values():
+        for el in p.track.elements:
+            image = rec.image(el.image_id)
+            proj = image.project_point(p.xyz)
+            if proj is not None:
+                errs.append(np.linalg.norm(np.asarray(proj) - image.points2D[el.point2D_idx].xy))
+    errs = np.asarray(errs)
+    return {
+        "units": "sfm",
+        "mapper": mapper,
+        "camera_model": camera.model_name,
+        "focal_px": float(camera.params[0]),
+        "width": int(camera.width),
+        "height": int(camera.height),
+        "cameras": cams,
+        "num_images": len(cams),
+        "num_points3D": int(rec.num_points3D()),
+        "num_observations": int(errs.size),
+        "mean_track_length": float(rec.compute_mean_track_length()),
+        "mean_reprojection_error_px": float(errs.mean()) if errs.size else None,
+        "median_reprojection_error_px": float(np.median(errs)) if errs.size else None,
+        "colmap_mean_reprojection_error_px": float(rec.compute_mean_reprojection_error()),
+    }
+
+
+def write_model(rec, folder: str | Path) -> None:
+    """Write a binary COLMAP model into ``folder`` atomically (temporary sibling, then
+    rename)."""
+    folder = Path(folder)
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
+    try:
+        rec.write_binary(str(tmp))
+        if folder.exists():
+            shutil.rmtree(folder)
+        os.replace(tmp, folder)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def map_a(database: str | Path, image_dir: str | Path, model_dir: str | Path, *,
+          mapper: str = "incremental", seed: int = 0, num_threads: int = 1) -> dict:
+    """Map, check that every view registered into one model, write the model; returns
+    the reg_a.json document."""
+    import pycolmap  # noqa: PLC0415
+
+    with pycolmap.Database.open(str(database)) as db:
+        names = sorted(im.name for im in db.read_all_images())
+    check_shots([n[:-4] for n in names])
+    t0 = time.perf_counter()
+    # the mapper works on a copy: the database input of the rule stays untouched
+    with tempfile.TemporaryDirectory(dir=Path(model_dir).parent) as tmp:
+        db_copy = Path(tmp) / "database.db"
+        shutil.copyfile(database, db_copy)
+        recs = run_mapper(db_copy, image_dir, mapper=mapper, seed=seed, num_threads=num_threads)
+    seconds = time.perf_counter() - t0
+    rec = check_models(recs, names, mapper)
+    log.info("map_a (%s): %d images, %d points, %.1f s", mapper, rec.num_reg_images(),
+             rec.num_points3D(), seconds)
+    write_model(rec, model_dir)
+    doc = reg_a_dict(rec, mapper)
+    return doc
