@@ -1,0 +1,74 @@
+"""Depth maps of subaperture views: a reference camera + image, source cameras +
+images and the scene bounds in, a float32 z-depth map of the reference out (0 =
+invalid), by the CPU plane sweep (:mod:`plenocal.depth.planesweep`) or COLMAP's
+patch-match stereo (:mod:`plenocal.depth.colmap_mvs`, GPU only)."""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import fields
+from pathlib import Path
+
+import numpy as np
+
+from plenocal.camera import PinholeCamera
+from plenocal.depth.colmap_mvs import (
+    COLMAP_HINT,
+    ColmapOptions,
+    DepthBackendError,
+    colmap_available,
+    colmap_depth,
+)
+from plenocal.depth.planesweep import PlaneSweepOptions, plane_sweep_depth
+
+__all__ = ["DepthBackendError", "estimate_depth", "planesweep_options", "resolve_backend"]
+
+
+def planesweep_options(cfg: dict | None) -> PlaneSweepOptions:
+    """PlaneSweepOptions from the config's ``depth`` block (unknown keys ignored)."""
+    cfg = cfg or {}
+    names = {f.name for f in fields(PlaneSweepOptions)}
+    return PlaneSweepOptions(**{k: v for k, v in cfg.items() if k in names})
+
+
+def colmap_options(cfg: dict | None) -> ColmapOptions:
+    cfg = dict((cfg or {}).get("colmap", {}) or {})
+    names = {f.name for f in fields(ColmapOptions)}
+    return ColmapOptions(**{k: v for k, v in cfg.items() if k in names})
+
+
+def resolve_backend(name: str) -> str:
+    """``auto`` -> colmap where it can run (CUDA build and a GPU, probed in a
+    subprocess), else planesweep; ``colmap`` where it cannot -> DepthBackendError."""
+    if name == "planesweep":
+        return name
+    if name not in ("auto", "colmap"):
+        raise ValueError(f"config: depth.backend = {name!r}: must be auto, planesweep or colmap")
+    ok, why = colmap_available()
+    if ok:
+        return "colmap"
+    if name == "colmap":
+        raise DepthBackendError(f"depth backend 'colmap' cannot run here ({why}): {COLMAP_HINT}")
+    return "planesweep"
+
+
+def estimate_depth(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
+                   src_imgs: list[np.ndarray], near: float, far: float,
+                   cfg: dict | None = None, backend: str | None = None,
+                   workspace: str | Path | None = None) -> np.ndarray:
+    """Z-depth of the reference view (float32, cameras' units, 0 = invalid).
+
+    ``cfg`` is the config's ``depth`` block; ``backend`` an already resolved backend
+    (default: resolve ``cfg['backend']``)."""
+    cfg = cfg or {}
+    backend = backend or resolve_backend(cfg.get("backend", "auto"))
+    if len(srcs) != len(src_imgs):
+        raise ValueError("depth: as many source images as source cameras are needed")
+    if backend == "planesweep":
+        return plane_sweep_depth(ref, ref_img, srcs, src_imgs, near, far,
+                                 planesweep_options(cfg))
+    if workspace is None:
+        with tempfile.TemporaryDirectory(prefix="plenocal_mvs_") as tmp:
+            return colmap_depth(ref, ref_img, srcs, src_imgs, near, far, tmp,
+                                colmap_options(cfg))
+    return colmap_depth(ref, ref_img, srcs, src_imgs, near, far, workspace, colmap_options(cfg))

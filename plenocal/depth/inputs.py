@@ -1,0 +1,144 @@
+"""What a depth map of the workflow is computed from: the source views of each
+registration, the scene bounds, and previews.
+
+- Registration A: reference = the central view of shot ``cam``; sources = the central
+  views of the ``k`` shots whose camera centres are nearest (SfM units). Bounds: the
+  depths of the sparse SfM points the reference sees (``reg_a.json`` key
+  ``depth_range`` per shot if present, else the COLMAP model), 2nd-98th percentile,
+  widened.
+- Registration B: reference = the central view; sources = the other views of its
+  own N x N set (the ``k`` nearest, or all). Bounds: rig.json's X_n / X_f (mm),
+  widened.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from plenocal.camera import PinholeCamera, transform
+from plenocal.io import read_json
+
+
+def widen(near: float, far: float, margin: float) -> tuple[float, float]:
+    """Bounds widened by ``margin`` (relative) on both sides."""
+    return near * (1.0 - margin), far * (1.0 + margin)
+
+
+def nearest_sources(ref_key: str, cameras: dict[str, PinholeCamera], k: int | None,
+                    candidates: list[str] | None = None) -> list[str]:
+    """The ``k`` candidate cameras nearest to the reference by camera centre (sorted by
+    distance, then name; all when k is None)."""
+    cand = [c for c in (candidates if candidates is not None else sorted(cameras))
+            if c != ref_key]
+    c0 = cameras[ref_key].centre
+    order = sorted(cand, key=lambda c: (round(float(np.linalg.norm(cameras[c].centre - c0)),
+                                              12), c))
+    return order if k is None else order[:k]
+
+
+def reg_a_cameras(reg_a: dict) -> dict[str, PinholeCamera]:
+    W, H = int(reg_a["width"]), int(reg_a["height"])
+    out = {}
+    for cam, d in reg_a["cameras"].items():
+        out[cam] = PinholeCamera(np.asarray(d["K"], float), np.asarray(d["cam_to_world"], float),
+                                 int(d.get("width", W)), int(d.get("height", H)))
+    return out
+
+
+def rig_cameras(rig: dict) -> dict[str, PinholeCamera]:
+    """Views of one N x N set in the central view's frame."""
+    W, H = int(rig["width"]), int(rig["height"])
+    return {v: PinholeCamera(np.asarray(d["K"], float), np.asarray(d["cam_to_central"], float),
+                             int(d.get("width", W)), int(d.get("height", H)))
+            for v, d in rig["views"].items()}
+
+
+def rig_bounds(rig: dict, margin: float) -> tuple[float, float]:
+    """Scene bounds (metres) from rig.json's X_n / X_f (mm), widened."""
+    sym = rig.get("symbols", {})
+    if "X_n" not in sym or "X_f" not in sym:
+        raise ValueError("rig.json: symbols.X_n / symbols.X_f (mm) are needed for the depth "
+                         "bounds of registration B")
+    return widen(float(sym["X_n"]) / 1000.0, float(sym["X_f"]) / 1000.0, margin)
+
+
+def _model_points_depths(model_dir: Path, cam: str, cam_to_world: np.ndarray) -> np.ndarray:
+    import cv2  # noqa: PLC0415,F401  (cv2 before pycolmap: DESIGN.md known traps)
+    import pycolmap  # noqa: PLC0415
+
+    rec = pycolmap.Reconstruction(str(model_dir))
+    img = None
+    for im in rec.images.values():
+        name = im.name
+        if Path(name).stem == cam or name.startswith(cam + "/") or f"/{cam}." in "/" + name:
+            img = im
+            break
+    if img is not None:
+        ids = [p.point3D_id for p in img.points2D if p.has_point3D()]
+        pts = np.array([rec.points3D[i].xyz for i in ids]) if ids else np.zeros((0, 3))
+    else:
+        pts = np.array([p.xyz for p in rec.points3D.values()]) if rec.points3D else \
+            np.zeros((0, 3))
+    if len(pts) == 0:
+        return np.zeros(0)
+    Xc = transform(np.linalg.inv(cam_to_world), pts)
+    return Xc[:, 2][Xc[:, 2] > 0]
+
+
+def reg_a_bounds(reg_a: dict, cam: str, model_dir: str | Path | None,
+                 margin: float) -> tuple[float, float]:
+    """Scene bounds of shot ``cam`` in SfM units, widened."""
+    dr = reg_a.get("depth_range", {})
+    if cam in dr:
+        near, far = dr[cam]
+        return widen(float(near), float(far), margin)
+    if model_dir is None or not Path(model_dir).is_dir():
+        raise FileNotFoundError(f"depth bounds of {cam} in registration A: reg_a.json has no "
+                                f"depth_range and the COLMAP model {model_dir} is missing")
+    z = _model_points_depths(Path(model_dir), cam,
+                             np.asarray(reg_a["cameras"][cam]["cam_to_world"], float))
+    if len(z) < 10:
+        raise ValueError(f"depth bounds of {cam} in registration A: only {len(z)} sparse "
+                         f"points in front of it in {model_dir}")
+    near, far = np.percentile(z, [2.0, 98.0])
+    return widen(float(near), float(far), margin)
+
+
+def load_rig(path: str | Path) -> dict:
+    return read_json(path)
+
+
+def preview(depth: np.ndarray) -> np.ndarray:
+    """Colour-mapped inverse depth (RGB uint8, invalid black), scaled to the valid
+    1st-99th percentile."""
+    import cv2  # noqa: PLC0415
+
+    v = depth > 0
+    out = np.zeros(depth.shape + (3,), np.uint8)
+    if not v.any():
+        return out
+    inv = np.zeros_like(depth, dtype=np.float64)
+    inv[v] = 1.0 / depth[v]
+    lo, hi = np.percentile(inv[v], [1.0, 99.0])
+    g = np.clip((inv - lo) / max(hi - lo, 1e-12), 0, 1)
+    col = cv2.applyColorMap(np.rint(g * 255).astype(np.uint8), cv2.COLORMAP_TURBO)[..., ::-1]
+    out[v] = col[v]
+    return out
+
+
+def depth_to_disparity16(depth: np.ndarray, near: float, far: float) -> np.ndarray:
+    """MPEG 16-bit normalised disparity L = round((2^16-1)(1/z - 1/far)/(1/near - 1/far)),
+    0 for invalid pixels."""
+    z = np.asarray(depth, np.float64)
+    with np.errstate(divide="ignore"):
+        L = (65535.0 * (1.0 / z - 1.0 / far) / (1.0 / near - 1.0 / far))
+    L = np.where(z > 0, np.clip(np.rint(L), 0, 65535), 0)
+    return L.astype(np.uint16)
+
+
+def disparity16_to_depth(L: np.ndarray, near: float, far: float) -> np.ndarray:
+    L = np.asarray(L, np.float64)
+    inv = L / 65535.0 * (1.0 / near - 1.0 / far) + 1.0 / far
+    return np.where(L > 0, 1.0 / inv, 0.0).astype(np.float32)

@@ -1,0 +1,276 @@
+"""Fronto-parallel plane sweep stereo on the CPU (vectorised with OpenCV/numpy).
+
+For every depth label ``d`` (uniform in inverse depth between ``near`` and ``far``)
+each source image is warped onto the reference by the homography induced by the
+plane ``n^T X_r = d`` (``n = (0, 0, 1)``, reference camera frame). With
+``[R | t] = world_to_cam_s @ cam_to_world_r`` a reference point on the plane maps to
+the source as ``X_s = (R + t n^T / d) X_r``, so the reference-to-source pixel
+homography is::
+
+    H(d) = K_s (R + t n^T / d) K_r^-1
+
+(used with ``cv2.WARP_INVERSE_MAP``: reference pixel -> source sampling position).
+
+Matching cost per source: ``zncc`` (1 - zero-mean normalised cross-correlation over a
+window, insensitive to the gain/offset differences of subaperture views) or ``tad``
+(truncated absolute difference of colour and gradient, box-aggregated). Occlusions:
+per pixel and label the mean of the best ``ceil(S * best_fraction)`` source costs.
+Winner-take-all with parabolic sub-label refinement (in inverse depth), then pixels
+are marked invalid (0) when: the best label is at the end of the range, the
+aggregated cost exceeds ``max_cost``, the best/second-best cost ratio exceeds
+``uniqueness`` (second best taken outside +-1 label), the reference texture is too
+weak, the optional left-right check against a source depth map fails, or the pixel
+lies in a small connected region (``cv2.filterSpeckles``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from plenocal.camera import PinholeCamera
+from plenocal.io import to_float
+
+
+@dataclass(frozen=True)
+class PlaneSweepOptions:
+    num_depths: int | None = None  # None: from the widest source's disparity range
+    labels_per_px: float = 1.5  # auto label count: labels per pixel of disparity range
+    min_depths: int = 32
+    max_depths: int = 128
+    cost: str = "tad"  # tad | zncc
+    window: int = 7  # matching / aggregation window (odd)
+    best_fraction: float = 0.5  # share of sources averaged per pixel (occlusions)
+    max_cost: float = 0.5  # tad: normalised truncated difference; zncc: 1 - ncc
+    uniqueness: float = 0.98  # best / second-best cost above this: ambiguous
+    min_texture: float = 0.004  # std of the reference grey value in the window (0..1)
+    lr_check: bool = True  # left-right check against the nearest source
+    lr_tolerance: float = 0.01  # relative depth agreement of the left-right check
+    speckle_size: int = 60  # connected regions below this many pixels are removed
+    speckle_labels: float = 2.0  # label jump that separates regions
+
+
+def _grey(img: np.ndarray) -> np.ndarray:
+    img = to_float(np.asarray(img))
+    if img.ndim == 3:
+        img = img.mean(axis=2)
+    return np.ascontiguousarray(img)
+
+
+def _features(img: np.ndarray) -> np.ndarray:
+    """Channels warped per plane: grey, x/y gradients (for tad), validity."""
+    g = _grey(img)
+    gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3) / 8.0
+    gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3) / 8.0
+    ones = np.ones_like(g)
+    return np.ascontiguousarray(np.stack([g, gx, gy, ones], axis=-1))
+
+
+def relative_pose(ref: PinholeCamera, src: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
+    """(R, t) with X_src = R X_ref + t."""
+    M = src.world_to_cam @ ref.cam_to_world
+    return M[:3, :3], M[:3, 3]
+
+
+def plane_homography(ref: PinholeCamera, src: PinholeCamera, depth: float) -> np.ndarray:
+    """Reference-to-source pixel homography of the plane z_ref = depth."""
+    R, t = relative_pose(ref, src)
+    n = np.array([0.0, 0.0, 1.0])
+    H = src.K @ (R + np.outer(t, n) / depth) @ np.linalg.inv(ref.K)
+    return H / H[2, 2]
+
+
+def disparity_range_px(ref: PinholeCamera, src: PinholeCamera, near: float, far: float) -> float:
+    """Largest pixel displacement, over the image corners and centre, between the
+    near and far planes (sets the label count)."""
+    W, Hh = ref.width, ref.height
+    pts = np.array([[0, 0], [W - 1, 0], [0, Hh - 1], [W - 1, Hh - 1],
+                    [(W - 1) / 2, (Hh - 1) / 2]], dtype=np.float64)
+    ph = np.concatenate([pts, np.ones((len(pts), 1))], axis=1)
+    out = []
+    for d in (near, far):
+        q = ph @ plane_homography(ref, src, d).T
+        out.append(q[:, :2] / q[:, 2:3])
+    return float(np.max(np.linalg.norm(out[0] - out[1], axis=1)))
+
+
+def depth_labels(near: float, far: float, n: int) -> np.ndarray:
+    """Depths of ``n`` labels uniform in inverse depth, near first."""
+    return (1.0 / np.linspace(1.0 / near, 1.0 / far, n)).astype(np.float64)
+
+
+def choose_num_depths(ref: PinholeCamera, srcs: list[PinholeCamera], near: float, far: float,
+                      opt: PlaneSweepOptions) -> int:
+    if opt.num_depths is not None:
+        return int(opt.num_depths)
+    rng = max(disparity_range_px(ref, s, near, far) for s in srcs)
+    n = int(math.ceil(rng * opt.labels_per_px)) + 1
+    return int(np.clip(n, opt.min_depths, opt.max_depths))
+
+
+def _box(x: np.ndarray, w: int) -> np.ndarray:
+    return cv2.boxFilter(x, cv2.CV_32F, (w, w), normalize=True, borderType=cv2.BORDER_REFLECT)
+
+
+def _source_cost(ref_feat: np.ndarray, ref_stats: tuple, warped: np.ndarray,
+                 opt: PlaneSweepOptions) -> np.ndarray:
+    """Cost of one warped source against the reference, +inf where the window leaves
+    the source image."""
+    w = opt.window
+    valid = _box(warped[..., 3], w) > 0.999
+    if opt.cost == "zncc":
+        mr, sr = ref_stats
+        s = warped[..., 0]
+        ms = _box(s, w)
+        vs = np.maximum(_box(s * s, w) - ms * ms, 0.0)
+        cov = _box(ref_feat[..., 0] * s, w) - mr * ms
+        ncc = cov / np.sqrt(np.maximum(sr * sr * vs, 1e-12))
+        cost = 1.0 - np.clip(ncc, -1.0, 1.0)
+    elif opt.cost == "tad":
+        dc = np.minimum(np.abs(ref_feat[..., 0] - warped[..., 0]), 0.08) / 0.08
+        dg = np.minimum(np.abs(ref_feat[..., 1] - warped[..., 1])
+                        + np.abs(ref_feat[..., 2] - warped[..., 2]), 0.04) / 0.04
+        cost = _box((0.3 * dc + 0.7 * dg).astype(np.float32), w)
+    else:
+        raise ValueError(f"depth: unknown matching cost {opt.cost!r} (use zncc or tad)")
+    return np.where(valid, cost, np.inf).astype(np.float32)
+
+
+def cost_volume(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
+                src_imgs: list[np.ndarray], depths: np.ndarray,
+                opt: PlaneSweepOptions) -> np.ndarray:
+    """Aggregated cost (D, H, W), best-k over the sources, +inf where no source sees."""
+    ref_feat = _features(ref_img)
+    w = opt.window
+    mr = _box(ref_feat[..., 0], w)
+    sr = np.sqrt(np.maximum(_box(ref_feat[..., 0] ** 2, w) - mr * mr, 0.0))
+    src_feat = [_features(im) for im in src_imgs]
+    S = len(srcs)
+    k = max(1, int(math.ceil(S * opt.best_fraction)))
+    size = (ref.width, ref.height)
+    vol = np.empty((len(depths), ref.height, ref.width), dtype=np.float32)
+    per = np.empty((S, ref.height, ref.width), dtype=np.float32)
+    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+    for i, d in enumerate(depths):
+        for j, (sc, sf) in enumerate(zip(srcs, src_feat, strict=True)):
+            H = plane_homography(ref, sc, float(d))
+            warped = cv2.warpPerspective(sf, H, size, flags=flags,
+                                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+            per[j] = _source_cost(ref_feat, (mr, sr), warped, opt)
+        if k < S:
+            best = np.partition(per, k - 1, axis=0)[:k]
+        else:
+            best = per
+        with np.errstate(invalid="ignore"):
+            vol[i] = best.mean(axis=0)
+    return vol
+
+
+def winner_take_all(vol: np.ndarray, depths: np.ndarray) -> tuple[np.ndarray, np.ndarray,
+                                                                   np.ndarray, np.ndarray]:
+    """Best label, sub-label inverse depth -> depth, best cost and second-best cost
+    (outside +-1 label) per pixel."""
+    D = vol.shape[0]
+    v = np.where(np.isfinite(vol), vol, np.float32(1e6))
+    best = np.argmin(v, axis=0)
+    ii = np.clip(best, 1, D - 2)
+    rows, cols = np.indices(best.shape)
+    c0 = v[best, rows, cols]
+    cm = v[ii - 1, rows, cols]
+    cp = v[ii + 1, rows, cols]
+    cc = v[ii, rows, cols]
+    denom = cm - 2.0 * cc + cp
+    with np.errstate(divide="ignore", invalid="ignore"):
+        off = np.where(denom > 1e-9, 0.5 * (cm - cp) / denom, 0.0)
+    off = np.clip(off, -0.5, 0.5)
+    off = np.where((best >= 1) & (best <= D - 2), off, 0.0)
+    inv = 1.0 / depths
+    step = (inv[-1] - inv[0]) / (D - 1)
+    inv_d = inv[0] + (best + off) * step
+    depth = (1.0 / inv_d).astype(np.float32)
+    # second best outside the +-1 neighbourhood of the winner
+    masked = v.copy()
+    for o in (-1, 0, 1):
+        j = np.clip(best + o, 0, D - 1)
+        masked[j, rows, cols] = np.float32(1e6)
+    second = masked.min(axis=0)
+    return best, depth, c0, second
+
+
+def _remove_speckles(labels: np.ndarray, valid: np.ndarray, size: int,
+                     jump: float) -> np.ndarray:
+    if size <= 0:
+        return valid
+    lab = np.where(valid, np.rint(labels * 16.0), -16).astype(np.int16)
+    cv2.filterSpeckles(lab, -16, int(size), int(round(jump * 16)))
+    return valid & (lab != -16)
+
+
+def _sweep(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
+           src_imgs: list[np.ndarray], near: float, far: float,
+           opt: PlaneSweepOptions) -> tuple[np.ndarray, np.ndarray]:
+    """Depth (0 invalid) and the continuous label map, without the left-right check."""
+    n = choose_num_depths(ref, srcs, near, far, opt)
+    depths = depth_labels(near, far, n)
+    vol = cost_volume(ref, ref_img, srcs, src_imgs, depths, opt)
+    best, depth, c0, second = winner_take_all(vol, depths)
+    g = _grey(ref_img)
+    m = _box(g, opt.window)
+    std = np.sqrt(np.maximum(_box(g * g, opt.window) - m * m, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = c0 / np.maximum(second, 1e-9)
+    valid = ((best > 0) & (best < n - 1) & (c0 <= opt.max_cost) & (ratio <= opt.uniqueness)
+             & (std >= opt.min_texture) & np.isfinite(depth) & (depth > 0))
+    inv = 1.0 / np.maximum(depth, 1e-12)
+    cont = (inv - 1.0 / near) / ((1.0 / far - 1.0 / near) / (n - 1))
+    valid = _remove_speckles(cont, valid, opt.speckle_size, opt.speckle_labels)
+    return np.where(valid, depth, 0.0).astype(np.float32), cont
+
+
+def left_right_check(ref: PinholeCamera, depth: np.ndarray, src: PinholeCamera,
+                     src_depth: np.ndarray, tol: float) -> np.ndarray:
+    """Valid where the reference point, projected into the source, meets the source's
+    own depth map within ``tol`` (relative), i.e. both maps see the same surface."""
+    Hh, W = depth.shape
+    ys, xs = np.mgrid[0:Hh, 0:W].astype(np.float64)
+    uv = np.stack([xs, ys], axis=-1)
+    X = ref.unproject(uv, depth.astype(np.float64))
+    uvs, zs = src.project(X)
+    mx = uvs[..., 0].astype(np.float32)
+    my = uvs[..., 1].astype(np.float32)
+    sd = cv2.remap(src_depth.astype(np.float32), mx, my, cv2.INTER_NEAREST,
+                   borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    inside = ((mx >= 0) & (mx <= src.width - 1) & (my >= 0) & (my <= src.height - 1)
+              & (zs > 0))
+    agree = (sd > 0) & (np.abs(sd - zs) <= tol * zs)
+    # outside the source's image the check cannot be made: keep those pixels
+    return (depth > 0) & (agree | ~inside)
+
+
+def plane_sweep_depth(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
+                      src_imgs: list[np.ndarray], near: float, far: float,
+                      opt: PlaneSweepOptions | None = None) -> np.ndarray:
+    """Float32 z-depth map of the reference (cameras' units), 0 where unreliable."""
+    opt = opt or PlaneSweepOptions()
+    if not srcs:
+        raise ValueError("plane sweep needs at least one source view")
+    if not 0 < near < far:
+        raise ValueError(f"plane sweep needs 0 < near < far (got {near}, {far})")
+    ref_img = np.asarray(ref_img)
+    if ref_img.shape[:2] != (ref.height, ref.width):
+        raise ValueError(f"reference image is {ref_img.shape[1]}x{ref_img.shape[0]}, its camera "
+                         f"says {ref.width}x{ref.height}")
+    depth, _ = _sweep(ref, ref_img, srcs, src_imgs, near, far, opt)
+    if opt.lr_check:
+        # nearest source by camera centre, with the reference among its own sources
+        dist = [np.linalg.norm(s.centre - ref.centre) for s in srcs]
+        j = int(np.argmin(dist))
+        others = [ref] + [s for i, s in enumerate(srcs) if i != j]
+        other_imgs = [ref_img] + [im for i, im in enumerate(src_imgs) if i != j]
+        src_depth, _ = _sweep(srcs[j], src_imgs[j], others, other_imgs, near, far, opt)
+        ok = left_right_check(ref, depth, srcs[j], src_depth, opt.lr_tolerance)
+        depth = np.where(ok, depth, 0.0).astype(np.float32)
+    return depth

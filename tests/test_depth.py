@@ -1,0 +1,122 @@
+"""Depth: the plane sweep recovers textured planes from synthetic pinhole renders;
+the colmap backend fails clearly without a GPU; the workspace it would run on is
+well formed; 16-bit disparity round trip; SGBM baseline runs."""
+
+import cv2  # noqa: F401  (before pycolmap)
+import numpy as np
+import pytest
+
+from plenocal.depth import DepthBackendError, estimate_depth, resolve_backend
+from plenocal.depth.colmap_mvs import colmap_available, prepare_workspace, read_colmap_array
+from plenocal.depth.inputs import depth_to_disparity16, disparity16_to_depth, nearest_sources
+from plenocal.depth.planesweep import PlaneSweepOptions, plane_homography, plane_sweep_depth
+from plenocal.depth.quality import depth_quality
+from plenocal.depth.sgbm import sgbm_depth
+from plenocal.depth.synthetic import camera_at, fronto_plane, photo_texture, render_plane
+
+W, H, F = 320, 240, 500.0
+
+
+@pytest.fixture(scope="module")
+def texture():
+    return photo_texture(512)
+
+
+def _scene(texture, tilt, step=0.02):
+    plane = fronto_plane(0.6, 0.8, texture, tilt)
+    ref = camera_at([0, 0, 0], F, W, H)
+    srcs = [camera_at([dx * step, dy * step, 0], F, W, H)
+            for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy]
+    ri, rd = render_plane(ref, plane)
+    return ref, ri, rd, srcs, [render_plane(s, plane)[0] for s in srcs]
+
+
+@pytest.mark.parametrize("tilt", [0.0, 30.0])
+def test_plane_sweep_recovers_plane(texture, tilt):
+    ref, ri, rd, srcs, sims = _scene(texture, tilt)
+    d = plane_sweep_depth(ref, ri, srcs, sims, 0.4, 0.9, PlaneSweepOptions())
+    q = depth_quality(d, rd, 0.01)
+    assert q["valid_share"] > 0.85, q
+    assert q["within_of_valid"] > 0.9, q
+    assert q["median_rel_error"] < 0.004, q
+
+
+def test_plane_homography_maps_plane_points(texture):
+    ref = camera_at([0, 0, 0], F, W, H)
+    src = camera_at([0.03, -0.01, 0.005], F, W, H)
+    uv = np.array([[10.0, 20.0], [300.0, 200.0]])
+    X = ref.unproject(uv, np.array([0.55, 0.55]))
+    expect, _ = src.project(X)
+    Hm = plane_homography(ref, src, 0.55)
+    q = np.c_[uv, np.ones(2)] @ Hm.T
+    np.testing.assert_allclose(q[:, :2] / q[:, 2:], expect, atol=1e-9)
+
+
+def test_plane_sweep_rejects_bad_input(texture):
+    ref, ri, rd, srcs, sims = _scene(texture, 0.0)
+    with pytest.raises(ValueError, match="near < far"):
+        plane_sweep_depth(ref, ri, srcs, sims, 0.9, 0.4)
+    with pytest.raises(ValueError, match="reference image"):
+        plane_sweep_depth(ref, ri[:100], srcs, sims, 0.4, 0.9)
+
+
+def test_colmap_backend_clear_error_without_gpu(texture):
+    ok, why = colmap_available()
+    if ok:
+        pytest.skip("a CUDA pycolmap and a GPU are present here")
+    with pytest.raises(DepthBackendError, match="pycolmap-cuda12.*planesweep"):
+        resolve_backend("colmap")
+    assert resolve_backend("auto") == "planesweep"
+    ref, ri, rd, srcs, sims = _scene(texture, 0.0)
+    with pytest.raises(DepthBackendError, match="GPU"):
+        estimate_depth(ref, ri, srcs[:2], sims[:2], 0.4, 0.9, {"backend": "colmap"})
+
+
+def test_colmap_workspace_is_readable(tmp_path, texture):
+    import pycolmap
+
+    ref, ri, rd, srcs, sims = _scene(texture, 0.0)
+    names = prepare_workspace(tmp_path, ref, ri, srcs[:3], sims[:3])
+    rec = pycolmap.Reconstruction(str(tmp_path / "sparse"))
+    assert rec.num_images() == 4
+    im = next(i for i in rec.images.values() if i.name == names[1])
+    # the COLMAP pose and intrinsics reproduce our projection (+0.5 px pixel convention)
+    X = np.array([[0.05, -0.02, 0.6]])
+    uv, _ = srcs[0].project(X)
+    cam = rec.cameras[im.camera_id]
+    xc = im.cam_from_world() * X[0] if callable(im.cam_from_world) else im.cam_from_world * X[0]
+    px = cam.img_from_cam(np.asarray(xc)[None])[0]
+    np.testing.assert_allclose(px - 0.5, uv[0], atol=1e-6)
+    cfg = (tmp_path / "stereo" / "patch-match.cfg").read_text().splitlines()
+    assert cfg == [names[0], ", ".join(names[1:])]
+
+
+def test_colmap_array_reader(tmp_path):
+    a = np.arange(12, dtype=np.float32).reshape(3, 4)
+    p = tmp_path / "d.bin"
+    p.write_bytes(b"4&3&1&" + a.tobytes())  # per channel, row after row (COLMAP Mat)
+    np.testing.assert_array_equal(read_colmap_array(p), a)
+
+
+def test_disparity16_round_trip():
+    z = np.array([[0.47, 0.6], [0.74, 0.0]], dtype=np.float32)
+    L = depth_to_disparity16(z, 0.47, 0.74)
+    assert L[0, 0] == 65535 and L[1, 0] == 0 and L[1, 1] == 0
+    back = disparity16_to_depth(np.where(z > 0, np.maximum(L, 1), 0), 0.47, 0.74)
+    np.testing.assert_allclose(back[0], z[0], rtol=1e-4)
+
+
+def test_nearest_sources_order():
+    cams = {k: camera_at([x, 0, 0], F, W, H) for k, x in
+            (("a", 0.0), ("b", 0.02), ("c", -0.01), ("d", 0.05))}
+    assert nearest_sources("a", cams, 2) == ["c", "b"]
+
+
+def test_sgbm_baseline_runs(texture):
+    plane = fronto_plane(0.6, 0.8, texture, 0.0)
+    a, b = camera_at([0, 0, 0], F, W, H), camera_at([0.02, 0, 0], F, W, H)
+    ia, da = render_plane(a, plane)
+    ib, _ = render_plane(b, plane)
+    d, info = sgbm_depth(a, ia, b, ib, 0.4, 0.9)
+    q = depth_quality(d, da, 0.02)
+    assert q["valid_share"] > 0.7 and q["within_of_valid"] > 0.8, q
