@@ -30,7 +30,7 @@ class TexturedPlane:
         return n / np.linalg.norm(n)
 
 
-def photo_texture(size: int = 768, seed: int = 0) -> np.ndarray:
+def photo_texture(size: int = 768, seed: int = 0, noise: float = 0.02) -> np.ndarray:
     """A real photograph (scikit-image's astronaut and coffee, tiled) as float RGB."""
     from skimage import data  # noqa: PLC0415
 
@@ -40,7 +40,7 @@ def photo_texture(size: int = 768, seed: int = 0) -> np.ndarray:
     tex = np.concatenate([a, b], axis=1)
     rng = np.random.default_rng(seed)
     # fine noise so that no window is flat even in the sky of the photo
-    tex = np.clip(tex + rng.normal(0, 0.02, tex.shape).astype(np.float32), 0, 1)
+    tex = np.clip(tex + rng.normal(0, noise, tex.shape).astype(np.float32), 0, 1)
     return cv2.resize(tex, (2 * size, size), interpolation=cv2.INTER_AREA)
 
 
