@@ -1,0 +1,43 @@
+"""Depth of the central view of every shot in registration A (central views of the
+nearest shots, SfM units) and in registration B (views of its own set, metres)."""
+
+
+wildcard_constraints:
+    reg="a|b",
+
+
+def depth_inputs(wildcards):
+    d = wildcards.dataset
+    if wildcards.reg == "a":
+        return {
+            "reg_a": res(d, "reg_a", "reg_a.json"),
+            "views": [res(d, "views", c, f"{centre(d)}.png") for c in cams(d)],
+        }
+    return {
+        "rig": res(d, "reg_b", "rig.json"),
+        "views": [res(d, "views", wildcards.cam, f"{v}.png") for v in views(d)],
+    }
+
+
+rule depth:
+    input:
+        unpack(depth_inputs),
+    output:
+        depth="results/{dataset}/depth/{reg}/{cam}.npy",
+        preview="results/{dataset}/depth/{reg}/{cam}.png",
+        info="results/{dataset}/depth/{reg}/{cam}.json",
+    log:
+        log_path("depth", "{reg}_{cam}"),
+    benchmark:
+        bench_path("depth", "{reg}_{cam}")
+    threads: 1
+    resources:
+        mem_mb=3000,
+        runtime=30,
+    params:
+        depth=lambda wc: stage_config("depth"),
+        centre=lambda wc: centre(wc.dataset),
+        views_dir=lambda wc: res(wc.dataset, "views"),
+        model_dir=lambda wc: res(wc.dataset, "reg_a", "model"),
+    script:
+        "../scripts/depth.py"
