@@ -128,3 +128,19 @@ def rig_cameras(f: float = 400.0, width: int = 320, height: int = 240, cols: int
         R = roll @ np.column_stack([x, y, z])
         cams[f"hand{k:02d}"] = PinholeCamera(K, pose(R, centre), width, height)
     return cams
+
+
+def view_sets(shots: dict[str, PinholeCamera], n: int = 3,
+              baseline_m: float = 0.002) -> dict[str, PinholeCamera]:
+    """An n x n set of parallel views ``<cam>/<r>_<c>`` around every shot, ``baseline_m``
+    apart along the shot's own x and y axes (a stand-in for a subaperture set)."""
+    out = {}
+    h = (n - 1) / 2
+    for cam, pc in shots.items():
+        for r in range(n):
+            for c in range(n):
+                M = pc.cam_to_world.copy()
+                M[:3, 3] = pc.centre + pc.R @ np.array([(c - h) * baseline_m,
+                                                        (r - h) * baseline_m, 0.0])
+                out[f"{cam}/{r}_{c}"] = PinholeCamera(pc.K, M, pc.width, pc.height)
+    return out

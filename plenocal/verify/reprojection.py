@@ -153,6 +153,10 @@ def reprojection_stats(cameras: Mapping[str, PinholeCamera], images: Mapping[str
             "colmap_mean_px": float(rec.compute_mean_reprojection_error()),
             "mean_track_length": float(rec.compute_mean_track_length()),
             "max_error_px": float(max_error_px),
+            # for comparison with COLMAP's default filter (its 4 px threshold)
+            "mean_px_within_4px": float(errs[errs <= 4.0].mean()) if (errs <= 4.0).any()
+            else None,
+            "fraction_within_4px": float((errs <= 4.0).mean()) if errs.size else None,
             "observations_per_image": obs_per_image,
         }
         log.info("reprojection: %d images, %d points, %d observations, mean %.4f px, "
@@ -162,3 +166,63 @@ def reprojection_stats(cameras: Mapping[str, PinholeCamera], images: Mapping[str
         return stats
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def reg_a_views(reg_a: Mapping, central: str) -> dict[str, PinholeCamera]:
+    """reg_a.json -> ``{"<cam>/<central>": PinholeCamera}`` (SfM units)."""
+    return {f"{cam}/{central}": PinholeCamera.from_dict(
+        {**d, "width": reg_a["width"], "height": reg_a["height"]})
+        for cam, d in reg_a["cameras"].items()}
+
+
+def rig_views(rig: Mapping, cam: str) -> dict[str, PinholeCamera]:
+    """rig.json (registration B) -> the N x N set of shot ``cam`` in its central view's
+    frame: ``{"<cam>/<r_c>": PinholeCamera}`` with cam_to_world = cam_to_central."""
+    return {f"{cam}/{view}": PinholeCamera(np.asarray(d["K"], dtype=float),
+                                           np.asarray(d["cam_to_central"], dtype=float),
+                                           int(rig["width"]), int(rig["height"]))
+            for view, d in rig["views"].items()}
+
+
+def shot_counts(names) -> dict:
+    """Array and hand-held shot counts of ``<cam>/<view>`` names (Table I writes
+    "21 + 7")."""
+    shots = {n.split("/", 1)[0] for n in names}
+    hand = sum(1 for s in shots if s.startswith("hand"))
+    views = len(list(names))
+    return {"num_shots": len(shots), "num_handheld_shots": hand,
+            "num_array_images": sum(1 for n in names if not n.startswith("hand")),
+            "num_handheld_images": sum(1 for n in names if n.startswith("hand")),
+            "num_views": views}
+
+
+def evaluate(cameras: Mapping[str, PinholeCamera], images: Mapping[str, str | Path],
+             **kwargs) -> dict:
+    """:func:`reprojection_stats` of the views that have both a camera and an image,
+    with the shot counts; views without a camera are listed (``missing_cameras``)."""
+    use = {k: v for k, v in cameras.items() if k in images}
+    stats = reprojection_stats(use, images, **kwargs)
+    stats.update(shot_counts(sorted(use)))
+    stats["missing_cameras"] = sorted(set(images) - set(cameras))
+    return stats
+
+
+def evaluate_sets(rig: Mapping, images: Mapping[str, str | Path], **kwargs) -> dict:
+    """Registration B: every shot's N x N set on its own, and the mean over the sets."""
+    by_shot: dict[str, dict] = {}
+    for name, path in images.items():
+        by_shot.setdefault(name.split("/", 1)[0], {})[name] = path
+    sets = {}
+    for cam in sorted(by_shot):
+        log.info("registration B: set %s", cam)
+        sets[cam] = evaluate(rig_views(rig, cam), by_shot[cam], **kwargs)
+    means = [s["mean_px"] for s in sets.values() if s["mean_px"] is not None]
+    medians = [s["median_px"] for s in sets.values() if s["median_px"] is not None]
+    return {"sets": sets,
+            "mean_px": float(np.mean(means)) if means else None,
+            "median_px": float(np.mean(medians)) if medians else None,
+            "mean_of": "per-set mean and median, averaged over the sets",
+            "num_sets": len(sets),
+            "num_images": int(np.median([s["num_images"] for s in sets.values()])) if sets
+            else 0,
+            "num_observations": int(sum(s["num_observations"] for s in sets.values()))}

@@ -1,0 +1,166 @@
+"""The naive baseline of Table I, "Complete (A+SfM)": the central views registered by
+registration A, every remaining subaperture view registered onto it by
+structure-from-motion (Section II-B of the paper: "it is possible to first calibrate
+the central views of each subaperture set, then register the remaining views"), and,
+for comparison, plain SfM of all views from scratch ("leads to a failure and
+incomplete registration").
+
+A+SfM: all views go into one database with the one SIMPLE_PINHOLE camera of A (its
+focal length); the central views get A's poses and their points are triangulated with
+those poses fixed; COLMAP's incremental mapper then continues from that model with
+A's frames and the camera held fixed, registering each remaining view by absolute pose
+against the points and bundle-adjusting the new poses and the points.
+
+From scratch: the same features and matches, the camera reset to COLMAP's default
+focal length guess, a plain incremental mapping; reported is how many views the
+largest model registers and into how many models the views fall.
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import tempfile
+import time
+from collections.abc import Mapping
+from pathlib import Path
+
+from plenocal.camera import PinholeCamera
+from plenocal.sfm import colmap as cm
+from plenocal.sfm.registration import incremental_options
+
+log = logging.getLogger(__name__)
+
+
+def reg_a_cameras(reg_a: Mapping) -> dict[str, PinholeCamera]:
+    """reg_a.json document -> {cam: PinholeCamera} (SfM units)."""
+    return {cam: PinholeCamera.from_dict({**d, "width": reg_a["width"], "height": reg_a["height"]})
+            for cam, d in reg_a["cameras"].items()}
+
+
+def _continue_options(seed: int, num_threads: int, camera_ids: set[int]):
+    o = incremental_options(seed, num_threads)
+    o.ba_refine_focal_length = False
+    o.mapper.abs_pose_refine_focal_length = False
+    o.fix_existing_frames = True
+    o.mapper.fix_existing_frames = True
+    o.constant_cameras = set(camera_ids)
+    o.mapper.constant_cameras = set(camera_ids)
+    o.multiple_models = False
+    return o
+
+
+def baseline_sfm(reg_a: Mapping, views: Mapping[str, str | Path], central: str, *,
+                 from_scratch: bool = True, max_num_features: int = 8192, seed: int = 0,
+                 num_threads: int = 1, work_dir: str | Path | None = None
+                 ) -> tuple[dict[str, PinholeCamera], dict]:
+    """Register ``views`` (``"<cam>/<view>"`` -> png) onto registration A (``reg_a``:
+    the reg_a.json document; ``central``: the central view name). Returns the cameras
+    of the registered views (SfM units) and a summary (counts, unregistered views,
+    wall times)."""
+    import pycolmap  # noqa: PLC0415
+
+    a_cams = reg_a_cameras(reg_a)
+    known = {f"{cam}/{central}": c for cam, c in a_cams.items()}
+    absent = sorted(set(known) - set(views))
+    if absent:
+        raise ValueError(f"baseline: central views of registration A have no image: "
+                         f"{', '.join(absent)}")
+    any_cam = next(iter(a_cams.values()))
+    info: dict = {"num_views": len(views), "num_central": len(known)}
+    tmp = Path(tempfile.mkdtemp(prefix="plenocal_baseline_", dir=work_dir))
+    try:
+        t0 = time.perf_counter()
+        image_dir = tmp / "images"
+        names = cm.stage_images(views, image_dir)
+        db = tmp / "database.db"
+        cm.extract_features(db, image_dir, [(names, any_cam)], model="SIMPLE_PINHOLE",
+                            max_num_features=max_num_features, num_threads=num_threads,
+                            seed=seed)
+        t1 = time.perf_counter()
+        info["num_verified_pairs"] = cm.match(db, cm.set_pairs(names), seed=seed,
+                                              num_threads=num_threads, work_dir=tmp)
+        t2 = time.perf_counter()
+        info["features_s"] = t1 - t0
+        info["matching_s"] = t2 - t1
+
+        # A+SfM: A's central views fixed, the rest registered onto them
+        rec = cm.known_pose_reconstruction(db, {f"{k}.png": c for k, c in known.items()})
+        tri_opts = incremental_options(seed, num_threads)
+        tri_dir = tmp / "reg_a_points"
+        tri_dir.mkdir()
+        pycolmap.set_random_seed(seed)
+        rec = pycolmap.triangulate_points(rec, str(db), str(image_dir), str(tri_dir),
+                                          clear_points=True, options=tri_opts,
+                                          refine_intrinsics=False)
+        rec.write_binary(str(tri_dir))
+        log.info("baseline: %d points triangulated from the %d central views",
+                 rec.num_points3D(), len(known))
+        camera_ids = {rec.image(i).camera_id for i in rec.reg_image_ids()}
+        out_dir = tmp / "a_sfm"
+        out_dir.mkdir()
+        pycolmap.set_random_seed(seed)
+        recs = pycolmap.incremental_mapping(str(db), str(image_dir), str(out_dir),
+                                            options=_continue_options(seed, num_threads,
+                                                                      camera_ids),
+                                            input_path=str(tri_dir))
+        t3 = time.perf_counter()
+        info["a_sfm_mapping_s"] = t3 - t2
+        info["a_sfm_wall_s"] = t3 - t0
+        if not recs:
+            raise RuntimeError("baseline: the mapper returned no model")
+        model = max(recs.values(), key=lambda r: r.num_reg_images())
+        cameras = {}
+        for image_id in sorted(model.reg_image_ids()):
+            image = model.image(image_id)
+            cameras[image.name[:-4]] = cm.pinhole_from_colmap(image,
+                                                              model.camera(image.camera_id))
+        unreg = sorted(set(views) - set(cameras))
+        info["a_sfm_registered"] = len(cameras)
+        info["a_sfm_unregistered"] = unreg
+        log.info("baseline A+SfM: %d of %d views registered in %.1f s", len(cameras),
+                 len(views), info["a_sfm_wall_s"])
+        if unreg:
+            log.warning("baseline A+SfM did not register %d views: %s", len(unreg),
+                        ", ".join(unreg[:20]))
+
+        if from_scratch:
+            info["scratch"] = scratch_sfm(db, image_dir, tmp, seed=seed,
+                                          num_threads=num_threads)
+            info["scratch"]["wall_s"] += info["features_s"] + info["matching_s"]
+        return cameras, info
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def scratch_sfm(database: Path, image_dir: Path, tmp: Path, *, seed: int,
+                num_threads: int) -> dict:
+    """Plain incremental SfM of every image of ``database`` (the shared camera reset to
+    COLMAP's default focal guess): how many views register, in how many models."""
+    import pycolmap  # noqa: PLC0415
+
+    t0 = time.perf_counter()
+    db = tmp / "scratch.db"
+    shutil.copyfile(database, db)
+    with pycolmap.Database.open(str(db)) as d:
+        for cam in d.read_all_cameras():
+            cam.params = [1.2 * max(cam.width, cam.height), cam.width / 2, cam.height / 2]
+            cam.has_prior_focal_length = False
+            d.update_camera(cam)
+        total = d.num_images()
+    out = tmp / "scratch"
+    out.mkdir()
+    pycolmap.set_random_seed(seed)
+    recs = pycolmap.incremental_mapping(str(db), str(image_dir), str(out),
+                                        options=incremental_options(seed, num_threads))
+    sizes = sorted((r.num_reg_images() for r in recs.values()), reverse=True)
+    res = {"num_images": int(total), "num_models": len(sizes),
+           "registered_largest_model": int(sizes[0]) if sizes else 0,
+           "registered_all_models": int(sum(sizes)),
+           "wall_s": time.perf_counter() - t0}
+    if sizes:
+        best = max(recs.values(), key=lambda r: r.num_reg_images())
+        res["focal_px"] = float(best.camera(next(iter(best.cameras))).params[0])
+    log.info("baseline from scratch: %d models, largest %d of %d views", res["num_models"],
+             res["registered_largest_model"], total)
+    return res

@@ -1,0 +1,103 @@
+"""Registration A (Section II-B of the paper): structure-from-motion of the central
+view of every shot (array + hand-held), and the naive A+SfM baseline of Table I."""
+
+
+def central_views(wildcards):
+    d = wildcards.dataset
+    return [res(d, "views", c, f"{centre(d)}.png") for c in cams(d)]
+
+
+def all_views(wildcards):
+    d = wildcards.dataset
+    return [res(d, "views", c, f"{v}.png") for c in cams(d) for v in views(d)]
+
+
+rule features_a:
+    input:
+        views=central_views,
+    output:
+        db="results/{dataset}/reg_a/features.db",
+        images=directory("results/{dataset}/reg_a/images"),
+        info="results/{dataset}/reg_a/features.json",
+    log:
+        log_path("features_a"),
+    benchmark:
+        bench_path("features_a")
+    threads: lambda wc: stage_config("sfm")["num_threads"]
+    resources:
+        mem_mb=4000,
+        runtime=30,
+    params:
+        sfm=lambda wc: stage_config("sfm"),
+    script:
+        "../scripts/features_a.py"
+
+
+rule match_a:
+    input:
+        db="results/{dataset}/reg_a/features.db",
+    output:
+        db="results/{dataset}/reg_a/database.db",
+        info="results/{dataset}/reg_a/matches.json",
+    log:
+        log_path("match_a"),
+    benchmark:
+        bench_path("match_a")
+    threads: lambda wc: stage_config("sfm")["num_threads"]
+    resources:
+        mem_mb=4000,
+        runtime=30,
+    params:
+        sfm=lambda wc: stage_config("sfm"),
+    script:
+        "../scripts/match_a.py"
+
+
+rule map_a:
+    input:
+        db="results/{dataset}/reg_a/database.db",
+        images="results/{dataset}/reg_a/images",
+    output:
+        model=directory("results/{dataset}/reg_a/model"),
+        reg_a="results/{dataset}/reg_a/reg_a.json",
+    log:
+        log_path("map_a"),
+    benchmark:
+        bench_path("map_a")
+    threads: lambda wc: stage_config("sfm")["num_threads"]
+    resources:
+        mem_mb=4000,
+        runtime=60,
+    params:
+        sfm=lambda wc: stage_config("sfm"),
+    script:
+        "../scripts/map_a.py"
+
+
+rule baseline_sfm:
+    input:
+        reg_a="results/{dataset}/reg_a/reg_a.json",
+        views=all_views,
+    output:
+        cameras="results/{dataset}/baseline/cameras.json",
+        info="results/{dataset}/baseline/baseline.json",
+    log:
+        log_path("baseline_sfm"),
+    benchmark:
+        bench_path("baseline_sfm")
+    threads: lambda wc: stage_config("sfm")["num_threads"]
+    resources:
+        mem_mb=8000,
+        runtime=240,
+    params:
+        sfm=lambda wc: stage_config("sfm"),
+        central=lambda wc: centre(wc.dataset),
+    script:
+        "../scripts/baseline_sfm.py"
+
+
+def sfm_targets(dataset):
+    return [res(dataset, "reg_a", "reg_a.json")]
+
+
+TARGETS.append(sfm_targets)

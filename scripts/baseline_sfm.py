@@ -1,0 +1,20 @@
+"""Rule baseline_sfm: the naive "A+SfM" calibration of Table I, and SfM from scratch."""
+import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
+
+from pathlib import Path
+
+from plenocal.baseline import baseline_sfm
+from plenocal.camera import write_cameras
+from plenocal.io import read_json, write_json
+from plenocal.sfm import log_to_file
+
+log_to_file(snakemake.log[0])  # noqa: F821
+sm = snakemake  # noqa: F821
+cfg = sm.params.sfm
+views = {f"{Path(p).parent.name}/{Path(p).stem}": p for p in sm.input.views}
+cameras, info = baseline_sfm(read_json(sm.input.reg_a), views, sm.params.central,
+                             from_scratch=cfg["baseline"]["from_scratch"],
+                             max_num_features=cfg["max_num_features"], seed=cfg["seed"],
+                             num_threads=sm.threads)
+write_cameras(sm.output.cameras, cameras, units="sfm")
+write_json(sm.output.info, info)

@@ -1,0 +1,17 @@
+"""Rule features_a: SIFT of the central views into the registration-A database."""
+import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
+
+from pathlib import Path
+
+from plenocal.io import write_json
+from plenocal.sfm import log_to_file
+from plenocal.sfm.registration import features_a
+
+log_to_file(snakemake.log[0])  # noqa: F821
+sm = snakemake  # noqa: F821
+cfg = sm.params.sfm
+views = {Path(p).parent.name: p for p in sm.input.views}
+info = features_a(views, sm.output.images, sm.output.db,
+                  max_num_features=cfg["max_num_features"], seed=cfg["seed"],
+                  num_threads=sm.threads)
+write_json(sm.output.info, info)

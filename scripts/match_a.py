@@ -1,0 +1,18 @@
+"""Rule match_a: exhaustive matching and geometric verification of registration A."""
+import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
+
+import shutil
+
+from plenocal.io import write_json
+from plenocal.sfm import log_to_file
+from plenocal.sfm.registration import match_a
+
+log_to_file(snakemake.log[0])  # noqa: F821
+sm = snakemake  # noqa: F821
+cfg = sm.params.sfm
+# matches go into a copy: the features database stays the input it was
+tmp = sm.output.db + ".part"
+shutil.copyfile(sm.input.db, tmp)
+info = match_a(tmp, seed=cfg["seed"], num_threads=sm.threads)
+shutil.move(tmp, sm.output.db)
+write_json(sm.output.info, info)

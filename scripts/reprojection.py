@@ -1,0 +1,44 @@
+"""Rules reprojection_calib and reprojection: the reprojection error of one calibration
+(Table I of the paper), and the table of all of them."""
+import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
+
+import logging
+from pathlib import Path
+
+from plenocal.camera import read_cameras
+from plenocal.io import read_json, write_json
+from plenocal.sfm import log_to_file
+from plenocal.verify import reprojection as rp
+
+log_to_file(snakemake.log[0])  # noqa: F821
+sm = snakemake  # noqa: F821
+
+if sm.rule == "reprojection":
+    doc = {k: read_json(p) for k, p in zip(sm.params.keys, sm.input.evals, strict=True)}
+    base = read_json(sm.input.baseline)
+    if "scratch" in base:
+        s = base["scratch"]
+        doc["sfm_scratch"] = {"num_images": s["num_images"],
+                              "num_registered": s["registered_largest_model"],
+                              "num_models": s["num_models"], "wall_s": s["wall_s"]}
+    doc["baseline_sfm"]["num_registered"] = base["a_sfm_registered"]
+    write_json(sm.output[0], doc)
+else:
+    cfg = sm.params.sfm
+    opts = dict(pairs=cfg["reprojection"]["pairs"],
+                max_error_px=cfg["reprojection"]["max_error_px"],
+                min_angle_deg=cfg["reprojection"]["min_angle_deg"],
+                max_num_features=cfg["max_num_features"], seed=cfg["seed"],
+                num_threads=sm.threads)
+    images = {f"{Path(p).parent.name}/{Path(p).stem}": p for p in sm.input.views}
+    calib = sm.wildcards.calib
+    logging.info("reprojection of %s: %d images", calib, len(images))
+    if calib == "reg_a":
+        cams = rp.reg_a_views(read_json(sm.input.calib), sm.params.central)
+        out = rp.evaluate(cams, images, **opts)
+    elif calib == "reg_b":
+        out = rp.evaluate_sets(read_json(sm.input.calib), images, **opts)
+    else:
+        out = rp.evaluate(read_cameras(sm.input.calib), images, **opts)
+    out["calibration"] = calib
+    write_json(sm.output[0], out)
