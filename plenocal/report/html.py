@@ -1,0 +1,577 @@
+"""The report page: ``results/<dataset>/report/index.html``.
+
+One self-contained HTML file (CSS inline, images embedded as data URIs, SVG figures
+inline, no script) that opens from disk: Table I beside the paper's values, the errors
+against ground truth with the targets of issues 4-5, the camera array in 3-D, the PSNR
+grids of Figs. 7-9 as heat maps with the dB lost to calibration, synthesised versus
+captured crops as in Fig. 10, the converter's quality and the patch-size and depth
+previews. A section whose source is absent says so and names the rule that makes it;
+every figure links its source file (relative links, so the results folder can be moved).
+The bytes depend only on the inputs (no timestamps, sorted iteration).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Mapping, Sequence
+from html import escape
+from pathlib import Path
+
+import numpy as np
+
+from plenocal.io import atomic_write_text, read_json
+from plenocal.report import figures as fg
+from plenocal.report import sources as src
+
+CSS = """
+body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:0;color:#222;
+background:#fff;line-height:1.4}
+main{max-width:1180px;margin:0 auto;padding:12px 24px 48px}
+h1{font-size:1.5em;margin:.4em 0 .1em}h2{font-size:1.2em;margin:1.6em 0 .4em;
+border-bottom:2px solid #1f4e9a;padding-bottom:2px}h3{font-size:1.02em;margin:1em 0 .3em}
+nav{font-size:.9em;margin:.4em 0 1em}nav a{margin-right:.9em}
+table{border-collapse:collapse;margin:.4em 0;font-size:.92em}
+th,td{border:1px solid #ccc;padding:3px 8px;text-align:right}
+th{background:#f0f3f8}td.l,th.l{text-align:left}
+tr.hl td{background:#f5f9ff;font-weight:600}
+.pass{color:#126b2f;font-weight:600}.fail{color:#b3261e;font-weight:600}.na{color:#777}
+.missing{color:#8a5a00;background:#fff7e0;border-left:4px solid #e0a800;padding:4px 8px}
+.note{color:#555;font-size:.9em}
+figure{display:inline-block;margin:6px 10px 10px 0;vertical-align:top}
+figcaption{font-size:.82em;color:#444;max-width:560px}
+.thumbs figure{margin:3px 6px 6px 0}.thumbs figcaption{font-size:.75em}
+img.px{image-rendering:pixelated}
+.src{font-size:.8em}code{font-size:.92em}
+.kpi{display:inline-block;border:1px solid #d6dbe4;border-radius:6px;padding:6px 12px;
+margin:4px 8px 4px 0;background:#f8fafd}.kpi b{font-size:1.25em;display:block}
+"""
+
+
+class Page:
+    """Accumulates sections; knows the results folder and how to link into it."""
+
+    def __init__(self, results: Path, dataset: str):
+        self.results = Path(results)
+        self.dataset = dataset
+        self.parts: list[str] = []
+        self.toc: list[tuple[str, str]] = []
+        self.linked: list[str] = []
+
+    def path(self, rel: str) -> Path:
+        return self.results / rel
+
+    def has(self, rel: str) -> bool:
+        return self.path(rel).exists()
+
+    def link(self, rel: str, text: str | None = None) -> str:
+        """Relative link from ``report/`` to ``results/<d>/<rel>``."""
+        if rel not in self.linked:
+            self.linked.append(rel)
+        return (f'<a class="src" href="../{escape(rel)}">'
+                f"{escape(text if text is not None else rel)}</a>")
+
+    def section(self, anchor: str, title: str) -> None:
+        self.toc.append((anchor, title))
+        self.parts.append(f'<h2 id="{anchor}">{escape(title)}</h2>')
+
+    def add(self, html: str) -> None:
+        self.parts.append(html)
+
+    def missing(self, key: str, what: str = "") -> None:
+        rel, rule = src.SOURCES[key]
+        self.add(f'<p class="missing">Not produced{": " + escape(what) if what else ""}: '
+                 f"<code>{escape(rel)}</code> is absent (made by rule "
+                 f"<code>{escape(rule)}</code>; run <code>snakemake -j2 "
+                 f"results/{escape(self.dataset)}/{escape(rel)}</code>).</p>")
+
+    def image(self, rel: str, caption: str, max_side: int = 360,
+              crop: tuple[int, int, int, int] | None = None, display_width: int | None = None,
+              pixelated: bool = False) -> str:
+        """A figure with the embedded preview of ``results/<d>/<rel>`` and its link."""
+        try:
+            uri, w, h = fg.image_data_uri(self.path(rel), max_side=max_side, crop=crop)
+        except OSError as err:
+            return f'<p class="missing">{escape(str(err))}</p>'
+        dw = display_width or w
+        dh = int(round(h * dw / w))
+        cls = ' class="px"' if pixelated else ""
+        return (f'<figure><img{cls} src="{uri}" width="{dw}" height="{dh}" '
+                f'alt="{escape(caption)}"><figcaption>{escape(caption)} '
+                f"{self.link(rel, '[source]')}</figcaption></figure>")
+
+    def render(self) -> str:
+        nav = " ".join(f'<a href="#{a}">{escape(t)}</a>' for a, t in self.toc)
+        return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+                f"<title>plenocal report: {escape(self.dataset)}</title>"
+                "<meta name=\"viewport\" content=\"width=device-width,initial-scale=1\">"
+                f"<style>{CSS}</style></head><body><main>"
+                f"<h1>plenocal report: <code>{escape(self.dataset)}</code></h1>"
+                "<p class=\"note\">Calibration of a plenoptic 2.0 camera array (the method "
+                "of the paper in <code>seed/</code>): Table I, errors against ground truth, "
+                "view synthesis (Figs. 7-10) and the stages' previews. Every figure links "
+                "its source file under <code>results/" + escape(self.dataset) + "/</code>."
+                f"</p><nav>{nav}</nav>" + "\n".join(self.parts) + "</main></body></html>\n")
+
+
+def _fmt(v, digits: int = 3, suffix: str = "") -> str:
+    if v is None:
+        return '<span class="na">-</span>'
+    if isinstance(v, float):
+        return f"{v:.{digits}f}{suffix}"
+    return f"{escape(str(v))}{suffix}"
+
+
+def _verdict(ok: bool | None) -> str:
+    if ok is None:
+        return '<span class="na">n/a</span>'
+    return '<span class="pass">pass</span>' if ok else '<span class="fail">FAIL</span>'
+
+
+def _read(page: Page, key: str):
+    """The parsed JSON source ``key`` or None (a broken file is reported, not raised)."""
+    rel = src.SOURCES[key][0]
+    if not page.has(rel):
+        return None
+    try:
+        return read_json(page.path(rel))
+    except (OSError, ValueError) as err:
+        page.add(f'<p class="missing"><code>{escape(rel)}</code> is unreadable: '
+                 f"{escape(str(err))}</p>")
+        return None
+
+
+# ---------------------------------------------------------------------------
+# Sections
+# ---------------------------------------------------------------------------
+
+
+def section_table1(page: Page) -> None:
+    page.section("table1", "Table I: reprojection error")
+    doc = _read(page, "reprojection")
+    if doc is None:
+        page.missing("reprojection")
+        return
+    rows = src.table1_rows(doc)
+    head = ("<tr><th class=l>Registration</th><th>mean [px]</th><th>median [px]</th>"
+            "<th>images</th><th>observations</th><th>paper mean [px]</th>"
+            "<th>paper images</th><th class=l>note</th></tr>")
+    body = []
+    for r in rows:
+        cls = ' class="hl"' if r.key == "complete" else ""
+        body.append(f'<tr{cls} id="t1-{r.key}"><td class=l>{escape(r.label)}</td>'
+                    f"<td>{_fmt(r.mean_px)}</td><td>{_fmt(r.median_px)}</td>"
+                    f"<td>{escape(r.images)}</td><td>{_fmt(r.observations)}</td>"
+                    f"<td>{_fmt(r.paper_mean_px)}</td><td>{_fmt(r.paper_images)}</td>"
+                    f"<td class=l>{escape(r.note)}</td></tr>")
+    page.add(f'<table id="table1">{head}{"".join(body)}</table>')
+    v = src.table1_verdict(rows)
+    if v is not None:
+        c, b = v
+        page.add(f"<p>Complete / naive baseline = {c:.3f} / {b:.3f} = <b>{c / b:.3f}</b> "
+                 f"(target &le; 0.9; the paper: 0.714 / 0.770 = 0.927) "
+                 f"{_verdict(c <= 0.9 * b)}</p>")
+    page.add("<p class=note>Per-observation errors after triangulation with every pose and "
+             "intrinsic held fixed, COLMAP's 4 px outlier filter raised (the paper reports "
+             "COLMAP's mean). Source: " + page.link(src.SOURCES["reprojection"][0]) + "</p>")
+
+
+def section_gt(page: Page, synthetic: bool) -> None:
+    page.section("gt", "Errors against ground truth")
+    doc = _read(page, "gt_errors")
+    if doc is None:
+        if synthetic:
+            page.missing("gt_errors")
+        else:
+            page.add('<p class="note">A real capture has no ground truth: rule '
+                     "<code>gt_errors</code> runs on synthetic datasets only.</p>")
+        return
+    rows = []
+    for c in doc.get("checks", []):
+        rows.append(f'<tr id="gt-{escape(c["name"])}"><td class=l>{escape(c["what"])}</td>'
+                    f"<td>{_fmt(c['value'], 4)}</td><td>&le; {c['target']:g}</td>"
+                    f"<td class=l>{escape(c['unit'])}</td><td>{_verdict(c['pass'])}</td></tr>")
+    page.add('<table id="gt-checks"><tr><th class=l>quantity</th><th>measured</th>'
+             "<th>target</th><th class=l>unit</th><th>verdict</th></tr>"
+             + "".join(rows) + "</table>")
+    details = []
+    a = doc.get("registration_a")
+    if a:
+        details.append(("Registration A", [
+            ("focal length [px] (truth)", f"{a['focal_px']:.3f} ({a['focal_px_truth']:.3f})"),
+            ("centre RMSE after similarity", f"{a['centre_rmse_mm']:.4f} mm = "
+             f"{a['centre_rmse_pct_step']:.3f} % of the {1000 * a['array_step_m']:.2f} mm "
+             "step"),
+            ("rotation error mean / max [deg]", f"{a['rotation_err_deg']['mean']:.4f} / "
+             f"{a['rotation_err_deg']['max']:.4f}"),
+            ("shots compared", str(a["n_shots"]))]))
+    b = doc.get("registration_b")
+    if b:
+        details.append((f"Registration B (model {b.get('model')})", [
+            ("baseline B per step [mm] (truth)", f"{1000 * b['baseline_m']:.5f} "
+             f"({1000 * b['baseline_m_truth']:.5f})"),
+            ("alpha-equivalent [mrad] (truth)", f"{1000 * b['alpha_equivalent_rad']:.5f} "
+             f"({1000 * b['alpha_equivalent_rad_truth']:.5f})"),
+            ("principal-point shift per step [px] (truth)", f"{b['pp_shift_px']:.4f} "
+             f"({b['pp_shift_px_truth']:.4f})"),
+            ("worst set: centre RMSE [mm] / rotation [deg]",
+             f"{_fmt(b.get('centre_rmse_mm'), 5)} / {_fmt(b.get('rotation_max_deg'), 5)}"),
+            ("sets compared", str(b["n_sets"]))]))
+    s = doc.get("scale")
+    if s:
+        details.append(("Scale r (Eq. 5)", [
+            ("r used (truth)", f"{s['r']:.6g} ({s['r_truth']:.6g})"),
+            ("error [%]", f"{s['err_pct']:.4f}")]))
+    al = doc.get("complete")
+    if al:
+        details.append(("Complete calibration (all views, rigid alignment)", [
+            ("centre RMSE / max [mm]", f"{al['centre_rmse_mm']:.4f} / "
+             f"{al['centre_max_mm']:.4f} (worst {escape(al['worst_view'])})"),
+            ("rotation error mean / max [deg]", f"{al['rotation_err_deg']['mean']:.4f} / "
+             f"{al['rotation_err_deg']['max']:.4f}"),
+            ("focal error mean / max [%]", f"{al['focal_err_pct']['mean']:.4f} / "
+             f"{al['focal_err_pct']['max']:.4f}"),
+            ("principal point error mean / max [px]", f"{al['pp_err_px']['mean']:.4f} / "
+             f"{al['pp_err_px']['max']:.4f}"),
+            ("metric scale error left [%]", f"{al['residual_scale_err_pct']:.4f}"),
+            ("views compared", str(al["n_views"]))]))
+    for title, items in details:
+        page.add(f"<h3>{escape(title)}</h3><table>" + "".join(
+            f"<tr><td class=l>{escape(k)}</td><td class=l>{v}</td></tr>" for k, v in items)
+            + "</table>")
+    page.add("<p class=note>Source: " + page.link(src.SOURCES["gt_errors"][0]) + "</p>")
+
+
+def section_cameras(page: Page) -> None:
+    from plenocal.camera import read_cameras  # noqa: PLC0415
+
+    page.section("array", "Camera array (complete calibration)")
+    rel = src.SOURCES["calibration"][0]
+    if not page.has(rel):
+        page.missing("calibration")
+        return
+    try:
+        cams = read_cameras(page.path(rel))
+    except (OSError, ValueError, KeyError) as err:
+        page.add(f'<p class="missing"><code>{escape(rel)}</code> is unreadable: '
+                 f"{escape(str(err))}</p>")
+        return
+    if not cams:
+        page.add(f'<p class="missing"><code>{escape(rel)}</code> holds no camera.</p>')
+        return
+    truth = {}
+    trel = src.SOURCES["ground_truth"][0]
+    if page.has(trel):
+        truth = fg.align_truth(cams, read_cameras(page.path(trel)))
+    shots = sorted({k.split("/")[0] for k in cams})
+    per_shot = len(cams) // max(len(shots), 1)
+    links = page.link(rel) + (" and " + page.link(trel) if truth else "")
+    page.add('<figure id="camera-array">' + fg.camera_array_svg(
+        cams, truth or None, title="oblique view from behind, above") + fg.camera_array_svg(
+        cams, truth or None, yaw_deg=0.0, pitch_deg=0.0, size=(560, 380),
+        title="front view (along the mean optical axis)")
+        + f"<figcaption>{len(cams)} views ({len(shots)} shots x {per_shot}); "
+        + ("ground truth aligned by a similarity, red rings; " if truth else "")
+        + f"hover a point for its name. Source: {links}</figcaption></figure>")
+
+
+def _psnr_section(page: Page, key: str, title: str, paper: str, n_views: int, cols: int,
+                  rows: int) -> None:
+    page.section(key, title)
+    doc = _read(page, key)
+    if doc is None:
+        page.missing(key)
+        return
+    from plenocal.viewgeom import central_view  # noqa: PLC0415
+
+    sets = src.psnr_sets(doc, central_view(n_views))
+    if not sets:
+        page.add(f'<p class="missing"><code>{escape(src.SOURCES[key][0])}</code> holds '
+                 "no per-view PSNR.</p>")
+        return
+    allv = [v for s in sets for v in s.values.values()]
+    vmin, vmax = float(np.floor(min(allv))), float(np.ceil(max(allv)))
+    if vmax - vmin < 1.0:
+        vmax = vmin + 1.0
+    lost = {s: (g, d, n) for s, g, d, n in src.db_lost(sets)}
+    kpis = []
+    for s in sets:
+        mean = float(np.mean(list(s.values.values())))
+        extra = ""
+        if s.name in lost:
+            g, d, n = lost[s.name]
+            extra = (f"<br>{d:.2f} dB lost to calibration (vs ground-truth cameras, {n} views) "
+                     f"{_verdict(d <= 0.5)}")
+        kpis.append(f'<span class="kpi" id="kpi-{escape(key)}-{escape(s.name)}">'
+                    f"{escape(s.name)}<b>{mean:.2f} dB</b>mean over {len(s.values)} views"
+                    f"{extra}</span>")
+    page.add("<div>" + "".join(kpis) + "</div>")
+    page.add(f"<p class=note>{escape(paper)} Target: at most 0.5 dB lost to calibration "
+             "(the same experiment with ground-truth cameras).</p>")
+    for s in sets:
+        g = src.layout(s, n_views, cols, rows)
+        labels = None
+        if g.annotate:
+            labels = np.vectorize(lambda v: f"{v:.2f}" if np.isfinite(v) else "")(g.values)
+        svg = fg.heatmap_svg(g.values, vmin, vmax, labels=labels, titles=g.titles,
+                             marks=g.marks, group=g.group, annotate=g.annotate,
+                             cell=(58, 30) if g.annotate else (14, 14),
+                             col_labels=g.col_labels, row_labels=g.row_labels)
+        cap = f"{s.name}: PSNR per synthesised view; hatched: input views"
+        if g.kind == "views":
+            cap += f" ({n_views} x {n_views} views per shot, thick lines between shots)"
+        page.add(f'<figure class="heatmap" id="hm-{escape(key)}-{escape(s.name)}">{svg}'
+                 f"<figcaption>{escape(cap)}. Source: {page.link(src.SOURCES[key][0])}"
+                 "</figcaption></figure>")
+        if g.kind == "views":
+            means = src.shot_means(s)
+            page.add("<table><tr><th class=l>shot</th>" + "".join(
+                f"<th>{escape(c)}</th>" for c in means) + "</tr><tr><td class=l>mean "
+                "PSNR [dB]</td>" + "".join(f"<td>{v:.2f}</td>" for v in means.values())
+                + "</tr></table>")
+        if g.outside:
+            page.add("<p class=note>Hand-held shots: " + ", ".join(
+                f"{escape(k)} {v:.2f} dB" for k, v in sorted(g.outside.items())) + "</p>")
+
+
+_KEY_IN_NAME = re.compile(r"(x\d{2}_y\d{2}|hand\d{2})[_/-]?(\d+_\d+)")
+
+
+def _synth_images(page: Page) -> dict[str, list[str]]:
+    """Synthesised images under eval/synth/, grouped by the view they show."""
+    rel_dir = src.SOURCES["synth_dir"][0]
+    root = page.path(rel_dir)
+    out: dict[str, list[str]] = {}
+    for p in sorted(root.rglob("*.png")):
+        rel = p.relative_to(page.results).as_posix()
+        m = _KEY_IN_NAME.search(p.relative_to(root).as_posix())
+        if m:
+            out.setdefault(f"{m.group(1)}/{m.group(2)}", []).append(rel)
+    return out
+
+
+def _crop_boxes(ref: np.ndarray, others: Sequence[np.ndarray], n: int = 2
+                ) -> list[tuple[int, int, int, int]]:
+    """Deterministic zoom windows as in Fig. 10: where the syntheses differ most from
+    the captured view, and the most textured place (each a quarter of the short side)."""
+    import cv2  # noqa: PLC0415
+
+    h, w = ref.shape[:2]
+    s = max(16, min(h, w) // 4)
+    g = ref.astype(np.float32)
+    if g.ndim == 3:
+        g = g.mean(axis=2)
+    err = np.zeros_like(g)
+    for o in others:
+        if o.shape[:2] == ref.shape[:2]:
+            og = o.astype(np.float32)
+            err += np.abs((og.mean(axis=2) if og.ndim == 3 else og) - g)
+    tex = np.abs(cv2.Laplacian(g, cv2.CV_32F))
+    boxes = []
+    for score in (err, tex)[:n]:
+        box = cv2.boxFilter(score, -1, (s, s), normalize=True)
+        half = s // 2
+        inner = box[half:h - (s - half) + 1, half:w - (s - half) + 1]
+        if inner.size == 0:
+            continue
+        for (x0, y0, _, _) in boxes:  # avoid repeating a window
+            ys, xs = max(0, y0 - half), max(0, x0 - half)
+            inner[ys:y0 + half, xs:x0 + half] = -1
+        y, x = np.unravel_index(int(np.argmax(inner)), inner.shape)
+        boxes.append((int(x), int(y), s, s))
+    return boxes
+
+
+def section_fig10(page: Page, n_views: int, centre_cam: str | None) -> None:
+    import cv2  # noqa: PLC0415
+
+    page.section("fig10", "Synthesised versus captured views (Fig. 10)")
+    rel_dir = src.SOURCES["synth_dir"][0]
+    if not page.has(rel_dir):
+        page.missing("synth_dir", "synthesised images")
+        return
+    groups = _synth_images(page)
+    if not groups:
+        page.add(f'<p class="missing">No synthesised image named <code>&lt;cam&gt;_&lt;r&gt;_'
+                 f"&lt;c&gt;</code> under <code>{escape(rel_dir)}/</code>.</p>")
+        return
+    from plenocal.viewgeom import central_view  # noqa: PLC0415
+
+    want = f"{centre_cam}/{central_view(n_views)}" if centre_cam else None
+    keys = sorted(groups, key=lambda k: (k != want, -len(groups[k]), k))
+    for key in keys[:2]:
+        cam, view = key.split("/")
+        cap_rel = f"views/{cam}/{view}.png"
+        row = []
+        if page.has(cap_rel):
+            row.append(page.image(cap_rel, f"captured {key}", max_side=300))
+        for rel in groups[key]:
+            row.append(page.image(rel, f"synthesised: {Path(rel).stem}", max_side=300))
+        page.add(f"<h3>{escape(key)}</h3><div>" + "".join(row) + "</div>")
+        imgs = [cv2.imread(str(page.path(r)), cv2.IMREAD_UNCHANGED) for r in groups[key]]
+        imgs = [i for i in imgs if i is not None]
+        ref = (cv2.imread(str(page.path(cap_rel)), cv2.IMREAD_UNCHANGED)
+               if page.has(cap_rel) else None)
+        base = ref if ref is not None else (imgs[0] if imgs else None)
+        if base is None:
+            continue
+        for box in _crop_boxes(base, imgs):
+            crops = []
+            if ref is not None:
+                crops.append(page.image(cap_rel, "captured (zoom)", max_side=box[2], crop=box,
+                                        display_width=200, pixelated=True))
+            for rel in groups[key]:
+                crops.append(page.image(rel, f"{Path(rel).stem} (zoom)", max_side=box[2],
+                                        crop=box, display_width=200, pixelated=True))
+            page.add(f'<div class="crops"><p class=note>zoom x={box[0]}, y={box[1]}, '
+                     f"{box[2]} x {box[3]} px</p>" + "".join(crops) + "</div>")
+
+
+def _quality_rows(doc: Mapping) -> dict[str, dict[str, float]]:
+    """``"<cam>/<view>"`` (or view) -> {"psnr", "ssim"} from convert/quality.json."""
+    out: dict[str, dict[str, float]] = {}
+
+    def walk(node, prefix: str):
+        if not isinstance(node, Mapping):
+            return
+        for k in sorted(node):
+            v = node[k]
+            key = f"{prefix}/{k}" if prefix else str(k)
+            if isinstance(v, Mapping) and any(n in v for n in ("psnr", "ssim", "psnr_db")):
+                vals = {n: float(v[m]) for n, m in (("psnr", "psnr"), ("psnr", "psnr_db"),
+                                                     ("ssim", "ssim"))
+                        if src._num(v.get(m)) is not None}
+                if vals:
+                    out[key] = vals
+            elif isinstance(v, Mapping):
+                walk(v, key if (src.CAM_RE.match(str(k)) or src.VIEW_RE.match(str(k)))
+                     else prefix)
+
+    walk(doc, "")
+    return out
+
+
+def section_convert_quality(page: Page) -> None:
+    page.section("convert", "Converter quality (views against ideal renders)")
+    doc = _read(page, "convert_quality")
+    if doc is None:
+        page.missing("convert_quality")
+        return
+    rows = _quality_rows(doc)
+    if not rows:
+        page.add('<p class="missing">convert/quality.json holds no per-view PSNR/SSIM.</p>')
+        return
+    by_view: dict[str, list[dict]] = {}
+    for k, v in rows.items():
+        by_view.setdefault(k.split("/")[-1], []).append(v)
+
+    def mean(lst, n):
+        x = [d[n] for d in lst if n in d]
+        return float(np.mean(x)) if x else None
+
+    allr = list(rows.values())
+    page.add(f'<span class="kpi">mean PSNR<b>{_fmt(mean(allr, "psnr"), 2, " dB")}</b>'
+             f'{len(allr)} views</span><span class="kpi">mean SSIM'
+             f'<b>{_fmt(mean(allr, "ssim"), 4)}</b>&nbsp;</span>')
+    body = "".join(f"<tr><td class=l>{escape(v)}</td><td>{_fmt(mean(lst, 'psnr'), 2)}</td>"
+                   f"<td>{_fmt(mean(lst, 'ssim'), 4)}</td><td>{len(lst)}</td></tr>"
+                   for v, lst in sorted(by_view.items()))
+    page.add('<table id="convert-quality"><tr><th class=l>view</th><th>PSNR [dB]</th>'
+             f"<th>SSIM</th><th>shots</th></tr>{body}</table>")
+    page.add("<p class=note>Source: " + page.link(src.SOURCES["convert_quality"][0]) + "</p>")
+
+
+def section_thumbs(page: Page, anchor: str, title: str, items: Sequence[tuple[str, str]],
+                   rule: str, what: str) -> None:
+    """A grid of small previews (``items``: (path under results/<d>/, caption))."""
+    page.section(anchor, title)
+    present = [(r, c) for r, c in items if page.has(r)]
+    absent = [r for r, _ in items if not page.has(r)]
+    if present:
+        page.add('<div class="thumbs">' + "".join(
+            page.image(r, c, max_side=180) for r, c in present) + "</div>")
+    if absent:
+        shown = ", ".join(f"<code>{escape(r)}</code>" for r in absent[:4])
+        more = f" and {len(absent) - 4} more" if len(absent) > 4 else ""
+        page.add(f'<p class="missing">Not produced: {escape(what)} {shown}{more} (made by '
+                 f"rule <code>{escape(rule)}</code>).</p>")
+
+
+def section_summary(page: Page) -> None:
+    page.section("summary", "Calibration summary")
+    found = False
+    sc = _read(page, "scale")
+    if sc is not None:
+        found = True
+        spread = sc.get("spread", {})
+        page.add('<span class="kpi">scale r (Eq. 5)<b>'
+                 f"{float(sc.get('r_used', sc.get('r', float('nan')))):.6g}</b>"
+                 f"{escape(str(sc.get('estimator', 'mean')))}; relative spread "
+                 f"{_fmt(spread.get('relative'), 4)} over {_fmt(spread.get('n_shots'))} shots "
+                 f"{page.link(src.SOURCES['scale'][0], '[source]')}</span>")
+    rig = _read(page, "rig")
+    if rig is not None:
+        found = True
+        chk = rig.get("check") or {}
+        model = str(rig.get("model"))
+        m = rig.get(model) if isinstance(rig.get(model), Mapping) else {}
+        page.add('<span class="kpi">registration B<b>' + escape(model) + " model</b>"
+                 f"B = {_fmt(m.get('B'), 5)} mm, {rig.get('n_views')} x {rig.get('n_views')} "
+                 f"views; Eqs. 2-3 check: {escape(str(chk.get('verdict', '-')))} "
+                 f"{page.link(src.SOURCES['rig'][0], '[source]')}</span>")
+    if not found:
+        page.missing("scale")
+        page.missing("rig")
+
+
+def build_report(results: str | Path, out_path: str | Path, dataset: str, *,
+                 cams: Sequence[str], n_views: int, synthetic: bool,
+                 log: Callable[[str], None] | None = None) -> dict:
+    """Write the report page of ``results`` (= ``results/<dataset>``) to ``out_path``.
+
+    ``cams``: the dataset's shots (array ``x<col>_y<row>`` and hand-held ``hand<k>``);
+    ``n_views``: N of the N x N sets. Returns what was shown and what was missing."""
+    results = Path(results)
+    say = log or (lambda _m: None)
+    page = Page(results, dataset)
+    pos = [src._array_pos(c) for c in cams]
+    cols = max((p[0] for p in pos if p), default=-1) + 1
+    rows = max((p[1] for p in pos if p), default=-1) + 1
+    array = [c for c, p in zip(cams, pos, strict=True) if p]
+    centre_cam = None
+    if array:
+        centre_cam = f"x{cols // 2:02d}_y{rows // 2:02d}"
+    section_table1(page)
+    say("Table I")
+    section_gt(page, synthetic)
+    say("ground-truth errors")
+    section_summary(page)
+    section_cameras(page)
+    say("camera array")
+    papers = {
+        "exp1": ("Experiment 1 (Fig. 7): central views from the corner shots' central views",
+                 "The paper: 28.44 dB on average."),
+        "exp2": ("Experiment 2 (Fig. 8): a set's views from the middles of its sides",
+                 "The paper: 36.89 dB on average."),
+        "exp3": ("Experiment 3 (Fig. 9): all views from the corner shots",
+                 "The paper: 29.98 dB from the central views, 29.32 dB from the lateral "
+                 "views."),
+    }
+    for key, (title, paper) in papers.items():
+        _psnr_section(page, key, title, paper, n_views, max(cols, 1), max(rows, 1))
+        say(title)
+    section_fig10(page, n_views, centre_cam)
+    section_convert_quality(page)
+    section_thumbs(page, "patch", "Patch size per microlens (converter)",
+                   [(f"views/{c}/patch_size.png", c) for c in cams], "convert",
+                   "patch-size previews")
+    items = [(f"depth/{reg}/{c}.png", f"{c} ({reg.upper()})") for c in cams for reg in "ab"]
+    section_thumbs(page, "depth", "Depth of the central views (registrations A and B)",
+                   items, "depth", "depth previews")
+    say("previews")
+    page.section("sources", "Source files")
+    page.add("<ul>" + "".join(f"<li>{page.link(r)}</li>" for r in sorted(page.linked))
+             + "</ul>")
+    html = page.render()
+    atomic_write_text(out_path, html)
+    return {"sections": [t for _, t in page.toc], "linked": sorted(page.linked),
+            "bytes": len(html.encode("utf-8"))}
