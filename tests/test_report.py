@@ -68,12 +68,16 @@ def make_results(root: Path) -> Path:
     truth, calib = cameras(), cameras(shift=5e-6)
     write_cameras(res / "ground_truth" / "cameras.json", truth)
     write_cameras(res / "calibration" / "cameras.json", calib)
+    # as plenocal.verify.reprojection and scripts/reprojection.py write it
     write_json(res / "eval" / "reprojection.json", {
         "reg_a": stats(0.61, 0.48, 10, array=6, hand=4),
-        "reg_b": {"sets": {c: stats(0.40 + 0.01 * i, 0.30, 9) for i, c in enumerate(CAMS)}},
-        "complete": stats(0.702, 0.55, 63),
-        "baseline_sfm": stats(0.812, 0.60, 63),
-        "sfm_scratch": dict(stats(0.9, 0.7, 63), num_registered=58),
+        "reg_b": {"sets": {c: stats(0.40 + 0.01 * i, 0.30, 9) for i, c in enumerate(CAMS)},
+                  "mean_px": 0.43, "median_px": 0.30, "num_sets": 7, "num_images": 9,
+                  "num_observations": 2520},
+        "complete": stats(0.702, 0.55, 63, array=54, hand=9),
+        "baseline_sfm": dict(stats(0.812, 0.60, 63, array=54, hand=9), num_registered=63),
+        "ground_truth": stats(0.31, 0.25, 15),
+        "sfm_scratch": {"num_images": 63, "num_registered": 58, "num_models": 2},
     })
     sfm = {c: np.linalg.inv(pose(np.eye(3), [0.1, 0, 0])) @ truth[f"{c}/1_1"].cam_to_world
            for c in CAMS}
@@ -91,34 +95,50 @@ def make_results(root: Path) -> Path:
                                               "spread": {"relative": 0.004, "n_shots": 7}})
     write_json(res / "eval" / "gt_errors.json", gt_errors(
         truth, reg_a={"focal_px": 120.3, "poses": sfm}, rig=rig, r=0.0201, calib=calib))
+    # as scripts/synthesis.py writes them (plenocal.synthesis.experiment1..3)
     corners = ["x00_y00", "x02_y00", "x00_y01", "x02_y01"]
-    exp1 = {"inputs": [f"{c}/1_1" for c in corners]}
-    for name, off in (("calibrated", 0.0), ("ground_truth", 0.3)):
-        exp1[name] = {f"{c}/1_1": {"psnr": 28.0 + 0.5 * i + off}
-                      for i, c in enumerate(CAMS) if c not in corners}
+    array = [c for c in CAMS if c.startswith("x")]
+
+    def scores(keys, base):
+        d = {k: base + 0.5 * i for i, k in enumerate(keys)}
+        v = list(d.values())
+        return {"psnr": d, "mean_psnr": float(np.mean(v)), "min_psnr": min(v),
+                "max_psnr": max(v), "count": len(v)}
+
+    exp1 = {"experiment": 1, "calibrations": {}, "near_m": 0.4, "far_m": 0.8}
+    for name, off in (("complete", 0.0), ("ground_truth", 0.3)):
+        exp1["calibrations"][name] = dict(
+            scores([f"{c}/1_1" for c in array if c not in corners], 28.0 + off),
+            inputs=[f"{c}/1_1" for c in corners], grid=[[None] * COLS] * ROWS)
+    exp1["db_lost"] = 0.3
     write_json(res / "eval" / "synthesis_exp1.json", exp1)
-    sides = ["0_1", "1_0", "1_2", "2_1"]
-    exp2 = {"cam": CENTRE_CAM, "inputs": sides,
-            "calibrated": {v: 36.0 + 0.2 * i for i, v in enumerate(VIEWS) if v not in sides}}
+    sides = [f"{CENTRE_CAM}/{v}" for v in ("0_1", "1_0", "1_2", "2_1")]
+    exp2 = {"experiment": 2, "calibrations": {"complete": {"sets": {CENTRE_CAM: dict(
+        scores([f"{CENTRE_CAM}/{v}" for v in VIEWS if f"{CENTRE_CAM}/{v}" not in sides],
+               36.0), inputs=sides)}, "mean_psnr": 37.0}}}
     write_json(res / "eval" / "synthesis_exp2.json", exp2)
-    exp3 = {}
-    for variant, inputs in (("central", ["1_1"]), ("lateral", ["0_0"])):
-        exp3[variant] = {"inputs": [f"{c}/{v}" for c in corners for v in inputs]}
-        for name, off in (("calibrated", 0.0), ("ground_truth", 0.2)):
-            exp3[variant][name] = {f"{c}/{v}": 29.0 + 0.1 * j + off
-                                   for j, (c, v) in enumerate((c, v) for c in CAMS
-                                                              for v in VIEWS)
-                                   if f"{c}/{v}" not in exp3[variant]["inputs"]}
+    exp3 = {"experiment": 3, "calibrations": {}}
+    for name, off in (("complete", 0.0), ("ground_truth", 0.2)):
+        exp3["calibrations"][name] = {"view_stride": 1}
+        for variant, v_in in (("central", "1_1"), ("lateral", "0_0")):
+            inputs = [f"{c}/{v_in}" for c in corners]
+            exp3["calibrations"][name][variant] = dict(
+                scores([f"{c}/{v}" for c in array for v in VIEWS
+                        if f"{c}/{v}" not in inputs], 29.0 + off), inputs=inputs)
+    exp3["db_lost"] = {"central": 0.2, "lateral": 0.2}
     write_json(res / "eval" / "synthesis_exp3.json", exp3)
     write_json(res / "convert" / "quality.json", {
         c: {v: {"psnr": 33.0 + 0.1 * k, "ssim": 0.95} for k, v in enumerate(VIEWS)}
         for c in CAMS})
     cap = texture(1)
     write_image(res / "views" / CENTRE_CAM / "1_1.png", cap)
-    for k, exp in enumerate(("exp1", "exp2", "exp3_lateral")):
+    names = [("exp1", "complete"), ("exp1", "ground_truth"), ("exp2", "complete"),
+             ("exp3", "complete_central"), ("exp3", "complete_lateral"),
+             ("exp3", "ground_truth_lateral")]
+    for k, (exp, name) in enumerate(names):
         noisy = np.clip(cap.astype(int) + np.random.default_rng(k).integers(-20, 20, cap.shape),
                         0, 255).astype(np.uint8)
-        write_image(res / "eval" / "synth" / f"{exp}_{CENTRE_CAM}_1_1.png", noisy)
+        write_image(res / "eval" / "synth" / exp / f"{name}_{CENTRE_CAM}_1_1.png", noisy)
     for i, c in enumerate(CAMS):
         write_image(res / "views" / c / "patch_size.png", texture(10 + i)[:, :, 0])
         depth = (np.linspace(1000, 60000, W * H).reshape(H, W)).astype(np.uint16)
@@ -156,43 +176,55 @@ def test_psnr_layouts_follow_figs_7_to_9(tmp_path):
     res = make_results(tmp_path)
     exp1 = json.loads((res / "eval" / "synthesis_exp1.json").read_text())
     sets = {s.name: s for s in psnr_sets(exp1, "1_1")}
-    assert sorted(sets) == ["calibrated", "ground_truth"]
-    g = layout(sets["calibrated"], N, COLS, ROWS)
+    assert sorted(sets) == ["complete", "ground_truth"]
+    assert sets["complete"].inputs == ["x00_y00/1_1", "x00_y01/1_1", "x02_y00/1_1",
+                                       "x02_y01/1_1"]
+    g = layout(sets["complete"], N, COLS, ROWS)
     assert g.kind == "shots" and g.values.shape == (ROWS, COLS)
     assert g.marks[0, 0] == "input" and math.isnan(g.values[0, 0])
-    assert g.values[0, 1] == pytest.approx(28.5)  # x01_y00 is CAMS[1]
-    assert g.outside == {"hand00/1_1": pytest.approx(31.0)}
+    assert g.values[0, 1] == pytest.approx(28.0)  # x01_y00
+    assert g.values[1, 1] == pytest.approx(28.5)  # x01_y01
+    assert g.outside == {}
     exp2 = json.loads((res / "eval" / "synthesis_exp2.json").read_text())
-    g2 = layout(psnr_sets(exp2, "1_1")[0], N, COLS, ROWS)
+    (s2,) = psnr_sets(exp2, "1_1")
+    assert s2.name == "complete/x01_y01"
+    g2 = layout(s2, N, COLS, ROWS)
     assert g2.kind == "set" and g2.values.shape == (N, N) and g2.marks[0, 1] == "input"
+    assert g2.values[0, 0] == pytest.approx(36.0) and g2.values[1, 1] == pytest.approx(37.0)
     exp3 = json.loads((res / "eval" / "synthesis_exp3.json").read_text())
-    names = sorted(s.name for s in psnr_sets(exp3, "1_1"))
-    assert names == ["central/calibrated", "central/ground_truth", "lateral/calibrated",
-                     "lateral/ground_truth"]
-    g3 = layout(psnr_sets(exp3, "1_1")[0], N, COLS, ROWS)
+    s3 = psnr_sets(exp3, "1_1")
+    assert [s.name for s in s3] == ["complete/central", "complete/lateral",
+                                    "ground_truth/central", "ground_truth/lateral"]
+    g3 = layout(s3[0], N, COLS, ROWS)
     assert g3.kind == "views" and g3.values.shape == (ROWS * N, COLS * N)
     assert g3.marks[1, 1] == "input"  # x00_y00/1_1 in the central experiment
+    assert g3.values[0, 0] == pytest.approx(29.0)  # x00_y00/0_0, the first target
+    # x01_y01/2_2: after 8 + 9 + 8 + 8 targets of the shots before it, and 8 of its own
+    assert g3.values[3 + 2, 3 + 2] == pytest.approx(29.0 + 0.5 * (8 + 9 + 8 + 8 + 8))
 
 
 def test_page_content_and_determinism(tmp_path):
     res = make_results(tmp_path)
     html = build(res)
-    for key in ("reg_a", "reg_b", "complete", "baseline_sfm", "sfm_scratch"):
+    for key in ("reg_a", "reg_b", "complete", "baseline_sfm", "sfm_scratch", "ground_truth"):
         assert f'id="t1-{key}"' in html
+    assert "58 of 63 views registered" in html and "<td>54 + 9</td>" in html
     for paper in ("0.663", "0.450", "0.714", "0.770"):
         assert f"<td>{paper}</td>" in html
     assert "0.702 / 0.812 = <b>0.865</b>" in html  # complete / baseline, target 0.9
     assert re.search(r'id="gt-a_focal_pct".*?0\.2500.*?pass', html)
-    assert "0.30 dB lost to calibration (vs ground-truth cameras, 3 views)" in html
-    assert "0.20 dB lost to calibration (vs ground-truth cameras, 59 views)" in html
-    assert html.count("<svg") >= 2 + 2 + 1 + 4  # array x2, exp1 x2, exp2, exp3 x4
+    assert "0.30 dB lost to calibration (vs ground-truth cameras, 2 views)" in html
+    assert "0.20 dB lost to calibration (vs ground-truth cameras, 50 views)" in html
+    assert html.count("<svg") == 2 + 2 + 1 + 4  # array x2, exp1 x2, exp2, exp3 x4
+    assert "Exp. 3 (checks A+B), lateral inputs (ground-truth cameras)" in html
     assert 'href="../eval/reprojection.json"' in html
     assert 'href="../views/x01_y01/patch_size.png"' in html
     assert "depth/b/hand00.png" in html and "made by rule <code>depth</code>" in html
     assert not re.search(r'(src|href)="(https?:)?//', html), "the page must not fetch"
     assert "Not produced" not in html.split('id="depth"')[0]
     n_img = html.count("<img ")
-    assert n_img == 1 + 3 + 2 * 4 + len(CAMS) + 2 * len(CAMS) - 1
+    # Fig. 10: captured + 6 syntheses, 2 zooms of captured + 4 calibrated; previews
+    assert n_img == 7 + 2 * 5 + len(CAMS) + 2 * len(CAMS) - 1
     assert len(html) < 600_000
     first = (res / "report" / "index.html").read_bytes()
     build(res)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from html import escape
 from pathlib import Path
 
@@ -334,19 +335,45 @@ def _psnr_section(page: Page, key: str, title: str, paper: str, n_views: int, co
 
 
 _KEY_IN_NAME = re.compile(r"(x\d{2}_y\d{2}|hand\d{2})[_/-]?(\d+_\d+)")
+_EXP_DIR = re.compile(r"exp(\d+)")
+_GT_WORDS = ("ground_truth", "truth", "gt")
 
 
-def _synth_images(page: Page) -> dict[str, list[str]]:
-    """Synthesised images under eval/synth/, grouped by the view they show."""
+@dataclass(frozen=True)
+class SynthImage:
+    rel: str  # path under results/<d>/
+    key: str  # the view it shows, "<cam>/<view>"
+    label: str  # "Exp. 3, lateral inputs"
+    truth: bool  # synthesised with the ground-truth cameras
+    order: tuple
+
+
+def _synth_images(page: Page) -> dict[str, list[SynthImage]]:
+    """Synthesised images under eval/synth/ (``exp<k>/<calibration>[_<variant>]_<cam>_
+    <r>_<c>.png``, as the synthesis rules write them), grouped by the view they show."""
     rel_dir = src.SOURCES["synth_dir"][0]
     root = page.path(rel_dir)
-    out: dict[str, list[str]] = {}
+    out: dict[str, list[SynthImage]] = {}
     for p in sorted(root.rglob("*.png")):
         rel = p.relative_to(page.results).as_posix()
-        m = _KEY_IN_NAME.search(p.relative_to(root).as_posix())
-        if m:
-            out.setdefault(f"{m.group(1)}/{m.group(2)}", []).append(rel)
-    return out
+        inner = p.relative_to(root).as_posix()
+        m = _KEY_IN_NAME.search(p.name)
+        if not m:
+            continue
+        e = _EXP_DIR.search(inner)
+        exp = int(e.group(1)) if e else 0
+        words = [w for w in p.name[:m.start()].strip("_-").split("_") if w]
+        truth = any(w in _GT_WORDS for w in words) or "ground_truth" in p.name
+        variant = [w for w in words if w not in _GT_WORDS + ("ground", "complete",
+                                                             "calibrated")]
+        what = {1: " (checks A)", 2: " (checks B)", 3: " (checks A+B)"}.get(exp, "")
+        label = (f"Exp. {exp}{what}" if exp else Path(inner).stem) + (
+            f", {' '.join(variant)} inputs" if variant else "") + (
+            " (ground-truth cameras)" if truth else "")
+        key = f"{m.group(1)}/{m.group(2)}"
+        out.setdefault(key, []).append(SynthImage(rel, key, label, truth,
+                                                  (truth, exp, variant, rel)))
+    return {k: sorted(v, key=lambda s: s.order) for k, v in out.items()}
 
 
 def _crop_boxes(ref: np.ndarray, others: Sequence[np.ndarray], n: int = 2
@@ -366,17 +393,19 @@ def _crop_boxes(ref: np.ndarray, others: Sequence[np.ndarray], n: int = 2
             og = o.astype(np.float32)
             err += np.abs((og.mean(axis=2) if og.ndim == 3 else og) - g)
     tex = np.abs(cv2.Laplacian(g, cv2.CV_32F))
-    boxes = []
+    boxes: list[tuple[int, int, int, int]] = []
+    half = s // 2
     for score in (err, tex)[:n]:
         box = cv2.boxFilter(score, -1, (s, s), normalize=True)
-        half = s // 2
-        inner = box[half:h - (s - half) + 1, half:w - (s - half) + 1]
+        # box[y, x] averages the window centred at (x, y): keep windows inside the image
+        inner = box[half:h - (s - half) + 1, half:w - (s - half) + 1].copy()
         if inner.size == 0:
             continue
-        for (x0, y0, _, _) in boxes:  # avoid repeating a window
-            ys, xs = max(0, y0 - half), max(0, x0 - half)
-            inner[ys:y0 + half, xs:x0 + half] = -1
+        for (x0, y0, _, _) in boxes:  # no window overlapping one already chosen
+            inner[max(0, y0 - s + 1):y0 + s, max(0, x0 - s + 1):x0 + s] = -1
         y, x = np.unravel_index(int(np.argmax(inner)), inner.shape)
+        if inner[y, x] < 0:
+            continue
         boxes.append((int(x), int(y), s, s))
     return boxes
 
@@ -398,16 +427,26 @@ def section_fig10(page: Page, n_views: int, centre_cam: str | None) -> None:
 
     want = f"{centre_cam}/{central_view(n_views)}" if centre_cam else None
     keys = sorted(groups, key=lambda k: (k != want, -len(groups[k]), k))
+    page.add("<p class=note>As in Fig. 10: the captured view, then the same view "
+             "synthesised in each experiment (Exp. 1 checks registration A, Exp. 2 "
+             "registration B, Exp. 3 the complete calibration), and zoomed details where "
+             "the syntheses differ most from the capture and where the texture is "
+             "finest (nearest-neighbour magnification: one block = one pixel).</p>")
     for key in keys[:2]:
         cam, view = key.split("/")
         cap_rel = f"views/{cam}/{view}.png"
-        row = []
+        calib = [s for s in groups[key] if not s.truth]
+        truth = [s for s in groups[key] if s.truth]
+        first = []
         if page.has(cap_rel):
-            row.append(page.image(cap_rel, f"captured {key}", max_side=300))
-        for rel in groups[key]:
-            row.append(page.image(rel, f"synthesised: {Path(rel).stem}", max_side=300))
-        page.add(f"<h3>{escape(key)}</h3><div>" + "".join(row) + "</div>")
-        imgs = [cv2.imread(str(page.path(r)), cv2.IMREAD_UNCHANGED) for r in groups[key]]
+            first.append(page.image(cap_rel, f"captured {key}", max_side=280))
+        first += [page.image(s.rel, s.label, max_side=280) for s in calib]
+        page.add(f'<h3>{escape(key)}</h3><div class="fig10">' + "".join(first) + "</div>")
+        if truth:
+            page.add('<div class="fig10">' + "".join(
+                page.image(s.rel, s.label, max_side=280) for s in truth) + "</div>")
+        shown = calib or truth
+        imgs = [cv2.imread(str(page.path(s.rel)), cv2.IMREAD_UNCHANGED) for s in shown]
         imgs = [i for i in imgs if i is not None]
         ref = (cv2.imread(str(page.path(cap_rel)), cv2.IMREAD_UNCHANGED)
                if page.has(cap_rel) else None)
@@ -418,10 +457,10 @@ def section_fig10(page: Page, n_views: int, centre_cam: str | None) -> None:
             crops = []
             if ref is not None:
                 crops.append(page.image(cap_rel, "captured (zoom)", max_side=box[2], crop=box,
-                                        display_width=200, pixelated=True))
-            for rel in groups[key]:
-                crops.append(page.image(rel, f"{Path(rel).stem} (zoom)", max_side=box[2],
-                                        crop=box, display_width=200, pixelated=True))
+                                        display_width=160, pixelated=True))
+            for s in shown:
+                crops.append(page.image(s.rel, f"{s.label} (zoom)", max_side=box[2],
+                                        crop=box, display_width=160, pixelated=True))
             page.add(f'<div class="crops"><p class=note>zoom x={box[0]}, y={box[1]}, '
                      f"{box[2]} x {box[3]} px</p>" + "".join(crops) + "</div>")
 

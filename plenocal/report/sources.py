@@ -39,6 +39,8 @@ PAPER_TABLE1 = {
     "complete": ("Complete A+B (proposed)", 0.714, "525 + 175"),
     "baseline_sfm": ("Complete A+SfM (naive baseline)", 0.770, "525 + 175"),
     "sfm_scratch": ("SfM of all views from scratch", None, None),
+    "ground_truth": ("Ground-truth cameras (the floor set by features and views)", None,
+                     None),
 }
 
 _ALIASES = {
@@ -47,6 +49,7 @@ _ALIASES = {
     "complete": ("complete", "complete_ab", "merged", "calibration"),
     "baseline_sfm": ("baseline_sfm", "a_sfm", "naive", "baseline", "complete_a_sfm"),
     "sfm_scratch": ("sfm_scratch", "sfm_from_scratch", "scratch", "plain_sfm"),
+    "ground_truth": ("ground_truth", "truth", "gt"),
 }
 
 CAM_RE = re.compile(r"^(x(\d{2})_y(\d{2})|hand\d{2})$")
@@ -132,14 +135,16 @@ def table1_rows(doc: Mapping) -> list[Table1Row]:
             counts = sorted({s[2] for s in st if s[2] is not None})
             n_img = counts[0] if len(counts) == 1 else None
             n_obs = int(sum(s[3] for s in st if s[3] is not None)) or None
-            note = f"mean over {len(st)} sets"
+        if isinstance(sets, Mapping) and sets:
+            means = [m for m, *_ in (_stats_of(v) for v in sets.values()
+                                     if isinstance(v, Mapping)) if m is not None]
+            note = f"mean over {len(sets)} sets"
             if means:
                 note += f" (range {min(means):.3f}-{max(means):.3f} px)"
-        elif isinstance(sets, Mapping) and sets:
-            note = f"mean over {len(sets)} sets"
         registered = _first(entry, "num_registered", "registered_images")
         if _num(registered) is not None:
-            note = (note + "; " if note else "") + f"{int(registered)} views registered"
+            of = f" of {n_img}" if n_img is not None else ""
+            note = (note + "; " if note else "") + f"{int(registered)}{of} views registered"
         images = _image_count(entry, n_img)
         if key == "reg_b" and n_img is not None and images == str(n_img):
             images = f"{n_img} per set"
@@ -161,7 +166,8 @@ def table1_verdict(rows: list[Table1Row]) -> tuple[float, float] | None:
 # PSNR of the view-synthesis experiments
 # ---------------------------------------------------------------------------
 
-_GENERIC = {"psnr", "psnr_db", "per_view", "views", "results", "targets", "values", "db"}
+_GENERIC = {"psnr", "psnr_db", "per_view", "views", "results", "targets", "values", "db",
+            "calibrations", "sets"}
 
 
 @dataclass
@@ -342,7 +348,7 @@ def db_lost(sets: list[PsnrSet]) -> list[tuple[str, str, float, int]]:
     def strip(name: str) -> str:
         return "/".join(p for p in name.split("/") if p not in (
             "ground_truth", "gt", "truth", "gt_cameras", "calibrated", "calibration",
-            "estimated"))
+            "estimated", "complete"))
 
     out = []
     gts = [s for s in sets if is_gt(s.name)]
