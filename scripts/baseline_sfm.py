@@ -1,7 +1,7 @@
 """Rule baseline_sfm: the naive "A+SfM" calibration of Table I, and SfM from scratch."""
-import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
-
 from pathlib import Path
+
+import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.baseline import baseline_sfm
 from plenocal.camera import write_cameras

@@ -1,7 +1,7 @@
 """Rule features_a: SIFT of the central views into the registration-A database."""
-import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
-
 from pathlib import Path
+
+import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.io import write_json
 from plenocal.sfm import log_to_file

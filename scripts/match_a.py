@@ -1,7 +1,7 @@
 """Rule match_a: exhaustive matching and geometric verification of registration A."""
-import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
-
 import shutil
+
+import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.io import write_json
 from plenocal.sfm import log_to_file

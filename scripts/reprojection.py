@@ -1,9 +1,9 @@
 """Rules reprojection_calib and reprojection: the reprojection error of one calibration
 (Table I of the paper), and the table of all of them."""
-import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
-
 import logging
 from pathlib import Path
+
+import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.camera import read_cameras
 from plenocal.io import read_json, write_json

@@ -1,0 +1,110 @@
+"""Registration A on a synthetic capture: a 3 x 2 parallel array plus 3 rotated
+hand-held shots of textured planes (plenocal.sfm.synthetic), f = 600 px, 480 x 360."""
+
+import cv2  # noqa: F401  (before pycolmap)
+import numpy as np
+import pytest
+
+from plenocal.camera import rotation_angle_deg, umeyama
+from plenocal.io import dumps_json, write_image
+from plenocal.sfm.registration import RegistrationError, check_shots, features_a, map_a, match_a
+from plenocal.sfm.synthetic import default_scene, render, rig_cameras
+
+F, W, H, STEP = 600.0, 480, 360, 0.03
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    root = tmp_path_factory.mktemp("sfm")
+    cams = rig_cameras(f=F, width=W, height=H, step_m=STEP, handheld=3)
+    scene = default_scene()
+    views = {}
+    for name, cam in cams.items():
+        views[name] = root / "views" / name / "2_2.png"
+        write_image(views[name], render(cam, scene))
+    return root, cams, views
+
+
+@pytest.fixture(scope="module")
+def registered(capture):
+    root, cams, views = capture
+    ra = root / "reg_a"
+    features_a(views, ra / "images", ra / "database.db")
+    match_a(ra / "database.db")
+    doc = map_a(ra / "database.db", ra / "images", ra / "model")
+    return ra, doc
+
+
+def _align(doc, cams):
+    names = sorted(cams)
+    src = np.array([np.asarray(doc["cameras"][n]["cam_to_world"])[:3, 3] for n in names])
+    dst = np.array([cams[n].centre for n in names])
+    s, R, t = umeyama(src, dst)
+    rmse = np.sqrt(((dst - (s * src @ R.T + t)) ** 2).sum(axis=1).mean())
+    rot = max(rotation_angle_deg(R @ np.asarray(doc["cameras"][n]["cam_to_world"])[:3, :3],
+                                 cams[n].R) for n in names)
+    return rmse, rot
+
+
+def test_registration_a_recovers_focal_and_poses(capture, registered):
+    _, cams, _ = capture
+    ra, doc = registered
+    assert sorted(doc["cameras"]) == sorted(cams)
+    assert doc["units"] == "sfm" and doc["width"] == W and doc["height"] == H
+    assert abs(doc["focal_px"] / F - 1) < 0.01
+    K = np.asarray(doc["cameras"]["hand00"]["K"])
+    # internal convention: principal point at ((W-1)/2, (H-1)/2), not COLMAP's W/2
+    np.testing.assert_allclose(K[:2, 2], [(W - 1) / 2, (H - 1) / 2], atol=1e-9)
+    rmse, rot = _align(doc, cams)
+    assert rmse < 0.02 * STEP
+    assert rot < 0.2
+    assert doc["mean_reprojection_error_px"] < 0.5
+    assert (ra / "model" / "images.bin").is_file()
+
+
+def test_registration_a_is_deterministic(capture, registered, tmp_path):
+    _, _, views = capture
+    ra, doc = registered
+    features_a(views, tmp_path / "images", tmp_path / "database.db")
+    match_a(tmp_path / "database.db")
+    again = map_a(tmp_path / "database.db", tmp_path / "images", tmp_path / "model")
+    assert dumps_json(again) == dumps_json(doc)
+    assert (tmp_path / "model" / "points3D.bin").read_bytes() == \
+        (ra / "model" / "points3D.bin").read_bytes()
+
+
+def test_global_mapper(capture, registered, tmp_path):
+    _, cams, _ = capture
+    ra, _ = registered
+    doc = map_a(ra / "database.db", ra / "images", tmp_path / "model", mapper="global")
+    assert doc["mapper"] == "global" and sorted(doc["cameras"]) == sorted(cams)
+    assert abs(doc["focal_px"] / F - 1) < 0.01
+    rmse, rot = _align(doc, cams)
+    assert rmse < 0.02 * STEP
+
+
+def test_unregistered_view_is_named(capture, tmp_path):
+    _, _, views = capture
+    rng = np.random.default_rng(0)
+    blank = tmp_path / "views" / "hand07" / "2_2.png"
+    # a view of some other scene: features, but no match with the rest
+    write_image(blank, cv2.GaussianBlur(rng.integers(0, 255, (H, W, 3), dtype=np.uint8),
+                                        (0, 0), 2))
+    v = dict(views, hand07=blank)
+    features_a(v, tmp_path / "images", tmp_path / "database.db")
+    match_a(tmp_path / "database.db")
+    with pytest.raises(RegistrationError, match=r"did not register hand07;.*hand-held"):
+        map_a(tmp_path / "database.db", tmp_path / "images", tmp_path / "model")
+
+
+def test_array_alone_is_refused():
+    with pytest.raises(RegistrationError, match="focal length is undetermined"):
+        check_shots(["x00_y00", "x01_y00", "x02_y00"])
+
+
+def test_views_of_different_sizes_are_refused(capture, tmp_path):
+    _, _, views = capture
+    small = tmp_path / "hand05.png"
+    write_image(small, np.zeros((H // 2, W // 2, 3), np.uint8))
+    with pytest.raises(RegistrationError, match="differ in size"):
+        features_a(dict(views, hand05=small), tmp_path / "images", tmp_path / "db.db")
