@@ -9,7 +9,11 @@ rule gt_errors:
         scale="results/{dataset}/merge/scale.json",
         calibration="results/{dataset}/calibration/cameras.json",
     output:
-        errors="results/{dataset}/eval/gt_errors.json",
+        errors=report(
+            "results/{dataset}/eval/gt_errors.json",
+            caption="../report/gt_errors.rst",
+            category="Ground truth",
+        ),
     log:
         log_path("gt_errors"),
     benchmark:

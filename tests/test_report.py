@@ -215,7 +215,7 @@ def test_page_content_and_determinism(tmp_path):
     assert re.search(r'id="gt-a_focal_pct".*?0\.2500.*?pass', html)
     assert "0.30 dB lost to calibration (vs ground-truth cameras, 2 views)" in html
     assert "0.20 dB lost to calibration (vs ground-truth cameras, 50 views)" in html
-    assert html.count("<svg") == 2 + 2 + 1 + 4  # array x2, exp1 x2, exp2, exp3 x4
+    assert html.count("<svg") == 3 + 2 + 1 + 4  # array x3, exp1 x2, exp2, exp3 x4
     assert "Exp. 3 (checks A+B), lateral inputs (ground-truth cameras)" in html
     assert 'href="../eval/reprojection.json"' in html
     assert 'href="../views/x01_y01/patch_size.png"' in html
@@ -306,7 +306,7 @@ def test_page_renders_in_headless_chromium(tmp_path):
     m = re.search(r'<p id="probe">images (\d+)/(\d+) svg (\d+)</p>', dom)
     assert m, "the probe script did not run: " + dom[-500:]
     assert int(m.group(2)) == n_img and int(m.group(1)) == n_img, m.group(0)
-    assert int(m.group(3)) >= 9
+    assert int(m.group(3)) == 10
     for key in ("reg_a", "reg_b", "complete", "baseline_sfm"):
         assert f'id="t1-{key}"' in dom
     assert "Complete A+B (proposed)" in dom

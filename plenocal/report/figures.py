@@ -260,10 +260,10 @@ def camera_array_svg(cameras: Mapping[str, object], truth: Mapping[str, object] 
     P = np.vstack(pts_all) @ V.T
     lo, hi = P[:, :2].min(axis=0), P[:, :2].max(axis=0)
     W, H = size
-    pad = 24
-    s = min((W - 2 * pad) / max(hi[0] - lo[0], 1e-12), (H - 2 * pad - 16) / max(hi[1] - lo[1],
-                                                                               1e-12))
-    off = np.array([W / 2, (H + 16) / 2]) - s * (lo + hi) / 2
+    pad, top, bottom = 24, 60, 44  # room for the title and axes above, legend below
+    s = min((W - 2 * pad) / max(hi[0] - lo[0], 1e-12),
+            (H - top - bottom) / max(hi[1] - lo[1], 1e-12))
+    off = np.array([W / 2, top + (H - top - bottom) / 2]) - s * (lo + hi) / 2
 
     def scr(X: np.ndarray) -> np.ndarray:
         return (np.atleast_2d(X) @ V.T)[:, :2] * s + off
@@ -286,8 +286,8 @@ def camera_array_svg(cameras: Mapping[str, object], truth: Mapping[str, object] 
                    'fill="#1f4e9a" fill-opacity="0.08"/>'
                    f'<line x1="{_f(p[1][0])}" y1="{_f(p[1][1])}" x2="{_f(p[2][0])}" '
                    f'y2="{_f(p[2][1])}" stroke-width="2"/></g>')
-    dots = scr(C)
     r_dot = 1.6 if len(keys) > 60 else 2.5
+    dots = scr(C)
     out.append('<g fill="#1f4e9a">')
     for k, q in zip(keys, dots, strict=True):
         out.append(f'<circle cx="{_f(q[0])}" cy="{_f(q[1])}" r="{r_dot}"><title>{escape(k)}'
@@ -295,26 +295,37 @@ def camera_array_svg(cameras: Mapping[str, object], truth: Mapping[str, object] 
     out.append("</g>")
     if tkeys:
         tq = scr(np.array([truth[k].centre for k in tkeys]))
-        out.append('<g fill="none" stroke="#d62728" stroke-width="0.9">')
+        a = r_dot + 2.0
+        out.append('<g fill="none" stroke="#d62728" stroke-width="0.8">')
         for k, q in zip(tkeys, tq, strict=True):
-            out.append(f'<circle cx="{_f(q[0])}" cy="{_f(q[1])}" r="{r_dot + 2.2}"><title>'
-                       f"truth {escape(k)}</title></circle>")
+            out.append(f'<path d="M{_f(q[0] - a)} {_f(q[1])}h{_f(2 * a)}M{_f(q[0])} '
+                       f'{_f(q[1] - a)}v{_f(2 * a)}"><title>truth {escape(k)}</title></path>')
         out.append("</g>")
+    # scale bar: a round length near a fifth of the drawing's width
+    target = (W - 2 * pad) / 5 / s
+    mag = 10 ** math.floor(math.log10(target))
+    length = max(m * mag for m in (1, 2, 5) if m * mag <= target)
+    bx, by = W - pad - length * s, H - 14
+    label = f"{length * 1000:g} mm" if length < 1 else f"{length:g} m"
+    out.append(f'<line x1="{_f(bx)}" y1="{_f(by)}" x2="{_f(bx + length * s)}" '
+               f'y2="{_f(by)}" stroke="#333" stroke-width="1.5"/><text x="{_f(bx)}" '
+               f'y="{_f(by - 4)}" fill="#333">{label}</text>')
     # legend and axes of the mean camera frame
     ly = H - 10
     out.append(f'<circle cx="14" cy="{ly - 4}" r="3" fill="#1f4e9a"/>'
-               f'<text x="22" y="{ly}" fill="#333">calibrated view centre; frusta: '
-               "central views (thick edge = top of the image)</text>")
+               f'<text x="22" y="{ly}" fill="#333">calibrated view centre'
+               + ("; frusta: central views (thick edge = top of the image)" if fr else "")
+               + "</text>")
     if tkeys:
-        out.append(f'<circle cx="14" cy="{ly - 20}" r="5" fill="none" stroke="#d62728"/>'
+        out.append(f'<path d="M9 {ly - 20}h10M14 {ly - 25}v10" stroke="#d62728"/>'
                    f'<text x="22" y="{ly - 16}" fill="#333">ground truth (aligned)</text>')
-    ax0 = np.array([W - 60.0, 40.0])
+    ax0 = np.array([W - 40.0, 26.0])
     names = ("x", "y", "z")
     for i, col in enumerate(("#c0392b", "#27ae60", "#2c3e50")):
         R_mean_axis = np.mean([r[:, i] for r in Rs], axis=0)
         d = (V @ R_mean_axis)[:2]
         n = float(np.linalg.norm(d))
-        d = d / n * 22 if n > 1e-9 else d
+        d = d / n * 14 if n > 1e-9 else d
         out.append(f'<line x1="{_f(ax0[0])}" y1="{_f(ax0[1])}" x2="{_f(ax0[0] + d[0])}" '
                    f'y2="{_f(ax0[1] + d[1])}" stroke="{col}" stroke-width="1.5"/>'
                    f'<text x="{_f(ax0[0] + d[0] * 1.25)}" y="{_f(ax0[1] + d[1] * 1.25 + 4)}" '

@@ -265,13 +265,22 @@ def section_cameras(page: Page) -> None:
         truth = fg.align_truth(cams, read_cameras(page.path(trel)))
     shots = sorted({k.split("/")[0] for k in cams})
     per_shot = len(cams) // max(len(shots), 1)
+    array = [c for c in shots if src._array_pos(c) is not None] or shots
+    mid = array[len(array) // 2]
+    one = {k: v for k, v in cams.items() if k.split("/")[0] == mid}
+    one_truth = {k: v for k, v in truth.items() if k.split("/")[0] == mid}
     links = page.link(rel) + (" and " + page.link(trel) if truth else "")
     page.add('<figure id="camera-array">' + fg.camera_array_svg(
         cams, truth or None, title="oblique view from behind, above") + fg.camera_array_svg(
         cams, truth or None, yaw_deg=0.0, pitch_deg=0.0, size=(560, 380),
         title="front view (along the mean optical axis)")
+        + (fg.camera_array_svg(one, one_truth or None, yaw_deg=0.0, pitch_deg=0.0,
+                               size=(380, 380), frustum_views=set(),
+                               title=f"front view of the set of {mid}") if len(one) > 1
+           else "")
         + f"<figcaption>{len(cams)} views ({len(shots)} shots x {per_shot}); "
-        + ("ground truth aligned by a similarity, red rings; " if truth else "")
+        + ("ground truth aligned by a similarity on all view centres, red crosses; "
+           if truth else "")
         + f"hover a point for its name. Source: {links}</figcaption></figure>")
 
 
@@ -315,7 +324,7 @@ def _psnr_section(page: Page, key: str, title: str, paper: str, n_views: int, co
             labels = np.vectorize(lambda v: f"{v:.2f}" if np.isfinite(v) else "")(g.values)
         svg = fg.heatmap_svg(g.values, vmin, vmax, labels=labels, titles=g.titles,
                              marks=g.marks, group=g.group, annotate=g.annotate,
-                             cell=(58, 30) if g.annotate else (14, 14),
+                             cell=(58, 30) if g.annotate else (16, 16),
                              col_labels=g.col_labels, row_labels=g.row_labels)
         cap = f"{s.name}: PSNR per synthesised view; hatched: input views"
         if g.kind == "views":
