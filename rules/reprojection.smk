@@ -66,7 +66,7 @@ rule reprojection:
         mem_mb=500,
         runtime=5,
     params:
-        keys=lambda wc: reprojection_calibs(wc.dataset),
+        calibs=lambda wc: reprojection_calibs(wc.dataset),
     script:
         "../scripts/reprojection.py"
 

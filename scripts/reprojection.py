@@ -14,7 +14,7 @@ log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821
 
 if sm.rule == "reprojection":
-    doc = {k: read_json(p) for k, p in zip(sm.params.keys, sm.input.evals, strict=True)}
+    doc = {k: read_json(p) for k, p in zip(sm.params.calibs, sm.input.evals, strict=True)}
     base = read_json(sm.input.baseline)
     if "scratch" in base:
         s = base["scratch"]
