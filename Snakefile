@@ -8,8 +8,18 @@ min_version("9.0")
 configfile: "config.yaml"
 
 
+report: "report/workflow.rst"
+
+
 include: "rules/common.smk"
 include: "rules/simulate.smk"
+include: "rules/sfm.smk"
+include: "rules/rig.smk"
+include: "rules/depth.smk"
+include: "rules/merge.smk"
+include: "rules/reprojection.smk"
+include: "rules/synthesis.smk"
+include: "rules/report.smk"
 
 
 rule all:
