@@ -1,0 +1,112 @@
+"""Ground truth of a synthetic dataset, computed by tracing, not by the paper's formulas.
+
+For subaperture view (r, c), the converter's tile centres sample the sensor points
+``m_i + R q_rc`` (plenocal.viewgeom). Their chief rays, traced through the
+microlens centres and the ideal main lens (PlenopticOptics.chief_rays), define the
+view's pinhole camera: its centre is the least-squares intersection of the rays,
+and ``K`` and the rotation come from a linear fit of pixel <-> ray direction
+(a DLT on directions, then an RQ decomposition). For this optics the fit is exact:
+every view has the main lens's orientation, its centre lies on the main-lens plane
+``L q p / s`` per view step from the axis, and its principal point is shifted by
+``f B / Z0`` per step (Z0: the plane conjugate to the MLA).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from plenocal.camera import PinholeCamera, pose
+from plenocal.grid import MicrolensGrid
+from plenocal.optics import PlenopticOptics
+from plenocal.viewgeom import ViewLayout, parse_view, view_names
+
+
+def intersect_rays(origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    """Least-squares point closest to all rays (origins (n, 3), unit dirs (n, 3))."""
+    A = np.zeros((3, 3))
+    b = np.zeros(3)
+    for o, d in zip(origins, dirs, strict=True):
+        P = np.eye(3) - np.outer(d, d)
+        A += P
+        b += P @ o
+    return np.linalg.solve(A, b)
+
+
+def rq(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """RQ decomposition M = K R with K upper triangular (positive diagonal), R a rotation."""
+    P = np.flipud(np.eye(3))
+    Q, U = np.linalg.qr((P @ M).T)
+    K = P @ U.T @ P
+    R = P @ Q.T
+    S = np.diag(np.sign(np.diag(K)))
+    K, R = K @ S, S @ R
+    if np.linalg.det(R) < 0:
+        R = -R
+        K = -K
+    return K / K[2, 2], R
+
+
+def fit_pinhole(pixels: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """K and the camera-to-frame rotation from pixel <-> direction pairs (DLT + RQ)."""
+    mu = pixels.mean(axis=0)
+    sc = np.sqrt(2) / np.linalg.norm(pixels - mu, axis=1).mean()
+    T = np.array([[sc, 0, -sc * mu[0]], [0, sc, -sc * mu[1]], [0, 0, 1]])
+    uv = (pixels - mu) * sc
+    rows = []
+    for (u, v), d in zip(uv, dirs, strict=True):
+        rows.append(np.concatenate([d, np.zeros(3), -u * d]))
+        rows.append(np.concatenate([np.zeros(3), d, -v * d]))
+    _, _, Vt = np.linalg.svd(np.asarray(rows))
+    M = np.linalg.inv(T) @ Vt[-1].reshape(3, 3)
+    if np.linalg.det(M) < 0:
+        M = -M
+    K, R = rq(M)
+    # R maps frame directions to camera directions: camera-to-frame is its transpose
+    return K, R.T
+
+
+def view_camera(optics: PlenopticOptics, layout: ViewLayout, r: int, c: int) -> tuple[
+        np.ndarray, np.ndarray, float]:
+    """(K, cam_to_main 4x4, rms residual px) of view (r, c) in the main-lens frame."""
+    sensor = layout.chief_sensor_points(r, c)
+    origins, dirs = optics.chief_rays(sensor, layout.lens_centres)
+    centre = intersect_rays(origins, dirs)
+    K, R = fit_pinhole(layout.tile_centres, dirs)
+    proj = (dirs @ R) @ K.T
+    res = proj[:, :2] / proj[:, 2:] - layout.tile_centres
+    return K, pose(R, centre), float(np.sqrt((res ** 2).sum(axis=1).mean()))
+
+
+def shot_cameras(optics: PlenopticOptics, grid: MicrolensGrid, layout: ViewLayout,
+                 cam_to_world: np.ndarray) -> tuple[dict[str, PinholeCamera], float]:
+    """Ground-truth cameras of every view of one shot, and the worst fit residual."""
+    out = {}
+    worst = 0.0
+    for name in view_names(layout.n_views):
+        r, c = parse_view(name)
+        K, M, rms = view_camera(optics, layout, r, c)
+        worst = max(worst, rms)
+        out[name] = PinholeCamera(K, cam_to_world @ M, layout.width, layout.height)
+    return out, worst
+
+
+
+def ground_truth_shot(data_dir, cam: str, n_views: int, tile: int, q: float | None,
+                      out_json, log=print) -> None:
+    """Write the cameras of every view of shot ``cam`` (plain format, one shot)."""
+    from pathlib import Path  # noqa: PLC0415
+
+    from plenocal.io import read_json, write_json  # noqa: PLC0415
+    from plenocal.raytrix import read_calib  # noqa: PLC0415
+    from plenocal.simulate.dataset import optics_from_truth  # noqa: PLC0415
+    from plenocal.viewgeom import make_layout  # noqa: PLC0415
+
+    data_dir = Path(data_dir)
+    optics = optics_from_truth(data_dir / "truth" / "optics.json")
+    grid = MicrolensGrid(read_calib(data_dir / "calib.xml"), optics.width, optics.height)
+    layout = make_layout(grid, n_views, tile, q)
+    shots = read_json(data_dir / "truth" / "shots.json")
+    cams, worst = shot_cameras(optics, grid, layout, np.asarray(shots[cam]["cam_to_world"]))
+    log(f"{cam}: {len(cams)} view cameras, worst chief-ray fit residual {worst:.2e} px")
+    write_json(out_json, {"units": "m", "fit_residual_px": worst,
+                          "cameras": {f"{cam}/{k}": v.to_dict() for k, v in cams.items()}})

@@ -1,0 +1,175 @@
+"""Write a synthetic dataset: shots, scene, optics, ``calib.xml``, ``camera.yaml``
+and the lenslet images (DESIGN.md "The simulator, and ground truth")."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from plenocal.camera import pose
+from plenocal.grid import MicrolensGrid
+from plenocal.io import atomic_write_text, read_json, to_uint8, write_image, write_json
+from plenocal.optics import PlenopticOptics
+from plenocal.raytrix import LensType, RayCalib, read_calib, write_calib
+from plenocal.simulate.optics_setup import optics_from_config
+from plenocal.simulate.raytrace import render_lenslet
+from plenocal.simulate.scene import make_scene, scene_arrays
+
+
+def shot_names(sim: dict) -> list[str]:
+    a = sim["array"]
+    names = [f"x{c:02d}_y{r:02d}" for r in range(a["rows"]) for c in range(a["cols"])]
+    return names + [f"hand{k:02d}" for k in range(sim["handheld"]["count"])]
+
+
+def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
+    axis = axis / np.linalg.norm(axis)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+
+
+def make_shots(sim: dict, scene_centre: np.ndarray) -> dict[str, np.ndarray]:
+    """Camera-to-world poses (main-lens centre frame) of every shot.
+
+    Array shots sit on a stage at (col step, row step, 0) looking along +z. Hand-held
+    shots orbit the scene centre: a random rotation (up to ``max_rotation_deg`` about
+    a random axis) turns the camera about the scene centre, then a random offset (up
+    to ``max_offset_m`` per axis) moves it, so that every shot sees the scene.
+    """
+    a = sim["array"]
+    step = a["step_m"]
+    shots = {}
+    for r in range(a["rows"]):
+        for c in range(a["cols"]):
+            shots[f"x{c:02d}_y{r:02d}"] = pose(np.eye(3), np.array([c * step, r * step, 0.0]))
+    hh = sim["handheld"]
+    rng = np.random.default_rng([sim["seed"], 3])
+    centre_array = np.array([(a["cols"] - 1) * step / 2, (a["rows"] - 1) * step / 2, 0.0])
+    dist = float(np.linalg.norm(scene_centre - centre_array))
+    for k in range(hh["count"]):
+        axis = rng.normal(size=3)
+        angle = math.radians(hh["max_rotation_deg"]) * math.sqrt(rng.uniform(0.25, 1.0))
+        R = _axis_angle(axis, angle)
+        offset = rng.uniform(-1, 1, size=3) * hh["max_offset_m"]
+        C = scene_centre - R @ np.array([0.0, 0.0, dist]) + offset
+        shots[f"hand{k:02d}"] = pose(R, C)
+    return shots
+
+
+def make_calib(sim: dict, optics: PlenopticOptics) -> RayCalib:
+    """The RayCalibData of the simulated MLA (micro-image centres, one lens type)."""
+    near, far = sim["scene"]["near_m"], sim["scene"]["far_m"]
+    v_near = float(optics.virtual_depth(near))
+    v_far = float(optics.virtual_depth(far))
+    ox, oy = sim["mla"]["offset_px"]
+    return RayCalib(
+        diameter=optics.micro_image_pitch_px, offset=(float(ox), float(oy)),
+        rotation=float(sim["mla"]["rotation_rad"]), lens_border=sim["mla"]["lens_border_px"],
+        lens_base_x=(1.0, 0.0), lens_base_y=(0.5, -math.sqrt(3) / 2),
+        lens_types=(LensType(0, (0.0, 0.0), round(0.85 * v_near, 6), round(1.15 * v_far, 6)),),
+        sub_grid_base=None, tcp=float(optics.virtual_depth(optics.focus_distance)), is_real=0,
+    )
+
+
+def datasheet(sim: dict, optics: PlenopticOptics) -> dict:
+    """What a datasheet (and a tape measure) gives: the values registration B needs."""
+    return {
+        "pixel_size_mm": optics.pixel_size * 1e3,
+        "sensor_width_px": optics.width,
+        "sensor_height_px": optics.height,
+        "main_lens": {"focal_length_mm": optics.focal_length * 1e3,
+                      "focus_distance_mm": optics.focus_distance * 1e3},
+        "mla": {"pitch_mm": optics.mla_pitch * 1e3, "f_numbers": [optics.mla_f_number],
+                "k": optics.k, "sensor_distance_mm": round(optics.s * 1e3, 9)},
+        "array": {"step_mm": sim["array"]["step_m"] * 1e3},
+        "scene": {"near_mm": sim["scene"]["near_m"] * 1e3, "far_mm": sim["scene"]["far_m"] * 1e3},
+    }
+
+
+CAMERA_YAML_HEADER = """\
+# Datasheet values of the (simulated) plenoptic camera, as registration B reads them.
+# pixel_size_mm: sensor pixel pitch p; sensor_*_px: lenslet image size.
+# main_lens.focus_distance_mm: X_o, from the main lens; focal_length_mm: nominal only
+#   (registration B derives F from registration A's focal length, as the paper does).
+# mla.pitch_mm: physical microlens pitch D; f_numbers: microlens F-number(s) (the paper
+#   uses the middle one); k: the paper's k (s = k f / (k - 1)); sensor_distance_mm: s.
+# array.step_mm: stage step between array shots.
+# scene.near_mm / far_mm: measured nearest / farthest object distances (Eqs. 2-3 check).
+"""
+
+
+def setup_dataset(sim: dict, out_dir: str | Path) -> None:
+    """Write truth/{scene,shots,optics}.json, calib.xml and camera.yaml."""
+    out = Path(out_dir)
+    optics = optics_from_config(sim)
+    a = sim["array"]
+    centre_xy = ((a["cols"] - 1) * a["step_m"] / 2, (a["rows"] - 1) * a["step_m"] / 2)
+    scene = make_scene(centre_xy, sim["scene"]["near_m"], sim["scene"]["far_m"], sim["seed"])
+    shots = make_shots(sim, np.array(scene["centre"]))
+    calib = make_calib(sim, optics)
+    write_json(out / "truth" / "scene.json", scene)
+    write_json(out / "truth" / "shots.json",
+               {k: {"cam_to_world": v} for k, v in sorted(shots.items())})
+    write_json(out / "truth" / "optics.json",
+               {**optics.to_dict(), "mla_rotation_rad": calib.rotation,
+                "mla_offset_px": list(calib.offset), "seed": sim["seed"]})
+    write_calib(calib, out / "calib.xml")
+    atomic_write_text(out / "camera.yaml",
+                      CAMERA_YAML_HEADER + yaml.safe_dump(datasheet(sim, optics),
+                                                          sort_keys=True))
+
+
+def optics_from_truth(path: str | Path) -> PlenopticOptics:
+    d = read_json(path)
+    return PlenopticOptics(
+        focal_length=d["focal_length"], focus_distance=d["focus_distance"],
+        mla_pitch=d["mla_pitch"], mla_f_number=d["mla_f_number"], k=d["k"],
+        pixel_size=d["pixel_size"], width=int(d["width"]), height=int(d["height"]),
+        aperture_scale=d["aperture_scale"],
+    )
+
+
+def nearest_lens_map(grid: MicrolensGrid) -> np.ndarray:
+    """(H, W, 2) micro-image centre of the nearest lens for every sensor pixel."""
+    H, W = grid.height, grid.width
+    ys, xs = np.mgrid[0:H, 0:W]
+    rel = np.stack([xs - grid.origin[0], ys - grid.origin[1]], axis=-1).astype(np.float64)
+    f = rel @ np.linalg.inv(grid.A).T
+    base = np.floor(f)
+    best = np.full((H, W), np.inf)
+    out = np.zeros((H, W, 2))
+    for di in (0, 1):
+        for dj in (0, 1):
+            ij = base + np.array([di, dj])
+            c = grid.origin + ij @ grid.A.T
+            d = ((c - np.stack([xs, ys], axis=-1)) ** 2).sum(axis=-1)
+            take = d < best
+            best[take] = d[take]
+            out[take] = c[take]
+    return out
+
+
+def render_shot(sim: dict, data_dir: str | Path, cam: str, out_png: str | Path,
+                log=print) -> None:
+    """Render the lenslet image of shot ``cam`` into ``out_png`` (8-bit RGB)."""
+    data_dir = Path(data_dir)
+    optics = optics_from_truth(data_dir / "truth" / "optics.json")
+    scene = scene_arrays(read_json(data_dir / "truth" / "scene.json"))
+    shots = read_json(data_dir / "truth" / "shots.json")
+    if cam not in shots:
+        raise KeyError(f"{cam}: not a shot of this dataset ({', '.join(sorted(shots))})")
+    calib = read_calib(data_dir / "calib.xml")
+    grid = MicrolensGrid(calib, optics.width, optics.height)
+    lens_map = nearest_lens_map(grid)
+    index = sorted(shots).index(cam)
+    log(f"{cam}: tracing {optics.width}x{optics.height} px x {sim['render']['samples']} rays")
+    img = render_lenslet(scene, optics, lens_map, np.asarray(shots[cam]["cam_to_world"]),
+                         sim["render"]["samples"], sim["seed"])
+    if sim["sensor"]["noise_std"] > 0:
+        rng = np.random.default_rng([sim["seed"], 5, index])
+        img = img + rng.normal(0.0, sim["sensor"]["noise_std"], img.shape).astype(np.float32)
+    write_image(out_png, to_uint8(img))
+    log(f"{cam}: done")
