@@ -1,0 +1,19 @@
+"""Lenslet-to-multiview conversion (the paper's RLC, Fig. 1 (a)): patch sizes by block
+matching (:mod:`.patchsize`), view rendering (:mod:`.render`), the per-shot driver and
+``disparity.json`` (:mod:`.shot`), quality against ideal renders (:mod:`.quality`)."""
+
+from plenocal.convert.errors import ConvertError
+from plenocal.convert.patchsize import PatchSizeSettings, estimate_patch_size
+from plenocal.convert.render import RenderSettings
+from plenocal.convert.shot import (
+    ConvertSettings,
+    ShotConversion,
+    convert_files,
+    disparity_summary,
+    load_lenslet,
+)
+
+__all__ = [
+    "ConvertError", "ConvertSettings", "PatchSizeSettings", "RenderSettings", "ShotConversion",
+    "convert_files", "disparity_summary", "estimate_patch_size", "load_lenslet",
+]

@@ -1,0 +1,286 @@
+"""Convert one lenslet image into its N x N subaperture views (the RLC of Fig. 1 (a)).
+
+:class:`ShotConversion` ties the stages together: the microlens grid from
+``calib.xml`` (:class:`plenocal.grid.MicrolensGrid`), the output layout
+(:func:`plenocal.viewgeom.make_layout`), the patch-size map
+(:mod:`plenocal.convert.patchsize`) and the view renderer
+(:mod:`plenocal.convert.render`). :func:`disparity_summary` gives the disparity
+range between views that Eqs. 1-3 of the paper use.
+
+View spacing. View (r, c) is cut at ``q_rc = ((c - (N-1)/2) q, (r - (N-1)/2) q)`` from
+the micro-image centre, ``q = D' sin(45 deg) / N`` by default: the N x N view points
+then span a square of side ``(N-1)/N D' sin 45`` inscribed (with a margin of one
+``q``) in the safe micro-image disc of diameter ``D' = D - 2 lens_border``.
+
+Disparity between views. A point whose patch size is ``P`` moves by ``q T / P``
+output pixels from view (r, c) to view (r, c+1) (towards +x: the tile of a lens
+samples ``q_rc - (u - o_i) P / T``, so a step of ``q`` in the view offset is a step
+of ``q T / P`` in ``u``). In the paper's Eq. 1, ``d = u_h - u_(h+1)``, so
+``d = -q T / P``: negative everywhere, because the simulated scene (and any scene of
+a Keplerian camera with virtual depths > 0) lies beyond the plane conjugate to the
+MLA, where all views converge.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+import yaml
+
+from plenocal.convert.errors import ConvertError
+from plenocal.convert.patchsize import PatchSizeResult, PatchSizeSettings, estimate_patch_size
+from plenocal.convert.render import RenderPlan, RenderSettings, make_plan, render_view
+from plenocal.grid import MicrolensGrid
+from plenocal.io import read_image
+from plenocal.raytrix import CalibError, RayCalib, read_calib
+from plenocal.viewgeom import ViewLayout, make_layout, parse_view, view_names
+
+log = logging.getLogger("plenocal.convert")
+
+
+@dataclass(frozen=True)
+class ConvertSettings:
+    tile_size: int = 6
+    view_spacing_px: float | None = None
+    percentiles: tuple[float, float] = (2.0, 98.0)
+    patch: PatchSizeSettings = field(default_factory=PatchSizeSettings)
+    render: RenderSettings = field(default_factory=RenderSettings)
+
+    @classmethod
+    def from_config(cls, cfg: dict | None) -> ConvertSettings:
+        cfg = dict(cfg or {})
+        pct = cfg.get("disparity_percentiles", (2.0, 98.0))
+        return cls(
+            tile_size=int(cfg.get("tile_size", 6)),
+            view_spacing_px=cfg.get("view_spacing_px"),
+            percentiles=(float(pct[0]), float(pct[1])),
+            patch=PatchSizeSettings.from_config(cfg.get("patch_size", {}) or {}),
+            render=RenderSettings.from_config(cfg.get("blend", {}) or {}),
+        )
+
+
+# ---------------------------------------------------------------------------
+# Inputs
+# ---------------------------------------------------------------------------
+
+
+def read_sensor_size(camera_yaml: str | Path) -> tuple[int, int] | None:
+    """(width, height) from ``camera.yaml`` (sensor_width_px, sensor_height_px), or None."""
+    path = Path(camera_yaml)
+    try:
+        with open(path) as fh:
+            doc = yaml.safe_load(fh) or {}
+    except OSError as exc:
+        raise ConvertError(f"{path}: cannot read the camera datasheet: {exc.strerror}") from None
+    except yaml.YAMLError as exc:
+        raise ConvertError(f"{path}: not valid YAML: {exc}") from None
+    w, h = doc.get("sensor_width_px"), doc.get("sensor_height_px")
+    if w is None or h is None:
+        return None
+    return int(w), int(h)
+
+
+def load_lenslet(path: str | Path, sensor_size: tuple[int, int] | None = None) -> np.ndarray:
+    """Read a lenslet image; check its size against the datasheet's sensor size."""
+    path = Path(path)
+    try:
+        img = read_image(path)
+    except (OSError, FileNotFoundError) as exc:
+        raise ConvertError(f"{path}: cannot read the lenslet image ({exc}); is it a PNG?") \
+            from None
+    if img.ndim not in (2, 3) or img.dtype not in (np.uint8, np.uint16) or min(img.shape[:2]) < 8:
+        raise ConvertError(f"{path}: not a usable lenslet image (shape {img.shape}, "
+                           f"{img.dtype}); need an 8- or 16-bit grey or RGB PNG")
+    if sensor_size is not None and (img.shape[1], img.shape[0]) != tuple(sensor_size):
+        raise ConvertError(f"{path}: image is {img.shape[1]}x{img.shape[0]} pixels but "
+                           f"camera.yaml says the sensor is {sensor_size[0]}x{sensor_size[1]}; "
+                           "the image must be the full, uncropped sensor readout")
+    return img
+
+
+def load_calib(path: str | Path) -> RayCalib:
+    try:
+        return read_calib(path)
+    except CalibError as exc:
+        raise ConvertError(str(exc)) from None
+
+
+def build_grid(calib: RayCalib, width: int, height: int) -> MicrolensGrid:
+    """The microlens grid for a ``width`` x ``height`` image, with the size checks."""
+    src = calib.source
+    ox = (width - 1) / 2 + calib.offset[0]
+    oy = (height - 1) / 2 - calib.offset[1]
+    if not (0 <= ox <= width - 1 and 0 <= oy <= height - 1):
+        raise ConvertError(
+            f"{src}: the grid origin (image centre + offset) lands at ({ox:.1f}, {oy:.1f}), "
+            f"outside the {width}x{height} lenslet image: calib.xml belongs to a larger "
+            "sensor (or another camera); convert the full sensor image with its own calib.xml")
+    if calib.diameter > min(width, height) / 2:
+        raise ConvertError(f"{src}: micro-image diameter {calib.diameter:.1f} px is more than "
+                           f"half the {width}x{height} image: wrong calib.xml for this image?")
+    try:
+        return MicrolensGrid(calib, width, height)
+    except CalibError as exc:
+        raise ConvertError(str(exc)) from None
+
+
+# ---------------------------------------------------------------------------
+# Conversion
+# ---------------------------------------------------------------------------
+
+
+def _source_float(image: np.ndarray) -> np.ndarray:
+    if image.dtype == np.uint8:
+        f = image.astype(np.float32) * np.float32(1 / 255)
+    elif image.dtype == np.uint16:
+        f = image.astype(np.float32) * np.float32(1 / 65535)
+    else:
+        f = image.astype(np.float32)
+    return np.ascontiguousarray(f)
+
+
+class ShotConversion:
+    """One lenslet image: grid, layout, patch sizes and the per-shot render plan."""
+
+    def __init__(self, image: np.ndarray, calib: RayCalib, n_views: int,
+                 settings: ConvertSettings | None = None, source: str = "<image>") -> None:
+        self.settings = settings or ConvertSettings()
+        self.calib = calib
+        self.n_views = n_views
+        H, W = image.shape[:2]
+        self.grid = build_grid(calib, W, H)
+        try:
+            self.layout: ViewLayout = make_layout(self.grid, n_views, self.settings.tile_size,
+                                                  self.settings.view_spacing_px)
+        except ValueError as exc:
+            raise ConvertError(f"{source} with {calib.source}: {exc}") from None
+        max_q = math.hypot(1, 1) * (n_views - 1) / 2 * self.layout.q
+        if max_q >= calib.safe_diameter / 2:
+            raise ConvertError(f"view spacing q = {self.layout.q:.3f} px puts the corner views "
+                               f"{max_q:.2f} px from the lens centre, outside the safe micro "
+                               f"image (radius {calib.safe_diameter / 2:.2f} px): lower "
+                               "convert.view_spacing_px or the number of views")
+        self.patch: PatchSizeResult = estimate_patch_size(image, self.grid, self.settings.patch)
+        for note in self.patch.warnings:
+            log.warning("%s: %s", source, note)
+        self.used_patch = self.patch.patch[self.layout.lens_index]
+        self.plan: RenderPlan = make_plan(self.layout, self.used_patch, calib.safe_diameter,
+                                          self.settings.render)
+        self._source = _source_float(image)
+
+    def view_float(self, r: int, c: int) -> np.ndarray:
+        return render_view(self.plan, self._source, r, c)
+
+    def view(self, r: int, c: int) -> np.ndarray:
+        """View (r, c) as uint8 RGB (layout.height x layout.width x 3)."""
+        v = self.view_float(r, c)
+        out = np.clip(v * np.float32(255.0) + np.float32(0.5), 0, 255).astype(np.uint8)
+        if out.shape[2] == 1:
+            out = np.repeat(out, 3, axis=2)
+        return out
+
+    def views(self):
+        """Yield (name, uint8 RGB) for every view, row-major."""
+        for name in view_names(self.n_views):
+            r, c = parse_view(name)
+            yield name, self.view(r, c)
+
+    def disparity(self) -> dict:
+        return disparity_summary(self.layout, self.calib, self.used_patch,
+                                 self.patch.confident[self.layout.lens_index],
+                                 self.settings.percentiles)
+
+    def patch_picture(self) -> np.ndarray:
+        return patch_size_picture(self.layout, self.used_patch,
+                                  self.patch.confident[self.layout.lens_index])
+
+
+def disparity_summary(layout: ViewLayout, calib: RayCalib, patch: np.ndarray,
+                      confident: np.ndarray, percentiles: tuple[float, float] = (2.0, 98.0)
+                      ) -> dict:
+    """``disparity.json``: the disparity range between horizontally adjacent views (paper
+    sign, Eq. 1), the geometry it refers to and the patch-size statistics."""
+    q, T = layout.q, layout.tile
+    p_lo, p_hi = (float(x) for x in np.percentile(patch, percentiles))
+    shift_far, shift_near = q * T / p_lo, q * T / p_hi  # u_(h+1) - u_h, output pixels
+    pct = {f"p{int(p):02d}": float(np.percentile(patch, p)) for p in (2, 10, 25, 50, 75, 90, 98)}
+    return {
+        "convention": "paper",
+        "convention_note": (
+            "D = u_h - u_(h+1): a point's x in view (r, c) minus its x in view (r, c+1), "
+            "output pixels (the paper's Eq. 1). Here D = -q T / P: negative, because the "
+            "scene lies beyond the plane conjugate to the MLA (Z0), where the views converge. "
+            "D_max belongs to the nearest object (largest patch size). shift_* are the "
+            "magnitudes |D| = q T / P (view shift u_(h+1) - u_h, positive)."),
+        "D_min": -shift_far,
+        "D_max": -shift_near,
+        "shift_far_px": shift_far,
+        "shift_near_px": shift_near,
+        "percentiles": list(percentiles),
+        "q_px": q,
+        "q_formula": "q = D' sin(45 deg) / N (the paper), unless convert.view_spacing_px is set",
+        "q_paper_px": calib.safe_diameter * math.sin(math.radians(45.0)) / layout.n_views,
+        "tile": T,
+        "D_px": calib.diameter,
+        "safe_diameter_px": calib.safe_diameter,
+        "n_views": layout.n_views,
+        "width": layout.width,
+        "height": layout.height,
+        "used_lenses": int(len(patch)),
+        "patch_size_px": {
+            "min": float(np.min(patch)), "max": float(np.max(patch)),
+            "median": float(np.median(patch)), "mean": float(np.mean(patch)),
+            "percentiles": pct,
+            "confident_share": float(np.mean(confident)) if len(confident) else 0.0,
+        },
+    }
+
+
+def _label(img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.4) -> None:
+    cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255), 1,
+                cv2.LINE_AA)
+
+
+def patch_size_picture(layout: ViewLayout, patch: np.ndarray, confident: np.ndarray
+                       ) -> np.ndarray:
+    """The patch-size map at tile resolution (viridis, each lens its tile; lenses filled
+    from neighbours drawn darker) with a colour bar; uint8 RGB."""
+    from plenocal.viewgeom import nearest_lenses  # noqa: PLC0415
+
+    idx, _ = nearest_lenses(layout, k=1)
+    idx = idx[..., 0]
+    lo, hi = float(np.min(patch)), float(np.max(patch))
+    span = max(hi - lo, 1e-6)
+    level = np.clip(np.rint((patch - lo) / span * 255), 0, 255).astype(np.uint8)
+    lut = cv2.applyColorMap(np.arange(256, dtype=np.uint8)[:, None], cv2.COLORMAP_VIRIDIS)[:, 0]
+    rgb_lens = lut[level][:, ::-1].astype(np.float32)
+    rgb_lens[~confident] *= 0.55
+    img = np.zeros((layout.height, layout.width, 3), dtype=np.uint8)
+    ok = idx >= 0
+    img[ok] = rgb_lens[idx[ok]].astype(np.uint8)
+    # colour bar on the right
+    h = img.shape[0]
+    bar_w, pad, text_w = 16, 8, 70
+    panel = np.zeros((h, pad + bar_w + text_w, 3), dtype=np.uint8)
+    top, bottom = 20, max(h - 20, 21)
+    ramp = np.linspace(255, 0, bottom - top).astype(np.uint8)
+    panel[top:bottom, pad:pad + bar_w] = lut[ramp][:, None, ::-1]
+    for frac in (0.0, 0.5, 1.0):
+        y = int(round(bottom - 1 - frac * (bottom - top - 1)))
+        _label(panel, f"{lo + frac * span:.2f}", (pad + bar_w + 4, y + 4))
+    _label(panel, "P [px]", (pad, 14))
+    return np.ascontiguousarray(np.concatenate([img, panel], axis=1))
+
+
+def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str | Path | None,
+                  n_views: int, settings: ConvertSettings | None = None) -> ShotConversion:
+    """Read the inputs of one shot (with every check) and prepare its conversion."""
+    sensor = read_sensor_size(camera_yaml) if camera_yaml is not None else None
+    image = load_lenslet(lenslet, sensor)
+    calib = load_calib(calib_xml)
+    return ShotConversion(image, calib, n_views, settings, source=str(lenslet))

@@ -1,0 +1,298 @@
+"""Converter (issue 3): patch sizes against the optics, view disparity against the
+geometry, every Raytrix fixture converts, and the error cases."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from plenocal.convert import ConvertError, ConvertSettings, ShotConversion, convert_files
+from plenocal.convert.patchsize import estimate_patch_size, weighted_median
+from plenocal.convert.quality import summarise, view_quality
+from plenocal.convert.synthetic import (
+    calib_for_optics,
+    lenslet_from_optics,
+    lenslet_from_patch_size,
+    random_texture,
+)
+from plenocal.grid import MicrolensGrid
+from plenocal.io import write_image
+from plenocal.optics import PlenopticOptics
+from plenocal.raytrix import LensType, RayCalib, read_calib, write_calib
+
+FIXTURES = sorted(Path("/work/shared/fixtures/raytrix-calib").glob("*.xml"))
+if not FIXTURES:  # the fixtures travel with the repository's shared folder
+    FIXTURES = sorted((Path(__file__).parents[1] / "shared/fixtures/raytrix-calib").glob("*.xml"))
+
+
+def small_optics(width: int = 400, height: int = 300) -> PlenopticOptics:
+    """The default simulated camera (config.yaml), on a small sensor."""
+    return PlenopticOptics(focal_length=0.035, focus_distance=0.6, mla_pitch=130e-6,
+                           mla_f_number=2.8, k=5.0, pixel_size=5.5e-6, width=width,
+                           height=height)
+
+
+def plane_lenslet(opt: PlenopticOptics, depth: float, seed: int = 0):
+    calib = calib_for_optics(opt)
+    grid = MicrolensGrid(calib, opt.width, opt.height)
+    texel = 3.0 * depth * opt.pixel_size / opt.focal_length  # ~3 view pixels per texel
+    img = lenslet_from_optics(grid, opt, depth, random_texture(512, 1.5, seed), texel)
+    return calib, grid, img
+
+
+def measure_shift(a: np.ndarray, b: np.ndarray, axis: int, search: float = 4.0) -> float:
+    """Sub-pixel shift s (pixels) along ``axis`` such that b(x + s) ~ a(x)."""
+    a = cv2.cvtColor(a, cv2.COLOR_RGB2GRAY).astype(np.float32)
+    b = cv2.cvtColor(b, cv2.COLOR_RGB2GRAY).astype(np.float32)
+    m = int(np.ceil(search)) + 2
+    ref = a[m:-m, m:-m]
+    shifts = np.arange(-search, search + 1e-9, 0.05)
+    cost = []
+    for s in shifts:
+        M = np.float32([[1, 0, s if axis == 0 else 0], [0, 1, s if axis == 1 else 0]])
+        w = cv2.warpAffine(b, M, b.shape[::-1], flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP)
+        cost.append(float(((w[m:-m, m:-m] - ref) ** 2).mean()))
+    k = int(np.argmin(cost))
+    k = min(max(k, 1), len(cost) - 2)
+    c0, c1, c2 = cost[k - 1], cost[k], cost[k + 1]
+    return float(shifts[k] + 0.05 * 0.5 * (c0 - c2) / (c0 - 2 * c1 + c2))
+
+
+# ---------------------------------------------------------------------------
+# (1) patch size of a fronto-parallel plane = what the optics predict
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("depth", [0.5, 0.6, 0.7])
+def test_patch_size_of_a_plane_matches_the_optics(depth):
+    opt = small_optics()
+    calib, grid, img = plane_lenslet(opt, depth)
+    truth = opt.micro_image_disparity_px(depth)
+    res = estimate_patch_size(img, grid)
+    inner = grid.inside()
+    assert abs(np.median(res.patch[inner]) - truth) < 0.05, (np.median(res.patch), truth)
+    assert np.mean(np.abs(res.patch[inner] - truth) < 0.2) > 0.95
+    assert res.confident[inner].mean() > 0.8
+    # the raw match: most lenses right before any smoothing
+    assert np.mean(np.abs(res.raw[inner] - truth) < 0.25) > 0.85
+
+
+def test_patch_size_follows_the_content_not_the_middle_of_the_range():
+    """Two planes (left half P=4.5, right half P=8): the map has both, not a blend."""
+    opt = small_optics(480, 300)
+    calib = calib_for_optics(opt)
+    grid = MicrolensGrid(calib, 480, 300)
+    tex = random_texture(512, 1.5, 3)
+    a = lenslet_from_patch_size(grid, 4.5, tex)
+    b = lenslet_from_patch_size(grid, 8.0, tex)
+    img = a.copy()
+    right = grid.centres[:, 0] > 240
+    # whole micro images from b for the lenses on the right
+    ys, xs = np.mgrid[0:300, 0:480]
+    owner_right = np.zeros((300, 480), bool)
+    for cx, cy in grid.centres[right]:
+        owner_right |= (xs - cx) ** 2 + (ys - cy) ** 2 < (calib.diameter / 2) ** 2
+    img[owner_right] = b[owner_right]
+    res = estimate_patch_size(img, grid)
+    inner = grid.inside()
+    far_left = inner & (grid.centres[:, 0] < 200)
+    far_right = inner & (grid.centres[:, 0] > 290)
+    assert abs(np.median(res.patch[far_left]) - 4.5) < 0.1
+    assert abs(np.median(res.patch[far_right]) - 8.0) < 0.1
+
+
+# ---------------------------------------------------------------------------
+# (2) views of a textured plane shift by q T / P between neighbours
+# ---------------------------------------------------------------------------
+
+
+def test_views_shift_by_the_predicted_disparity():
+    opt = small_optics(520, 400)
+    depth = 0.55
+    calib, grid, img = plane_lenslet(opt, depth, seed=1)
+    shot = ShotConversion(img, calib, 5)
+    P = opt.micro_image_disparity_px(depth)
+    expect = shot.layout.q * shot.layout.tile / P  # u_(h+1) - u_h > 0
+    centre = shot.view(2, 2)
+    right = shot.view(2, 3)
+    below = shot.view(3, 2)
+    assert centre.shape == (shot.layout.height, shot.layout.width, 3)
+    dx = measure_shift(centre, right, axis=0)
+    dy = measure_shift(centre, below, axis=1)
+    assert dx == pytest.approx(expect, abs=0.06)
+    assert dy == pytest.approx(expect, abs=0.06)
+    # two steps: twice the shift
+    assert measure_shift(centre, shot.view(2, 4), axis=0, search=7.0) == pytest.approx(
+        2 * expect, abs=0.1)
+    # disparity.json: paper sign d = u_h - u_(h+1) = -q T / P
+    d = shot.disparity()
+    assert d["convention"] == "paper"
+    assert d["D_min"] <= d["D_max"] < 0
+    assert -d["D_max"] == pytest.approx(expect, rel=0.03)
+    assert -d["D_min"] == pytest.approx(expect, rel=0.03)
+    assert d["q_px"] == pytest.approx(calib.safe_diameter * np.sqrt(0.5) / 5)
+
+
+def test_views_match_the_ideal_view_of_the_plane():
+    """Patch size right -> the rendered view equals the virtual image resampled (no seams)."""
+    calib = calib_for_optics(small_optics())
+    grid = MicrolensGrid(calib, 400, 300)
+    tex = random_texture(512, 1.5, 2)
+    P = 6.5
+    shot = ShotConversion(lenslet_from_patch_size(grid, P, tex), calib, 5)
+    L = shot.layout
+    v = calib.diameter / P
+    ys, xs = np.mgrid[0:L.height, 0:L.width].astype(np.float64)
+    T = L.tile
+    for r, c in ((2, 2), (0, 0), (4, 1)):
+        d = np.stack([xs - L.tile_centres[0, 0], ys - L.tile_centres[0, 1]], -1) * (
+            calib.diameter / T)
+        y = L.lens_centres[0] + d[..., :1] * L.e1 + d[..., 1:] * L.e2 - v * L.offset_image(r, c)
+        t = (y / v + 256).astype(np.float32)
+        ideal = cv2.remap(tex, t[..., 0], t[..., 1], cv2.INTER_LINEAR)
+        ideal8 = np.clip(np.rint(ideal * 255), 0, 255).astype(np.uint8)
+        q = view_quality(shot.view(r, c), ideal8, border=T)
+        assert q["psnr_db"] > 36, (r, c, q)
+
+
+# ---------------------------------------------------------------------------
+# (3) every fixture calibration drives a conversion
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("path", FIXTURES, ids=[p.stem for p in FIXTURES])
+def test_every_fixture_converts(path):
+    calib = read_calib(path)
+    D = calib.diameter
+    W, H = int(round(12 * D)), int(round(10 * D))
+    grid = MicrolensGrid(calib, W, H)
+    mid = calib.lens_types[len(calib.lens_types) // 2]
+    P = D / (0.5 * (mid.depth_min + min(mid.depth_max, 10.0)))
+    img = lenslet_from_patch_size(grid, P, random_texture(512, 1.5, 0), texture_scale=0.5)
+    shot = ShotConversion(img, calib, 5)
+    names = [name for name, _ in shot.views()]
+    assert len(names) == 25 and names[0] == "0_0" and names[-1] == "4_4"
+    view = shot.view(2, 2)
+    assert view.shape == (shot.layout.height, shot.layout.width, 3)
+    assert view.dtype == np.uint8
+    assert shot.layout.width % 2 == 1 and shot.layout.height % 2 == 1
+    assert np.all(np.isfinite(shot.used_patch))
+    assert abs(np.median(shot.used_patch) - P) < 0.05 * P
+    assert view.std() > 10  # content, not an empty or black frame
+    d = shot.disparity()
+    assert d["width"] == shot.layout.width and d["n_views"] == 5
+    # lenses of a type whose range excludes P are filled from their neighbours
+    assert d["patch_size_px"]["confident_share"] > 0.3
+    pic = shot.patch_picture()
+    assert pic.shape[0] == shot.layout.height and pic.dtype == np.uint8
+
+
+def test_conversion_is_deterministic():
+    calib = calib_for_optics(small_optics())
+    grid = MicrolensGrid(calib, 400, 300)
+    img = lenslet_from_patch_size(grid, 5.0, random_texture(256, 1.5, 4))
+    a = ShotConversion(img, calib, 3)
+    b = ShotConversion(img, calib, 3)
+    assert np.array_equal(a.used_patch, b.used_patch)
+    assert np.array_equal(a.view(0, 2), b.view(0, 2))
+
+
+# ---------------------------------------------------------------------------
+# (4) errors
+# ---------------------------------------------------------------------------
+
+
+@pytest.fixture()
+def shot_files(tmp_path):
+    opt = small_optics()
+    calib = calib_for_optics(opt)
+    grid = MicrolensGrid(calib, 400, 300)
+    img = lenslet_from_patch_size(grid, 5.0, random_texture(256, 1.5, 5))
+    write_image(tmp_path / "x00_y00.png", img)
+    write_calib(calib, tmp_path / "calib.xml")
+    (tmp_path / "camera.yaml").write_text("sensor_width_px: 400\nsensor_height_px: 300\n")
+    return tmp_path
+
+
+def test_files_convert(shot_files):
+    shot = convert_files(shot_files / "x00_y00.png", shot_files / "calib.xml",
+                         shot_files / "camera.yaml", 3, ConvertSettings.from_config(
+                             {"tile_size": 5, "patch_size": {"step_px": 0.25}}))
+    assert shot.layout.tile == 5
+    assert abs(np.median(shot.used_patch) - 5.0) < 0.05
+
+
+def test_error_size_differs_from_datasheet(shot_files):
+    (shot_files / "camera.yaml").write_text("sensor_width_px: 640\nsensor_height_px: 300\n")
+    with pytest.raises(ConvertError, match=r"400x300.*640x300"):
+        convert_files(shot_files / "x00_y00.png", shot_files / "calib.xml",
+                      shot_files / "camera.yaml", 3)
+
+
+def test_error_grid_origin_outside_image(shot_files):
+    calib = read_calib(shot_files / "calib.xml")
+    far = RayCalib(**{**calib.__dict__, "offset": (900.0, 0.0)})
+    write_calib(far, shot_files / "calib.xml")
+    with pytest.raises(ConvertError, match="outside the 400x300 lenslet image"):
+        convert_files(shot_files / "x00_y00.png", shot_files / "calib.xml", None, 3)
+
+
+def test_error_cropped_image(shot_files, tmp_path):
+    img = cv2.imread(str(shot_files / "x00_y00.png"))
+    cv2.imwrite(str(tmp_path / "crop.png"), img[:60, :80])
+    with pytest.raises(ConvertError, match="calib.xml"):
+        convert_files(tmp_path / "crop.png", shot_files / "calib.xml", None, 3)
+
+
+def test_error_unreadable_image(shot_files):
+    (shot_files / "x00_y00.png").write_bytes(b"not a png at all")
+    with pytest.raises(ConvertError, match=r"x00_y00.png: cannot read the lenslet image"):
+        convert_files(shot_files / "x00_y00.png", shot_files / "calib.xml", None, 3)
+    with pytest.raises(ConvertError, match="cannot read the lenslet image"):
+        convert_files(shot_files / "missing.png", shot_files / "calib.xml", None, 3)
+
+
+def test_error_lens_type_without_depth_range(shot_files):
+    text = (shot_files / "calib.xml").read_text()
+    start = text.index("<depth_range")
+    end = text.index("</depth_range>") + len("</depth_range>")
+    (shot_files / "calib.xml").write_text(text[:start] + text[end:])
+    with pytest.raises(ConvertError, match=r"lens_type\[0\].depth_range"):
+        convert_files(shot_files / "x00_y00.png", shot_files / "calib.xml", None, 3)
+    # a calibration built in memory with an unusable range
+    bad = RayCalib(**{**calib_for_optics(small_optics()).__dict__,
+                      "lens_types": (LensType(0, (0.0, 0.0), 4.0, float("nan")),)})
+    with pytest.raises(ConvertError, match="virtual-depth range"):
+        ShotConversion(np.zeros((300, 400, 3), np.uint8), bad, 3)
+
+
+# ---------------------------------------------------------------------------
+# helpers
+# ---------------------------------------------------------------------------
+
+
+def test_weighted_median_by_hand():
+    v = np.array([[1.0, 2.0, 3.0], [5.0, 1.0, 9.0]])
+    w = np.array([[1.0, 1.0, 5.0], [0.0, 0.0, 0.0]])
+    out = weighted_median(v, w)
+    assert out[0] == 3.0 and np.isnan(out[1])
+
+
+def test_quality_summary():
+    a = np.zeros((20, 20, 3), np.uint8)
+    b = a.copy()
+    b[5, 5] = 255
+    q = view_quality(a, b, border=2)
+    # one pixel of 16 x 16 x 3 channels off by 255 in each channel: MSE = 255^2 / 256
+    assert q["psnr_db"] == pytest.approx(10 * np.log10(256), abs=1e-6)
+    s = summarise({"x00_y00": {"1_1": {"psnr_db": 31.0, "ssim": 0.9},
+                               "0_0": {"psnr_db": 28.0, "ssim": 0.8}},
+                   "x01_y00": {"1_1": {"psnr_db": 33.0, "ssim": 0.95}}}, "1_1")
+    assert s["mean_psnr_central_db"] == pytest.approx(32.0)
+    assert s["min_psnr_db"] == 28.0 and s["worst_view"] == "x00_y00/0_0"
+    assert s["meets_targets"]
+    with pytest.raises(ConvertError, match="same convert settings"):
+        view_quality(a, np.zeros((10, 20, 3), np.uint8), 1)
