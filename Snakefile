@@ -13,6 +13,7 @@ report: "report/workflow.rst"
 
 include: "rules/common.smk"
 include: "rules/simulate.smk"
+include: "rules/convert.smk"
 include: "rules/sfm.smk"
 include: "rules/rig.smk"
 include: "rules/depth.smk"

@@ -23,13 +23,8 @@ from plenocal.viewgeom import ViewLayout, parse_view, view_names
 
 def intersect_rays(origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
     """Least-squares point closest to all rays (origins (n, 3), unit dirs (n, 3))."""
-    A = np.zeros((3, 3))
-    b = np.zeros(3)
-    for o, d in zip(origins, dirs, strict=True):
-        P = np.eye(3) - np.outer(d, d)
-        A += P
-        b += P @ o
-    return np.linalg.solve(A, b)
+    P = np.eye(3) - dirs[:, :, None] * dirs[:, None, :]  # (n, 3, 3) projectors
+    return np.linalg.solve(P.sum(axis=0), np.einsum("nij,nj->i", P, origins))
 
 
 def rq(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -52,11 +47,13 @@ def fit_pinhole(pixels: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.nd
     sc = np.sqrt(2) / np.linalg.norm(pixels - mu, axis=1).mean()
     T = np.array([[sc, 0, -sc * mu[0]], [0, sc, -sc * mu[1]], [0, 0, 1]])
     uv = (pixels - mu) * sc
-    rows = []
-    for (u, v), d in zip(uv, dirs, strict=True):
-        rows.append(np.concatenate([d, np.zeros(3), -u * d]))
-        rows.append(np.concatenate([np.zeros(3), d, -v * d]))
-    _, _, Vt = np.linalg.svd(np.asarray(rows))
+    n = len(dirs)
+    A = np.zeros((2 * n, 9))
+    A[0::2, 0:3] = dirs
+    A[0::2, 6:9] = -uv[:, :1] * dirs
+    A[1::2, 3:6] = dirs
+    A[1::2, 6:9] = -uv[:, 1:2] * dirs
+    _, _, Vt = np.linalg.svd(A.T @ A)
     M = np.linalg.inv(T) @ Vt[-1].reshape(3, 3)
     if np.linalg.det(M) < 0:
         M = -M
