@@ -13,12 +13,19 @@ every view has the main lens's orientation, its centre lies on the main-lens pla
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from plenocal.camera import PinholeCamera, pose
 from plenocal.grid import MicrolensGrid
+from plenocal.io import read_json, write_json
 from plenocal.optics import PlenopticOptics
-from plenocal.viewgeom import ViewLayout, parse_view, view_names
+from plenocal.raytrix import read_calib
+from plenocal.simulate.dataset import optics_from_truth
+from plenocal.viewgeom import ViewLayout, make_layout, parse_view, view_names
+
+SKEW_ZERO = 1e-9  # relative skew below which the fitted K is taken as skew-free
 
 
 def intersect_rays(origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
@@ -58,6 +65,8 @@ def fit_pinhole(pixels: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.nd
     if np.linalg.det(M) < 0:
         M = -M
     K, R = rq(M)
+    if abs(K[0, 1]) < SKEW_ZERO * K[0, 0]:
+        K[0, 1] = 0.0  # the optics give no skew: keep K clean of round-off
     # R maps frame directions to camera directions: camera-to-frame is its transpose
     return K, R.T
 
@@ -87,22 +96,17 @@ def shot_cameras(optics: PlenopticOptics, grid: MicrolensGrid, layout: ViewLayou
     return out, worst
 
 
-
-def ground_truth_shot(data_dir, cam: str, n_views: int, tile: int, q: float | None,
-                      out_json, log=print) -> None:
+def ground_truth_shot(data_dir: str | Path, cam: str, n_views: int, tile: int,
+                      q: float | None, out_json: str | Path, log=print) -> None:
     """Write the cameras of every view of shot ``cam`` (plain format, one shot)."""
-    from pathlib import Path  # noqa: PLC0415
-
-    from plenocal.io import read_json, write_json  # noqa: PLC0415
-    from plenocal.raytrix import read_calib  # noqa: PLC0415
-    from plenocal.simulate.dataset import optics_from_truth  # noqa: PLC0415
-    from plenocal.viewgeom import make_layout  # noqa: PLC0415
-
     data_dir = Path(data_dir)
     optics = optics_from_truth(data_dir / "truth" / "optics.json")
     grid = MicrolensGrid(read_calib(data_dir / "calib.xml"), optics.width, optics.height)
     layout = make_layout(grid, n_views, tile, q)
     shots = read_json(data_dir / "truth" / "shots.json")
+    if cam not in shots:
+        raise KeyError(f"{cam}: not a shot of {data_dir / 'truth' / 'shots.json'} "
+                       f"({', '.join(sorted(shots))}); rerun rule simulate_setup?")
     cams, worst = shot_cameras(optics, grid, layout, np.asarray(shots[cam]["cam_to_world"]))
     log(f"{cam}: {len(cams)} view cameras, worst chief-ray fit residual {worst:.2e} px")
     write_json(out_json, {"units": "m", "fit_residual_px": worst,

@@ -13,6 +13,21 @@ def sim_config(wildcards):
     return ds_config(wildcards.dataset)["simulate"]
 
 
+def setup_config(wildcards):
+    """The simulate slice without what only the lenslet renders use (rays per pixel,
+    sensor noise): changing those re-renders the lenslet images and nothing else."""
+    sim = sim_config(wildcards)
+    out = {k: v for k, v in sim.items() if k != "render"}
+    out["sensor"] = {k: v for k, v in sim["sensor"].items() if k != "noise_std"}
+    return out
+
+
+def view_geometry(wildcards):
+    """The convert settings that fix the view geometry (never the image content)."""
+    conv = stage_config("convert")
+    return {"tile_size": conv["tile_size"], "view_spacing_px": conv.get("view_spacing_px")}
+
+
 def gt_render_views(dataset):
     """Ideal renders: every central view, and the complete set of the middle shot."""
     out = [(c, centre(dataset)) for c in cams(dataset)]
@@ -38,7 +53,7 @@ rule simulate_setup:
         mem_mb=500,
         runtime=5,
     params:
-        sim=sim_config,
+        sim=setup_config,
     script:
         "../scripts/simulate_setup.py"
 
@@ -82,7 +97,7 @@ rule ground_truth_cam:
         mem_mb=1000,
         runtime=5,
     params:
-        convert=lambda wc: stage_config("convert"),
+        convert=view_geometry,
         views=lambda wc: n_views(wc.dataset),
     script:
         "../scripts/ground_truth_cam.py"

@@ -76,16 +76,19 @@ def make_calib(sim: dict, optics: PlenopticOptics) -> RayCalib:
 
 def datasheet(sim: dict, optics: PlenopticOptics) -> dict:
     """What a datasheet (and a tape measure) gives: the values registration B needs."""
+    def mm(metres: float) -> float:
+        return round(metres * 1e3, 9)  # no binary round-off (0.12999999999999998) in the file
+
     return {
-        "pixel_size_mm": optics.pixel_size * 1e3,
+        "pixel_size_mm": mm(optics.pixel_size),
         "sensor_width_px": optics.width,
         "sensor_height_px": optics.height,
-        "main_lens": {"focal_length_mm": optics.focal_length * 1e3,
-                      "focus_distance_mm": optics.focus_distance * 1e3},
-        "mla": {"pitch_mm": optics.mla_pitch * 1e3, "f_numbers": [optics.mla_f_number],
-                "k": optics.k, "sensor_distance_mm": round(optics.s * 1e3, 9)},
-        "array": {"step_mm": sim["array"]["step_m"] * 1e3},
-        "scene": {"near_mm": sim["scene"]["near_m"] * 1e3, "far_mm": sim["scene"]["far_m"] * 1e3},
+        "main_lens": {"focal_length_mm": mm(optics.focal_length),
+                      "focus_distance_mm": mm(optics.focus_distance)},
+        "mla": {"pitch_mm": mm(optics.mla_pitch), "f_numbers": [optics.mla_f_number],
+                "k": optics.k, "sensor_distance_mm": mm(optics.s)},
+        "array": {"step_mm": mm(sim["array"]["step_m"])},
+        "scene": {"near_mm": mm(sim["scene"]["near_m"]), "far_mm": mm(sim["scene"]["far_m"])},
     }
 
 
@@ -113,9 +116,17 @@ def setup_dataset(sim: dict, out_dir: str | Path) -> None:
     write_json(out / "truth" / "scene.json", scene)
     write_json(out / "truth" / "shots.json",
                {k: {"cam_to_world": v} for k, v in sorted(shots.items())})
+    grid = MicrolensGrid(calib, optics.width, optics.height)
     write_json(out / "truth" / "optics.json",
                {**optics.to_dict(), "mla_rotation_rad": calib.rotation,
-                "mla_offset_px": list(calib.offset), "seed": sim["seed"]})
+                "mla_offset_px": list(calib.offset), "seed": sim["seed"],
+                "grid": {"micro_image_pitch_px": calib.diameter,
+                         "origin_px": [float(x) for x in grid.origin],
+                         "lens_border_px": calib.lens_border, "lenses": len(grid),
+                         "lenses_whole": int(grid.inside().sum()),
+                         "virtual_depth_near": float(optics.virtual_depth(sim["scene"]["near_m"])),
+                         "virtual_depth_far": float(optics.virtual_depth(sim["scene"]["far_m"])),
+                         "virtual_depth_focus": calib.tcp}})
     write_calib(calib, out / "calib.xml")
     atomic_write_text(out / "camera.yaml",
                       CAMERA_YAML_HEADER + yaml.safe_dump(datasheet(sim, optics),

@@ -27,8 +27,8 @@ BACKGROUND = 0.5
 
 
 @njit(cache=True)
-def _texel(atlas, th, tw, k, s, t):
-    """Bilinear lookup with mirrored repetition; s, t in texels."""
+def _texel(atlas, th, tw, k, s, t, out):
+    """Bilinear lookup with mirrored repetition into ``out`` (3,); s, t in texels."""
     h = th[k]
     w = tw[k]
     s = s % (2.0 * (w - 1))
@@ -43,7 +43,6 @@ def _texel(atlas, th, tw, k, s, t):
     j1 = min(j0 + 1, w - 1)
     fy = t - i0
     fx = s - j0
-    out = np.empty(3)
     for c in range(3):
         a = atlas[k, i0, j0, c] * (1 - fx) + atlas[k, i0, j1, c] * fx
         b = atlas[k, i1, j0, c] * (1 - fx) + atlas[k, i1, j1, c] * fx
@@ -85,10 +84,7 @@ def _trace(ox, oy, oz, dx, dy, dz, p0, u, v, nrm, tex_id, texel, atlas, th, tw, 
         rgb[1] = BACKGROUND
         rgb[2] = BACKGROUND
         return -1.0
-    col = _texel(atlas, th, tw, tex_id[hit], ba / texel[hit], bb / texel[hit])
-    rgb[0] = col[0]
-    rgb[1] = col[1]
-    rgb[2] = col[2]
+    _texel(atlas, th, tw, tex_id[hit], ba / texel[hit], bb / texel[hit], rgb)
     return best
 
 
