@@ -15,7 +15,7 @@ from plenocal.io import atomic_write_text, read_json, to_uint8, write_image, wri
 from plenocal.optics import PlenopticOptics
 from plenocal.raytrix import LensType, RayCalib, read_calib, write_calib
 from plenocal.simulate.optics_setup import optics_from_config
-from plenocal.simulate.raytrace import render_lenslet
+from plenocal.simulate.raytrace import nearest_lens_centres, render_lenslet
 from plenocal.simulate.scene import make_scene, scene_arrays
 
 
@@ -145,22 +145,7 @@ def optics_from_truth(path: str | Path) -> PlenopticOptics:
 
 def nearest_lens_map(grid: MicrolensGrid) -> np.ndarray:
     """(H, W, 2) micro-image centre of the nearest lens for every sensor pixel."""
-    H, W = grid.height, grid.width
-    ys, xs = np.mgrid[0:H, 0:W]
-    rel = np.stack([xs - grid.origin[0], ys - grid.origin[1]], axis=-1).astype(np.float64)
-    f = rel @ np.linalg.inv(grid.A).T
-    base = np.floor(f)
-    best = np.full((H, W), np.inf)
-    out = np.zeros((H, W, 2))
-    for di in (0, 1):
-        for dj in (0, 1):
-            ij = base + np.array([di, dj])
-            c = grid.origin + ij @ grid.A.T
-            d = ((c - np.stack([xs, ys], axis=-1)) ** 2).sum(axis=-1)
-            take = d < best
-            best[take] = d[take]
-            out[take] = c[take]
-    return out
+    return nearest_lens_centres(grid.origin, grid.A, grid.width, grid.height)
 
 
 def render_shot(sim: dict, data_dir: str | Path, cam: str, out_png: str | Path,

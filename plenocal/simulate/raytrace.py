@@ -179,6 +179,42 @@ def _render_pinhole(height, width, Kinv, R, C, ss, p0, u, v, nrm, tex_id, texel,
             depth[row, col] = tt * cz if tt > 0 else 0.0
 
 
+@njit(cache=True)
+def _nearest_lens_map(height, width, origin, A, Ainv, out):
+    """Per pixel, the nearest lattice point ``origin + A (i, j)``: one of the four
+    corners of the lattice cell holding the pixel (the cell is two equilateral
+    triangles, the Delaunay triangles of the hexagonal lattice)."""
+    for row in range(height):
+        for col in range(width):
+            rx = col - origin[0]
+            ry = row - origin[1]
+            fi = math.floor(Ainv[0, 0] * rx + Ainv[0, 1] * ry)
+            fj = math.floor(Ainv[1, 0] * rx + Ainv[1, 1] * ry)
+            best = 1e300
+            for di in range(2):
+                for dj in range(2):
+                    i = fi + di
+                    j = fj + dj
+                    cx = origin[0] + (A[0, 0] * i + A[0, 1] * j)
+                    cy = origin[1] + (A[1, 0] * i + A[1, 1] * j)
+                    d = (cx - col) * (cx - col) + (cy - row) * (cy - row)
+                    if d < best:
+                        best = d
+                        out[row, col, 0] = cx
+                        out[row, col, 1] = cy
+
+
+def nearest_lens_centres(origin: np.ndarray, A: np.ndarray, width: int,
+                         height: int) -> np.ndarray:
+    """(H, W, 2) micro-image centre (pixels) of the lens nearest to every sensor pixel,
+    for the lattice ``origin + A (i, j)`` (``A``: 2 x 2, columns are the lattice steps)."""
+    out = np.zeros((height, width, 2))
+    A = np.ascontiguousarray(A, dtype=np.float64)
+    _nearest_lens_map(int(height), int(width), np.asarray(origin, dtype=np.float64), A,
+                      np.ascontiguousarray(np.linalg.inv(A)), out)
+    return out
+
+
 def sample_pattern(samples: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Stratified pixel jitter in [-0.5, 0.5)^2 and uniform points on the unit disc."""
     rng = np.random.default_rng([seed, 11])
