@@ -128,3 +128,32 @@ def test_dataset_files(tmp_path: Path):
     assert lt.depth_min < optics.virtual_depth(0.47) < optics.virtual_depth(0.74) < lt.depth_max
     shots = yaml.safe_load((tmp_path / "truth" / "shots.json").read_text())
     assert len(shots) == 3 * 2 + 4
+    # a second setup with the same seed gives the same bytes
+    setup_dataset(sim, tmp_path / "again")
+    for f in ("calib.xml", "camera.yaml", "truth/scene.json", "truth/shots.json",
+              "truth/optics.json"):
+        assert (tmp_path / f).read_bytes() == (tmp_path / "again" / f).read_bytes(), f
+
+
+def test_shots_array_on_the_stage_and_hand_held_orbiting_the_scene():
+    from plenocal.simulate.dataset import make_shots
+
+    sim = small_sim()
+    centre = np.array([0.01, 0.005, 0.6])
+    shots = make_shots(sim, centre)
+    step = sim["array"]["step_m"]
+    np.testing.assert_allclose(shots["x02_y01"][:3, 3], [2 * step, step, 0.0])
+    np.testing.assert_allclose(shots["x02_y01"][:3, :3], np.eye(3))
+    dist = np.linalg.norm(centre - [0.01, 0.005, 0.0])
+    hh = sim["handheld"]
+    for k in range(hh["count"]):
+        M = shots[f"hand{k:02d}"]
+        R, C = M[:3, :3], M[:3, 3]
+        angle = np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1)))
+        assert 0 < angle <= hh["max_rotation_deg"] + 1e-9
+        # the optical axis passes the scene centre within the position offset
+        to_centre = centre - C
+        miss = np.linalg.norm(np.cross(R[:, 2], to_centre))
+        assert miss <= np.sqrt(3) * hh["max_offset_m"] + 1e-12
+        assert abs(R[:, 2] @ to_centre - dist) <= np.sqrt(3) * hh["max_offset_m"]
+    assert make_shots(sim, centre)["hand01"].tobytes() == shots["hand01"].tobytes()
