@@ -12,6 +12,14 @@ report: "report/workflow.rst"
 
 
 include: "rules/common.smk"
+
+
+wildcard_constraints:
+    dataset="|".join(re.escape(d) for d in DATASETS),
+    cam=r"x\d{2}_y\d{2}|hand\d{2}",
+    view=r"\d+_\d+",
+
+
 include: "rules/simulate.smk"
 include: "rules/convert.smk"
 include: "rules/sfm.smk"
@@ -24,6 +32,6 @@ include: "rules/report.smk"
 
 
 rule all:
+    default_target: True
     input:
         final_targets(),
-    default_target: True

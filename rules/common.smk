@@ -1,4 +1,4 @@
-"""Helpers shared by every rule file: config validation, the shot and view lists,
+"""Helpers shared by all the rule files - config validation, the shot and view lists,
 paths, and per-stage config slices (passed as ``params`` so that a change of one
 stage's settings reruns that stage and what depends on it, nothing else)."""
 
@@ -18,12 +18,6 @@ SYNTHETIC = [d for d in DATASETS if "simulate" in config["datasets"][d]]
 CAM_RE = re.compile(r"^(x\d{2}_y\d{2}|hand\d{2})$")
 
 
-wildcard_constraints:
-    dataset="|".join(re.escape(d) for d in DATASETS),
-    cam=r"x\d{2}_y\d{2}|hand\d{2}",
-    view=r"\d+_\d+",
-
-
 def ds_config(dataset):
     return config["datasets"][dataset]
 
@@ -37,7 +31,9 @@ def array_cams(dataset):
     sim = ds_config(dataset).get("simulate")
     if sim is not None:
         a = sim["array"]
-        return [f"x{c:02d}_y{r:02d}" for r in range(a["rows"]) for c in range(a["cols"])]
+        return [
+            f"x{c:02d}_y{r:02d}" for r in range(a["rows"]) for c in range(a["cols"])
+        ]
     return [c for c in real_cams(dataset) if c.startswith("x")]
 
 
@@ -108,7 +104,7 @@ def stage_config(name):
     return config[name]
 
 
-# The targets of `rule all`: each stage adds its final outputs once it is real.
+# The targets of the default target: each stage adds its final outputs once it is real.
 TARGETS = []
 
 
@@ -118,3 +114,264 @@ def final_targets():
         for fn in TARGETS:
             out.extend(fn(d))
     return out
+
+
+# --- helpers of rules/convert.smk -----------------------------------------------------
+
+
+def convert_groups():
+    """[(N, [datasets])], the first dataset's N first."""
+    groups = {}
+    for d in DATASETS:
+        groups.setdefault(n_views(d), []).append(d)
+    first = n_views(DATASETS[0])
+    return [(first, groups.pop(first))] + sorted(groups.items())
+
+
+def convert_view_paths(dataset, cam):
+    return [res(dataset, "views", cam, f"{v}.png") for v in views(dataset)]
+
+
+def convert_quality_truth(wildcards):
+    d = wildcards.dataset
+    gt = Path(res(d, "ground_truth", "renders"))
+    # every ideal render the ground-truth renders include: the central view of every shot
+    # and the full N x N set of one shot (see rules/simulate.smk)
+    out = [str(gt / c / f"{centre(d)}.png") for c in cams(d)]
+    out += [str(gt / full_set_cam(d) / f"{v}.png") for v in views(d) if v != centre(d)]
+    return out
+
+
+def convert_quality_views(wildcards):
+    """The converted views that have an ideal render (same order as the renders)."""
+    d = wildcards.dataset
+    return [
+        res(d, "views", Path(t).parent.name, Path(t).name)
+        for t in convert_quality_truth(wildcards)
+    ]
+
+
+def convert_targets(dataset):
+    out = []
+    for c in cams(dataset):
+        out += convert_view_paths(dataset, c)
+        out.append(res(dataset, "views", c, "disparity.json"))
+    if is_synthetic(dataset):
+        out.append(res(dataset, "convert", "quality.json"))
+    return out
+
+
+# --- helpers of rules/depth.smk -------------------------------------------------------
+
+
+def depth_inputs(wildcards):
+    d = wildcards.dataset
+    if wildcards.reg == "a":
+        return {
+            "reg_a": res(d, "reg_a", "reg_a.json"),
+            "views": [res(d, "views", c, f"{centre(d)}.png") for c in cams(d)],
+        }
+    return {
+        "rig": res(d, "reg_b", "rig.json"),
+        "views": [res(d, "views", wildcards.cam, f"{v}.png") for v in views(d)],
+    }
+
+
+# --- helpers of rules/merge.smk -------------------------------------------------------
+
+
+def scale_shots(dataset):
+    """Shots whose central-view depth maps give the scale (config scale.shots)."""
+    return (
+        cams(dataset)
+        if stage_config("scale")["shots"] == "all"
+        else array_cams(dataset)
+    )
+
+
+def merge_targets(dataset):
+    return [
+        res(dataset, "merge", "scale.json"),
+        res(dataset, "calibration", "cameras.json"),
+        res(dataset, "calibration", "mpeg", "cameras.json"),
+        res(dataset, "calibration", "colmap"),
+    ]
+
+
+# --- helpers of rules/report.smk ------------------------------------------------------
+
+
+def report_inputs(wildcards):
+    """What the page shows, for the stages this workflow defines: a section whose
+    producing rule is not included is reported as "not produced" instead of failing."""
+    d = wildcards.dataset
+    have = workflow.is_rule
+    out = {}
+    if have("reprojection"):
+        out["reprojection"] = res(d, "eval", "reprojection.json")
+    gt_rules = ("ground_truth", "map_a", "rig_b", "scale", "merge")
+    if is_synthetic(d) and all(have(r) for r in gt_rules):
+        out["gt_errors"] = res(d, "eval", "gt_errors.json")
+    if is_synthetic(d) and have("ground_truth"):
+        out["ground_truth"] = res(d, "ground_truth", "cameras.json")
+    for k in (1, 2, 3):
+        if have(f"synthesis_exp{k}"):
+            out[f"exp{k}"] = res(d, "eval", f"synthesis_exp{k}.json")
+    if have("merge"):
+        out["calibration"] = res(d, "calibration", "cameras.json")
+    if have("scale"):
+        out["scale"] = res(d, "merge", "scale.json")
+    if have("rig_b"):
+        out["rig"] = res(d, "reg_b", "rig.json")
+    if have("convert_quality"):
+        out["convert_quality"] = res(d, "convert", "quality.json")
+    if have("convert"):
+        out["patch_size"] = [res(d, "views", c, "patch_size.png") for c in cams(d)]
+    if have("depth"):
+        out["depth"] = [
+            res(d, "depth", r, f"{c}.png") for r in ("a", "b") for c in cams(d)
+        ]
+    return out
+
+
+def report_targets(dataset):
+    return [res(dataset, "report", "index.html")]
+
+
+# --- helpers of rules/reprojection.smk ------------------------------------------------
+
+
+REPROJECTION_CALIB = {
+    "reg_a": ("reg_a", "reg_a.json"),
+    "reg_b": ("reg_b", "rig.json"),
+    "complete": ("calibration", "cameras.json"),
+    "baseline_sfm": ("baseline", "cameras.json"),
+    "ground_truth": ("ground_truth", "cameras.json"),
+}
+
+
+def reprojection_calibs(dataset):
+    out = ["reg_a", "reg_b", "complete", "baseline_sfm"]
+    return out + (["ground_truth"] if is_synthetic(dataset) else [])
+
+
+def reprojection_views(wildcards):
+    d = wildcards.dataset
+    if wildcards.calib == "reg_a":
+        return [res(d, "views", c, f"{centre(d)}.png") for c in cams(d)]
+    if wildcards.calib == "ground_truth":
+        # the ground truth covers every central view and one complete set
+        full = full_set_cam(d)
+        return sorted(
+            {res(d, "views", c, f"{centre(d)}.png") for c in cams(d)}
+            | {res(d, "views", full, f"{v}.png") for v in views(d)}
+        )
+    return [res(d, "views", c, f"{v}.png") for c in cams(d) for v in views(d)]
+
+
+def reprojection_targets(dataset):
+    return [res(dataset, "eval", "reprojection.json")]
+
+
+# --- helpers of rules/rig.smk ---------------------------------------------------------
+
+
+def rig_b_disparities(wildcards):
+    return [
+        res(wildcards.dataset, "views", c, "disparity.json")
+        for c in cams(wildcards.dataset)
+    ]
+
+
+def rig_targets(dataset):
+    return [res(dataset, "reg_b", "rig.json")]
+
+
+# --- helpers of rules/sfm.smk ---------------------------------------------------------
+
+
+def central_views(wildcards):
+    d = wildcards.dataset
+    return [res(d, "views", c, f"{centre(d)}.png") for c in cams(d)]
+
+
+def all_views(wildcards):
+    d = wildcards.dataset
+    return [res(d, "views", c, f"{v}.png") for c in cams(d) for v in views(d)]
+
+
+def sfm_targets(dataset):
+    return [res(dataset, "reg_a", "reg_a.json")]
+
+
+# --- helpers of rules/simulate.smk ----------------------------------------------------
+
+
+SYN = "|".join(re.escape(d) for d in SYNTHETIC) or "^$"
+
+
+TRUTH = [
+    "data/{dataset}/truth/scene.json",
+    "data/{dataset}/truth/shots.json",
+    "data/{dataset}/truth/optics.json",
+]
+
+
+def sim_config(wildcards):
+    return ds_config(wildcards.dataset)["simulate"]
+
+
+def setup_config(wildcards):
+    """The simulate slice without what only the lenslet renders use (rays per pixel,
+    sensor noise): changing those re-renders the lenslet images and nothing else."""
+    sim = sim_config(wildcards)
+    out = {k: v for k, v in sim.items() if k != "render"}
+    out["sensor"] = {k: v for k, v in sim["sensor"].items() if k != "noise_std"}
+    return out
+
+
+def view_geometry(wildcards):
+    """The convert settings that fix the view geometry (never the image content)."""
+    conv = stage_config("convert")
+    return {
+        "tile_size": conv["tile_size"],
+        "view_spacing_px": conv.get("view_spacing_px"),
+    }
+
+
+def gt_render_views(dataset):
+    """Ideal renders: every central view, and the complete set of the middle shot."""
+    out = [(c, centre(dataset)) for c in cams(dataset)]
+    out += [(full_set_cam(dataset), v) for v in views(dataset) if v != centre(dataset)]
+    return out
+
+
+def simulate_targets(dataset):
+    if not is_synthetic(dataset):
+        return []
+    out = [data(dataset, "lenslet", f"{c}.png") for c in cams(dataset)]
+    out.append(res(dataset, "ground_truth", "cameras.json"))
+    for cam, view in gt_render_views(dataset):
+        out.append(res(dataset, "ground_truth", "renders", cam, f"{view}.png"))
+    return out
+
+
+# --- helpers of rules/synthesis.smk ---------------------------------------------------
+
+
+def synthesis_inputs(wildcards):
+    d = wildcards.dataset
+    out = {
+        "calibration": res(d, "calibration", "cameras.json"),
+        "rig": res(d, "reg_b", "rig.json"),
+        "views": [
+            res(d, "views", c, f"{v}.png") for c in array_cams(d) for v in views(d)
+        ],
+    }
+    if is_synthetic(d):
+        out["truth"] = res(d, "ground_truth", "cameras.json")
+    return out
+
+
+def synthesis_targets(dataset):
+    return [res(dataset, "eval", f"synthesis_exp{e}.json") for e in (1, 2, 3)]

@@ -6,27 +6,11 @@ Snakemake outputs cannot be functions of the wildcards, and every view is declar
 an output, so the rule is defined once per distinct N among the datasets: `convert`
 for the N of the first dataset (all of them, usually), `convert_n<N>` for others."""
 
-
-def convert_groups():
-    """[(N, [datasets])], the first dataset's N first."""
-    groups = {}
-    for d in DATASETS:
-        groups.setdefault(n_views(d), []).append(d)
-    first = n_views(DATASETS[0])
-    return [(first, groups.pop(first))] + sorted(groups.items())
-
-
-def convert_view_paths(dataset, cam):
-    return [res(dataset, "views", cam, f"{v}.png") for v in views(dataset)]
-
-
 for _i, (_n, _datasets) in enumerate(convert_groups()):
 
     rule:
         name:
             "convert" if _i == 0 else f"convert_n{_n}"
-        wildcard_constraints:
-            dataset="|".join(re.escape(d) for d in _datasets),
         input:
             lenslet="data/{dataset}/lenslet/{cam}.png",
             calib="data/{dataset}/calib.xml",
@@ -40,6 +24,10 @@ for _i, (_n, _datasets) in enumerate(convert_groups()):
             log_path("convert", "{cam}"),
         benchmark:
             bench_path("convert", "{cam}")
+        wildcard_constraints:
+            dataset="|".join(re.escape(d) for d in _datasets),
+        conda:
+            "../envs/plenocal.yaml"
         threads: 1
         resources:
             mem_mb=2500,
@@ -49,25 +37,6 @@ for _i, (_n, _datasets) in enumerate(convert_groups()):
             views=lambda wc: n_views(wc.dataset),
         script:
             "../scripts/convert.py"
-
-
-def convert_quality_truth(wildcards):
-    d = wildcards.dataset
-    gt = Path(res(d, "ground_truth", "renders"))
-    # every ideal render the ground truth rule makes: the central view of every shot
-    # and the full N x N set of one shot (see rules/simulate.smk)
-    out = [str(gt / c / f"{centre(d)}.png") for c in cams(d)]
-    out += [str(gt / full_set_cam(d) / f"{v}.png") for v in views(d) if v != centre(d)]
-    return out
-
-
-def convert_quality_views(wildcards):
-    """The converted views that have an ideal render (same order as the renders)."""
-    d = wildcards.dataset
-    return [
-        res(d, "views", Path(t).parent.name, Path(t).name)
-        for t in convert_quality_truth(wildcards)
-    ]
 
 
 rule convert_quality:
@@ -80,6 +49,8 @@ rule convert_quality:
         log_path("convert_quality"),
     benchmark:
         bench_path("convert_quality")
+    conda:
+        "../envs/plenocal.yaml"
     threads: 1
     resources:
         mem_mb=1500,
@@ -90,16 +61,6 @@ rule convert_quality:
         views_dir=lambda wc: res(wc.dataset, "views"),
     script:
         "../scripts/convert_quality.py"
-
-
-def convert_targets(dataset):
-    out = []
-    for c in cams(dataset):
-        out += convert_view_paths(dataset, c)
-        out.append(res(dataset, "views", c, "disparity.json"))
-    if is_synthetic(dataset):
-        out.append(res(dataset, "convert", "quality.json"))
-    return out
 
 
 TARGETS.append(convert_targets)

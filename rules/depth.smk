@@ -6,19 +6,6 @@ wildcard_constraints:
     reg="a|b",
 
 
-def depth_inputs(wildcards):
-    d = wildcards.dataset
-    if wildcards.reg == "a":
-        return {
-            "reg_a": res(d, "reg_a", "reg_a.json"),
-            "views": [res(d, "views", c, f"{centre(d)}.png") for c in cams(d)],
-        }
-    return {
-        "rig": res(d, "reg_b", "rig.json"),
-        "views": [res(d, "views", wildcards.cam, f"{v}.png") for v in views(d)],
-    }
-
-
 rule depth:
     input:
         unpack(depth_inputs),
@@ -30,6 +17,8 @@ rule depth:
         log_path("depth", "{reg}_{cam}"),
     benchmark:
         bench_path("depth", "{reg}_{cam}")
+    conda:
+        "../envs/plenocal.yaml"
     threads: 1
     resources:
         mem_mb=3000,

@@ -2,15 +2,6 @@
 calibration, written in every export format."""
 
 
-def scale_shots(dataset):
-    """Shots whose central-view depth maps give the scale (config scale.shots)."""
-    return (
-        cams(dataset)
-        if stage_config("scale")["shots"] == "all"
-        else array_cams(dataset)
-    )
-
-
 rule scale:
     input:
         depth_a=lambda wc: [
@@ -25,6 +16,8 @@ rule scale:
         log_path("scale"),
     benchmark:
         bench_path("scale")
+    conda:
+        "../envs/plenocal.yaml"
     threads: 1
     resources:
         mem_mb=2000,
@@ -49,6 +42,8 @@ rule merge:
         log_path("merge"),
     benchmark:
         bench_path("merge")
+    conda:
+        "../envs/plenocal.yaml"
     threads: 1
     resources:
         mem_mb=1000,
@@ -57,15 +52,6 @@ rule merge:
         shots=lambda wc: cams(wc.dataset),
     script:
         "../scripts/merge.py"
-
-
-def merge_targets(dataset):
-    return [
-        res(dataset, "merge", "scale.json"),
-        res(dataset, "calibration", "cameras.json"),
-        res(dataset, "calibration", "mpeg", "cameras.json"),
-        res(dataset, "calibration", "colmap"),
-    ]
 
 
 TARGETS.append(merge_targets)

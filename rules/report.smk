@@ -18,43 +18,14 @@ rule gt_errors:
         log_path("gt_errors"),
     benchmark:
         bench_path("gt_errors")
+    conda:
+        "../envs/plenocal.yaml"
     threads: 1
     resources:
         mem_mb=1000,
         runtime=5,
     script:
         "../scripts/gt_errors.py"
-
-
-def report_inputs(wildcards):
-    """What the page shows, for the stages this workflow defines: a section whose
-    producing rule is not included is reported as "not produced" instead of failing."""
-    d = wildcards.dataset
-    have = workflow.is_rule
-    out = {}
-    if have("reprojection"):
-        out["reprojection"] = res(d, "eval", "reprojection.json")
-    gt_rules = ("ground_truth", "map_a", "rig_b", "scale", "merge")
-    if is_synthetic(d) and all(have(r) for r in gt_rules):
-        out["gt_errors"] = res(d, "eval", "gt_errors.json")
-    if is_synthetic(d) and have("ground_truth"):
-        out["ground_truth"] = res(d, "ground_truth", "cameras.json")
-    for k in (1, 2, 3):
-        if have(f"synthesis_exp{k}"):
-            out[f"exp{k}"] = res(d, "eval", f"synthesis_exp{k}.json")
-    if have("merge"):
-        out["calibration"] = res(d, "calibration", "cameras.json")
-    if have("scale"):
-        out["scale"] = res(d, "merge", "scale.json")
-    if have("rig_b"):
-        out["rig"] = res(d, "reg_b", "rig.json")
-    if have("convert_quality"):
-        out["convert_quality"] = res(d, "convert", "quality.json")
-    if have("convert"):
-        out["patch_size"] = [res(d, "views", c, "patch_size.png") for c in cams(d)]
-    if have("depth"):
-        out["depth"] = [res(d, "depth", r, f"{c}.png") for r in ("a", "b") for c in cams(d)]
-    return out
 
 
 rule report:
@@ -66,25 +37,23 @@ rule report:
             caption="../report/index.rst",
             category="Summary",
         ),
+    log:
+        log_path("report"),
+    benchmark:
+        bench_path("report")
+    conda:
+        "../envs/plenocal.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
     params:
         results=lambda wc: res(wc.dataset),
         cams=lambda wc: cams(wc.dataset),
         views=lambda wc: n_views(wc.dataset),
         synthetic=lambda wc: is_synthetic(wc.dataset),
-    log:
-        log_path("report"),
-    benchmark:
-        bench_path("report")
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=10,
     script:
         "../scripts/report.py"
-
-
-def report_targets(dataset):
-    return [res(dataset, "report", "index.html")]
 
 
 TARGETS.append(report_targets)

@@ -3,13 +3,6 @@ camera from the datasheet, the converter's disparity range and registration A's 
 length. One rig per dataset (the same camera took every shot)."""
 
 
-def rig_b_disparities(wildcards):
-    return [
-        res(wildcards.dataset, "views", c, "disparity.json")
-        for c in cams(wildcards.dataset)
-    ]
-
-
 rule rig_b:
     input:
         camera="data/{dataset}/camera.yaml",
@@ -21,6 +14,8 @@ rule rig_b:
         log_path("rig_b"),
     benchmark:
         bench_path("rig_b")
+    conda:
+        "../envs/plenocal.yaml"
     threads: 1
     resources:
         mem_mb=500,
@@ -31,10 +26,6 @@ rule rig_b:
         shots=lambda wc: cams(wc.dataset),
     script:
         "../scripts/rig_b.py"
-
-
-def rig_targets(dataset):
-    return [res(dataset, "reg_b", "rig.json")]
 
 
 TARGETS.append(rig_targets)

@@ -2,16 +2,6 @@
 view of every shot (array + hand-held), and the naive A+SfM baseline of Table I."""
 
 
-def central_views(wildcards):
-    d = wildcards.dataset
-    return [res(d, "views", c, f"{centre(d)}.png") for c in cams(d)]
-
-
-def all_views(wildcards):
-    d = wildcards.dataset
-    return [res(d, "views", c, f"{v}.png") for c in cams(d) for v in views(d)]
-
-
 rule features_a:
     input:
         views=central_views,
@@ -23,6 +13,8 @@ rule features_a:
         log_path("features_a"),
     benchmark:
         bench_path("features_a")
+    conda:
+        "../envs/plenocal.yaml"
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=4000,
@@ -43,6 +35,8 @@ rule match_a:
         log_path("match_a"),
     benchmark:
         bench_path("match_a")
+    conda:
+        "../envs/plenocal.yaml"
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=4000,
@@ -64,6 +58,8 @@ rule map_a:
         log_path("map_a"),
     benchmark:
         bench_path("map_a")
+    conda:
+        "../envs/plenocal.yaml"
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=4000,
@@ -85,6 +81,8 @@ rule baseline_sfm:
         log_path("baseline_sfm"),
     benchmark:
         bench_path("baseline_sfm")
+    conda:
+        "../envs/plenocal.yaml"
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=8000,
@@ -94,10 +92,6 @@ rule baseline_sfm:
         central=lambda wc: centre(wc.dataset),
     script:
         "../scripts/baseline_sfm.py"
-
-
-def sfm_targets(dataset):
-    return [res(dataset, "reg_a", "reg_a.json")]
 
 
 TARGETS.append(sfm_targets)

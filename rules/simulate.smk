@@ -1,39 +1,5 @@
 """Simulator and ground truth (synthetic datasets only): DESIGN.md "The simulator"."""
 
-SYN = "|".join(re.escape(d) for d in SYNTHETIC) or "^$"
-
-TRUTH = [
-    "data/{dataset}/truth/scene.json",
-    "data/{dataset}/truth/shots.json",
-    "data/{dataset}/truth/optics.json",
-]
-
-
-def sim_config(wildcards):
-    return ds_config(wildcards.dataset)["simulate"]
-
-
-def setup_config(wildcards):
-    """The simulate slice without what only the lenslet renders use (rays per pixel,
-    sensor noise): changing those re-renders the lenslet images and nothing else."""
-    sim = sim_config(wildcards)
-    out = {k: v for k, v in sim.items() if k != "render"}
-    out["sensor"] = {k: v for k, v in sim["sensor"].items() if k != "noise_std"}
-    return out
-
-
-def view_geometry(wildcards):
-    """The convert settings that fix the view geometry (never the image content)."""
-    conv = stage_config("convert")
-    return {"tile_size": conv["tile_size"], "view_spacing_px": conv.get("view_spacing_px")}
-
-
-def gt_render_views(dataset):
-    """Ideal renders: every central view, and the complete set of the middle shot."""
-    out = [(c, centre(dataset)) for c in cams(dataset)]
-    out += [(full_set_cam(dataset), v) for v in views(dataset) if v != centre(dataset)]
-    return out
-
 
 rule simulate_setup:
     output:
@@ -48,6 +14,8 @@ rule simulate_setup:
         bench_path("simulate_setup")
     wildcard_constraints:
         dataset=SYN,
+    conda:
+        "../envs/plenocal.yaml"
     threads: 1
     resources:
         mem_mb=500,
@@ -70,6 +38,8 @@ rule simulate:
         bench_path("simulate", "{cam}")
     wildcard_constraints:
         dataset=SYN,
+    conda:
+        "../envs/plenocal.yaml"
     threads: 1
     resources:
         mem_mb=3000,
@@ -92,6 +62,8 @@ rule ground_truth_cam:
         bench_path("ground_truth_cam", "{cam}")
     wildcard_constraints:
         dataset=SYN,
+    conda:
+        "../envs/plenocal.yaml"
     threads: 1
     resources:
         mem_mb=1000,
@@ -116,6 +88,8 @@ rule ground_truth:
         bench_path("ground_truth")
     wildcard_constraints:
         dataset=SYN,
+    conda:
+        "../envs/plenocal.yaml"
     threads: 1
     resources:
         mem_mb=500,
@@ -137,6 +111,8 @@ rule ground_truth_render:
         bench_path("ground_truth_render", "{cam}_{view}")
     wildcard_constraints:
         dataset=SYN,
+    conda:
+        "../envs/plenocal.yaml"
     threads: 1
     resources:
         mem_mb=1000,
@@ -145,16 +121,6 @@ rule ground_truth_render:
         supersample=lambda wc: sim_config(wc)["render"]["ideal_supersample"],
     script:
         "../scripts/ground_truth_render.py"
-
-
-def simulate_targets(dataset):
-    if not is_synthetic(dataset):
-        return []
-    out = [data(dataset, "lenslet", f"{c}.png") for c in cams(dataset)]
-    out.append(res(dataset, "ground_truth", "cameras.json"))
-    for cam, view in gt_render_views(dataset):
-        out.append(res(dataset, "ground_truth", "renders", cam, f"{view}.png"))
-    return out
 
 
 TARGETS.append(simulate_targets)
