@@ -1,0 +1,147 @@
+"""Rerun semantics on the tiny config (issue 7): after one complete run, Snakemake
+plans exactly the jobs that a change makes stale, and a killed run leaves nothing
+that a rerun would wrongly trust."""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+FILES = ["Snakefile", "rules", "scripts", "config.schema.yaml", "report", "envs", "profiles"]
+VERIFY_RULES = {"synthesis_exp1", "synthesis_exp2", "synthesis_exp3", "report", "all"}
+
+pytestmark = pytest.mark.workflow
+
+
+def snakemake(work: Path, *args: str, timeout: int = 1500) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "snakemake", "-j2", "--workflow-profile",
+                           "none", *args], cwd=work, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def planned(work: Path) -> dict[str, int]:
+    """Rule -> job count of a dry run (empty when nothing is to be done)."""
+    proc = snakemake(work, "-n")
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 0, out[-3000:]
+    if "Nothing to be done" in out:
+        return {}
+    table = out[out.index("Job stats:"):]
+    jobs = {}
+    for line in table.splitlines()[3:]:
+        m = re.match(r"^(\w+)\s+(\d+)$", line.strip())
+        if not m:
+            break
+        if m.group(1) != "total":
+            jobs[m.group(1)] = int(m.group(2))
+    return jobs
+
+
+@pytest.fixture(scope="module")
+def complete_run(tmp_path_factory) -> Path:
+    work = tmp_path_factory.mktemp("complete")
+    for name in FILES:
+        src = ROOT / name
+        (shutil.copytree if src.is_dir() else shutil.copy2)(src, work / name)
+    shutil.copy2(ROOT / "tests" / "tiny" / "config.yaml", work / "config.yaml")
+    proc = snakemake(work)
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-4000:]
+    return work
+
+
+def clone(src: Path, dest: Path) -> Path:
+    shutil.copytree(src, dest, symlinks=True)
+    # copying rewrites mtimes in the same order, keep them as they were
+    for p in src.rglob("*"):
+        q = dest / p.relative_to(src)
+        if q.exists() and not q.is_symlink():
+            st = p.stat()
+            os.utime(q, ns=(st.st_atime_ns, st.st_mtime_ns))
+    return dest
+
+
+def edit_config(work: Path, change) -> None:
+    cfg = yaml.safe_load((work / "config.yaml").read_text())
+    change(cfg)
+    (work / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+
+
+def test_complete_run_leaves_nothing_to_do(complete_run: Path):
+    assert planned(complete_run) == {}
+    assert (complete_run / "results/tiny/report/index.html").is_file()
+    assert (complete_run / "results/tiny/calibration/cameras.json").is_file()
+
+
+def test_verification_change_reruns_only_verification(complete_run: Path, tmp_path: Path):
+    work = clone(complete_run, tmp_path / "w")
+    edit_config(work, lambda c: c.setdefault("verify", {}).update(psnr_border_px=9))
+    jobs = planned(work)
+    assert jobs, "a verification setting changed: its jobs must rerun"
+    assert set(jobs) <= VERIFY_RULES, jobs
+
+
+def test_conversion_change_reruns_conversion_and_downstream(complete_run: Path,
+                                                           tmp_path: Path):
+    work = clone(complete_run, tmp_path / "w")
+    edit_config(work, lambda c: c["convert"].update(tile_size=7))
+    jobs = planned(work)
+    assert jobs.get("convert") == 10  # every shot
+    assert "simulate" not in jobs and "simulate_setup" not in jobs
+    for rule in ("features_a", "map_a", "rig_b", "depth", "scale", "merge", "report"):
+        assert rule in jobs, (rule, jobs)
+
+
+def test_script_edit_reruns_that_rule_and_dependants(complete_run: Path, tmp_path: Path):
+    work = clone(complete_run, tmp_path / "w")
+    script = work / "scripts" / "rig_b.py"
+    script.write_text(script.read_text() + "\n# edited\n")
+    jobs = planned(work)
+    assert jobs.get("rig_b") == 1
+    for rule in ("scale", "merge", "report"):
+        assert rule in jobs, (rule, jobs)
+    for rule in ("simulate", "convert", "features_a", "map_a"):
+        assert rule not in jobs, (rule, jobs)
+
+
+def test_killed_run_leaves_nothing_trusted(complete_run: Path, tmp_path: Path):
+    work = clone(complete_run, tmp_path / "w")
+    edit_config(work, lambda c: c["convert"].update(tile_size=5))
+    proc = subprocess.Popen([sys.executable, "-m", "snakemake", "-j1", "--workflow-profile",
+                             "none", "--until", "convert"], cwd=work,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    logs = work / "results/tiny/logs/convert"
+    deadline = time.time() + 300
+    started = set(logs.glob("*.log")) if logs.exists() else set()
+    # wait until a convert job is under way, then kill the whole run hard
+    while time.time() < deadline:
+        now = set(logs.glob("*.log")) if logs.exists() else set()
+        fresh = [p for p in now if p.stat().st_mtime > time.time() - 60]
+        if fresh or now - started:
+            time.sleep(1.0)
+            break
+        time.sleep(0.2)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    # no half-written file sits under a final name: atomic writes leave only .part temps
+    views = list((work / "results/tiny/views").rglob("*.png"))
+    assert views
+    import cv2
+
+    for p in views:
+        assert cv2.imread(str(p)) is not None, f"{p} is corrupt"
+    # a rerun does not trust what the killed job left: it reruns the conversions
+    rerun = snakemake(work, "-n", "--rerun-incomplete")
+    out = rerun.stdout + rerun.stderr
+    assert rerun.returncode == 0, out[-3000:]
+    assert re.search(r"^convert\s+\d+$", out, flags=re.M), out[-3000:]
