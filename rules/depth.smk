@@ -23,6 +23,8 @@ rule depth:
     resources:
         mem_mb=3000,
         runtime=30,
+        # COLMAP's patch-match stereo needs a GPU node; the plane sweep does not
+        gpu=lambda wc: 1 if stage_config("depth")["backend"] == "colmap" else 0,
     params:
         depth=lambda wc: stage_config("depth"),
         centre=lambda wc: centre(wc.dataset),
