@@ -13,7 +13,7 @@ import pytest
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
-FILES = ["Snakefile", "rules", "scripts", "config.schema.yaml", "report"]
+FILES = ["Snakefile", "rules", "scripts", "config.schema.yaml", "report", "envs", "profiles"]
 
 
 def workflow_copy(dest: Path) -> Path:
