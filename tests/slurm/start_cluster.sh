@@ -1,87 +1,66 @@
 #!/usr/bin/env bash
-# Start a single-node SLURM cluster on this machine for tests/test_slurm.py: Debian's
-# munge, slurmctld and slurmd (Slurm 22.05), as root, without systemd. Idempotent: a
-# cluster it started before is reused.
-#
-# Installs the packages with apt-get when they are missing (root; a few minutes).
-# The configuration (slurm.conf.in filled in) lives in $PLENOCAL_SLURM_STATE
-# (default /var/tmp/plenocal-slurm), never in /etc/slurm: clients must be given
-# SLURM_CONF=$PLENOCAL_SLURM_STATE/slurm.conf (the last line printed says so).
-#
-# Exit status: 0 the node is up (idle), 3 SLURM cannot be installed or started here
-# (the reason is printed).
+# Start a single-node SLURM cluster on this machine (root, no systemd), for
+# tests/test_slurm.py. Idempotent. Exit codes: 0 running, 3 cannot install/start.
 set -u
-HERE=$(cd "$(dirname "$0")" && pwd)
-STATE=${PLENOCAL_SLURM_STATE:-/var/tmp/plenocal-slurm}
-CONF=$STATE/slurm.conf
-export SLURM_CONF=$CONF
+STATE=/var/tmp/plenocal-slurm
+HOST=$(hostname -s)
 
-fail() { echo "SLURM unavailable: $*"; exit 3; }
-alive() { [ -s "$1" ] && kill -0 "$(cat "$1")" 2>/dev/null; }
-
-missing=""
-for b in munged slurmctld slurmd sbatch squeue sinfo scontrol; do
-  command -v "$b" >/dev/null 2>&1 || missing="$missing $b"
-done
-if [ -n "$missing" ]; then
-  [ "$(id -u)" = 0 ] || fail "missing$missing, and installing needs root"
-  command -v apt-get >/dev/null 2>&1 || fail "missing$missing, and there is no apt-get"
-  echo "installing slurmctld slurmd munge (apt-get)..."
+need_install=0
+for b in slurmctld slurmd munged sinfo; do command -v "$b" >/dev/null 2>&1 || need_install=1; done
+if [ "$need_install" = 1 ]; then
+  if [ "$(id -u)" != 0 ] || ! command -v apt-get >/dev/null 2>&1; then
+    echo "SLURM is not installed and cannot be installed (needs root and apt-get)"; exit 3
+  fi
   export DEBIAN_FRONTEND=noninteractive
-  apt-get update -qq >"$STATE.apt.log" 2>&1 \
-    && apt-get install -y -qq slurmctld slurmd munge >>"$STATE.apt.log" 2>&1 \
-    || fail "apt-get install slurmctld slurmd munge failed: $(tail -3 "$STATE.apt.log")"
+  { apt-get update -qq && apt-get install -y -qq slurmctld slurmd munge; } >/dev/null 2>&1 \
+    || { echo "apt-get install slurmctld slurmd munge failed"; exit 3; }
 fi
-[ "$(id -u)" = 0 ] || fail "the test cluster runs its daemons as root"
 
-# munge: the packages create the key; make one if they did not
-mkdir -p "$STATE/ctld" "$STATE/d" /run/munge /var/log/munge /var/lib/munge /etc/munge
+mkdir -p "$STATE/ctld" "$STATE/d" /etc/slurm /run/munge /var/log/munge /var/lib/munge
+chown -R munge:munge /run/munge /var/log/munge /var/lib/munge /etc/munge 2>/dev/null || true
 if [ ! -s /etc/munge/munge.key ]; then
+  mkdir -p /etc/munge
   dd if=/dev/urandom of=/etc/munge/munge.key bs=1024 count=1 status=none
+  chown munge:munge /etc/munge/munge.key 2>/dev/null || true
   chmod 400 /etc/munge/munge.key
 fi
-if id munge >/dev/null 2>&1; then
-  chown -R munge:munge /etc/munge /run/munge /var/log/munge /var/lib/munge
-fi
-if ! munge -n </dev/null 2>/dev/null | unmunge >/dev/null 2>&1; then
-  if id munge >/dev/null 2>&1; then
-    su -s /bin/sh munge -c "munged" 2>/dev/null || munged --force
-  else
-    munged --force
-  fi
-  sleep 1
-  munge -n </dev/null | unmunge >/dev/null 2>&1 || fail "munged does not start"
-fi
+pgrep -x munged >/dev/null || munged --force 2>/dev/null || su -s /bin/sh munge -c munged \
+  || { echo "munged does not start"; exit 3; }
 
-HOST=$(hostname -s)
 CPUS=$(nproc)
-MEM=$(( $(free -m | awk '/^Mem:/{print $2}') - 1024 ))
-[ "$MEM" -ge 1024 ] || MEM=1024
-sed -e "s|@HOST@|$HOST|g" -e "s|@CPUS@|$CPUS|g" -e "s|@MEM@|$MEM|g" -e "s|@STATE@|$STATE|g" \
-  "$HERE/slurm.conf.in" >"$CONF.new"
-if ! cmp -s "$CONF.new" "$CONF"; then
-  # new or changed configuration: (re)start our cluster from a clean state
-  "$HERE/stop_cluster.sh" >/dev/null
-  rm -rf "${STATE:?}/ctld" "${STATE:?}/d"
-  mkdir -p "$STATE/ctld" "$STATE/d"
-fi
-mv "$CONF.new" "$CONF"
-
-alive "$STATE/slurmctld.pid" || slurmctld -f "$CONF" \
-  || fail "slurmctld does not start: $(tail -3 "$STATE/slurmctld.log" 2>/dev/null)"
-alive "$STATE/slurmd.pid" || slurmd -f "$CONF" \
-  || fail "slurmd does not start: $(tail -3 "$STATE/slurmd.log" 2>/dev/null)"
-
-state=""
+MEM=$(( $(free -m | awk '/^Mem:/{print $2}') * 3 / 4 ))
+cat > /etc/slurm/slurm.conf <<CONF
+ClusterName=plenocal
+SlurmctldHost=$HOST
+SlurmUser=root
+SlurmdUser=root
+AuthType=auth/munge
+StateSaveLocation=$STATE/ctld
+SlurmdSpoolDir=$STATE/d
+SlurmctldPidFile=$STATE/slurmctld.pid
+SlurmdPidFile=$STATE/slurmd.pid
+SlurmctldLogFile=$STATE/slurmctld.log
+SlurmdLogFile=$STATE/slurmd.log
+ProctrackType=proctrack/linuxproc
+TaskPlugin=task/none
+SelectType=select/cons_tres
+SelectTypeParameters=CR_Core_Memory
+SchedulerType=sched/backfill
+AccountingStorageType=accounting_storage/none
+JobAcctGatherType=jobacct_gather/none
+ReturnToService=2
+MpiDefault=none
+NodeName=$HOST CPUs=$CPUS RealMemory=$MEM State=UNKNOWN
+PartitionName=debug Nodes=$HOST Default=YES MaxTime=INFINITE State=UP
+CONF
+pgrep -x slurmctld >/dev/null || slurmctld || { echo "slurmctld does not start"; exit 3; }
+pgrep -x slurmd >/dev/null || slurmd || { echo "slurmd does not start"; exit 3; }
 for _ in $(seq 1 60); do
-  state=$(sinfo -h -N -n "$HOST" -o %T 2>/dev/null | head -1)
+  state=$(sinfo -h -N -o %T 2>/dev/null | head -1)
   case "$state" in
-    idle*|mixed*|allocated*)
-      echo "SLURM up: node $HOST ($CPUS CPUs, $MEM MB) $state"
-      echo "SLURM_CONF=$CONF"
-      exit 0 ;;
+    idle*|mixed*|alloc*) echo "SLURM up: $HOST $state"; exit 0 ;;
     down*|drain*) scontrol update nodename="$HOST" state=resume >/dev/null 2>&1 ;;
   esac
   sleep 1
 done
-fail "node $HOST never became idle (state: ${state:-none}); see $STATE/slurmd.log"
+echo "SLURM node never became idle (state: ${state:-none})"; exit 3
