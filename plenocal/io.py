@@ -45,6 +45,24 @@ def _atomic(path: str | Path, write: Callable[[Any], None], mode: str) -> None:
         raise
 
 
+def atomic_write_dir(folder: str | Path, write: Callable[[Path], None]) -> None:
+    """Fill a folder atomically: ``write`` fills a temporary sibling, which then
+    replaces ``folder`` (a killed job leaves no half-written folder under its name)."""
+    import shutil  # noqa: PLC0415
+
+    folder = Path(folder)
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
+    try:
+        write(tmp)
+        if folder.exists():
+            shutil.rmtree(folder)
+        os.replace(tmp, folder)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     _atomic(path, lambda fh: fh.write(data), "wb")
 

@@ -58,19 +58,7 @@ def build_reconstruction(cameras: Mapping[str, PinholeCamera], image_ext: str = 
 def write_colmap(folder: str | Path, cameras: Mapping[str, PinholeCamera]) -> None:
     """Write the binary model into ``folder`` (atomic per folder: written into a
     temporary sibling, then renamed)."""
-    import os  # noqa: PLC0415
-    import shutil  # noqa: PLC0415
-    import tempfile  # noqa: PLC0415
+    from plenocal.io import atomic_write_dir  # noqa: PLC0415
 
-    folder = Path(folder)
-    folder.parent.mkdir(parents=True, exist_ok=True)
     rec = build_reconstruction(cameras)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
-    try:
-        rec.write_binary(str(tmp))
-        if folder.exists():
-            shutil.rmtree(folder)
-        os.replace(tmp, folder)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+    atomic_write_dir(folder, lambda tmp: rec.write_binary(str(tmp)))

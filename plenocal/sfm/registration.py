@@ -23,7 +23,6 @@ Output ``reg_a.json`` (SfM units, internal convention)::
 from __future__ import annotations
 
 import logging
-import os
 import shutil
 import tempfile
 import time
@@ -32,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from plenocal.io import atomic_write_dir
 from plenocal.sfm import colmap as cm
 
 log = logging.getLogger(__name__)
@@ -226,19 +226,8 @@ def reg_a_dict(rec, mapper: str) -> dict:
 
 
 def write_model(rec, folder: str | Path) -> None:
-    """Write a binary COLMAP model into ``folder`` atomically (temporary sibling, then
-    rename)."""
-    folder = Path(folder)
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
-    try:
-        rec.write_binary(str(tmp))
-        if folder.exists():
-            shutil.rmtree(folder)
-        os.replace(tmp, folder)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+    """Write a binary COLMAP model into ``folder`` atomically."""
+    atomic_write_dir(folder, lambda tmp: rec.write_binary(str(tmp)))
 
 
 def map_a(database: str | Path, image_dir: str | Path, model_dir: str | Path, *,
