@@ -255,20 +255,6 @@ def reprojection_calibs(dataset):
     return out + (["ground_truth"] if is_synthetic(dataset) else [])
 
 
-def reprojection_views(wildcards):
-    d = wildcards.dataset
-    if wildcards.calib == "reg_a":
-        return [res(d, "views", c, f"{centre(d)}.png") for c in cams(d)]
-    if wildcards.calib == "ground_truth":
-        # the ground truth covers every central view and one complete set
-        full = full_set_cam(d)
-        return sorted(
-            {res(d, "views", c, f"{centre(d)}.png") for c in cams(d)}
-            | {res(d, "views", full, f"{v}.png") for v in views(d)}
-        )
-    return [res(d, "views", c, f"{v}.png") for c in cams(d) for v in views(d)]
-
-
 def reprojection_targets(dataset):
     return [res(dataset, "eval", "reprojection.json")]
 

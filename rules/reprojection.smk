@@ -1,11 +1,12 @@
-"""Reprojection error of every calibration (Table I of the paper): SIFT matches
-triangulated with poses and intrinsics held fixed, COLMAP's 4 px filter raised."""
+"""Reprojection error of every calibration (Table I of the paper): the SIFT matches of
+rule view_matches triangulated with poses and intrinsics held fixed, COLMAP's 4 px
+filter raised."""
 
 
 rule reprojection_calib:
     input:
         calib=lambda wc: res(wc.dataset, *REPROJECTION_CALIB[wc.calib]),
-        views=reprojection_views,
+        database="results/{dataset}/matches/database.db",
     output:
         "results/{dataset}/eval/reprojection/{calib}.json",
     log:

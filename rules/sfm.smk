@@ -1,5 +1,6 @@
 """Registration A (Section II-B of the paper): structure-from-motion of the central
-view of every shot (array + hand-held), and the naive A+SfM baseline of Table I."""
+view of every shot (array + hand-held), the matches of all views that the verification
+shares, and the naive A+SfM baseline of Table I."""
 
 
 rule features_a:
@@ -70,10 +71,33 @@ rule map_a:
         "../scripts/map_a.py"
 
 
+rule view_matches:
+    input:
+        views=all_views,
+        reg_a="results/{dataset}/reg_a/reg_a.json",
+    output:
+        database="results/{dataset}/matches/database.db",
+        info="results/{dataset}/matches/matches.json",
+    log:
+        log_path("view_matches"),
+    benchmark:
+        bench_path("view_matches")
+    conda:
+        "../envs/plenocal.yaml"
+    threads: lambda wc: stage_config("sfm")["num_threads"]
+    resources:
+        mem_mb=4000,
+        runtime=60,
+    params:
+        sfm=lambda wc: stage_config("sfm"),
+    script:
+        "../scripts/view_matches.py"
+
+
 rule baseline_sfm:
     input:
         reg_a="results/{dataset}/reg_a/reg_a.json",
-        views=all_views,
+        database="results/{dataset}/matches/database.db",
     output:
         cameras="results/{dataset}/baseline/cameras.json",
         info="results/{dataset}/baseline/baseline.json",

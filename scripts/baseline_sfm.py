@@ -1,5 +1,4 @@
 """Rule baseline_sfm: the naive "A+SfM" calibration of Table I, and SfM from scratch."""
-from pathlib import Path
 
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
@@ -11,10 +10,8 @@ from plenocal.sfm import log_to_file
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821
 cfg = sm.params.sfm
-views = {f"{Path(p).parent.name}/{Path(p).stem}": p for p in sm.input.views}
-cameras, info = baseline_sfm(read_json(sm.input.reg_a), views, sm.params.central,
-                             from_scratch=cfg["baseline"]["from_scratch"],
-                             max_num_features=cfg["max_num_features"], seed=cfg["seed"],
-                             num_threads=sm.threads)
+cameras, info = baseline_sfm(read_json(sm.input.reg_a), sm.input.database,
+                             sm.params.central, from_scratch=cfg["baseline"]["from_scratch"],
+                             seed=cfg["seed"], num_threads=sm.threads)
 write_cameras(sm.output.cameras, cameras, units="sfm")
 write_json(sm.output.info, info)

@@ -1,7 +1,6 @@
 """Rules reprojection_calib and reprojection: the reprojection error of one calibration
 (Table I of the paper), and the table of all of them."""
 import logging
-from pathlib import Path
 
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
@@ -20,25 +19,24 @@ if sm.rule == "reprojection":
         s = base["scratch"]
         doc["sfm_scratch"] = {"num_images": s["num_images"],
                               "num_registered": s["registered_largest_model"],
-                              "num_models": s["num_models"], "wall_s": s["wall_s"]}
+                              "num_models": s["num_models"], "mapping_s": s["mapping_s"]}
     doc["baseline_sfm"]["num_registered"] = base["a_sfm_registered"]
     write_json(sm.output[0], doc)
 else:
     cfg = sm.params.sfm
-    opts = dict(pairs=cfg["reprojection"]["pairs"],
-                max_error_px=cfg["reprojection"]["max_error_px"],
+    opts = dict(max_error_px=cfg["reprojection"]["max_error_px"],
                 min_angle_deg=cfg["reprojection"]["min_angle_deg"],
-                max_num_features=cfg["max_num_features"], seed=cfg["seed"],
+                track_error_px=cfg["reprojection"]["track_error_px"], seed=cfg["seed"],
                 num_threads=sm.threads)
-    images = {f"{Path(p).parent.name}/{Path(p).stem}": p for p in sm.input.views}
+    db = sm.input.database
     calib = sm.wildcards.calib
-    logging.info("reprojection of %s: %d images", calib, len(images))
+    logging.info("reprojection of %s on the view database %s", calib, db)
     if calib == "reg_a":
-        cams = rp.reg_a_views(read_json(sm.input.calib), sm.params.central)
-        out = rp.evaluate(cams, images, **opts)
+        out = rp.evaluate(rp.reg_a_views(read_json(sm.input.calib), sm.params.central), db,
+                          **opts)
     elif calib == "reg_b":
-        out = rp.evaluate_sets(read_json(sm.input.calib), images, **opts)
+        out = rp.evaluate_sets(read_json(sm.input.calib), db, **opts)
     else:
-        out = rp.evaluate(read_cameras(sm.input.calib), images, **opts)
+        out = rp.evaluate(read_cameras(sm.input.calib), db, **opts)
     out["calibration"] = calib
     write_json(sm.output[0], out)

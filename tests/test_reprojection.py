@@ -7,7 +7,7 @@ import pytest
 
 from plenocal.camera import PinholeCamera, invert_pose, pose
 from plenocal.io import write_image
-from plenocal.sfm.colmap import set_pairs
+from plenocal.sfm import viewdb
 from plenocal.sfm.synthetic import default_scene, render, rig_cameras, view_sets
 from plenocal.verify.reprojection import evaluate_sets, reg_a_views, reprojection_stats
 
@@ -72,10 +72,31 @@ def test_reg_a_and_rig_documents():
     assert views["x00_y00/2_2"].width == W
 
 
-def test_set_pairs():
-    names = ["a/0_0.png", "a/0_1.png", "b/0_0.png", "b/0_1.png"]
-    assert set_pairs(names) == [("a/0_0.png", "a/0_1.png"), ("a/0_0.png", "b/0_0.png"),
-                                ("a/0_1.png", "b/0_1.png"), ("b/0_0.png", "b/0_1.png")]
+def test_view_pairs_by_hand():
+    names = [f"{s}/{v}.png" for s in ("a", "b", "c") for v in ("0_0", "0_1", "1_1", "0_2")]
+    # radius 1 within a shot: 0_0-0_1, 0_0-1_1, 0_1-1_1, 0_1-0_2, 1_1-0_2 (not 0_0-0_2)
+    within = [(f"a/{x}.png", f"a/{y}.png") for x, y in
+              (("0_0", "0_1"), ("0_0", "1_1"), ("0_1", "0_2"), ("0_1", "1_1"), ("0_2", "1_1"))]
+    centres = {"a": np.zeros(3), "b": np.array([1.0, 0, 0]), "c": np.array([3.0, 0, 0])}
+    # one neighbour each: a-b (a's and b's nearest), b-c (c's nearest); never a-c
+    got = viewdb.view_pairs(names, centres, shot_neighbours=1, view_radius=1)
+    assert [p for p in got if p[0].startswith("a/") and p[1].startswith("a/")] == within
+    across = {(p[0][0], p[1][0]) for p in got if p[0][0] != p[1][0]}
+    assert across == {("a", "b"), ("b", "c")}
+    assert all(p[0][2:] == p[1][2:] for p in got if p[0][0] != p[1][0])
+    assert len(got) == 3 * 5 + 2 * 4
+    # None: every pair within a shot and the same view across every two shots
+    full = viewdb.view_pairs(names, centres, shot_neighbours=None, view_radius=None)
+    assert len(full) == 3 * 6 + 3 * 4
+    # names without views: exhaustive
+    assert viewdb.view_pairs(["x.png", "y.png", "z.png"], None) == [
+        ("x.png", "y.png"), ("x.png", "z.png"), ("y.png", "z.png")]
+
+
+def test_nearest_shots_ties_by_name():
+    c = {"b": np.array([1.0, 0, 0]), "a": np.zeros(3), "c": np.array([-1.0, 0, 0])}
+    # a's two neighbours are equally near: the name decides
+    assert viewdb.nearest_shots(c, 1) == {("a", "b"), ("a", "c")}
 
 
 @pytest.fixture(scope="module")
@@ -92,7 +113,7 @@ def sets(shots, tmp_path_factory):
     return sub, vs, paths
 
 
-def test_rig_sets(sets):
+def test_rig_sets(sets, tmp_path):
     sub, vs, paths = sets
     rig = {"width": W, "height": H, "views": {}}
     for k in ("x00_y00", "hand00"):
@@ -102,7 +123,40 @@ def test_rig_sets(sets):
                 rig["views"][name.split("/")[1]] = {
                     "K": cam.K, "cam_to_central": invert_pose(central) @ cam.cam_to_world}
     imgs = {k: v for k, v in paths.items() if k.startswith(("x00_y00", "hand00"))}
-    out = evaluate_sets(rig, imgs, max_num_features=2000)
+    db = tmp_path / "views.db"
+    info = viewdb.build_view_database(imgs, db, tmp_path, max_num_features=2000)
+    assert info["num_images"] == 18 and info["num_pairs"] == 2 * 20 + 9
+    out = evaluate_sets(rig, db)
     assert sorted(out["sets"]) == ["hand00", "x00_y00"]
     assert out["sets"]["hand00"]["num_images"] == 9
     assert out["median_px"] < 0.2
+
+
+def test_subset_database_sets_each_camera(sets, tmp_path):
+    """A calibration's copy of the view database: only its images, each camera at its
+    intrinsics, only the verified pairs among them; one shared camera on request."""
+    import pycolmap
+
+    _, vs, paths = sets
+    db = tmp_path / "views.db"
+    viewdb.build_view_database(paths, db, tmp_path, max_num_features=1000)
+    names = [n for n in vs if n.startswith("hand00")]
+    cams = {}
+    for i, n in enumerate(sorted(names)):  # a principal point of its own per view
+        K = vs[n].K.copy()
+        K[0, 2] += i
+        K[1, 2] -= 0.5 * i
+        cams[n] = PinholeCamera(K, vs[n].cam_to_world, W, H)
+    n_pairs = viewdb.subset_database(db, tmp_path / "sub.db", names, cams)
+    with pycolmap.Database.open(str(tmp_path / "sub.db")) as d:
+        images = {im.name: im for im in d.read_all_images()}
+        assert sorted(images) == sorted(f"{n}.png" for n in names)
+        for n in names:
+            c = d.read_camera(images[f"{n}.png"].camera_id)
+            K = cams[n].K
+            assert np.allclose(c.params, [K[0, 0], K[1, 1], K[0, 2] + 0.5, K[1, 2] + 0.5])
+        assert d.num_verified_image_pairs() == n_pairs
+    assert 0 < n_pairs <= 9 * 8 // 2
+    viewdb.subset_database(db, tmp_path / "one.db", names, cams[names[0]])
+    with pycolmap.Database.open(str(tmp_path / "one.db")) as d:
+        assert d.num_cameras() == 1 and d.num_images() == 9

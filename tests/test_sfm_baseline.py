@@ -8,6 +8,7 @@ import pytest
 
 from plenocal.baseline import baseline_sfm
 from plenocal.io import write_image
+from plenocal.sfm import viewdb
 from plenocal.sfm.synthetic import default_scene, render, rig_cameras, view_sets
 from plenocal.verify.reprojection import evaluate
 
@@ -28,13 +29,15 @@ def sets(tmp_path_factory):
     return sub, vs, paths
 
 
-def test_baseline_registers_remaining_views(sets):
+def test_baseline_registers_remaining_views(sets, tmp_path):
     sub, vs, paths = sets
     reg_a = {"width": W, "height": H, "units": "sfm",
              "cameras": {k: {"K": c.K, "cam_to_world": vs[f"{k}/1_1"].cam_to_world}
                          for k, c in sub.items()}}
-    cameras, info = baseline_sfm(reg_a, paths, "1_1", from_scratch=True,
-                                 max_num_features=2000)
+    db = tmp_path / "views.db"
+    viewdb.build_view_database(paths, db, tmp_path, shot_neighbours=None, view_radius=None,
+                               max_num_features=2000)
+    cameras, info = baseline_sfm(reg_a, db, "1_1", from_scratch=True)
     assert info["a_sfm_registered"] == len(vs) and info["a_sfm_unregistered"] == []
     assert info["scratch"]["num_images"] == len(vs)
     # registration A was the truth: the registered views land on their true centres
@@ -43,6 +46,6 @@ def test_baseline_registers_remaining_views(sets):
     for k in sub:  # A's views stay where A put them
         np.testing.assert_allclose(cameras[f"{k}/1_1"].cam_to_world,
                                    vs[f"{k}/1_1"].cam_to_world, atol=1e-9)
-    stats = evaluate(cameras, paths, max_num_features=2000)
+    stats = evaluate(cameras, db)
     assert stats["num_array_images"] == 18 and stats["num_handheld_images"] == 18
     assert stats["median_px"] < 0.3

@@ -16,7 +16,6 @@ everything downstream, do not depend on the file system.
 
 from __future__ import annotations
 
-import itertools
 import logging
 import shutil
 from collections.abc import Iterable, Mapping
@@ -161,20 +160,6 @@ def match(database: str | Path, pairs: Iterable[tuple[str, str]] | None = None, 
         n = db.num_verified_image_pairs()
     log.info("matching: %d verified image pairs", n)
     return n
-
-
-def set_pairs(names: Iterable[str]) -> list[tuple[str, str]]:
-    """Pairs for ``<cam>/<view>.png`` images: every pair within a shot, and across shots
-    the pairs of the same view (what overlaps most); a single view per shot gives the
-    exhaustive list. Sorted, so that the matching order is fixed."""
-    names = sorted(names)
-    out = []
-    for a, b in itertools.combinations(names, 2):
-        ca, va = a.split("/", 1) if "/" in a else (a, "")
-        cb, vb = b.split("/", 1) if "/" in b else (b, "")
-        if ca == cb or va == vb:
-            out.append((a, b))
-    return out
 
 
 def pinhole_from_colmap(image, camera) -> PinholeCamera:

@@ -1,0 +1,217 @@
+"""The feature database of every subaperture view, shared by the verification stages.
+
+Table I of the paper triangulates the same SIFT matches with each calibration's poses
+held fixed, and the naive A+SfM baseline registers the same views by structure from
+motion. SIFT of all views and their matching are the same work for every calibration,
+so they are done once (rule ``view_matches``) into one COLMAP database: one shared
+camera, COLMAP's default focal guess, no calibration used, so that every calibration
+is measured on the very same verified matches.
+
+Each use then takes a copy of the part it needs (:func:`subset_database`): the images
+of one calibration, each with its own camera set to that calibration's intrinsics
+(registration B and the complete calibration shift the principal point per view), or
+all of them sharing one camera (the baselines). Descriptors and raw matches are not
+copied: triangulation and mapping read keypoints and verified matches only.
+
+Which pairs are matched (:func:`view_pairs`): within a shot, the views at most
+``view_radius`` apart on the N x N grid; across shots, the same view of each shot and
+its ``shot_neighbours`` nearest shots (by registration A's camera centres). Exhaustive
+matching of the default dataset's 700 views is 244,650 pairs and the "sets" pairing
+(every pair within a shot, the same view across every two shots) 17,850; this one
+about 4,000, and tracks still chain across the whole array through the overlaps.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import re
+import time
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+import numpy as np
+
+from plenocal.camera import PinholeCamera, k_to_colmap
+from plenocal.sfm import colmap as cm
+
+log = logging.getLogger(__name__)
+
+_VIEW = re.compile(r"^(\d+)_(\d+)$")
+
+
+def split_name(name: str) -> tuple[str, str]:
+    """``"<cam>/<view>.png"`` (or without the extension) -> (cam, view); a name without
+    '/' is a shot of its own with an empty view."""
+    if name.endswith(".png"):
+        name = name[:-4]
+    cam, _, view = name.partition("/")
+    return cam, view
+
+
+def _grid(view: str) -> tuple[int, int] | None:
+    m = _VIEW.match(view)
+    return (int(m.group(1)), int(m.group(2))) if m else None
+
+
+def nearest_shots(centres: Mapping[str, np.ndarray], k: int) -> set[tuple[str, str]]:
+    """Unordered shot pairs (sorted tuples) linking each shot to its ``k`` nearest
+    shots by camera centre; ties are broken by name, so the result is fixed."""
+    shots = sorted(centres)
+    out: set[tuple[str, str]] = set()
+    for a in shots:
+        others = sorted((float(np.linalg.norm(np.asarray(centres[a]) - np.asarray(centres[b]))),
+                         b) for b in shots if b != a)
+        for _, b in others[:k]:
+            out.add(tuple(sorted((a, b))))
+    return out
+
+
+def view_pairs(names: Iterable[str], shot_centres: Mapping[str, np.ndarray] | None = None,
+               *, shot_neighbours: int | None = 4, view_radius: int | None = 1
+               ) -> list[tuple[str, str]]:
+    """Image pairs to match among ``<cam>/<view>.png`` names (module docstring).
+
+    ``view_radius`` None: every pair within a shot; ``shot_neighbours`` None (or no
+    centres): the same view across every two shots. Views whose names are not
+    ``<row>_<col>`` are paired with every view of their shot. Sorted."""
+    names = sorted(names)
+    shots = sorted({split_name(n)[0] for n in names})
+    linked = None
+    if shot_neighbours is not None and shot_centres is not None:
+        known = {s: shot_centres[s] for s in shots if s in shot_centres}
+        linked = nearest_shots(known, shot_neighbours)
+        unknown = [s for s in shots if s not in known]
+        linked |= {tuple(sorted((a, b))) for a in unknown for b in shots if a != b}
+    out = []
+    for a, b in itertools.combinations(names, 2):
+        ca, va = split_name(a)
+        cb, vb = split_name(b)
+        if ca == cb:
+            ga, gb = _grid(va), _grid(vb)
+            if (view_radius is None or ga is None or gb is None
+                    or max(abs(ga[0] - gb[0]), abs(ga[1] - gb[1])) <= view_radius):
+                out.append((a, b))
+        elif va == vb and (linked is None or tuple(sorted((ca, cb))) in linked):
+            out.append((a, b))
+    return out
+
+
+def build_view_database(images: Mapping[str, str | Path], database: str | Path,
+                        work_dir: str | Path, *,
+                        shot_centres: Mapping[str, np.ndarray] | None = None,
+                        shot_neighbours: int | None = 4, view_radius: int | None = 1,
+                        max_num_features: int = 8192, seed: int = 0,
+                        num_threads: int = 1) -> dict:
+    """SIFT of ``images`` (``"<cam>/<view>"`` -> png) into a new ``database`` (one
+    shared camera, no prior focal length) and the matching of :func:`view_pairs`.
+    ``work_dir`` receives the staged images. Returns counts and timings."""
+    t0 = time.perf_counter()
+    image_dir = Path(work_dir) / "images"
+    names = cm.stage_images(images, image_dir)
+    sizes = {cm.image_size(image_dir / n) for n in names[:1] + names[-1:]}
+    if len(sizes) != 1:
+        raise ValueError(f"the views differ in size ({sorted(sizes)}); convert every shot "
+                         "with the same settings")
+    cm.extract_features(database, image_dir, [(names, None)], model="PINHOLE",
+                        max_num_features=max_num_features, num_threads=num_threads,
+                        seed=seed)
+    t1 = time.perf_counter()
+    pairs = view_pairs(names, shot_centres, shot_neighbours=shot_neighbours,
+                       view_radius=view_radius)
+    n_verified = cm.match(database, pairs, seed=seed, num_threads=num_threads,
+                          work_dir=work_dir)
+    t2 = time.perf_counter()
+    import pycolmap  # noqa: PLC0415
+
+    with pycolmap.Database.open(str(database)) as db:
+        kp = [db.num_keypoints_for_image(im.image_id) for im in db.read_all_images()]
+    info = {"num_images": len(names), "num_pairs": len(pairs),
+            "num_verified_pairs": int(n_verified),
+            "keypoints_mean": float(np.mean(kp)), "keypoints_min": int(min(kp)),
+            "shot_neighbours": shot_neighbours, "view_radius": view_radius,
+            "features_s": t1 - t0, "matching_s": t2 - t1}
+    log.info("view database: %d images, %d pairs (%d verified), features %.1f s, "
+             "matching %.1f s", len(names), len(pairs), n_verified, t1 - t0, t2 - t1)
+    return info
+
+
+def database_names(database: str | Path) -> list[str]:
+    """``"<cam>/<view>"`` names of the images of a database, sorted."""
+    return sorted(n[:-4] if n.endswith(".png") else n for n in cm.database_images(database))
+
+
+def _colmap_camera(cam: PinholeCamera | None, width: int, height: int, camera_id: int):
+    import pycolmap  # noqa: PLC0415
+
+    c = pycolmap.Camera.create_from_model_name(camera_id, "PINHOLE", 1.0, width, height)
+    if cam is None:
+        f = 1.2 * max(width, height)
+        c.params = [f, f, width / 2.0, height / 2.0]
+        c.has_prior_focal_length = False
+    else:
+        if (int(cam.width), int(cam.height)) != (width, height):
+            raise ValueError(f"the calibration says {cam.width}x{cam.height}, the images "
+                             f"are {width}x{height}")
+        if abs(cam.K[0, 1]) > 1e-9:
+            raise ValueError("a skewed K has no COLMAP PINHOLE equivalent")
+        K = k_to_colmap(cam.K)
+        c.params = [K[0, 0], K[1, 1], K[0, 2], K[1, 2]]
+        c.has_prior_focal_length = True
+    return c
+
+
+def subset_database(src: str | Path, dst: str | Path, names: Iterable[str],
+                    cameras: Mapping[str, PinholeCamera] | PinholeCamera | None = None
+                    ) -> int:
+    """Copy the images ``names`` (``"<cam>/<view>"``) of database ``src`` into a new
+    database ``dst``: their keypoints and the verified matches among them (no
+    descriptors). ``cameras`` a mapping: one camera per image, set to its intrinsics;
+    a single PinholeCamera or None: one camera shared by all (None: COLMAP's default
+    focal guess). Image ids are kept. Returns the number of verified pairs copied."""
+    import pycolmap  # noqa: PLC0415
+
+    want = {f"{n}.png" for n in names}
+    dst = Path(dst)
+    if dst.exists():
+        dst.unlink()
+    with pycolmap.Database.open(str(src)) as s:
+        cams = {c.camera_id: c for c in s.read_all_cameras()}
+        images = [im for im in s.read_all_images() if im.name in want]
+        missing = sorted(want - {im.name for im in images})
+        if missing:
+            raise ValueError(f"views not in the view database {src}: "
+                             f"{', '.join(m[:-4] for m in missing[:10])}")
+        keypoints = {im.image_id: s.read_keypoints(im.image_id) for im in images}
+        pair_ids, tvgs = s.read_two_view_geometries()
+    ids = {im.image_id for im in images}
+    per_image = isinstance(cameras, Mapping)
+    n_pairs = 0
+    with pycolmap.Database.open(str(dst)) as d:
+        shared_id = None
+        for im in sorted(images, key=lambda i: i.image_id):
+            src_cam = cams[im.camera_id]
+            w, h = int(src_cam.width), int(src_cam.height)
+            if per_image or shared_id is None:
+                cam = cameras[im.name[:-4]] if per_image else cameras
+                cam_id = d.write_camera(_colmap_camera(cam, w, h, 0))
+                rig = pycolmap.Rig()
+                rig.add_ref_sensor(pycolmap.sensor_t(pycolmap.SensorType.CAMERA, cam_id))
+                rig_id = d.write_rig(rig)
+                shared_id = (cam_id, rig_id)
+            cam_id, rig_id = shared_id
+            frame = pycolmap.Frame()
+            frame.rig_id = rig_id
+            frame.add_data_id(pycolmap.data_t(
+                pycolmap.sensor_t(pycolmap.SensorType.CAMERA, cam_id), im.image_id))
+            frame_id = d.write_frame(frame)
+            d.write_image(pycolmap.Image(name=im.name, camera_id=cam_id,
+                                         image_id=im.image_id, frame_id=frame_id),
+                          use_image_id=True)
+            d.write_keypoints(im.image_id, keypoints[im.image_id])
+        for pid, tvg in zip(pair_ids, tvgs, strict=True):
+            a, b = pycolmap.pair_id_to_image_pair(pid)
+            if a in ids and b in ids and tvg.inlier_matches.shape[0] > 0:
+                d.write_two_view_geometry(a, b, tvg)
+                n_pairs += 1
+    return n_pairs

@@ -1,0 +1,30 @@
+"""Rule view_matches: SIFT of every subaperture view and the matching of the pairs
+that Table I and the baseline share (plenocal.sfm.viewdb)."""
+import tempfile
+from pathlib import Path
+
+import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
+import numpy as np
+
+from plenocal.io import read_json, write_json
+from plenocal.sfm import log_to_file, viewdb
+
+log_to_file(snakemake.log[0])  # noqa: F821
+sm = snakemake  # noqa: F821
+cfg = sm.params.sfm
+views = {f"{Path(p).parent.name}/{Path(p).stem}": p for p in sm.input.views}
+reg_a = read_json(sm.input.reg_a)
+centres = {cam: np.asarray(d["cam_to_world"], dtype=float)[:3, 3]
+           for cam, d in reg_a["cameras"].items()}
+out_db = Path(sm.output.database)
+out_db.parent.mkdir(parents=True, exist_ok=True)
+with tempfile.TemporaryDirectory(prefix=".view_matches.", dir=out_db.parent) as tmp:
+    work = Path(tmp)  # the database moves into place only once complete
+    info = viewdb.build_view_database(views, work / "database.db", work,
+                                      shot_centres=centres,
+                                      shot_neighbours=cfg["view_matching"]["shot_neighbours"],
+                                      view_radius=cfg["view_matching"]["view_radius"],
+                                      max_num_features=cfg["max_num_features"],
+                                      seed=cfg["seed"], num_threads=sm.threads)
+    (work / "database.db").replace(out_db)
+write_json(sm.output.info, info)
