@@ -104,6 +104,16 @@ def stage_config(name):
     return config[name]
 
 
+SFM_CORE = ("seed", "num_threads", "max_num_features")
+
+
+def sfm_params(*sections):
+    """The sfm settings that one step reads - the core ones and the named sections - so a
+    change to, say, the verification's matching does not rerun registration A."""
+    cfg = stage_config("sfm")
+    return {k: cfg[k] for k in (*SFM_CORE, *sections)}
+
+
 # The targets of the default target: each stage adds its final outputs once it is real.
 TARGETS = []
 

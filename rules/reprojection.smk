@@ -22,7 +22,7 @@ rule reprojection_calib:
         mem_mb=8000,
         runtime=240,
     params:
-        sfm=lambda wc: stage_config("sfm"),
+        sfm=lambda wc: sfm_params("reprojection"),
         central=lambda wc: centre(wc.dataset),
     script:
         "../scripts/reprojection.py"

@@ -21,7 +21,7 @@ rule features_a:
         mem_mb=4000,
         runtime=30,
     params:
-        sfm=lambda wc: stage_config("sfm"),
+        sfm=lambda wc: sfm_params(),
     script:
         "../scripts/features_a.py"
 
@@ -43,7 +43,7 @@ rule match_a:
         mem_mb=4000,
         runtime=30,
     params:
-        sfm=lambda wc: stage_config("sfm"),
+        sfm=lambda wc: sfm_params(),
     script:
         "../scripts/match_a.py"
 
@@ -66,7 +66,7 @@ rule map_a:
         mem_mb=4000,
         runtime=60,
     params:
-        sfm=lambda wc: stage_config("sfm"),
+        sfm=lambda wc: sfm_params("mapper"),
     script:
         "../scripts/map_a.py"
 
@@ -89,7 +89,7 @@ rule view_matches:
         mem_mb=4000,
         runtime=60,
     params:
-        sfm=lambda wc: stage_config("sfm"),
+        sfm=lambda wc: sfm_params("view_matching"),
     script:
         "../scripts/view_matches.py"
 
@@ -112,7 +112,7 @@ rule baseline_sfm:
         mem_mb=8000,
         runtime=240,
     params:
-        sfm=lambda wc: stage_config("sfm"),
+        sfm=lambda wc: sfm_params("baseline"),
         central=lambda wc: centre(wc.dataset),
     script:
         "../scripts/baseline_sfm.py"
