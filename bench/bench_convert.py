@@ -27,6 +27,8 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from benchmd import Lines, update_sections  # noqa: E402
+
 from plenocal.convert import ShotConversion  # noqa: E402
 from plenocal.convert.synthetic import lenslet_from_patch_size, random_texture  # noqa: E402
 from plenocal.grid import MicrolensGrid  # noqa: E402
@@ -59,12 +61,14 @@ def synthetic_image(calib, size: int) -> tuple[np.ndarray, MicrolensGrid, np.nda
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=None, help="also write the figures into this BENCHMARKS.md")
     ap.add_argument("--calib", default=str(FIXTURES / "Fujita2.xml"))
     ap.add_argument("--size", type=int, default=2048)
     ap.add_argument("--views", type=int, default=5)
     ap.add_argument("--lenslet", default=None)
     ap.add_argument("--repeat", type=int, default=2)
     args = ap.parse_args()
+    out = Lines()
     cv2.setNumThreads(1)
     calib = read_calib(args.calib)
     truth = None
@@ -73,7 +77,7 @@ def main() -> None:
     else:
         img, grid, truth = synthetic_image(calib, args.size)
     mp = img.shape[0] * img.shape[1] / 1e6
-    print(f"lenslet {img.shape[1]}x{img.shape[0]} ({mp:.2f} MP), {Path(args.calib).name}, "
+    out.say(f"lenslet {img.shape[1]}x{img.shape[0]} ({mp:.2f} MP), {Path(args.calib).name}, "
           f"D = {calib.diameter:.2f} px, {args.views}x{args.views} views, 1 thread")
     best = None
     for rep in range(args.repeat):
@@ -85,22 +89,27 @@ def main() -> None:
         encoded = [cv2.imencode(".png", v, [cv2.IMWRITE_PNG_COMPRESSION, 3])[1] for v in views]
         t3 = time.perf_counter()
         total = t2 - t0
-        print(f"run {rep}: grid + patch sizes + plan {t1 - t0:.2f} s, {len(views)} views "
+        out.say(f"run {rep}: grid + patch sizes + plan {t1 - t0:.2f} s, {len(views)} views "
               f"{t2 - t1:.2f} s ({1000 * (t2 - t1) / len(views):.0f} ms each), total {total:.2f} s "
               f"= {mp / total:.2f} MP/s; PNG encoding {t3 - t2:.2f} s "
               f"({sum(len(e) for e in encoded) / 1e6:.1f} MB)")
         best = total if best is None else min(best, total)
-    print(f"best total {best:.2f} s for {mp:.2f} MP ({mp / best:.2f} MP/s); target <= 3 s: "
+    out.say(f"best total {best:.2f} s for {mp:.2f} MP ({mp / best:.2f} MP/s); target <= 3 s: "
           f"{'met' if best <= 3.0 else 'NOT met'}")
     L = shot.layout
-    print(f"views {L.width}x{L.height}, tile {L.tile}, q {L.q:.3f} px, {len(L.lens_index)} used "
+    out.say(f"views {L.width}x{L.height}, tile {L.tile}, q {L.q:.3f} px, {len(L.lens_index)} used "
           f"lenses of {len(shot.grid)}")
     if truth is not None:
         err = shot.patch.patch - truth
         inner = shot.grid.inside()
-        print(f"patch size vs truth (used lenses): median |err| {np.median(np.abs(err[inner])):.3f}"
+        out.say(f"patch size vs truth (used lenses): median |err| "
+                f"{np.median(np.abs(err[inner])):.3f}"
               f" px, within 0.25 px {np.mean(np.abs(err[inner]) < 0.25):.1%}, confident "
               f"{shot.patch.confident[inner].mean():.1%}")
+    if args.out:
+        update_sections(args.out, {"Conversion throughput (one core)": [
+            "`python bench/bench_convert.py` (issue 3 target: 3 s per 4-megapixel lenslet "
+            "image, 25 views):", "", "```", *out, "```"]})
 
 
 if __name__ == "__main__":

@@ -23,6 +23,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from benchmd import Lines, update_sections  # noqa: E402
+
 from plenocal.camera import read_cameras  # noqa: E402
 from plenocal.depth.inputs import nearest_sources  # noqa: E402
 from plenocal.depth.planesweep import (  # noqa: E402
@@ -41,7 +43,7 @@ from plenocal.depth.synthetic import (  # noqa: E402
 from plenocal.io import read_image  # noqa: E402
 
 
-def run_sweep(label, ref, img, srcs, simgs, near, far, gt, opt):
+def run_sweep(out, label, ref, img, srcs, simgs, near, far, gt, opt):
     n = choose_num_depths(ref, srcs, near, far, opt)
     t = time.perf_counter()
     d = plane_sweep_depth(ref, img, srcs, simgs, near, far, opt)
@@ -49,29 +51,39 @@ def run_sweep(label, ref, img, srcs, simgs, near, far, gt, opt):
     q = depth_quality(d, gt, 0.01, border=8)
     passes = 2 if opt.lr_check else 1
     mpl = ref.width * ref.height / 1e6 * n * passes / dt
-    print(f"{label:34s} valid {q['valid_share']:6.1%}  within 1% {q['within_share']:6.1%} "
+    out.say(f"{label:34s} valid {q['valid_share']:6.1%}  within 1% {q['within_share']:6.1%} "
           f"(of valid {q['within_of_valid']:6.1%})  median rel {q['median_rel_error']:.4f}  "
           f"{dt:6.2f} s  {n} labels x {len(srcs)} sources  {mpl:7.1f} MP*labels/s")
 
 
-def run_sgbm(label, c1, i1, c2, i2, near, far, gt):
+def run_sgbm(out, label, c1, i1, c2, i2, near, far, gt):
     t = time.perf_counter()
     d, info = sgbm_depth(c1, i1, c2, i2, near, far)
     dt = time.perf_counter() - t
     q = depth_quality(d, gt, 0.01, border=8)
     mpl = c1.width * c1.height / 1e6 * info["num_disparities"] / dt
-    print(f"{label:34s} valid {q['valid_share']:6.1%}  within 1% {q['within_share']:6.1%} "
+    out.say(f"{label:34s} valid {q['valid_share']:6.1%}  within 1% {q['within_share']:6.1%} "
           f"(of valid {q['within_of_valid']:6.1%})  median rel {q['median_rel_error']:.4f}  "
           f"{dt:6.2f} s  {info['num_disparities']} disparities      {mpl:7.1f} MP*labels/s")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=None, help="also write the figures into this BENCHMARKS.md")
     ap.add_argument("--dataset", default="synthetic")
     ap.add_argument("--cam", default=None)
     ap.add_argument("--near", type=float, default=0.47 * 0.85)
     ap.add_argument("--far", type=float, default=0.74 * 1.15)
     a = ap.parse_args()
+    out = Lines()
+    measure(a, out)
+    if a.out:
+        update_sections(a.out, {"Plane sweep against StereoSGBM (quality and throughput)": [
+            "`python bench/bench_depth.py` (one process, the same views):", "", "```",
+            *out, "```"]})
+
+
+def measure(a, out: Lines) -> None:
     opt = PlaneSweepOptions()
     gt_dir = Path("results") / a.dataset / "ground_truth"
     if (gt_dir / "cameras.json").is_file():
@@ -92,24 +104,24 @@ def main() -> None:
         own = [f"{cam}/{v}" for v in views if f"{cam}/{v}" in cams]
         src_b = nearest_sources(ref_key, cams, 8, own)
         src_a = nearest_sources(ref_key, cams, 6, [f"{s}/{cv}" for s in shots])
-        print(f"reference {ref_key} ({cams[ref_key].width}x{cams[ref_key].height}), "
+        out.say(f"reference {ref_key} ({cams[ref_key].width}x{cams[ref_key].height}), "
               f"ground-truth cameras, bounds [{a.near:.3f}, {a.far:.3f}] m")
         for label, src in (("plane sweep, own set (B)", src_b),
                            ("plane sweep, neighbour shots (A)", src_a)):
-            run_sweep(label, cams[ref_key], img, [cams[k] for k in src],
+            run_sweep(out, label, cams[ref_key], img, [cams[k] for k in src],
                       [load(k) for k in src], a.near, a.far, gt, opt)
         def offset(k):  # source centre in the reference camera frame
             return (cams[ref_key].world_to_cam @ cams[k].cam_to_world)[:3, 3]
 
         horiz = [k for k in src_a if abs(offset(k)[0]) > 2 * abs(offset(k)[1])]
         right = min(horiz, key=lambda k: float(np.linalg.norm(offset(k))))
-        run_sweep("plane sweep, same pair as SGBM", cams[ref_key], img, [cams[right]],
+        run_sweep(out, "plane sweep, same pair as SGBM", cams[ref_key], img, [cams[right]],
                   [load(right)], a.near, a.far, gt,
                   PlaneSweepOptions(lr_check=False, best_fraction=1.0))
-        run_sgbm(f"StereoSGBM {ref_key} + {right}", cams[ref_key], img, cams[right],
+        run_sgbm(out, f"StereoSGBM {ref_key} + {right}", cams[ref_key], img, cams[right],
                  load(right), a.near, a.far, gt)
         return
-    print("no ground truth under results/: textured slanted plane, 320x240, 2 cm baseline")
+    out.say("no ground truth under results/: textured slanted plane, 320x240, 2 cm baseline")
     tex = photo_texture(512)
     plane = fronto_plane(0.6, 0.8, tex, 30.0)
     ref = camera_at([0, 0, 0], 500.0, 320, 240)
@@ -117,11 +129,11 @@ def main() -> None:
             for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy]
     img, gt = render_plane(ref, plane)
     simgs = [render_plane(s, plane)[0] for s in srcs]
-    run_sweep("plane sweep, 8 sources", ref, img, srcs, simgs, 0.4, 0.9, gt, opt)
+    run_sweep(out, "plane sweep, 8 sources", ref, img, srcs, simgs, 0.4, 0.9, gt, opt)
     right = srcs[6]  # (+1, 0)
-    run_sweep("plane sweep, same pair as SGBM", ref, img, [right], [simgs[6]], 0.4, 0.9, gt,
+    run_sweep(out, "plane sweep, same pair as SGBM", ref, img, [right], [simgs[6]], 0.4, 0.9, gt,
               PlaneSweepOptions(lr_check=False, best_fraction=1.0))
-    run_sgbm("StereoSGBM", ref, img, right, simgs[6], 0.4, 0.9, gt)
+    run_sgbm(out, "StereoSGBM", ref, img, right, simgs[6], 0.4, 0.9, gt)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,8 @@
 """Reprojection error with known cameras (Table I machinery) and the A+SfM baseline, on
 synthetic renders whose true cameras are known exactly."""
 
+import os
+
 import cv2  # noqa: F401  (before pycolmap)
 import numpy as np
 import pytest
@@ -147,7 +149,11 @@ def test_subset_database_sets_each_camera(sets, tmp_path):
         K[0, 2] += i
         K[1, 2] -= 0.5 * i
         cams[n] = PinholeCamera(K, vs[n].cam_to_world, W, H)
+    os.utime(db, ns=(10**18, 10**18))  # an old, known modification time
     n_pairs = viewdb.subset_database(db, tmp_path / "sub.db", names, cams)
+    assert sorted(viewdb.database_names(db)) == sorted(paths)
+    # read by several rules: reading must not touch it (Snakemake would rerun them)
+    assert db.stat().st_mtime_ns == 10**18
     with pycolmap.Database.open(str(tmp_path / "sub.db")) as d:
         images = {im.name: im for im in d.read_all_images()}
         assert sorted(images) == sorted(f"{n}.png" for n in names)

@@ -23,9 +23,12 @@ about 4,000, and tracks still chain across the whole array through the overlaps.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import logging
 import re
+import shutil
+import sqlite3
 import time
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -137,8 +140,13 @@ def build_view_database(images: Mapping[str, str | Path], database: str | Path,
 
 
 def database_names(database: str | Path) -> list[str]:
-    """``"<cam>/<view>"`` names of the images of a database, sorted."""
-    return sorted(n[:-4] if n.endswith(".png") else n for n in cm.database_images(database))
+    """``"<cam>/<view>"`` names of the images of a database, sorted. Read through
+    SQLite in read-only mode: opening a database with pycolmap writes to it (its
+    schema check), which would make Snakemake rerun every job that reads it."""
+    uri = f"{Path(database).resolve().as_uri()}?mode=ro"
+    with contextlib.closing(sqlite3.connect(uri, uri=True)) as con:
+        names = [row[0] for row in con.execute("SELECT name FROM images")]
+    return sorted(n[:-4] if n.endswith(".png") else n for n in names)
 
 
 def _colmap_camera(cam: PinholeCamera | None, width: int, height: int, camera_id: int):
@@ -168,13 +176,26 @@ def subset_database(src: str | Path, dst: str | Path, names: Iterable[str],
     database ``dst``: their keypoints and the verified matches among them (no
     descriptors). ``cameras`` a mapping: one camera per image, set to its intrinsics;
     a single PinholeCamera or None: one camera shared by all (None: COLMAP's default
-    focal guess). Image ids are kept. Returns the number of verified pairs copied."""
-    import pycolmap  # noqa: PLC0415
+    focal guess). Image ids are kept. Returns the number of verified pairs copied.
+    ``src`` is left untouched (not even its modification time)."""
 
     want = {f"{n}.png" for n in names}
     dst = Path(dst)
     if dst.exists():
         dst.unlink()
+    # pycolmap writes to any database it opens: read a private copy (database_names)
+    src_copy = dst.with_name(f".{dst.stem}.source.db")
+    shutil.copyfile(src, src_copy)
+    try:
+        return _copy_views(src_copy, dst, want, cameras)
+    finally:
+        src_copy.unlink()
+
+
+def _copy_views(src: Path, dst: Path, want: set[str],
+                cameras: Mapping[str, PinholeCamera] | PinholeCamera | None) -> int:
+    import pycolmap  # noqa: PLC0415
+
     with pycolmap.Database.open(str(src)) as s:
         cams = {c.camera_id: c for c in s.read_all_cameras()}
         images = [im for im in s.read_all_images() if im.name in want]
