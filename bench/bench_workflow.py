@@ -135,10 +135,12 @@ def kept_run(work: Path, scratch: Path) -> dict:
 
 
 def verification_change(work: Path, config: dict) -> tuple[float, int]:
+    """Change a verification-only setting (the border excluded from the PSNR) to a value
+    the work folder has not run with, then rerun: seconds and jobs planned."""
     cfg = copy.deepcopy(config)
     cfg.setdefault("verify", {})
-    # a verification-only setting: the border excluded from PSNR
-    cfg["verify"]["psnr_border_px"] = int(cfg["verify"].get("psnr_border_px", 6)) + 1
+    current = yaml.safe_load((work / "config.yaml").read_text()).get("verify", {})
+    cfg["verify"]["psnr_border_px"] = int(current.get("psnr_border_px", 8)) + 1
     (work / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
     _, out = snakemake(work, "-n")
     jobs = jobs_planned(out)

@@ -19,8 +19,12 @@ if sm.rule == "reprojection":
         s = base["scratch"]
         doc["sfm_scratch"] = {"num_images": s["num_images"],
                               "num_registered": s["registered_largest_model"],
-                              "num_models": s["num_models"], "mapping_s": s["mapping_s"]}
+                              "num_models": s["num_models"], "mapping_s": s["mapping_s"],
+                              "focal_px": s.get("focal_px")}
     doc["baseline_sfm"]["num_registered"] = base["a_sfm_registered"]
+    for name, row in doc.items():
+        logging.info("Table I %-13s images %4s  mean %s px  median %s px", name,
+                     row.get("num_images"), row.get("mean_px"), row.get("median_px"))
     write_json(sm.output[0], doc)
 else:
     cfg = sm.params.sfm
