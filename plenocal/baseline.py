@@ -12,9 +12,10 @@ incremental mapper then continues from that model with A's frames and the camera
 fixed, registering each remaining view by absolute pose
 against the points and bundle-adjusting the new poses and the points.
 
-From scratch: the same features and matches, one shared camera at COLMAP's default
-focal length guess, a plain incremental mapping; reported is how many views the
-largest model registers and into how many models the views fall.
+From scratch: the same features and matches, one shared PINHOLE camera (fx and fy
+refined apart) at COLMAP's default focal length guess, a plain incremental mapping;
+reported is how many views the largest model registers, into how many models the
+views fall, and the focal length it finds.
 """
 
 from __future__ import annotations
