@@ -74,9 +74,8 @@ def _continue_options(seed: int, num_threads: int, camera_ids: set[int]):
     return o
 
 
-def baseline_sfm(reg_a: Mapping, database: str | Path, central: str, *,
-                 from_scratch: bool = True, seed: int = 0, num_threads: int = 1,
-                 work_dir: str | Path | None = None
+def baseline_sfm(reg_a: Mapping, database: str | Path, central: str, *, seed: int = 0,
+                 num_threads: int = 1, work_dir: str | Path | None = None
                  ) -> tuple[dict[str, PinholeCamera], dict]:
     """Register the views of the view ``database`` (:mod:`plenocal.sfm.viewdb`: SIFT
     and verified matches of every ``"<cam>/<view>"``) onto registration A (``reg_a``:
@@ -142,30 +141,31 @@ def baseline_sfm(reg_a: Mapping, database: str | Path, central: str, *,
         if unreg:
             log.warning("baseline A+SfM did not register %d views: %s", len(unreg),
                         ", ".join(unreg[:20]))
-
-        if from_scratch:
-            info["scratch"] = scratch_sfm(database, views, tmp, seed=seed,
-                                          num_threads=num_threads)
         return cameras, info
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def scratch_sfm(database: str | Path, views: list[str], tmp: Path, *, seed: int,
-                num_threads: int) -> dict:
-    """Plain incremental SfM of ``views`` of the view ``database``, one shared camera
-    at COLMAP's default focal guess: how many views register, in how many models."""
+def scratch_sfm(database: str | Path, *, seed: int = 0, num_threads: int = 1,
+                work_dir: str | Path | None = None) -> dict:
+    """Plain incremental SfM of every view of the view ``database``, one shared camera
+    at COLMAP's default focal guess: how many views register, in how many models, with
+    which focal length."""
     import pycolmap  # noqa: PLC0415
 
     t0 = time.perf_counter()
-    db = tmp / "scratch.db"
-    viewdb.subset_database(database, db, views, None)
-    out = tmp / "scratch"
-    out.mkdir()
-    (tmp / "scratch_images").mkdir()
-    pycolmap.set_random_seed(seed)
-    recs = pycolmap.incremental_mapping(str(db), str(tmp / "scratch_images"), str(out),
-                                        options=_large_scene_options(seed, num_threads))
+    views = viewdb.database_names(database)
+    tmp = Path(tempfile.mkdtemp(prefix="plenocal_scratch_", dir=work_dir))
+    try:
+        db = tmp / "scratch.db"
+        viewdb.subset_database(database, db, views, None)
+        (tmp / "out").mkdir()
+        (tmp / "images").mkdir()
+        pycolmap.set_random_seed(seed)
+        recs = pycolmap.incremental_mapping(str(db), str(tmp / "images"), str(tmp / "out"),
+                                            options=_large_scene_options(seed, num_threads))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
     sizes = sorted((r.num_reg_images() for r in recs.values()), reverse=True)
     res = {"num_images": len(views), "num_models": len(sizes),
            "registered_largest_model": int(sizes[0]) if sizes else 0,

@@ -265,6 +265,13 @@ def reprojection_calibs(dataset):
     return out + (["ground_truth"] if is_synthetic(dataset) else [])
 
 
+def scratch_sfm_input(wildcards):
+    """SfM of all views from scratch joins Table I where sfm.baseline.from_scratch."""
+    if stage_config("sfm")["baseline"]["from_scratch"]:
+        return [res(wildcards.dataset, "baseline", "scratch.json")]
+    return []
+
+
 def reprojection_targets(dataset):
     return [res(dataset, "eval", "reprojection.json")]
 

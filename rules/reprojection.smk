@@ -35,6 +35,7 @@ rule reprojection:
             for c in reprojection_calibs(wc.dataset)
         ],
         baseline="results/{dataset}/baseline/baseline.json",
+        scratch=scratch_sfm_input,
     output:
         "results/{dataset}/eval/reprojection.json",
     log:

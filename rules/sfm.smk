@@ -1,6 +1,6 @@
 """Registration A (Section II-B of the paper): structure-from-motion of the central
 view of every shot (array + hand-held), the matches of all views that the verification
-shares, and the naive A+SfM baseline of Table I."""
+shares, and the naive baselines of Table I (A+SfM; SfM of all views from scratch)."""
 
 
 rule features_a:
@@ -112,10 +112,31 @@ rule baseline_sfm:
         mem_mb=8000,
         runtime=240,
     params:
-        sfm=lambda wc: sfm_params("baseline"),
+        sfm=lambda wc: sfm_params(),
         central=lambda wc: centre(wc.dataset),
     script:
         "../scripts/baseline_sfm.py"
+
+
+rule baseline_scratch:
+    input:
+        database="results/{dataset}/matches/database.db",
+    output:
+        "results/{dataset}/baseline/scratch.json",
+    log:
+        log_path("baseline_scratch"),
+    benchmark:
+        bench_path("baseline_scratch")
+    conda:
+        "../envs/plenocal.yaml"
+    threads: lambda wc: stage_config("sfm")["num_threads"]
+    resources:
+        mem_mb=8000,
+        runtime=240,
+    params:
+        sfm=lambda wc: sfm_params(),
+    script:
+        "../scripts/baseline_scratch.py"
 
 
 TARGETS.append(sfm_targets)

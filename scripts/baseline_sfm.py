@@ -1,4 +1,4 @@
-"""Rule baseline_sfm: the naive "A+SfM" calibration of Table I, and SfM from scratch."""
+"""Rule baseline_sfm: the naive "A+SfM" calibration of Table I."""
 
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
@@ -11,7 +11,6 @@ log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821
 cfg = sm.params.sfm
 cameras, info = baseline_sfm(read_json(sm.input.reg_a), sm.input.database,
-                             sm.params.central, from_scratch=cfg["baseline"]["from_scratch"],
-                             seed=cfg["seed"], num_threads=sm.threads)
+                             sm.params.central, seed=cfg["seed"], num_threads=sm.threads)
 write_cameras(sm.output.cameras, cameras, units="sfm")
 write_json(sm.output.info, info)

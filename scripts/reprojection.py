@@ -15,8 +15,8 @@ sm = snakemake  # noqa: F821
 if sm.rule == "reprojection":
     doc = {k: read_json(p) for k, p in zip(sm.params.calibs, sm.input.evals, strict=True)}
     base = read_json(sm.input.baseline)
-    if "scratch" in base:
-        s = base["scratch"]
+    if sm.input.scratch:
+        s = read_json(sm.input.scratch[0])
         doc["sfm_scratch"] = {"num_images": s["num_images"],
                               "num_registered": s["registered_largest_model"],
                               "num_models": s["num_models"], "mapping_s": s["mapping_s"],
