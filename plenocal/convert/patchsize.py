@@ -55,11 +55,6 @@ class PatchSizeSettings:
     texture_scale: float = 0.02  # grey std (0..1) at which the texture factor saturates
     search_range: str = "type"  # "type": each lens its type's range; "union": all types'
 
-    @classmethod
-    def from_config(cls, cfg: dict) -> PatchSizeSettings:
-        keys = {f for f in cls.__dataclass_fields__}
-        return cls(**{k: v for k, v in cfg.items() if k in keys})
-
 
 @dataclass
 class PatchSizeResult:

@@ -39,11 +39,6 @@ class RenderSettings:
     rim_ramp_px: float = 1.5  # width of the rim ramp
     slots: int = 4  # candidate lenses blended per output pixel
 
-    @classmethod
-    def from_config(cls, cfg: dict) -> RenderSettings:
-        keys = {f for f in cls.__dataclass_fields__}
-        return cls(**{k: v for k, v in cfg.items() if k in keys})
-
 
 @dataclass
 class RenderPlan:

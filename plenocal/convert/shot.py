@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import cv2
@@ -41,6 +41,12 @@ from plenocal.raytrix import CalibError, RayCalib, read_calib
 from plenocal.viewgeom import ViewLayout, make_layout, parse_view, view_names
 
 log = logging.getLogger("plenocal.convert")
+
+
+def _known_fields(cls, cfg: dict):
+    """A settings dataclass from the config keys that name its fields."""
+    names = {f.name for f in fields(cls)}
+    return cls(**{k: v for k, v in cfg.items() if k in names})
 
 
 @dataclass(frozen=True)
@@ -59,8 +65,8 @@ class ConvertSettings:
             tile_size=int(cfg.get("tile_size", 6)),
             view_spacing_px=cfg.get("view_spacing_px"),
             percentiles=(float(pct[0]), float(pct[1])),
-            patch=PatchSizeSettings.from_config(cfg.get("patch_size", {}) or {}),
-            render=RenderSettings.from_config(cfg.get("blend", {}) or {}),
+            patch=_known_fields(PatchSizeSettings, cfg.get("patch_size") or {}),
+            render=_known_fields(RenderSettings, cfg.get("blend") or {}),
         )
 
 

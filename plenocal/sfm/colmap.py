@@ -108,14 +108,6 @@ def extract_features(database: str | Path, image_dir: str | Path,
         log.info("features: %d images of group %s", len(names), names[0])
 
 
-def database_images(database: str | Path) -> dict[str, object]:
-    """COLMAP image name -> ``pycolmap.Image`` as stored in the database."""
-    import pycolmap  # noqa: PLC0415
-
-    with pycolmap.Database.open(str(database)) as db:
-        return {im.name: im for im in db.read_all_images()}
-
-
 def _verification_options(seed: int, max_error_px: float = 4.0):
     import pycolmap  # noqa: PLC0415
 

@@ -140,6 +140,18 @@ def _render_lenslet(height, width, pix_size, L, s, t, F, half_ap, lens_x, lens_y
 
 
 @njit(cache=True)
+def _pixel_ray(Kinv, R, u, v):
+    """World direction (dx, dy, dz) of pixel (u, v) of a pinhole camera, and the camera
+    z of ``K^-1 (u, v, 1)`` (cz), by which a ray length becomes a z-depth."""
+    cx = Kinv[0, 0] * u + Kinv[0, 1] * v + Kinv[0, 2]
+    cy = Kinv[1, 0] * u + Kinv[1, 1] * v + Kinv[1, 2]
+    cz = Kinv[2, 0] * u + Kinv[2, 1] * v + Kinv[2, 2]
+    return (R[0, 0] * cx + R[0, 1] * cy + R[0, 2] * cz,
+            R[1, 0] * cx + R[1, 1] * cy + R[1, 2] * cz,
+            R[2, 0] * cx + R[2, 1] * cy + R[2, 2] * cz, cz)
+
+
+@njit(cache=True)
 def _render_pinhole(height, width, Kinv, R, C, ss, p0, u, v, nrm, tex_id, texel, atlas, th,
                     tw, out, depth):
     rgb = np.empty(3)
@@ -150,14 +162,8 @@ def _render_pinhole(height, width, Kinv, R, C, ss, p0, u, v, nrm, tex_id, texel,
             a2 = 0.0
             for i in range(ss):
                 for j in range(ss):
-                    uu = col - 0.5 + (j + 0.5) / ss
-                    vv = row - 0.5 + (i + 0.5) / ss
-                    cx = Kinv[0, 0] * uu + Kinv[0, 1] * vv + Kinv[0, 2]
-                    cy = Kinv[1, 0] * uu + Kinv[1, 1] * vv + Kinv[1, 2]
-                    cz = Kinv[2, 0] * uu + Kinv[2, 1] * vv + Kinv[2, 2]
-                    dx = R[0, 0] * cx + R[0, 1] * cy + R[0, 2] * cz
-                    dy = R[1, 0] * cx + R[1, 1] * cy + R[1, 2] * cz
-                    dz = R[2, 0] * cx + R[2, 1] * cy + R[2, 2] * cz
+                    dx, dy, dz, _ = _pixel_ray(Kinv, R, col - 0.5 + (j + 0.5) / ss,
+                                               row - 0.5 + (i + 0.5) / ss)
                     _trace(C[0], C[1], C[2], dx, dy, dz, p0, u, v, nrm, tex_id, texel,
                            atlas, th, tw, rgb)
                     a0 += rgb[0]
@@ -168,12 +174,7 @@ def _render_pinhole(height, width, Kinv, R, C, ss, p0, u, v, nrm, tex_id, texel,
             out[row, col, 1] = a1 / n
             out[row, col, 2] = a2 / n
             # z-depth of the pixel centre's ray (direction has z_cam = 1 by K^-1)
-            cx = Kinv[0, 0] * col + Kinv[0, 1] * row + Kinv[0, 2]
-            cy = Kinv[1, 0] * col + Kinv[1, 1] * row + Kinv[1, 2]
-            cz = Kinv[2, 0] * col + Kinv[2, 1] * row + Kinv[2, 2]
-            dx = R[0, 0] * cx + R[0, 1] * cy + R[0, 2] * cz
-            dy = R[1, 0] * cx + R[1, 1] * cy + R[1, 2] * cz
-            dz = R[2, 0] * cx + R[2, 1] * cy + R[2, 2] * cz
+            dx, dy, dz, cz = _pixel_ray(Kinv, R, float(col), float(row))
             tt = _trace(C[0], C[1], C[2], dx, dy, dz, p0, u, v, nrm, tex_id, texel, atlas,
                         th, tw, rgb)
             depth[row, col] = tt * cz if tt > 0 else 0.0
