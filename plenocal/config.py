@@ -16,6 +16,8 @@ from typing import Any
 import jsonschema
 import yaml
 
+from plenocal.datasheet import virtual_depth_problem
+
 SCHEMA_PATH = Path(__file__).resolve().parent.parent / "config.schema.yaml"
 
 
@@ -65,7 +67,8 @@ def _reason(error: jsonschema.ValidationError) -> str:
     if v in ("minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum"):
         word = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=",
                 "exclusiveMaximum": "<"}[v]
-        return f"must be {word} {error.validator_value}"
+        why = error.schema.get("x-why") if isinstance(error.schema, dict) else None
+        return f"must be {word} {error.validator_value}" + (f": {why}" if why else "")
     if v == "enum":
         return f"must be one of {', '.join(map(str, error.validator_value))}"
     return error.message
@@ -114,6 +117,9 @@ def _check_semantics(config: dict) -> None:
                         f"virtual depth {v_near:.2f} at the near plane: below 1.5 a point is "
                         "seen by too few microlenses to be matched (raise mla.k, the focal "
                         "length or near_m)")
+        why = virtual_depth_problem(optics, near, far)
+        if why:
+            raise _fail(f"{key}.main_lens.focus_distance_m", X_o, why)
     c = config["convert"]
     if c.get("view_spacing_px") is not None and c["view_spacing_px"] <= 0:
         raise _fail("convert.view_spacing_px", c["view_spacing_px"], "must be > 0")

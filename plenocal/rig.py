@@ -34,10 +34,10 @@ from pathlib import Path
 from statistics import median
 
 import numpy as np
-import yaml
 
 from plenocal import optics as o
 from plenocal.camera import PinholeCamera, intrinsics, invert_pose, rotation_angle_deg
+from plenocal.datasheet import load_datasheet
 from plenocal.io import read_json
 from plenocal.viewgeom import central_view, parse_view, view_names, view_position
 
@@ -89,17 +89,16 @@ def _opt(doc: Mapping, path: str):
 def read_datasheet(path: str | Path) -> Datasheet:
     """Read ``camera.yaml``: pixel_size_mm, sensor_width_px, sensor_height_px,
     main_lens.{focus_distance_mm, focal_length_mm}, mla.{pitch_mm, f_numbers, k,
-    sensor_distance_mm (optional)}, array.step_mm, scene.{near_mm, far_mm}."""
+    sensor_distance_mm (optional)}, array.step_mm, scene.{near_mm, far_mm}.
+
+    Validated against :data:`plenocal.datasheet.SCHEMA` first: a bad value raises
+    :class:`plenocal.datasheet.DatasheetError` naming the file and the key."""
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: camera datasheet not found (camera.yaml is written "
-                                "by the simulator, or put next to a real capture's calib.xml)")
-    with open(path) as fh:
-        doc = yaml.safe_load(fh) or {}
+    doc = load_datasheet(path)
     fn = _need(doc, "mla.f_numbers", path)
     fns = tuple(float(x) for x in (fn if isinstance(fn, list | tuple) else [fn]))
     opt_f = lambda key: None if _opt(doc, key) is None else float(_opt(doc, key))  # noqa: E731
-    ds = Datasheet(
+    return Datasheet(
         pixel_size=float(_need(doc, "pixel_size_mm", path)),
         sensor_width=int(_need(doc, "sensor_width_px", path)),
         sensor_height=int(_need(doc, "sensor_height_px", path)),
@@ -113,10 +112,6 @@ def read_datasheet(path: str | Path) -> Datasheet:
         near=opt_f("scene.near_mm"),
         far=opt_f("scene.far_mm"),
     )
-    if ds.pixel_size <= 0 or ds.mla_pitch <= 0 or ds.focus_distance <= 0:
-        raise ValueError(f"{path}: pixel_size_mm, mla.pitch_mm and main_lens.focus_distance_mm "
-                         "must be positive")
-    return ds
 
 
 @dataclass(frozen=True)

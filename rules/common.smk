@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 from plenocal.config import ConfigError, validate_config
+from plenocal.datasheet import DatasheetError, load_datasheet
 from plenocal.viewgeom import central_view, view_names
 
 try:
@@ -45,6 +46,9 @@ def hand_cams(dataset):
 
 
 def real_cams(dataset):
+    """The shots of a real capture: the files in data/<dataset>/lenslet/, each of which
+    must be a lenslet image named x<col>_y<row>.png or hand<k>.png (hidden files, such
+    as a file manager's .DS_Store, are skipped)."""
     folder = Path("data") / dataset / "lenslet"
     if not folder.is_dir():
         raise ValueError(
@@ -52,14 +56,47 @@ def real_cams(dataset):
             "there (x00_y00.png ... and hand00.png ...) or give the dataset a "
             "'simulate' block"
         )
-    names = sorted(p.stem for p in folder.glob("*.png"))
-    bad = [n for n in names if not CAM_RE.match(n)]
+    entries = sorted(p for p in folder.iterdir() if not p.name.startswith("."))
+    bad = []
+    for p in entries:
+        if p.is_dir():
+            bad.append(f"{p.name}/ (a folder)")
+        elif p.suffix != ".png":
+            hint = " (rename it to .png)" if p.suffix.lower() == ".png" else ""
+            bad.append(f"{p.name}{hint}")
+        elif not CAM_RE.match(p.stem):
+            bad.append(p.name)
     if bad:
         raise ValueError(
-            f"dataset {dataset!r}: lenslet images must be named x<col>_y<row>.png or "
-            f"hand<k>.png with two-digit numbers; cannot use {', '.join(bad)}"
+            f"dataset {dataset!r}: {folder}/ may hold only lenslet images named "
+            f"x<col>_y<row>.png or hand<k>.png (two-digit numbers, lower-case .png); "
+            f"move or rename {', '.join(bad)}"
         )
+    names = [p.stem for p in entries]
+    if not names:
+        raise ValueError(f"dataset {dataset!r}: {folder}/ holds no lenslet image")
     return names
+
+
+def check_real_dataset(dataset):
+    """A real capture's files, checked before any job: the lenslet folder, calib.xml,
+    and camera.yaml against its schema (plenocal.datasheet)."""
+    real_cams(dataset)
+    calib = Path("data") / dataset / "calib.xml"
+    if not calib.is_file():
+        raise ValueError(
+            f"dataset {dataset!r}: {calib} does not exist; put the capture's Raytrix "
+            "RayCalibData file there (README, 'Bringing a real capture')"
+        )
+    try:
+        load_datasheet(Path("data") / dataset / "camera.yaml")
+    except (DatasheetError, FileNotFoundError) as err:
+        raise ValueError(f"dataset {dataset!r}: {err}") from None
+
+
+for _d in DATASETS:
+    if _d not in SYNTHETIC:
+        check_real_dataset(_d)
 
 
 def cams(dataset):
@@ -136,6 +173,15 @@ def convert_groups():
         groups.setdefault(n_views(d), []).append(d)
     first = n_views(DATASETS[0])
     return [(first, groups.pop(first))] + sorted(groups.items())
+
+
+def convert_settings(dataset):
+    """The convert block with the dataset's own overrides (its `mla` set-up) applied:
+    only the converter of that dataset reruns when it changes."""
+    out = dict(stage_config("convert"))
+    if ds_config(dataset).get("mla") is not None:
+        out["mla"] = ds_config(dataset)["mla"]
+    return out
 
 
 def convert_view_paths(dataset, cam):
@@ -233,7 +279,7 @@ def report_inputs(wildcards):
         out["scale"] = res(d, "merge", "scale.json")
     if have("rig_b"):
         out["rig"] = res(d, "reg_b", "rig.json")
-    if have("convert_quality"):
+    if is_synthetic(d) and have("convert_quality"):
         out["convert_quality"] = res(d, "convert", "quality.json")
     if have("convert"):
         out["patch_size"] = [res(d, "views", c, "patch_size.png") for c in cams(d)]

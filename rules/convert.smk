@@ -33,7 +33,7 @@ for _i, (_n, _datasets) in enumerate(convert_groups()):
             mem_mb=2500,
             runtime=10,
         params:
-            convert=lambda wc: stage_config("convert"),
+            convert=lambda wc: convert_settings(wc.dataset),
             views=lambda wc: n_views(wc.dataset),
         script:
             "../scripts/convert.py"
@@ -49,6 +49,8 @@ rule convert_quality:
         log_path("convert_quality"),
     benchmark:
         bench_path("convert_quality")
+    wildcard_constraints:
+        dataset=SYN,
     conda:
         "../envs/plenocal.yaml"
     threads: 1

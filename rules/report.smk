@@ -18,6 +18,8 @@ rule gt_errors:
         log_path("gt_errors"),
     benchmark:
         bench_path("gt_errors")
+    wildcard_constraints:
+        dataset=SYN,
     conda:
         "../envs/plenocal.yaml"
     threads: 1

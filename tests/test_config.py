@@ -34,6 +34,11 @@ def test_tiny_config_valid():
 @pytest.mark.parametrize("path, value, key, why", [
     (("datasets", "synthetic", "views"), 4, "datasets.synthetic.views", "odd"),
     (("datasets", "synthetic", "views"), "five", "datasets.synthetic.views", "integer"),
+    (("datasets", "synthetic", "views"), 1, "datasets.synthetic.views", "no baseline"),
+    (("datasets", "synthetic", "mla"), "plenoptic", "datasets.synthetic.mla", "keplerian"),
+    # just outside the focal length: virtual depths in the thousands
+    (("datasets", "synthetic", "simulate", "main_lens", "focus_distance_m"), 0.036,
+     "datasets.synthetic.simulate.main_lens.focus_distance_m", "virtual depths"),
     (("datasets", "synthetic", "simulate", "array", "step_m"), -0.01,
      "datasets.synthetic.simulate.array.step_m", "> 0"),
     (("datasets", "synthetic", "simulate", "main_lens", "focus_distance_m"), 0.03,

@@ -1,0 +1,264 @@
+"""The camera datasheet ``camera.yaml``: its JSON schema and a loader that names the file,
+the key and the remedy for every bad value.
+
+``camera.yaml`` gives what registration B (Section II-C of the paper, Eqs. 1-4) reads
+from the datasheet: the pixel size p, the sensor size, the main lens's focus distance
+X_o, the microlens pitch D, F-number(s) and the paper's k (or the MLA-sensor distance
+s), the array step and the measured nearest / farthest object distances (the inverse
+check of Eqs. 2-3). Every length is in millimetres (the unit is in the key name).
+
+Besides types, the schema holds a plausible range per field, so that a value written in
+the wrong unit (a pixel size of 5.5 "mm" meant as micrometres, a pitch of 130) stops
+the run at the start instead of giving an absurd rig after conversion and SfM. The
+checks a schema cannot express (NaN, near < far, a focus distance beyond the focal
+length) follow in :func:`check_datasheet`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import yaml
+
+
+class DatasheetError(ValueError):
+    """A bad ``camera.yaml``; the message names the file, the key and the remedy."""
+
+
+def _mm(lo: float, hi: float, what: str) -> dict:
+    return {"type": "number", "exclusiveMinimum": 0, "x-range": [lo, hi], "description": what}
+
+
+#: The schema of camera.yaml. ``x-range`` is the plausible range of a field in its unit
+#: (a value outside it is almost surely in another unit); ``x-unit`` names that unit.
+SCHEMA: dict = {
+    "$schema": "https://json-schema.org/draft/2020-12/schema",
+    "title": "camera.yaml: datasheet of the plenoptic camera (lengths in millimetres)",
+    "type": "object",
+    "required": ["pixel_size_mm", "sensor_width_px", "sensor_height_px", "main_lens", "mla"],
+    "properties": {
+        "pixel_size_mm": _mm(0.0005, 0.05, "sensor pixel pitch p (0.5-50 um)"),
+        "sensor_width_px": {"type": "integer", "minimum": 64, "maximum": 65536},
+        "sensor_height_px": {"type": "integer", "minimum": 64, "maximum": 65536},
+        "main_lens": {
+            "type": "object",
+            "required": ["focus_distance_mm"],
+            "properties": {
+                "focus_distance_mm": _mm(5.0, 1.0e6, "X_o, where the main lens is focused"),
+                "focal_length_mm": _mm(1.0, 2000.0, "nominal focal length (information)"),
+            },
+        },
+        "mla": {
+            "type": "object",
+            "required": ["pitch_mm", "f_numbers", "k"],
+            "properties": {
+                "pitch_mm": _mm(0.005, 2.0, "physical microlens pitch D (5 um - 2 mm)"),
+                "f_numbers": {
+                    "description": "microlens F-number(s); the paper uses the middle one",
+                    "oneOf": [
+                        {"type": "number", "exclusiveMinimum": 0, "x-range": [0.5, 64.0]},
+                        {"type": "array", "minItems": 1,
+                         "items": {"type": "number", "exclusiveMinimum": 0,
+                                   "x-range": [0.5, 64.0]}},
+                    ],
+                },
+                "k": {"type": "number", "exclusiveMinimum": 1, "x-range": [1.0, 1000.0],
+                      "description": "the paper's k: s = k f / (k - 1); k <= 1 puts the "
+                                     "sensor at or inside the microlens focal length"},
+                "sensor_distance_mm": _mm(0.01, 20.0, "s, MLA-sensor distance (optional)"),
+            },
+        },
+        "array": {
+            "type": "object",
+            "properties": {"step_mm": _mm(0.01, 1.0e4, "stage step between array shots")},
+        },
+        "scene": {
+            "type": "object",
+            "properties": {
+                "near_mm": _mm(1.0, 1.0e7, "measured nearest object distance X_n"),
+                "far_mm": _mm(1.0, 1.0e7, "measured farthest object distance X_f"),
+            },
+        },
+    },
+}
+
+_UNIT = {"mm": "millimetres", "px": "pixels"}
+
+
+def _dotted(path) -> str:
+    parts = [str(p) for p in path]
+    return ".".join(parts) if parts else "<top level>"
+
+
+def _unit_hint(key: str) -> str:
+    last = key.rsplit(".", 1)[-1]
+    unit = last.rsplit("_", 1)[-1] if "_" in last else ""
+    return f" in {_UNIT[unit]}" if unit in _UNIT else ""
+
+
+def _fail(source: str | Path, key: str, value: Any, why: str) -> DatasheetError:
+    return DatasheetError(f"{source}: {key} = {value!r}: {why}")
+
+
+def _non_finite(doc: Any, path: tuple = ()) -> tuple[tuple, float] | None:
+    """The first NaN or infinity in ``doc`` (YAML's .nan / .inf), with its path."""
+    if isinstance(doc, Mapping):
+        for k in sorted(doc, key=str):
+            hit = _non_finite(doc[k], (*path, k))
+            if hit:
+                return hit
+    elif isinstance(doc, list):
+        for i, v in enumerate(doc):
+            hit = _non_finite(v, (*path, i))
+            if hit:
+                return hit
+    elif isinstance(doc, float) and not math.isfinite(doc):
+        return path, doc
+    return None
+
+
+def _schema_message(err: jsonschema.ValidationError) -> str:
+    key = _dotted(err.absolute_path)
+    v = err.validator
+    if v == "required":
+        missing = [m for m in err.validator_value if m not in (err.instance or {})]
+        return (f"missing key {'.'.join([*map(str, err.absolute_path), missing[0]])!r}"
+                if missing else err.message)
+    if v == "type":
+        want = err.validator_value
+        if want in ("number", "integer") and isinstance(err.instance, str):
+            return (f"must be a plain number{_unit_hint(key)} (the unit is in the key name; "
+                    f"write e.g. 5.5 for {key}, not '5.5 um')")
+        if want == "object":
+            return "must be a mapping of keys to values (key: value lines), not a " + (
+                "list" if isinstance(err.instance, list) else type(err.instance).__name__)
+        return f"must be of type {want}"
+    if v == "oneOf" and key.endswith("f_numbers"):
+        if isinstance(err.instance, list) and not err.instance:
+            return "the F-number list is empty: give the microlens F-number(s), e.g. [2.8]"
+        return "must be a number or a non-empty list of positive numbers (e.g. [2.8])"
+    if v == "exclusiveMinimum" and key.endswith(".k"):
+        return ("must be > 1: the MLA-sensor distance s = k f / (k - 1) lies beyond the "
+                "microlens focal length f only for k > 1 (k <= 1: no focused plenoptic "
+                "camera); typical values are 3-10")
+    if v in ("minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum"):
+        word = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=",
+                "exclusiveMaximum": "<"}[v]
+        return f"must be {word} {err.validator_value}"
+    if v == "minItems":
+        return "must not be empty"
+    return err.message
+
+
+def _check_ranges(doc: Any, schema: Mapping, path: tuple, source: str | Path) -> None:
+    """Plausibility: every number within its field's ``x-range`` (a value outside is
+    almost surely in another unit, e.g. micrometres in a ``_mm`` key)."""
+    if "x-range" in schema and isinstance(doc, int | float) and not isinstance(doc, bool):
+        lo, hi = schema["x-range"]
+        if not lo <= doc <= hi:
+            key = _dotted(path)
+            unit = _unit_hint(key)
+            guess = ""
+            if key.endswith("_mm") and doc > hi and lo <= doc / 1000.0 <= hi:
+                guess = f"; {doc} looks like micrometres: {doc / 1000.0:g} mm is plausible"
+            raise _fail(source, key, doc, f"outside the plausible range {lo:g}-{hi:g}{unit} "
+                        f"({schema.get('description', 'see plenocal/datasheet.py')}){guess}")
+    if isinstance(doc, Mapping):
+        for k, sub in schema.get("properties", {}).items():
+            if k in doc:
+                _check_ranges(doc[k], sub, (*path, k), source)
+    for alt in schema.get("oneOf", []):
+        if alt.get("type") == "array" and isinstance(doc, list):
+            for i, v in enumerate(doc):
+                _check_ranges(v, alt["items"], (*path, i), source)
+        elif alt.get("type") == "number" and not isinstance(doc, list):
+            _check_ranges(doc, alt, path, source)
+
+
+def check_datasheet(doc: Any, source: str | Path = "camera.yaml") -> dict:
+    """Validate a parsed ``camera.yaml``; raise :class:`DatasheetError` naming the key."""
+    if not isinstance(doc, Mapping):
+        kind = "empty" if doc is None else f"a {type(doc).__name__}"
+        raise DatasheetError(f"{source}: the file is {kind}; it must be a mapping of keys "
+                             "to values (pixel_size_mm: ..., mla: {...}; see README, "
+                             "'Bringing a real capture')")
+    bad = _non_finite(doc)
+    if bad:
+        raise _fail(source, _dotted(bad[0]), bad[1], "must be a finite number")
+    validator = jsonschema.Draft202012Validator(SCHEMA)
+    errors = list(validator.iter_errors(doc))
+    if errors:
+        # the deepest error is the most specific; ties in file order
+        err = max(errors, key=lambda e: len(e.absolute_path))
+        shown = err.instance if not isinstance(err.instance, Mapping) else "{...}"
+        raise _fail(source, _dotted(err.absolute_path), shown, _schema_message(err))
+    _check_ranges(doc, SCHEMA, (), source)
+    ml, scene = doc["main_lens"], doc.get("scene") or {}
+    F, X_o = ml.get("focal_length_mm"), ml["focus_distance_mm"]
+    if F is not None and X_o <= F:
+        raise _fail(source, "main_lens.focus_distance_mm", X_o,
+                    f"must exceed the focal length ({F} mm): a focus distance inside the "
+                    "focal length forms no real image")
+    near, far = scene.get("near_mm"), scene.get("far_mm")
+    if near is not None and far is not None and not near < far:
+        raise _fail(source, "scene.near_mm", near, f"must be less than scene.far_mm ({far})")
+    if F is not None and near is not None and far is not None:
+        optics = _optics(doc)
+        why = virtual_depth_problem(optics, near / 1000.0, far / 1000.0)
+        if why:
+            raise _fail(source, "main_lens.focus_distance_mm", X_o, why)
+    return dict(doc)
+
+
+#: the smallest patch (micro-image pitch / virtual depth) a view can be rendered from
+MIN_PATCH_PX = 1.0
+
+
+def virtual_depth_problem(optics, near_m: float, far_m: float) -> str | None:
+    """Why the scene cannot be converted with these optics, or None.
+
+    A point at virtual depth v is repeated in micro images ``v`` apart, so each micro
+    image contributes a patch of D_px / |v| pixels (the RLC conversion of Fig. 1 (a)):
+    past D_px / MIN_PATCH_PX no view can be rendered. A focus distance just outside the
+    focal length puts the image near infinity: virtual depths in the thousands."""
+    d_px = float(optics.micro_image_pitch_px)
+    vs = [float(optics.virtual_depth(z)) for z in (near_m, far_m)]
+    worst = max(abs(v) for v in vs)
+    limit = d_px / MIN_PATCH_PX
+    if not math.isfinite(worst) or worst > limit:
+        return (f"virtual depths {vs[0]:.4g} (near) to {vs[1]:.4g} (far): patches of "
+                f"{d_px / worst:.3g} px in {d_px:.1f} px micro images, under "
+                f"{MIN_PATCH_PX:g} px no view can be rendered (|v| <= {limit:.1f}); move the "
+                "focus distance further from the focal length, or check its unit")
+    return None
+
+
+def _optics(doc: Mapping):
+    """The thin-lens optics the datasheet describes (metres), for the checks above."""
+    from plenocal.optics import PlenopticOptics, middle_f_number  # noqa: PLC0415
+
+    mla, ml = doc["mla"], doc["main_lens"]
+    fns = mla["f_numbers"] if isinstance(mla["f_numbers"], list) else [mla["f_numbers"]]
+    return PlenopticOptics(
+        focal_length=ml["focal_length_mm"] / 1000.0, focus_distance=ml["focus_distance_mm"]
+        / 1000.0, mla_pitch=mla["pitch_mm"] / 1000.0, mla_f_number=middle_f_number(fns),
+        k=mla["k"], pixel_size=doc["pixel_size_mm"] / 1000.0, width=doc["sensor_width_px"],
+        height=doc["sensor_height_px"])
+
+
+def load_datasheet(path: str | Path) -> dict:
+    """Read and validate ``camera.yaml`` (see :data:`SCHEMA`)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: camera datasheet not found (camera.yaml is written "
+                                "by the simulator, or put next to a real capture's calib.xml)")
+    try:
+        with open(path) as fh:
+            doc = yaml.safe_load(fh)
+    except yaml.YAMLError as exc:
+        raise DatasheetError(f"{path}: not valid YAML: {exc}") from None
+    return check_datasheet(doc, path)

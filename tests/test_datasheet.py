@@ -1,0 +1,108 @@
+"""camera.yaml validation (plenocal.datasheet): every bad value is refused with the file,
+the dotted key and the remedy; the simulator's own datasheet passes; read_datasheet
+uses the same checks (no bad value reaches rig.json as null)."""
+
+from __future__ import annotations
+
+import copy
+import math
+from pathlib import Path
+
+import pytest
+import yaml
+
+from plenocal.datasheet import DatasheetError, check_datasheet, load_datasheet
+from plenocal.rig import read_datasheet
+
+# what the simulator writes for the tiny config (plenocal.simulate.dataset.datasheet)
+GOOD = {
+    "pixel_size_mm": 0.0055, "sensor_width_px": 1280, "sensor_height_px": 960,
+    "main_lens": {"focal_length_mm": 35.0, "focus_distance_mm": 600.0},
+    "mla": {"pitch_mm": 0.13, "f_numbers": [2.8], "k": 5.0, "sensor_distance_mm": 0.455},
+    "array": {"step_mm": 10.0}, "scene": {"near_mm": 470.0, "far_mm": 740.0},
+}
+
+
+def _with(path: str, value):
+    doc = copy.deepcopy(GOOD)
+    node = doc
+    parts = path.split(".")
+    for p in parts[:-1]:
+        node = node[p]
+    node[parts[-1]] = value
+    return doc
+
+
+def test_simulator_datasheet_passes(tmp_path: Path):
+    from plenocal.config import validate_config
+    from plenocal.simulate.dataset import datasheet
+    from plenocal.simulate.optics_setup import optics_from_config
+
+    cfg = validate_config(yaml.safe_load(
+        (Path(__file__).parent / "tiny" / "config.yaml").read_text()))
+    sim = cfg["datasets"]["tiny"]["simulate"]
+    doc = datasheet(sim, optics_from_config(sim))
+    (tmp_path / "camera.yaml").write_text(yaml.safe_dump(doc))
+    assert load_datasheet(tmp_path / "camera.yaml")["mla"]["k"] == doc["mla"]["k"]
+    check_datasheet(GOOD)
+
+
+@pytest.mark.parametrize("key, value, words", [
+    ("pixel_size_mm", "5.5 um", ["pixel_size_mm", "plain number", "millimetres"]),
+    ("pixel_size_mm", math.nan, ["pixel_size_mm", "finite"]),
+    ("mla.k", 1.0, ["mla.k", "> 1"]),
+    ("mla.k", 0.5, ["mla.k", "> 1"]),
+    ("mla.f_numbers", [], ["mla.f_numbers", "empty"]),
+    ("mla.f_numbers", [2.8, "f/4"], ["mla.f_numbers"]),
+    ("mla", [0.13, 2.8, 5.0], ["mla", "mapping", "list"]),
+    ("main_lens", None, ["main_lens", "mapping"]),
+    # micrometres in a millimetre key: outside the plausible range, with the guess
+    ("mla.pitch_mm", 130.0, ["mla.pitch_mm", "plausible", "micrometres", "0.13 mm"]),
+    ("pixel_size_mm", 5.5, ["pixel_size_mm", "plausible", "micrometres"]),
+    ("sensor_width_px", 1280.5, ["sensor_width_px", "integer"]),
+    ("scene.near_mm", 800.0, ["scene.near_mm", "far_mm"]),
+    ("main_lens.focus_distance_mm", 30.0, ["main_lens.focus_distance_mm", "focal length"]),
+    # just outside the focal length: virtual depths in the thousands
+    ("main_lens.focus_distance_mm", 36.0, ["main_lens.focus_distance_mm", "virtual depth"]),
+    ("main_lens.focus_distance_mm", -600.0, ["main_lens.focus_distance_mm", "> 0"]),
+])
+def test_bad_value_names_file_key_and_remedy(tmp_path: Path, key, value, words):
+    path = tmp_path / "camera.yaml"
+    path.write_text(yaml.safe_dump(_with(key, value)))
+    with pytest.raises(DatasheetError) as exc:
+        load_datasheet(path)
+    msg = str(exc.value)
+    assert msg.startswith(str(path)), msg
+    for w in words:
+        assert w in msg, (w, msg)
+
+
+def test_missing_key_and_not_a_mapping(tmp_path: Path):
+    doc = copy.deepcopy(GOOD)
+    del doc["mla"]["k"]
+    with pytest.raises(DatasheetError, match=r"missing key 'mla\.k'"):
+        check_datasheet(doc)
+    path = tmp_path / "camera.yaml"
+    path.write_text("- 0.0055\n- 1280\n")
+    with pytest.raises(DatasheetError, match="must be a mapping"):
+        load_datasheet(path)
+    path.write_text("")
+    with pytest.raises(DatasheetError, match="empty"):
+        load_datasheet(path)
+
+
+def test_yaml_nan_is_refused(tmp_path: Path):
+    path = tmp_path / "camera.yaml"
+    path.write_text(yaml.safe_dump(GOOD).replace("k: 5.0", "k: .nan"))
+    with pytest.raises(DatasheetError, match=r"mla\.k = nan: must be a finite number"):
+        load_datasheet(path)
+
+
+def test_read_datasheet_uses_the_schema(tmp_path: Path):
+    path = tmp_path / "camera.yaml"
+    path.write_text(yaml.safe_dump(GOOD))
+    ds = read_datasheet(path)
+    assert ds.k == 5.0 and ds.f_numbers == (2.8,) and ds.sensor_distance == 0.455
+    path.write_text(yaml.safe_dump(_with("array.step_mm", "10 mm")))
+    with pytest.raises(DatasheetError, match=r"array\.step_mm"):
+        read_datasheet(path)
