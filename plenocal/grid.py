@@ -12,6 +12,10 @@ rotation inside ``lens_base_x/y`` (rotation pi/2 with rotated base vectors) and 
 that store it beside them (TempleBoat: base vectors unrotated, rotation 0.0007 rad)
 describe the same lattice; the lens types are read in the frame of the base vectors.
 
+A grid measured on the image (:func:`plenocal.convert.gridcheck.refine_grid`) replaces
+the file's origin and lattice vectors by fitted ones (``lattice=(origin, A)``, an affine
+lattice); lens indices ``(i, j)`` and lens types stay those of the file.
+
 Lens types: the type-0 lenses form the centred rectangular lattice whose cell is
 ``|sub_grid_base|`` (3 x sqrt(3) lens units for rows of lenses); type ``t`` is that
 lattice shifted by its ``offset``.
@@ -52,6 +56,9 @@ class MicrolensGrid:
     calib: RayCalib
     width: int
     height: int
+    # (origin (2,), A (2, 2) with lattice vectors as columns), image pixels: a measured
+    # lattice replacing the file's (None: the file's)
+    lattice: tuple[np.ndarray, np.ndarray] | None = None
     ij: np.ndarray = field(init=False)  # (n, 2) int lattice coordinates
     centres: np.ndarray = field(init=False)  # (n, 2) float image coordinates (x, y)
     types: np.ndarray = field(init=False)  # (n,) lens type id
@@ -61,11 +68,18 @@ class MicrolensGrid:
     def __post_init__(self) -> None:
         c = self.calib
         D = c.diameter
-        self.origin = np.array([(self.width - 1) / 2 + c.offset[0],
-                                (self.height - 1) / 2 - c.offset[1]])
+        origin = np.array([(self.width - 1) / 2 + c.offset[0],
+                           (self.height - 1) / 2 - c.offset[1]])
         R = _rot(c.rotation)
         flip = np.diag([1.0, -1.0])
-        self.A = (flip @ R @ np.array([[1.0, 0.5], [0.0, math.sqrt(3) / 2]])) * D  # columns
+        A_file = (flip @ R @ np.array([[1.0, 0.5], [0.0, math.sqrt(3) / 2]])) * D  # columns
+        if self.lattice is None:
+            self.origin, self.A = origin, A_file
+        else:
+            self.origin = np.asarray(self.lattice[0], dtype=float).reshape(2).copy()
+            self.A = np.asarray(self.lattice[1], dtype=float).reshape(2, 2).copy()
+            if abs(np.linalg.det(self.A)) < 1e-6 * D * D:
+                raise CalibError(f"{c.source}: measured lattice is degenerate ({self.A.tolist()})")
         # unit vectors of the lattice frame in image coordinates
         self.e1 = self.A[:, 0] / np.linalg.norm(self.A[:, 0])
         self.e2 = np.array([-self.e1[1], self.e1[0]])  # e1 turned +90 deg in y-down image
@@ -91,7 +105,9 @@ class MicrolensGrid:
         self.centres = centres[idx]
         rel = self.centres - self.origin
         self.lattice_xy = np.stack([rel @ self.e1, rel @ self.e2], axis=1) / D
-        self.types = self._lens_types(rel / D)
+        # lens types from the lattice indices on the file's lattice (the same lenses for a
+        # measured lattice as for the file's)
+        self.types = self._lens_types(self.ij @ A_file.T / D)
         self.neighbours = self._neighbours()
 
     # ------------------------------------------------------------------

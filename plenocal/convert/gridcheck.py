@@ -1,0 +1,429 @@
+"""Check the calib.xml microlens grid against the micro images of the frame, and refine it.
+
+Measurement. The micro images repeat on the MLA lattice, so the grey frame has its
+strongest periodic components at the lattice's three shortest reciprocal vectors
+``k_1, k_2, k_3 = -(k_1 + k_2)`` (cycles per pixel, ``k_i . a_j = delta_ij``). The frame is
+divided by its local mean (vignetting is multiplicative: bright and dark parts of the
+scene then weigh alike), demodulated at each ``k_j`` relative to the file's grid and
+low-passed over a few lenses. For micro images ``v(x - c_i)`` of a point-symmetric profile
+centred at ``c_i = c_i^file + delta``, the local coefficient is
+``z_j = V(k_j) exp(-2 pi i k_j . delta)``: its phase gives the local shift ``delta`` of the
+true lattice against the file's, modulo one lens. ``V`` is real, of one sign for the three
+``k_j`` (hexagonal symmetry); the phase closure ``arg(z_1 z_2 z_3) = 3 arg V`` (the
+``delta`` terms cancel, as ``k_1 + k_2 + k_3 = 0``) gives that sign, and lenses whose closure
+is far from it (scene content at the lattice frequency, dark or textureless regions) are
+not measured. The frame is first reduced by area averaging to about 10 px per lens
+(the phase keeps sub-pixel accuracy), which makes the check take ~0.1 s per 4 MP frame.
+
+Fit. ``c_i^measured = o + M (i, j)`` by least squares with outlier trimming (3 robust
+sigmas): an affine lattice (offset, pitch, rotation, and anisotropic scale / shear), and
+the similarity part of it (offset, pitch, rotation: what a RayCalibData file can hold).
+The shift modulo one lens is unwrapped from the centre outwards, so grids off by several
+pixels at the edges (a pitch error) are followed. The drift of the file's grid is the
+distance from each lens's file centre to the fitted lattice (max, rms, and per region: the
+four corners and the centre); the raw per-lens measurements give the model-free medians per
+region.
+
+Where is the RayCalibData offset measured from? On the three Raytrix frames whose files
+fit their micro images (Fujita2, Origami, Boxer-IrishMan-Gladiator2), the fitted lattice
+at the image centre lies at file + (+0.28, -0.08), (+0.08, +0.01) and (+0.42, +0.06) px
+when the offset is read from ``((W-1)/2, (H-1)/2)`` (this project's convention,
+:mod:`plenocal.raytrix`). TLCT's ``(W/2, H/2)`` puts the grid half a pixel further right
+and down, so under TLCT's reading the micro images would sit at about (-0.2, -0.5) px
+from its grid. In y the measurement is clear (within 0.1 px of ``(H-1)/2``, 0.5 px from
+``H/2``); in x it lies between the two (0.08..0.42 px, frame to frame), so x alone does
+not decide, and the project keeps ``((W-1)/2, (H-1)/2)``. On synthetic frames with known
+centres the check is unbiased to 0.03 px, so these offsets are the files', not the
+method's. (Figures: ``bench/bench_real.py``, BENCHMARKS.md.)
+
+Known limits. The phase measures the centre of the repeating micro-image pattern; where
+vignetting is weak and the scene repeats strongly from lens to lens (the TSPC frames,
+Galilean, with bright micro images and thin borders) scene content biases it: the per-lens
+residual is 8 px of 70 there against ~1 px of 23-35 on the Raytrix frames. On HandTools
+the refined grid lies 0.3-5 px from the four corner centres of the TSPC tools (the file's
+grid 12-14 px); on Boys2 it lies 14-18 px from them (the file's 5-21 px): the check sees
+the drift towards the right edge, but its Boys2 fit is not better than the file.
+
+``convert.grid`` values:
+
+- ``file``: the file's grid as it is; the check still runs and is reported.
+- ``refine``: the fitted affine lattice (:func:`refine_grid`), unless the check found too
+  few lenses to fit (then the file's grid, with a warning).
+- ``auto`` (the rule of :func:`decide`): refine when the file's grid drifts from the fitted
+  lattice by more than ``AUTO_DRIFT_PX`` = 1 px somewhere on the sensor, and by more than
+  ``AUTO_DRIFT_SIGMAS`` = 4 standard errors of that drift, and the file is not foreign.
+  Why 1 px: a centre error of ``e`` px shifts that lens's tile in a view by ``e T / P``
+  output pixels (seams at tile borders), so half a pixel would be the ideal bar; but the
+  measurement repeats only to ~0.6 px at the corners between Fujita2 and Origami (same
+  camera, same calib.xml, different scenes), and refining on less than that would chase the
+  scene, not the grid. The Raytrix files (drift 0.7-1.35 px, standard error 0.1-0.4) stay;
+  the TSPC files (drift 12-36 px) are refined.
+- A grid that is not on the micro images at all (a calib.xml from another camera or for
+  another sensor crop) is recognised as foreign: fewer than ``MIN_SHARE`` of the lenses
+  measured, a fitted pitch more than ``FOREIGN_PITCH`` (2 %) from the file's, the lattice
+  more than a quarter lens off at the image centre, or measurements more than a fifth of a
+  lens (rms) from any lattice. It is reported with its measured drift
+  (``GridCheck.foreign``, a warning in ``GridCheck.warnings``) and never refined
+  automatically: a wrong file should be replaced, not patched (``refine`` still may). The
+  R42_klein_crop file is one: a crop of a larger frame whose offset was left for the full
+  sensor (lattice 14 px = 0.4 lens off).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, replace
+
+import cv2
+import numpy as np
+
+from plenocal.grid import MicrolensGrid
+from plenocal.raytrix import RayCalib
+
+AUTO_DRIFT_PX = 1.0  # refine (convert.grid: auto) past this drift of the file's grid
+AUTO_DRIFT_SIGMAS = 4.0  # ... and when the drift is this many standard errors
+MIN_SHARE = 0.2  # fewer lenses measured than this: the grid is not on the micro images
+FOREIGN_PITCH = 0.02  # fitted pitch this far from the file's: another camera's file
+FOREIGN_OFFSET = 0.25  # lenses: fitted lattice this far from the file's at the image centre
+FOREIGN_RESIDUAL = 0.2  # lenses: measurements this far from any lattice (rms)
+WORK_PX_PER_LENS = 10.0  # the frame is reduced to about this many pixels per lens
+CLOSURE_TOL = 0.6  # rad: phase closure of a measured lens
+BOX_LENSES = 3.0  # low-pass: two box filters this many lenses wide
+MIN_LENSES = 30  # fewer measured lenses: no fit
+GRID_MODES = ("file", "refine", "auto")
+REGIONS = ("top_left", "top_right", "centre", "bottom_left", "bottom_right")
+
+
+@dataclass
+class GridCheck:
+    """The file's grid against the micro-image centres measured in the frame (pixels)."""
+
+    width: int
+    height: int
+    diameter_px: float
+    lenses: int
+    measured: int
+    measured_share: float
+    fitted: bool
+    drift_max_px: float  # file grid vs fitted lattice, over every lens on the sensor
+    drift_rms_px: float
+    drift_stderr_px: float  # standard error of the fitted drift at its worst lens
+    regions: dict[str, dict[str, float]]  # per region: fit (dx, dy) and measured median
+    offset_px: tuple[float, float]  # fitted lattice - file grid at the image centre
+    pitch_ratio: float  # fitted pitch / file pitch (mean of the two lattice vectors)
+    rotation_deg: float  # fitted lattice rotation - file rotation, image frame (y down)
+    affine: list[list[float]]  # fitted A = affine @ A_file
+    origin: tuple[float, float]  # fitted lattice: centre of lens (0, 0)
+    A: list[list[float]]  # fitted lattice vectors as columns
+    similarity_origin: tuple[float, float]  # centre of lens (0, 0) on the best similarity
+    residual_rms_px: float  # measurements vs the affine fit
+    similarity_residual_rms_px: float  # measurements vs the best similarity
+    foreign: bool
+    refine_auto: bool
+    warnings: list[str] = field(default_factory=list)
+    seconds: float = 0.0
+
+    def to_dict(self) -> dict:
+        """For disparity.json (plain floats and lists)."""
+        d = asdict(self)
+        d["rule"] = (f"convert.grid auto refines when drift_max_px > {AUTO_DRIFT_PX} and "
+                     f"> {AUTO_DRIFT_SIGMAS:g} x drift_stderr_px, and not foreign")
+        return d
+
+    def summary(self) -> str:
+        r = self.regions
+        corners = ", ".join(f"{k} {r[k]['fit_drift_px']:.2f}" for k in REGIONS if k in r)
+        return (f"grid check: {100 * self.measured_share:.0f}% of {self.lenses} lenses "
+                f"measured; file grid drifts max {self.drift_max_px:.2f} px (rms "
+                f"{self.drift_rms_px:.2f}, +-{self.drift_stderr_px:.2f}) [{corners}]; fitted "
+                f"offset ({self.offset_px[0]:+.2f}, {self.offset_px[1]:+.2f}) px, pitch x"
+                f"{self.pitch_ratio:.5f}, rotation {self.rotation_deg:+.4f} deg; residual "
+                f"{self.residual_rms_px:.2f} px" + (" - FOREIGN GRID" if self.foreign else ""))
+
+
+def decide(mode: str, check: GridCheck) -> bool:
+    """Whether to use the refined grid for ``convert.grid`` = ``mode``."""
+    if mode not in GRID_MODES:
+        raise ValueError(f"convert.grid: {mode!r} is not one of {', '.join(GRID_MODES)}")
+    if mode == "file":
+        return False
+    if mode == "refine":
+        return check.fitted
+    return check.refine_auto
+
+
+# ---------------------------------------------------------------------------
+# measurement
+# ---------------------------------------------------------------------------
+
+
+def _grey(image: np.ndarray) -> np.ndarray:
+    """One channel, in the image's own integer type where it has one (fast reductions)."""
+    img = np.ascontiguousarray(image)
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[:, :, 0]
+    elif img.ndim == 3:
+        if img.dtype not in (np.uint8, np.uint16, np.float32):
+            img = img.astype(np.float32)
+        img = cv2.cvtColor(np.ascontiguousarray(img[:, :, :3]), cv2.COLOR_RGB2GRAY)
+    if img.dtype not in (np.uint8, np.uint16, np.float32):
+        img = img.astype(np.float32)
+    return img
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def _measure(image: np.ndarray, origin: np.ndarray, A: np.ndarray, centres: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """Per-lens shift of the true lattice against (origin, A) at ``centres`` (modulo one
+    lens, in the cell nearest zero) and a measured flag."""
+    D = float(np.sqrt(abs(np.linalg.det(A)) * 2 / math.sqrt(3)))
+    s = max(1, int(D // WORK_PX_PER_LENS))
+    g = _grey(image)
+    H, W = g.shape
+    Hs, Ws = H // s, W // s
+    if s > 1:
+        g = cv2.resize(np.ascontiguousarray(g[:Hs * s, :Ws * s]), (Ws, Hs),
+                       interpolation=cv2.INTER_AREA)
+    g = g.astype(np.float32)
+    Ds = D / s
+    # small pixel u covers big pixels s u .. s u + s - 1: its centre is at s u + (s - 1) / 2
+    o_s = (origin - (s - 1) / 2) / s
+    A_s = A / s
+    wide = max(3, int(round(2 * Ds)) | 1)
+    mean = cv2.blur(cv2.blur(g, (wide, wide)), (wide, wide))
+    n = g / np.maximum(mean, np.float32(1e-3 * max(float(g.max()), 1e-6))) - np.float32(1.0)
+    K = np.linalg.inv(A_s)  # rows: reciprocal vectors k_1, k_2 (cycles per small pixel)
+    ks = np.stack([K[0], K[1], -(K[0] + K[1])])
+    xs = np.arange(Ws, dtype=np.float64) - o_s[0]
+    ys = np.arange(Hs, dtype=np.float64) - o_s[1]
+    box = max(3, int(round(BOX_LENSES * Ds)) | 1)
+    pts = ((centres - (s - 1) / 2) / s).astype(np.float32)
+    mx, my = pts[:, 0].reshape(-1, 1), pts[:, 1].reshape(-1, 1)
+    z = np.empty((len(centres), 3), dtype=np.complex128)
+    amp_ref = cv2.blur(cv2.blur(np.abs(n), (box, box)), (box, box))
+    for j, k in enumerate(ks):
+        ax, ay = 2 * np.pi * k[0] * xs, 2 * np.pi * k[1] * ys
+        cx, sx = np.cos(ax).astype(np.float32), np.sin(ax).astype(np.float32)
+        cy, sy = np.cos(ay).astype(np.float32), np.sin(ay).astype(np.float32)
+        # n exp(-i (ax + ay)) = n (cos ax cos ay - sin ax sin ay) - i n (sin ax cos ay + ...)
+        re = n * (np.outer(cy, cx) - np.outer(sy, sx))
+        im = n * (np.outer(sy, cx) + np.outer(cy, sx))
+        parts = []
+        for comp in (re, -im):
+            sm = cv2.blur(cv2.blur(comp, (box, box)), (box, box))
+            parts.append(cv2.remap(sm, mx, my, cv2.INTER_LINEAR,
+                                   borderMode=cv2.BORDER_REPLICATE)[:, 0])
+        z[:, j] = parts[0] + 1j * parts[1]
+    ref = cv2.remap(amp_ref, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[:, 0]
+    triple = z[:, 0] * z[:, 1] * z[:, 2]
+    sign = 1.0 if float(np.sum(triple).real) >= 0 else -1.0
+    if sign < 0:
+        z = -z
+    phi = np.angle(z)
+    closure = _wrap(phi.sum(axis=1))
+    # delta from phases 1 and 2 (k_i . a_j = delta_ij), then least squares with all three
+    d0 = -(phi[:, :1] * A_s[:, 0] + phi[:, 1:2] * A_s[:, 1]) / (2 * np.pi)
+    e = _wrap(phi + 2 * np.pi * d0 @ ks.T)
+    d = d0 - e @ np.linalg.pinv(2 * np.pi * ks).T
+    d = _nearest_cell(d, A_s, np.zeros_like(d))
+    amp = np.abs(z).min(axis=1)
+    margin = box  # windows that reach past the border are unreliable
+    inside = ((pts[:, 0] >= margin) & (pts[:, 0] <= Ws - 1 - margin)
+              & (pts[:, 1] >= margin) & (pts[:, 1] <= Hs - 1 - margin))
+    ok = inside & (np.abs(closure) < CLOSURE_TOL) & (amp > 0.05 * np.maximum(ref, 1e-6))
+    return d * s, ok
+
+
+def _nearest_cell(d: np.ndarray, A: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """``d`` moved by whole lattice vectors to the translate nearest ``target``."""
+    Ainv = np.linalg.inv(A)
+    base = np.round((target - d) @ Ainv.T)
+    best = d + base @ A.T
+    best_err = np.linalg.norm(best - target, axis=1)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            if di == dj == 0:
+                continue
+            cand = d + (base + (di, dj)) @ A.T
+            err = np.linalg.norm(cand - target, axis=1)
+            better = err < best_err
+            best[better], best_err[better] = cand[better], err[better]
+    return best
+
+
+def _fit_affine(ij: np.ndarray, y: np.ndarray, keep: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """y = P [1, i, j] for the kept rows, trimmed at 3 robust sigmas; (P (2, 3), keep,
+    covariance of P's rows (3, 3) per unit variance)."""
+    X = np.column_stack([np.ones(len(ij)), ij])
+    keep = keep.copy()
+    for _ in range(4):
+        P, *_ = np.linalg.lstsq(X[keep], y[keep], rcond=None)
+        r = np.linalg.norm(X @ P - y, axis=1)
+        sig = 1.4826 * float(np.median(r[keep])) + 1e-3
+        new = keep & (r < max(3 * sig, 0.3))
+        if new.sum() < MIN_LENSES or np.array_equal(new, keep):
+            break
+        keep = new
+    P, *_ = np.linalg.lstsq(X[keep], y[keep], rcond=None)
+    cov = np.linalg.inv(X[keep].T @ X[keep])
+    return P.T, keep, cov
+
+
+def _similarity(A_file: np.ndarray, A_fit: np.ndarray) -> tuple[float, float]:
+    """(scale, angle) of the similarity closest to A_fit A_file^-1 (least squares)."""
+    M = A_fit @ np.linalg.inv(A_file)
+    a, b = (M[0, 0] + M[1, 1]) / 2, (M[1, 0] - M[0, 1]) / 2
+    return math.hypot(a, b), math.atan2(b, a)
+
+
+def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
+    """Measure ``grid`` (from calib.xml) against the micro images of ``image``."""
+    import time  # noqa: PLC0415
+
+    t0 = time.perf_counter()
+    H, W = image.shape[:2]
+    if (W, H) != (grid.width, grid.height):
+        raise ValueError(f"grid is for {grid.width}x{grid.height}, image is {W}x{H}")
+    D = grid.diameter
+    c_file = grid.centres
+    d, ok = _measure(image, grid.origin, grid.A, c_file)
+    ij = grid.ij.astype(float)
+    centre = np.array([(W - 1) / 2, (H - 1) / 2])
+    warnings: list[str] = []
+    # unwrap from the centre outwards: fit near the centre, re-pick each lens's shift
+    # nearest the fit's prediction, widen
+    r_lens = np.linalg.norm(c_file - centre, axis=1)
+    r_max = float(r_lens.max()) + 1
+    radius = max(8 * D, 0.15 * r_max)
+    P = None
+    keep = ok
+    cov = np.eye(3)
+    while True:
+        sel = ok & (r_lens <= radius)
+        if sel.sum() >= MIN_LENSES:
+            P, keep, cov = _fit_affine(ij, c_file + d, sel)
+        if P is not None and radius < r_max:
+            pred = np.column_stack([np.ones(len(ij)), ij]) @ P.T - c_file
+            d = _nearest_cell(d, grid.A, pred)
+        if radius >= r_max:
+            break
+        radius = min(radius * 1.6, r_max)
+    n_lens = len(c_file)
+    measured = int(ok.sum())
+    share = measured / max(n_lens, 1)
+    if P is None:
+        warnings.append(f"grid check: only {measured} of {n_lens} lenses measured: cannot fit "
+                        "the lattice; the calib.xml grid does not match the micro images")
+        return GridCheck(W, H, D, n_lens, measured, share, False, math.nan, math.nan, math.nan,
+                         {}, (math.nan, math.nan), math.nan, math.nan, [], (math.nan,) * 2,
+                         [], (math.nan,) * 2, math.nan, math.nan, True, False, warnings,
+                         time.perf_counter() - t0)
+    X = np.column_stack([np.ones(len(ij)), ij])
+    fit = X @ P.T
+    drift = fit - c_file
+    dn = np.linalg.norm(drift, axis=1)
+    resid = np.linalg.norm(fit - (c_file + d), axis=1)
+    sigma = float(np.sqrt(np.mean(resid[keep] ** 2) / 2))  # per coordinate
+    worst = int(np.argmax(dn))
+    # neighbouring lenses share their low-pass window (two boxes BOX_LENSES wide): about
+    # BOX_LENSES^2 / (sqrt(3)/2) lenses per independent measurement
+    corr = math.sqrt(BOX_LENSES ** 2 / (math.sqrt(3) / 2))
+    stderr = corr * sigma * float(np.sqrt(X[worst] @ cov @ X[worst]))
+    origin_fit, A_fit = P[:, 0], P[:, 1:]
+    scale, ang = _similarity(grid.A, A_fit)
+    # best similarity through the measurements, for the residual a RayCalib would leave
+    S = scale * np.array([[math.cos(ang), -math.sin(ang)], [math.sin(ang), math.cos(ang)]])
+    A_sim = S @ grid.A
+    o_sim = np.mean((c_file + d)[keep] - ij[keep] @ A_sim.T, axis=0)
+    sim_res = np.linalg.norm(o_sim + ij @ A_sim.T - (c_file + d), axis=1)
+    # at the image centre: fitted lattice point minus the file's, same lattice coordinates
+    ij_c = (centre - grid.origin) @ np.linalg.inv(grid.A).T
+    off = origin_fit + A_fit @ ij_c - centre
+    regions = _regions(W, H, D, c_file, drift, d, keep)
+    res_rms = float(np.sqrt(np.mean(resid[keep] ** 2)))
+    foreign = bool(share < MIN_SHARE or abs(scale - 1) > FOREIGN_PITCH
+                   or float(np.linalg.norm(off)) > FOREIGN_OFFSET * D
+                   or res_rms > FOREIGN_RESIDUAL * D)
+    refine_auto = bool(not foreign and dn.max() > AUTO_DRIFT_PX
+                       and dn.max() > AUTO_DRIFT_SIGMAS * stderr)
+    if foreign:
+        warnings.append(
+            f"grid check: the calib.xml grid does not fit the micro images of this frame "
+            f"({100 * share:.0f}% of lenses measured, fitted pitch x{scale:.4f}, drift up to "
+            f"{dn.max():.1f} px of a {D:.1f} px lens): is calib.xml for this camera and this "
+            "sensor crop?")
+    elif dn.max() > AUTO_DRIFT_PX:
+        warnings.append(f"grid check: the calib.xml grid drifts up to {dn.max():.2f} px from "
+                        "the micro-image centres (convert.grid: refine / auto corrects it)")
+    return GridCheck(
+        width=W, height=H, diameter_px=float(D), lenses=n_lens, measured=measured,
+        measured_share=float(share), fitted=True, drift_max_px=float(dn.max()),
+        drift_rms_px=float(np.sqrt(np.mean(dn ** 2))), drift_stderr_px=stderr,
+        regions=regions, offset_px=(float(off[0]), float(off[1])),
+        pitch_ratio=float(scale), rotation_deg=float(math.degrees(ang)),
+        affine=(A_fit @ np.linalg.inv(grid.A)).tolist(),
+        origin=(float(origin_fit[0]), float(origin_fit[1])), A=A_fit.tolist(),
+        residual_rms_px=res_rms, similarity_origin=(float(o_sim[0]), float(o_sim[1])),
+        similarity_residual_rms_px=float(np.sqrt(np.mean(sim_res[keep] ** 2))),
+        foreign=foreign, refine_auto=refine_auto, warnings=warnings,
+        seconds=time.perf_counter() - t0)
+
+
+def _regions(W: int, H: int, D: float, c: np.ndarray, drift: np.ndarray, d: np.ndarray,
+             keep: np.ndarray) -> dict[str, dict[str, float]]:
+    """Per region (a square of a fifth of the shorter side at each corner, and at the
+    centre): the fitted drift at the lens nearest the region's corner (centre) and the
+    median of the lenses measured there."""
+    side = max(min(W, H) / 5, 3 * D)
+    anchors = {"top_left": (0, 0), "top_right": (W - 1, 0), "centre": ((W - 1) / 2, (H - 1) / 2),
+               "bottom_left": (0, H - 1), "bottom_right": (W - 1, H - 1)}
+    out = {}
+    for name, (ax, ay) in anchors.items():
+        a = np.array([ax, ay], dtype=float)
+        dist = np.abs(c - a).max(axis=1)
+        near = int(np.argmin(np.linalg.norm(c - a, axis=1)))
+        reach = side / 2 if name == "centre" else side
+        inr = (dist <= reach) & keep
+        med = np.median(d[inr], axis=0) if inr.any() else np.array([math.nan, math.nan])
+        out[name] = {
+            "x": float(c[near, 0]), "y": float(c[near, 1]),
+            "fit_dx_px": float(drift[near, 0]), "fit_dy_px": float(drift[near, 1]),
+            "fit_drift_px": float(np.linalg.norm(drift[near])),
+            "measured_dx_px": float(med[0]), "measured_dy_px": float(med[1]),
+            "measured_lenses": int(inr.sum()),
+        }
+    return out
+
+
+# ---------------------------------------------------------------------------
+# refinement
+# ---------------------------------------------------------------------------
+
+
+def refine_grid(grid: MicrolensGrid, check: GridCheck) -> MicrolensGrid:
+    """The grid on the fitted affine lattice (same lens indices and types as ``grid``);
+    ``calib`` becomes :func:`refine_calib`'s similarity (diameter: the fitted mean pitch)."""
+    if not check.fitted:
+        raise ValueError("grid check found too few lenses to fit the lattice: cannot refine")
+    calib = refine_calib(grid.calib, check)
+    return MicrolensGrid(calib, grid.width, grid.height,
+                         lattice=(np.array(check.origin), np.array(check.A)))
+
+
+def refine_calib(calib: RayCalib, check: GridCheck) -> RayCalib:
+    """The RayCalibData closest to the fitted lattice: offset, diameter and rotation of its
+    best similarity (a RayCalib cannot hold the affine part; see
+    ``GridCheck.similarity_residual_rms_px`` for what it leaves)."""
+    if not check.fitted:
+        raise ValueError("grid check found too few lenses to fit the lattice: cannot refine")
+    W, H = check.width, check.height
+    ox = check.similarity_origin[0] - (W - 1) / 2
+    oy = (H - 1) / 2 - check.similarity_origin[1]
+    # image-frame rotation (y down) is the file's rotation (y up) negated
+    return replace(calib, offset=(float(ox), float(oy)),
+                   diameter=float(calib.diameter * check.pitch_ratio),
+                   rotation=float(calib.rotation - math.radians(check.rotation_deg)))
