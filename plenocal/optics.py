@@ -1,4 +1,4 @@
-"""Optics of a focused plenoptic (plenoptic 2.0, Keplerian) camera.
+"""Optics of a focused plenoptic (plenoptic 2.0) camera, Keplerian or Galilean.
 
 Two families of functions live here:
 
@@ -17,6 +17,14 @@ behind it, ``e = F^2 / (X_o - F)``. The MLA (microlens pitch ``D``, focal
 ``t = k f``. A point whose main-lens image lies ``a`` in front of the MLA has
 virtual depth ``v = a / s`` and appears in neighbouring micro images shifted by
 ``D s (1/a - 1/L)`` (metres on the sensor; for ``a << L`` this is ``D / v``).
+
+Galilean set-up: the MLA stands in front of the main-lens image, which the microlenses
+see as a virtual object ``|t| = k f`` behind them (``1/s = 1/f + 1/(k f)``, so
+``s = k f / (k + 1) < f``); lengths ``t``, ``a`` and the virtual depth ``v`` are then
+negative and the micro images upright. Multi-focus MLAs (Raytrix): every lens type
+has its own focal length ``f_i``, all share ``s``; a type images sharply the virtual
+depth ``v_i = 1 / kappa_i`` with ``kappa_i = s / f_i - 1``, and a point at virtual
+depth ``v`` is blurred on the sensor into a disc of ``D |kappa_i - 1/v|`` (metres).
 """
 
 from __future__ import annotations
@@ -176,6 +184,17 @@ class PlenopticOptics:
     width: int  # sensor pixels
     height: int
     aperture_scale: float = 1.0  # main-lens aperture relative to the F-number match
+    kind: str = "keplerian"  # or "galilean"
+    # focal length of each lens type relative to f (type ids 0, 1, ...); (1,) single-focus
+    type_focal_ratios: tuple[float, ...] = (1.0,)
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("keplerian", "galilean"):
+            raise ValueError(f"kind must be 'keplerian' or 'galilean' (got {self.kind!r})")
+        if not self.type_focal_ratios or min(self.type_focal_ratios) <= 0:
+            raise ValueError(f"type_focal_ratios must be > 0 (got {self.type_focal_ratios})")
+        object.__setattr__(self, "type_focal_ratios",
+                           tuple(float(r) for r in self.type_focal_ratios))
 
     # -- derived lengths (paper symbols) --------------------------------------
     @property
@@ -183,12 +202,60 @@ class PlenopticOptics:
         return microlens_focal(self.mla_f_number, self.mla_pitch)
 
     @property
+    def galilean(self) -> bool:
+        return self.kind == "galilean"
+
+    @property
     def s(self) -> float:
+        """MLA-to-sensor distance: k f / (k - 1) (Keplerian), k f / (k + 1) (Galilean)."""
+        if self.galilean:
+            if self.k <= 0:
+                raise ValueError(f"k must be > 0 (got {self.k})")
+            return self.k * self.f / (self.k + 1.0)
         return mla_sensor_distance(self.k, self.f)
 
     @property
     def t(self) -> float:
-        return sharp_image_distance(self.s, self.f)
+        """Signed distance in front of the MLA imaged sharply by the reference lens type:
+        k f (Keplerian), -k f (Galilean: a virtual object behind the MLA)."""
+        return self.type_t(None)
+
+    # -- lens types (multi-focus MLA) ---------------------------------------------
+    @property
+    def lens_types(self) -> int:
+        return len(self.type_focal_ratios)
+
+    def type_f(self, lens_type: int | None) -> float:
+        """Focal length of a lens type (``None``: the reference type, f)."""
+        return self.f if lens_type is None else self.f * self.type_focal_ratios[lens_type]
+
+    def type_t(self, lens_type: int | None) -> float:
+        """Signed sharp object distance s f_i / (s - f_i) of a lens type (thin lens)."""
+        s, fi = self.s, self.type_f(lens_type)
+        if s == fi:
+            raise ValueError("a lens type with f = s images infinity: no sharp plane")
+        return s * fi / (s - fi)
+
+    def type_kappa(self, lens_type: int | None) -> float:
+        """kappa_i = s / f_i - 1 = 1 / v_i: inverse sharp virtual depth of a lens type."""
+        return self.s / self.type_f(lens_type) - 1.0
+
+    def blur_px(self, v: np.ndarray | float, lens_type: int | None) -> np.ndarray | float:
+        """Defocus disc diameter (pixels) of a point at (signed) virtual depth ``v`` seen
+        through a lens of the given type: D |kappa_i - 1/v| / p."""
+        v = np.asarray(v, dtype=np.float64)
+        out = self.mla_pitch * np.abs(self.type_kappa(lens_type) - 1.0 / v) / self.pixel_size
+        return out if out.ndim else float(out)
+
+    def depth_of_field(self, lens_type: int | None, blur_px: float) -> tuple[float, float]:
+        """|virtual depth| range in which the type's blur disc stays within ``blur_px``
+        pixels: 1/|v| in [|kappa_i| - w, |kappa_i| + w], w = blur_px p / D (inf: far end
+        open)."""
+        w = blur_px * self.pixel_size / self.mla_pitch
+        kap = abs(self.type_kappa(lens_type))
+        lo = 1.0 / (kap + w)
+        hi = 1.0 / (kap - w) if kap > w else math.inf
+        return lo, hi
 
     @property
     def e(self) -> float:
@@ -222,7 +289,8 @@ class PlenopticOptics:
         return F * Z / (Z - F)
 
     def virtual_depth(self, Z: np.ndarray | float) -> np.ndarray | float:
-        """v = a / s with a = L - b(Z) (Keplerian: image in front of the MLA)."""
+        """v = a / s with a = L - b(Z): > 0 Keplerian (image in front of the MLA), < 0
+        Galilean (image behind it)."""
         return (self.L - self.image_distance(Z)) / self.s
 
     def depth_from_virtual_depth(self, v: np.ndarray | float) -> np.ndarray | float:
@@ -240,6 +308,7 @@ class PlenopticOptics:
 
     def to_dict(self) -> dict:
         d = asdict(self)
+        d["type_focal_ratios"] = list(self.type_focal_ratios)
         d.update(
             f=self.f, s=self.s, t=self.t, e=self.e, L=self.L, aperture=self.aperture,
             micro_image_pitch_px=self.micro_image_pitch_px,

@@ -11,12 +11,14 @@ import yaml
 
 from plenocal.camera import pose
 from plenocal.grid import MicrolensGrid
-from plenocal.io import atomic_write_text, read_json, to_uint8, write_image, write_json
+from plenocal.io import atomic_write_text, read_json, write_image, write_json
 from plenocal.optics import PlenopticOptics
-from plenocal.raytrix import LensType, RayCalib, read_calib, write_calib
+from plenocal.raytrix import read_calib, write_calib
+from plenocal.simulate.mla import lens_type_map, make_calib
 from plenocal.simulate.optics_setup import optics_from_config
 from plenocal.simulate.raytrace import nearest_lens_centres, render_lenslet
 from plenocal.simulate.scene import make_scene, scene_arrays
+from plenocal.simulate.sensor import natural_vignetting, read_out
 
 
 def shot_names(sim: dict) -> list[str]:
@@ -59,21 +61,6 @@ def make_shots(sim: dict, scene_centre: np.ndarray) -> dict[str, np.ndarray]:
     return shots
 
 
-def make_calib(sim: dict, optics: PlenopticOptics) -> RayCalib:
-    """The RayCalibData of the simulated MLA (micro-image centres, one lens type)."""
-    near, far = sim["scene"]["near_m"], sim["scene"]["far_m"]
-    v_near = float(optics.virtual_depth(near))
-    v_far = float(optics.virtual_depth(far))
-    ox, oy = sim["mla"]["offset_px"]
-    return RayCalib(
-        diameter=optics.micro_image_pitch_px, offset=(float(ox), float(oy)),
-        rotation=float(sim["mla"]["rotation_rad"]), lens_border=sim["mla"]["lens_border_px"],
-        lens_base_x=(1.0, 0.0), lens_base_y=(0.5, -math.sqrt(3) / 2),
-        lens_types=(LensType(0, (0.0, 0.0), round(0.85 * v_near, 6), round(1.15 * v_far, 6)),),
-        sub_grid_base=None, tcp=float(optics.virtual_depth(optics.focus_distance)), is_real=0,
-    )
-
-
 def datasheet(sim: dict, optics: PlenopticOptics) -> dict:
     """What a datasheet (and a tape measure) gives: the values registration B needs."""
     def mm(metres: float) -> float:
@@ -85,7 +72,8 @@ def datasheet(sim: dict, optics: PlenopticOptics) -> dict:
         "sensor_height_px": optics.height,
         "main_lens": {"focal_length_mm": mm(optics.focal_length),
                       "focus_distance_mm": mm(optics.focus_distance)},
-        "mla": {"pitch_mm": mm(optics.mla_pitch), "f_numbers": [optics.mla_f_number],
+        "mla": {"pitch_mm": mm(optics.mla_pitch),
+                "f_numbers": [round(optics.mla_f_number * r, 9) for r in optics.type_focal_ratios],
                 "k": optics.k, "sensor_distance_mm": mm(optics.s)},
         "array": {"step_mm": mm(sim["array"]["step_m"])},
         "scene": {"near_mm": mm(sim["scene"]["near_m"]), "far_mm": mm(sim["scene"]["far_m"])},
@@ -126,7 +114,12 @@ def setup_dataset(sim: dict, out_dir: str | Path) -> None:
                          "lenses_whole": int(grid.inside().sum()),
                          "virtual_depth_near": float(optics.virtual_depth(sim["scene"]["near_m"])),
                          "virtual_depth_far": float(optics.virtual_depth(sim["scene"]["far_m"])),
-                         "virtual_depth_focus": calib.tcp}})
+                         "virtual_depth_focus": calib.tcp,
+                         "lens_types": [{"id": t.id, "focal_length": optics.type_f(t.id),
+                                         "sharp_virtual_depth": 1.0 / optics.type_kappa(t.id),
+                                         "depth_range": [t.depth_min, t.depth_max]}
+                                        for t in calib.lens_types]},
+                "sensor": sensor_truth(sim)})
     write_calib(calib, out / "calib.xml")
     atomic_write_text(out / "camera.yaml",
                       CAMERA_YAML_HEADER + yaml.safe_dump(datasheet(sim, optics),
@@ -139,8 +132,20 @@ def optics_from_truth(path: str | Path) -> PlenopticOptics:
         focal_length=d["focal_length"], focus_distance=d["focus_distance"],
         mla_pitch=d["mla_pitch"], mla_f_number=d["mla_f_number"], k=d["k"],
         pixel_size=d["pixel_size"], width=int(d["width"]), height=int(d["height"]),
-        aperture_scale=d["aperture_scale"],
+        aperture_scale=d["aperture_scale"], kind=d.get("kind", "keplerian"),
+        type_focal_ratios=tuple(d.get("type_focal_ratios", (1.0,))),
     )
+
+
+def sensor_truth(sim: dict) -> dict:
+    """The readout and vignetting settings a shot is rendered with (truth/optics.json)."""
+    sensor, vig = sim["sensor"], sim["main_lens"].get("vignetting", {})
+    return {"bit_depth": int(sensor.get("bit_depth", 8)),
+            "noise_std": float(sensor["noise_std"]),
+            "full_well_e": sensor.get("full_well_e"),
+            "vignetting_cos4": bool(vig.get("cos4", False)),
+            "front_stop_distance_m": float(vig.get("stop_distance_mm", 0.0)) / 1000.0,
+            "front_stop_diameter_scale": float(vig.get("stop_diameter_scale", 1.0))}
 
 
 def nearest_lens_map(grid: MicrolensGrid) -> np.ndarray:
@@ -150,7 +155,9 @@ def nearest_lens_map(grid: MicrolensGrid) -> np.ndarray:
 
 def render_shot(sim: dict, data_dir: str | Path, cam: str, out_png: str | Path,
                 log=print) -> None:
-    """Render the lenslet image of shot ``cam`` into ``out_png`` (8-bit RGB)."""
+    """Render the lenslet image of shot ``cam`` into ``out_png``: 8-bit RGB, or 12-bit
+    data in a 16-bit PNG (``sensor.bit_depth``), with the vignetting and noise of the
+    ``simulate`` block."""
     data_dir = Path(data_dir)
     optics = optics_from_truth(data_dir / "truth" / "optics.json")
     scene = scene_arrays(read_json(data_dir / "truth" / "scene.json"))
@@ -160,12 +167,20 @@ def render_shot(sim: dict, data_dir: str | Path, cam: str, out_png: str | Path,
     calib = read_calib(data_dir / "calib.xml")
     grid = MicrolensGrid(calib, optics.width, optics.height)
     lens_map = nearest_lens_map(grid)
+    types = lens_type_map(calib, lens_map)
+    sensor = sensor_truth(sim)
     index = sorted(shots).index(cam)
-    log(f"{cam}: tracing {optics.width}x{optics.height} px x {sim['render']['samples']} rays")
+    log(f"{cam}: tracing {optics.width}x{optics.height} px x {sim['render']['samples']} rays"
+        f" ({optics.lens_types} lens type(s), {optics.kind})")
+    stop = sensor["front_stop_distance_m"]
     img = render_lenslet(scene, optics, lens_map, np.asarray(shots[cam]["cam_to_world"]),
-                         sim["render"]["samples"], sim["seed"])
-    if sim["sensor"]["noise_std"] > 0:
-        rng = np.random.default_rng([sim["seed"], 5, index])
-        img = img + rng.normal(0.0, sim["sensor"]["noise_std"], img.shape).astype(np.float32)
-    write_image(out_png, to_uint8(img))
+                         sim["render"]["samples"], sim["seed"], lens_types=types,
+                         stop_distance=stop,
+                         stop_diameter=sensor["front_stop_diameter_scale"] * optics.aperture
+                         if stop > 0 else 0.0)
+    if sensor["vignetting_cos4"]:
+        img = img * natural_vignetting(optics, lens_map)[..., None]
+    rng = np.random.default_rng([sim["seed"], 5, index])
+    write_image(out_png, read_out(img, rng, sensor["noise_std"], sensor["full_well_e"],
+                                  sensor["bit_depth"]))
     log(f"{cam}: done")

@@ -5,6 +5,19 @@ from __future__ import annotations
 from plenocal.optics import PlenopticOptics
 
 
+def type_focal_ratios(mla: dict) -> tuple[float, ...]:
+    """Focal length of each lens type relative to ``mla.f_number``'s: (1,) for a
+    single-focus MLA; (r0, 1, r2) for Raytrix's three types, ``mla.focal_ratios`` =
+    [r0, r2] (type 1 is the middle one, whose F-number the paper's rule takes)."""
+    n = int(mla.get("lens_types", 1))
+    if n == 1:
+        return (1.0,)
+    if n == 3:
+        r0, r2 = (float(r) for r in mla["focal_ratios"])
+        return (r0, 1.0, r2)
+    raise ValueError(f"simulate.mla.lens_types: 1 or 3, not {n}")
+
+
 def optics_from_config(sim: dict) -> PlenopticOptics:
     """The simulated camera (lengths in metres) from a validated ``simulate`` block."""
     return PlenopticOptics(
@@ -17,4 +30,6 @@ def optics_from_config(sim: dict) -> PlenopticOptics:
         width=sim["sensor"]["width"],
         height=sim["sensor"]["height"],
         aperture_scale=sim["main_lens"]["aperture_scale"],
+        kind=sim["mla"].get("kind", "keplerian"),
+        type_focal_ratios=type_focal_ratios(sim["mla"]),
     )

@@ -7,8 +7,14 @@ every ray from sensor point x through the conjugate point
 ``P = c + (c - x) t / s`` at ``t = s f / (s - f)`` in front of the MLA; the ray
 then reaches the main-lens plane at ``h`` and is black if ``|h| > A / 2``
 (vignetting: the dark borders between micro images). The ideal thin main lens
-turns tangent slopes as ``u' = u - h / F``. Light reaching a pixel through a
+turns tangent slopes as ``u' = u - h / F``. An optional front stop (a lens barrel
+``stop_z`` in front of the main lens) clips oblique bundles: the mechanical
+vignetting towards the sensor's edges. Light reaching a pixel through a
 *neighbouring* microlens (cross-talk at the micro-image border) is not modelled.
+
+Multi-focus MLAs: every pixel carries its lens's type, and ``t`` is that type's
+(signed: negative for a Galilean MLA, whose conjugate point lies behind it) sharp
+distance, so each type blurs a given depth differently.
 
 Numba compiles the per-pixel loops (the default dataset traces about 40 million
 rays per shot); the arithmetic is plain IEEE double, so results are deterministic.
@@ -89,8 +95,9 @@ def _trace(ox, oy, oz, dx, dy, dz, p0, u, v, nrm, tex_id, texel, atlas, th, tw, 
 
 
 @njit(cache=True)
-def _render_lenslet(height, width, pix_size, L, s, t, F, half_ap, lens_x, lens_y, half_lens,
-                    jitter, disk, R, C, p0, u, v, nrm, tex_id, texel, atlas, th, tw, out):
+def _render_lenslet(height, width, pix_size, L, s, t_types, lens_type, F, half_ap, stop_z,
+                    stop_half, lens_x, lens_y, half_lens, jitter, disk, R, C, p0, u, v, nrm,
+                    tex_id, texel, atlas, th, tw, out):
     ns = jitter.shape[0]
     cxs = (width - 1) / 2.0
     cys = (height - 1) / 2.0
@@ -99,6 +106,7 @@ def _render_lenslet(height, width, pix_size, L, s, t, F, half_ap, lens_x, lens_y
         for col in range(width):
             lx = lens_x[row, col]
             ly = lens_y[row, col]
+            t = t_types[lens_type[row, col]]
             acc0 = 0.0
             acc1 = 0.0
             acc2 = 0.0
@@ -122,6 +130,11 @@ def _render_lenslet(height, width, pix_size, L, s, t, F, half_ap, lens_x, lens_y
                     continue  # vignetted by the main-lens aperture
                 ux = sx - hx / F
                 uy = sy - hy / F
+                if stop_half > 0.0:
+                    bx = hx + ux * stop_z
+                    by = hy + uy * stop_z
+                    if bx * bx + by * by > stop_half * stop_half:
+                        continue  # clipped by the front stop (mechanical vignetting)
                 # to the world
                 ox = R[0, 0] * hx + R[0, 1] * hy + C[0]
                 oy = R[1, 0] * hx + R[1, 1] * hy + C[1]
@@ -232,14 +245,23 @@ def sample_pattern(samples: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def render_lenslet(scene: SceneArrays, optics, lens_centres_px: np.ndarray,
-                   cam_to_world: np.ndarray, samples: int, seed: int) -> np.ndarray:
+                   cam_to_world: np.ndarray, samples: int, seed: int,
+                   lens_types: np.ndarray | None = None, stop_distance: float = 0.0,
+                   stop_diameter: float = 0.0) -> np.ndarray:
     """Render a lenslet image (float32 RGB in [0, 1]) of one shot.
 
     ``lens_centres_px`` (H, W, 2) gives, per sensor pixel, the micro-image centre of
-    the microlens it lies under (pixels).
+    the microlens it lies under (pixels); ``lens_types`` (H, W) its lens type (None:
+    every lens of type 0). ``stop_diameter`` > 0: a front stop of that diameter
+    ``stop_distance`` in front of the main lens (metres).
     """
     L, s, F = optics.L, optics.s, optics.focal_length
-    t = optics.t
+    t_types = np.array([optics.type_t(i) for i in range(optics.lens_types)])
+    if lens_types is None:
+        lens_types = np.zeros(lens_centres_px.shape[:2], dtype=np.int64)
+    lens_types = np.ascontiguousarray(lens_types, dtype=np.int64)
+    if lens_types.min() < 0 or lens_types.max() >= len(t_types):
+        raise ValueError(f"lens type map holds types outside 0..{len(t_types) - 1}")
     mx, my = optics.sensor_to_metric(lens_centres_px[..., 0], lens_centres_px[..., 1])
     lens_x = np.ascontiguousarray(mx * L / (L + s))
     lens_y = np.ascontiguousarray(my * L / (L + s))
@@ -247,10 +269,11 @@ def render_lenslet(scene: SceneArrays, optics, lens_centres_px: np.ndarray,
     out = np.zeros((optics.height, optics.width, 3), dtype=np.float32)
     R = np.ascontiguousarray(cam_to_world[:3, :3], dtype=np.float64)
     C = np.ascontiguousarray(cam_to_world[:3, 3], dtype=np.float64)
-    _render_lenslet(optics.height, optics.width, optics.pixel_size, L, s, t, F,
-                    optics.aperture / 2, lens_x, lens_y, optics.mla_pitch / 2, jitter, disk,
-                    R, C, scene.p0, scene.u, scene.v, scene.normal, scene.tex_id,
-                    scene.texel, scene.atlas, scene.tex_h, scene.tex_w, out)
+    _render_lenslet(optics.height, optics.width, optics.pixel_size, L, s, t_types, lens_types,
+                    F, optics.aperture / 2, float(stop_distance), float(stop_diameter) / 2,
+                    lens_x, lens_y, optics.mla_pitch / 2, jitter, disk, R, C, scene.p0,
+                    scene.u, scene.v, scene.normal, scene.tex_id, scene.texel, scene.atlas,
+                    scene.tex_h, scene.tex_w, out)
     return out
 
 
