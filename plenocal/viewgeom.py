@@ -8,25 +8,40 @@ only, never on image content: the per-lens patch size enters as an argument.
 Layout. Every lens whose whole micro image lies on the sensor ("used" lens) owns a
 tile of ``T x T`` output pixels (the tile size) centred at::
 
-    o_i = (lattice_xy_i - axis) * T + ((W_v - 1) / 2, (H_v - 1) / 2)
+    o_i = (m_i - c_s) * T / D + ((W_v - 1) / 2, (H_v - 1) / 2)
 
-where ``lattice_xy`` are lens positions in lens units in the lattice frame (so a
-rotated MLA gives upright views) and ``axis`` is the sensor centre in the same
-frame: the optical axis lands on the centre pixel of every view's tile grid, which
-is what registration A assumes (principal point at the image centre) for the
-central view. ``W_v`` and ``H_v`` are odd and chosen symmetric about the axis so
-that every output pixel lies inside the span of used lens centres.
+``m_i`` the micro-image centre, ``c_s`` the sensor centre, both in IMAGE axes (x right,
+y down): the output is the sensor image scaled by ``T / D`` about its centre, so the
+views stand as the scene stands in the raw frame whatever the grid's rotation (0,
+pi/2 or a small angle). The optical axis lands on the centre of every view's tile
+grid, which is what registration A assumes (principal point at the image centre) for
+the central view. ``W_v`` and ``H_v`` are chosen symmetric about the axis so that every
+output pixel lies inside the span of used lens centres (odd; with ``even`` the last
+column / row is cropped, so that both are even for YUV 4:2:0 tools: the axis then
+lies half a pixel right of and below the centre).
 
 Sampling. View (r, c) of an N x N set has the offset
-``q_rc = ((c - (N-1)/2) q, (r - (N-1)/2) q)`` (pixels, lattice frame) from the
+``q_rc = ((c - (N-1)/2) q, (r - (N-1)/2) q)`` (pixels, image axes) from the
 micro-image centre, with ``q = D' sin(45 deg) / N`` by default (the paper). Output
 pixel ``u`` in the tile of lens ``i`` whose patch size is ``P_i`` samples::
 
-    m_i + R (q_rc - (u - o_i) * P_i / T)
+    m_i + q_rc - (u - o_i) * P_i / T     (Keplerian MLA: every micro image inverted)
+    m_i + q_rc + (u - o_i) * P_i / T     (Galilean MLA: micro images upright)
 
-``R`` maps lattice-frame vectors to the image; the minus sign is the 180-degree
-turn of every micro image (Keplerian relay). The tile centre ``u = o_i`` samples
-``m_i + R q_rc`` whatever ``P_i`` is: its chief ray defines the view's pinhole.
+The tile centre ``u = o_i`` samples ``m_i + q_rc`` whatever ``P_i`` is: its chief ray
+defines the view's pinhole.
+
+Orientation of the view index. A sensor pixel at offset ``x`` from a micro-image
+centre sees the scene along the straight line through the microlens centre, i.e.
+from the opposite side of the main-lens pupil, for both MLA kinds; the raw frame is
+read out so that the scene stands upright (image turned by the main lens and turned
+back by the readout), which turns the pupil with it. So a step of ``+q`` along image
+x in every micro image is a viewpoint step to the RIGHT, ``+q`` along y a step DOWN,
+for Keplerian and Galilean MLAs alike: view (r, c) has r growing as the viewpoint
+moves down and c as it moves right. Measured: on the real Raytrix (Keplerian) and
+TSPC (Galilean) frames near content moves left against far content from view
+(2, 0) to (2, 4) (``tests/test_convert_real.py``), and on the simulator the view
+cameras' centres move right with c (``tests/test_groundtruth.py``).
 """
 
 from __future__ import annotations
@@ -63,6 +78,16 @@ def view_position(r: int, c: int, n: int) -> tuple[int, int]:
     return c - h, r - h
 
 
+MLA_KINDS = ("keplerian", "galilean")
+
+
+def mla_sign(mla: str) -> float:
+    """-1 for a Keplerian MLA (micro images inverted), +1 for a Galilean one."""
+    if mla not in MLA_KINDS:
+        raise ValueError(f"MLA kind must be one of {', '.join(MLA_KINDS)} (got {mla!r})")
+    return -1.0 if mla == "keplerian" else 1.0
+
+
 @dataclass(frozen=True)
 class ViewLayout:
     n_views: int
@@ -73,19 +98,22 @@ class ViewLayout:
     lens_index: np.ndarray  # (m,) indices into the grid of the used lenses
     tile_centres: np.ndarray  # (m, 2) output pixel of each used lens's tile centre
     lens_centres: np.ndarray  # (m, 2) micro-image centres of the used lenses (sensor px)
-    e1: np.ndarray  # lattice frame in image coordinates
-    e2: np.ndarray
     basis: np.ndarray  # (2, 2) rows: output-pixel steps of lattice steps (1, 0) and (0, 1)
+    mla: str = "keplerian"  # micro images inverted (keplerian) or upright (galilean)
+
+    @property
+    def sign(self) -> float:
+        """-1 (Keplerian) or +1 (Galilean): the sign of ``(u - o_i) P / T`` in sampling."""
+        return mla_sign(self.mla)
 
     def offset(self, r: int, c: int) -> np.ndarray:
-        """q_rc in the lattice frame (pixels)."""
+        """q_rc, image axes (pixels): +x for a viewpoint step right, +y down."""
         h, v = view_position(r, c, self.n_views)
         return np.array([h * self.q, v * self.q])
 
     def offset_image(self, r: int, c: int) -> np.ndarray:
-        """q_rc as an image-space vector on the sensor."""
-        o = self.offset(r, c)
-        return o[0] * self.e1 + o[1] * self.e2
+        """q_rc as an image-space vector on the sensor (the layout is in image axes)."""
+        return self.offset(r, c)
 
     def chief_sensor_points(self, r: int, c: int) -> np.ndarray:
         """Sensor points sampled by the tile centres of view (r, c): m_i + R q_rc."""
@@ -96,13 +124,14 @@ class ViewLayout:
         """Sensor positions sampled by output pixels ``out_xy`` (..., 2) of view (r, c)
         through used-lens indices ``lens`` (...) with patch sizes ``patch`` (...)."""
         d = (out_xy - self.tile_centres[lens]) * (patch / self.tile)[..., None]
-        v = self.offset(r, c) - d
-        return self.lens_centres[lens] + v[..., :1] * self.e1 + v[..., 1:2] * self.e2
+        return self.lens_centres[lens] + self.offset(r, c) + self.sign * d
 
 
 def make_layout(grid: MicrolensGrid, n_views: int, tile: int, q: float | None = None,
-                margin: float = 0.0) -> ViewLayout:
-    """Build the output layout of the N x N views of one lenslet image."""
+                margin: float = 0.0, mla: str = "keplerian", even: bool = False) -> ViewLayout:
+    """Build the output layout of the N x N views of one lenslet image (image axes; see
+    the module docstring). ``even``: crop the last column / row where the size is odd."""
+    mla_sign(mla)
     if n_views < 1 or n_views % 2 == 0:
         raise ValueError(f"the number of views per side must be odd (got {n_views})")
     if tile < 1:
@@ -113,22 +142,23 @@ def make_layout(grid: MicrolensGrid, n_views: int, tile: int, q: float | None = 
     if len(used) < 4:
         raise ValueError("fewer than 4 microlenses lie wholly on the sensor: does calib.xml "
                          "belong to this lenslet image?")
-    lxy = grid.lattice_xy[used]
+    D = grid.diameter
     sensor_centre = np.array([(grid.width - 1) / 2, (grid.height - 1) / 2])
-    axis = grid.image_to_lattice(sensor_centre - grid.origin) / grid.diameter
-    lo, hi = lxy.min(axis=0), lxy.max(axis=0)
-    half = np.minimum(axis - lo, hi - axis) * tile
+    rel = (grid.centres[used] - sensor_centre) / D  # lens units, image axes
+    lo, hi = rel.min(axis=0), rel.max(axis=0)
+    half = np.minimum(-lo, hi) * tile
     if (half <= 1).any():
         raise ValueError("the sensor centre lies outside the microlens grid")
     size = 2 * np.floor(half).astype(int) + 1
     width, height = int(size[0]), int(size[1])
     centre_out = np.array([(width - 1) / 2, (height - 1) / 2])
-    tile_centres = (lxy - axis) * tile + centre_out
+    if even:
+        width, height = width - width % 2, height - height % 2
+    tile_centres = rel * tile + centre_out
     return ViewLayout(
         n_views=n_views, tile=int(tile), q=float(q), width=width, height=height,
         lens_index=used, tile_centres=tile_centres, lens_centres=grid.centres[used],
-        e1=grid.e1.copy(), e2=grid.e2.copy(),
-        basis=grid.image_to_lattice(grid.A.T) / grid.diameter * tile,
+        basis=grid.A.T / D * tile, mla=mla,
     )
 
 

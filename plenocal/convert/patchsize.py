@@ -41,6 +41,7 @@ import numpy as np
 
 from plenocal.convert.errors import ConvertError
 from plenocal.grid import MicrolensGrid
+from plenocal.viewgeom import mla_sign
 
 
 @dataclass(frozen=True)
@@ -53,7 +54,11 @@ class PatchSizeSettings:
     min_confidence: float = 0.25
     smooth_iterations: int = 2
     texture_scale: float = 0.02  # grey std (0..1) at which the texture factor saturates
-    search_range: str = "type"  # "type": each lens its type's range; "union": all types'
+    search_range: str = "union"  # "type": each lens its type's range; "union": all types'
+    aggregate: float = 1.0  # weight of the six neighbours' costs against the lens's own 2
+    same_type_ring: bool = True  # also match the six lenses at sqrt(3) D (multi-focus MLAs)
+    focus_softness: float = 0.35  # log virtual-depth width of the focus weight's fall-off
+    focus_floor: float = 0.05  # focus weight of a lens far outside its type's range
 
 
 @dataclass
@@ -67,6 +72,7 @@ class PatchSizeResult:
     lo: np.ndarray  # (n,) candidate range of the lens's type
     hi: np.ndarray
     candidates: np.ndarray  # (c,) candidate patch sizes tried
+    focus: np.ndarray  # (n,) in (0, 1]: how sharp lens i sees its point (its type's range)
     warnings: list[str] = field(default_factory=list)
 
 
@@ -175,58 +181,190 @@ def _block_offsets(radius: float, samples: int) -> tuple[np.ndarray, np.ndarray]
     return bx.ravel().astype(np.float32), by.ravel().astype(np.float32)
 
 
+RING2 = np.array([(1, 1), (-1, 2), (-2, 1), (-1, -1), (1, -2), (2, -1)], dtype=np.int64)
+
+
+def _ring_neighbours(grid: MicrolensGrid, steps: np.ndarray) -> np.ndarray:
+    """(n, 6) index of the lens at each lattice step (``steps`` (6, 2)) or -1."""
+    lo = grid.ij.min(axis=0)
+    shape = grid.ij.max(axis=0) - lo + 5
+    table = np.full(tuple(shape), -1, dtype=np.int64)
+    local = grid.ij - lo + 2
+    table[local[:, 0], local[:, 1]] = np.arange(len(grid.ij))
+    nb = np.full((len(grid.ij), len(steps)), -1, dtype=np.int64)
+    for k, step in enumerate(steps):
+        q = local + step
+        ok = (q[:, 0] >= 0) & (q[:, 0] < shape[0]) & (q[:, 1] >= 0) & (q[:, 1] < shape[1])
+        nb[ok, k] = table[q[ok, 0], q[ok, 1]]
+    return nb
+
+
 def match_scores(gray: np.ndarray, grid: MicrolensGrid, candidates: np.ndarray,
-                 radius: float, samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 radius: float, samples: int, sign: float = -1.0, ring2: bool = False
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """ZNCC of every lens against its neighbours for every candidate patch size.
 
-    Returns (scores (n, c): mean ZNCC over the lens's neighbour pairs, NaN where it has
-    none; pairs (n,) number of neighbour pairs; texture (n,) grey std of the block at
-    the lens centre)."""
+    ``sign``: -1 Keplerian (a point moves towards the neighbour by ``P``), +1 Galilean
+    (away from it). ``ring2``: also the six lenses at ``sqrt(3) D`` (shift ``sqrt(3) P``),
+    where a block fits. Returns (scores (n, c): mean ZNCC over the lens's pairs, NaN where
+    it has none; pairs (n,) number of nearest-neighbour pairs; texture (n,) grey std of
+    the block at the lens centre)."""
     n = len(grid)
-    nb = grid.neighbours
-    dirs = grid.neighbour_vectors / grid.diameter  # (6, 2) unit vectors
+    rings = [(grid.neighbours, grid.neighbour_vectors / grid.diameter, 1.0)]
+    if ring2:
+        v2 = RING2 @ grid.A.T
+        rings.append((_ring_neighbours(grid, RING2), v2 / np.linalg.norm(v2, axis=1)[:, None],
+                      math.sqrt(3.0)))
     bx, by = _block_offsets(radius, samples)
     cx = grid.centres[:, 0].astype(np.float32)[:, None, None]
     cy = grid.centres[:, 1].astype(np.float32)[:, None, None]
     base_x = cx + bx[None, None, :]  # (n, 1, b)
     base_y = cy + by[None, None, :]
-    dx = dirs[:, 0].astype(np.float32)[None, :, None]
-    dy = dirs[:, 1].astype(np.float32)[None, :, None]
     b = len(bx)
-    valid = nb >= 0
-    pairs = valid.sum(axis=1)
-    safe_nb = np.where(valid, nb, 0)
     opposite = (np.arange(6) + 3) % 6
+    half_safe = grid.calib.safe_diameter / 2
 
-    def blocks(shift: float, directions: int = 6) -> np.ndarray:
-        mx = np.ascontiguousarray(np.broadcast_to(base_x - shift * dx, (n, 6, b))
-                                  [:, :directions].reshape(n, -1))
-        my = np.ascontiguousarray(np.broadcast_to(base_y - shift * dy, (n, 6, b))
-                                  [:, :directions].reshape(n, -1))
+    def blocks(shift: float, dirs: np.ndarray) -> np.ndarray:
+        k = len(dirs)
+        dx = dirs[:, 0].astype(np.float32)[None, :, None]
+        dy = dirs[:, 1].astype(np.float32)[None, :, None]
+        mx = np.ascontiguousarray(np.broadcast_to(base_x + sign * shift * dx, (n, k, b))
+                                  .reshape(n, -1))
+        my = np.ascontiguousarray(np.broadcast_to(base_y + sign * shift * dy, (n, k, b))
+                                  .reshape(n, -1))
         s = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                       borderValue=0.0)
-        return s.reshape(n, directions, b)
+        return s.reshape(n, k, b)
 
-    centre_block = blocks(0.0, 1)[:, 0]
+    centre_block = blocks(0.0, np.zeros((1, 2)))[:, 0]
     texture = centre_block.std(axis=1)
+    pairs = (grid.neighbours >= 0).sum(axis=1)
     scores = np.full((n, len(candidates)), np.nan, dtype=np.float32)
     for ci, P in enumerate(candidates):
-        B = blocks(0.5 * float(P))
-        B -= B.mean(axis=2, keepdims=True)
-        B /= np.sqrt((B * B).sum(axis=2, keepdims=True)) + 1e-6
         total = np.zeros(n, dtype=np.float32)
-        for k in range(6):
-            partner = B[safe_nb[:, k], opposite[k]]
-            total += np.where(valid[:, k], np.einsum("ij,ij->i", B[:, k], partner), 0.0)
+        count = np.zeros(n, dtype=np.float32)
+        for nb, dirs, scale in rings:
+            shift = 0.5 * scale * float(P)
+            if shift + radius > half_safe:
+                continue
+            B = blocks(shift, dirs)
+            B -= B.mean(axis=2, keepdims=True)
+            B /= np.sqrt((B * B).sum(axis=2, keepdims=True)) + 1e-6
+            valid = nb >= 0
+            safe_nb = np.where(valid, nb, 0)
+            for k in range(6):
+                partner = B[safe_nb[:, k], opposite[k]]
+                total += np.where(valid[:, k], np.einsum("ij,ij->i", B[:, k], partner), 0.0)
+                count += valid[:, k]
         with np.errstate(invalid="ignore", divide="ignore"):
-            scores[:, ci] = np.where(pairs > 0, total / np.maximum(pairs, 1), np.nan)
+            scores[:, ci] = np.where(count > 0, total / np.maximum(count, 1), np.nan)
     return scores, pairs, texture
 
 
+def detect_mla(gray: np.ndarray, grid: MicrolensGrid, radius: float, samples: int,
+               candidates: np.ndarray, max_lenses: int = 600) -> tuple[str, float, float]:
+    """Which way points move between neighbouring micro images, read from the image.
+
+    Matches an even spread of textured lenses (at most ``max_lenses``) against their
+    six neighbours both ways: towards the neighbour (Keplerian: micro images inverted)
+    and away from it (Galilean: upright). Returns (kind, mean best ZNCC towards, mean
+    best ZNCC away); the kind whose best match is higher. Deterministic (no sampling)."""
+    inside = np.flatnonzero(grid.inside() & (grid.neighbours >= 0).all(axis=1))
+    if len(inside) == 0:
+        return "keplerian", float("nan"), float("nan")
+    bx, by = _block_offsets(radius, samples)
+    blk = np.stack([bx, by], axis=1)[None, :, :]
+
+    def sample(pts: np.ndarray) -> np.ndarray:
+        m = pts.reshape(pts.shape[0], -1, 2).astype(np.float32)
+        v = cv2.remap(gray, np.ascontiguousarray(m[..., 0]), np.ascontiguousarray(m[..., 1]),
+                      cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+        return v.reshape(pts.shape[:-1])
+
+    centre = sample(grid.centres[inside][:, None, :] + blk)
+    tex = centre.std(axis=1)
+    order = np.argsort(-tex, kind="stable")[: max(1, len(inside) // 3)]
+    chosen = np.sort(inside[order])
+    chosen = chosen[np.linspace(0, len(chosen) - 1, min(max_lenses, len(chosen))).astype(int)]
+    dirs = grid.neighbour_vectors / grid.diameter
+    nb = grid.neighbours[chosen]
+    m_i = grid.centres[chosen]
+    half_safe = grid.calib.safe_diameter / 2
+    best = {}
+    for kind, sign in (("keplerian", -1.0), ("galilean", 1.0)):
+        curve = []
+        for P in candidates:
+            sh = 0.5 * float(P)
+            if sh + radius > half_safe:
+                break
+            total = np.zeros(len(chosen))
+            for k in range(6):
+                a = sample(m_i[:, None, :] + sign * sh * dirs[k] + blk)
+                b = sample(grid.centres[nb[:, k]][:, None, :] - sign * sh * dirs[k] + blk)
+                a = a - a.mean(axis=1, keepdims=True)
+                b = b - b.mean(axis=1, keepdims=True)
+                den = np.sqrt((a * a).sum(axis=1) * (b * b).sum(axis=1)) + 1e-9
+                total += (a * b).sum(axis=1) / den
+            curve.append(total / 6)
+        best[kind] = float(np.mean(np.max(np.stack(curve, axis=1), axis=1))) if curve else 0.0
+    kind = "keplerian" if best["keplerian"] >= best["galilean"] else "galilean"
+    return kind, best["keplerian"], best["galilean"]
+
+
+def detect_mla_kind(gray: np.ndarray, grid: MicrolensGrid, settings: PatchSizeSettings
+                    ) -> tuple[str, float, float]:
+    """:func:`detect_mla` with the settings' block and a coarse candidate range (up to
+    the largest searchable patch size, ``D' / 40`` steps)."""
+    D_safe = grid.calib.safe_diameter
+    radius = settings.block_radius_px or D_safe / 7.0
+    cap = settings.max_fraction * D_safe
+    cand = np.arange(settings.min_px, cap + 1e-9, max(settings.step_px, D_safe / 40))
+    return detect_mla(gray, grid, radius, settings.block_samples, cand, max_lenses=200)
+
+
+def aggregate_scores(scores: np.ndarray, weight: np.ndarray, neighbours: np.ndarray,
+                     neighbour_weight: float) -> np.ndarray:
+    """Cost aggregation over the lens lattice: each lens's scores averaged with its six
+    neighbours' (weights: ``2 w_i`` for itself, ``neighbour_weight w_j`` for each
+    neighbour), so that one lens's ambiguous or defocused match is decided by the
+    surface around it. NaN scores take no weight."""
+    if neighbour_weight <= 0:
+        return scores
+    ok = np.isfinite(scores)
+    w = weight[:, None] * ok
+    sw = np.where(ok, scores, 0.0) * w
+    num = 2.0 * sw
+    den = 2.0 * w
+    valid = neighbours >= 0
+    safe = np.where(valid, neighbours, 0)
+    for k in range(neighbours.shape[1]):
+        m = valid[:, k][:, None] * neighbour_weight
+        num = num + m * sw[safe[:, k]]
+        den = den + m * w[safe[:, k]]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, num / den, np.nan).astype(np.float32)
+
+
+def focus_weights(grid: MicrolensGrid, patch: np.ndarray, softness: float, floor: float
+                  ) -> np.ndarray:
+    """How sharp each lens sees its point: 1 where its virtual depth ``v = D / P`` lies in
+    its lens type's depth range, falling off as ``exp(-(d / softness)^2)`` with the
+    distance ``d`` of ``log v`` from the range, never below ``floor``. One lens type (or
+    types whose ranges all cover the point): 1 everywhere."""
+    c = grid.calib
+    v = np.log(grid.diameter / np.maximum(patch, 1e-6))
+    lo = np.log([t.depth_min for t in c.lens_types])[grid.types]
+    hi = np.log([t.depth_max for t in c.lens_types])[grid.types]
+    d = np.maximum(lo - v, 0.0) + np.maximum(v - hi, 0.0)
+    return np.maximum(np.exp(-(d / softness) ** 2), floor).astype(np.float32)
+
+
 def estimate_patch_size(image: np.ndarray, grid: MicrolensGrid,
-                        settings: PatchSizeSettings | None = None) -> PatchSizeResult:
+                        settings: PatchSizeSettings | None = None, mla: str = "keplerian"
+                        ) -> PatchSizeResult:
     """Patch size of every lens of ``grid`` in ``image`` (see the module docstring)."""
     settings = settings or PatchSizeSettings()
+    sign = mla_sign(mla)
     gray = to_gray(image)
     if gray.shape != (grid.height, grid.width):
         raise ConvertError(f"image is {gray.shape[1]}x{gray.shape[0]}, the grid was built for "
@@ -240,8 +378,14 @@ def estimate_patch_size(image: np.ndarray, grid: MicrolensGrid,
     candidates = start + step * np.arange(count)
     if candidates[-1] < stop - 1e-9:
         candidates = np.append(candidates, candidates[-1] + step)
+    multi = len({(t.depth_min, t.depth_max) for t in grid.calib.lens_types}) > 1
     scores, pairs, texture = match_scores(gray, grid, candidates, radius,
-                                          settings.block_samples)
+                                          settings.block_samples, sign,
+                                          settings.same_type_ring and multi)
+    # lenses cut by the sensor's edge match blocks partly off the image: they lend their
+    # scores to no neighbour
+    tex = np.clip(texture / settings.texture_scale, 0, 1) * grid.inside() + 1e-3
+    scores = aggregate_scores(scores, tex, grid.neighbours, settings.aggregate)
 
     if settings.search_range not in ("type", "union"):
         raise ConvertError(f"convert.patch_size.search_range: 'type' or 'union', not "
@@ -295,5 +439,6 @@ def estimate_patch_size(image: np.ndarray, grid: MicrolensGrid,
     return PatchSizeResult(
         patch=patch, raw=raw.astype(np.float32), confidence=conf,
         confident=conf >= settings.min_confidence, lo=lo, hi=hi, candidates=candidates,
+        focus=focus_weights(grid, patch, settings.focus_softness, settings.focus_floor),
         warnings=notes + more,
     )

@@ -53,9 +53,11 @@ class RenderPlan:
 
 
 def make_plan(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
-              settings: RenderSettings | None = None) -> RenderPlan:
+              settings: RenderSettings | None = None, focus: np.ndarray | None = None
+              ) -> RenderPlan:
     """Precompute the per-shot geometry. ``patch``: (m,) patch size per used lens, in
-    ``layout.lens_index`` order."""
+    ``layout.lens_index`` order; ``focus``: (m,) focus weight per used lens (multi-focus
+    MLAs: lenses that see their point blurred get less weight), None for all 1."""
     settings = settings or RenderSettings()
     patch = np.asarray(patch, dtype=np.float64)
     if patch.shape != (len(layout.lens_index),):
@@ -76,6 +78,8 @@ def make_plan(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
     off = pts - layout.lens_centres[lens]
     R = settings.fade_radius
     wt = np.clip(1.0 - dist2 / (R * R), 0.0, None) ** 2
+    if focus is not None:
+        wt = wt * np.asarray(focus, dtype=np.float64)[lens]
     wt = np.where(have, wt, 0.0)
     # the nearest lens always keeps a tiny weight (every pixel has a lens within 0.577)
     wt[..., 0] = np.maximum(wt[..., 0], np.where(have[..., 0], _FLOOR, 0.0))

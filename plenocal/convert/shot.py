@@ -33,12 +33,20 @@ import numpy as np
 import yaml
 
 from plenocal.convert.errors import ConvertError
-from plenocal.convert.patchsize import PatchSizeResult, PatchSizeSettings, estimate_patch_size
+from plenocal.convert.levels import significant_bits, to_unit_float
+from plenocal.convert.patchsize import (
+    PatchSizeResult,
+    PatchSizeSettings,
+    detect_mla_kind,
+    estimate_patch_size,
+    to_gray,
+)
 from plenocal.convert.render import RenderPlan, RenderSettings, make_plan, render_view
 from plenocal.grid import MicrolensGrid
 from plenocal.io import read_image
+from plenocal.optics import view_spacing
 from plenocal.raytrix import CalibError, RayCalib, read_calib
-from plenocal.viewgeom import ViewLayout, make_layout, parse_view, view_names
+from plenocal.viewgeom import MLA_KINDS, ViewLayout, make_layout, parse_view, view_names
 
 log = logging.getLogger("plenocal.convert")
 
@@ -51,20 +59,53 @@ def _known_fields(cls, cfg: dict):
 
 @dataclass(frozen=True)
 class ConvertSettings:
-    tile_size: int = 6
+    """The ``convert`` block of the config (config.schema.yaml documents every key).
+
+    ``tile_size``: output pixels per lens pitch, or ``"auto"``: ``ceil(upsample x``
+    the median confident patch size``)`` (the views' natural resolution, ``upsample``
+    output pixels per sensor pixel of patch). ``mla``: ``keplerian`` (Raytrix, the
+    simulator: micro images inverted) or ``galilean`` (TSPC: upright). ``even_size``:
+    crop the views' last column / row where odd (YUV 4:2:0). ``bit_depth``: ``"auto"``
+    (16-bit images whose maximum fits 10, 12 or 14 bits are scaled to that range) or
+    the number of significant bits (8..16)."""
+
+    tile_size: int | str = "auto"
+    upsample: float = 2.0
     view_spacing_px: float | None = None
     percentiles: tuple[float, float] = (2.0, 98.0)
+    mla: str = "auto"
+    even_size: bool = True
+    bit_depth: int | str = "auto"
     patch: PatchSizeSettings = field(default_factory=PatchSizeSettings)
     render: RenderSettings = field(default_factory=RenderSettings)
+
+    def __post_init__(self) -> None:
+        t = self.tile_size
+        if not (t == "auto" or (isinstance(t, int) and not isinstance(t, bool) and t >= 1)):
+            raise ConvertError(f"convert.tile_size: 'auto' or a whole number >= 1, not {t!r}")
+        if not self.upsample > 0:
+            raise ConvertError(f"convert.upsample: must be > 0 (got {self.upsample})")
+        if self.mla not in ("auto", *MLA_KINDS):
+            raise ConvertError(f"convert.mla: auto, {' or '.join(MLA_KINDS)}, not {self.mla!r} "
+                               "(auto: read from the image; see README 'MLA kinds')")
+        b = self.bit_depth
+        if not (b == "auto" or (isinstance(b, int) and 8 <= b <= 16)):
+            raise ConvertError(f"convert.bit_depth: 'auto' or 8..16, not {b!r}")
 
     @classmethod
     def from_config(cls, cfg: dict | None) -> ConvertSettings:
         cfg = dict(cfg or {})
         pct = cfg.get("disparity_percentiles", (2.0, 98.0))
+        tile = cfg.get("tile_size", "auto")
+        bits = cfg.get("bit_depth", "auto")
         return cls(
-            tile_size=int(cfg.get("tile_size", 6)),
+            tile_size=tile if isinstance(tile, str) else int(tile),
+            upsample=float(cfg.get("upsample", 2.0)),
             view_spacing_px=cfg.get("view_spacing_px"),
             percentiles=(float(pct[0]), float(pct[1])),
+            mla=str(cfg.get("mla", "auto")),
+            even_size=bool(cfg.get("even_size", True)),
+            bit_depth=bits if isinstance(bits, str) else int(bits),
             patch=_known_fields(PatchSizeSettings, cfg.get("patch_size") or {}),
             render=_known_fields(RenderSettings, cfg.get("blend") or {}),
         )
@@ -140,44 +181,68 @@ def build_grid(calib: RayCalib, width: int, height: int) -> MicrolensGrid:
 # ---------------------------------------------------------------------------
 
 
-def _source_float(image: np.ndarray) -> np.ndarray:
-    if image.dtype == np.uint8:
-        f = image.astype(np.float32) * np.float32(1 / 255)
-    elif image.dtype == np.uint16:
-        f = image.astype(np.float32) * np.float32(1 / 65535)
-    else:
-        f = image.astype(np.float32)
-    return np.ascontiguousarray(f)
+def resolve_tile(setting: int | str, patch: np.ndarray, confident: np.ndarray,
+                 upsample: float) -> int:
+    """The tile size T: the setting, or for ``auto`` ``ceil(upsample x median P)`` over
+    the confident lenses (all lenses where none is confident), at least 2."""
+    if setting != "auto":
+        return int(setting)
+    p = patch[confident] if np.any(confident) else patch
+    return max(2, int(math.ceil(upsample * float(np.median(p)) - 1e-6)))
 
 
 class ShotConversion:
-    """One lenslet image: grid, layout, patch sizes and the per-shot render plan."""
+    """One lenslet image: grid, patch sizes, layout and the per-shot render plan.
+
+    ``grid``: a microlens grid to use instead of the one built from ``calib`` (a grid
+    refined from the image, for instance); it must belong to an image of this size."""
 
     def __init__(self, image: np.ndarray, calib: RayCalib, n_views: int,
-                 settings: ConvertSettings | None = None, source: str = "<image>") -> None:
-        self.settings = settings or ConvertSettings()
+                 settings: ConvertSettings | None = None, source: str = "<image>",
+                 grid: MicrolensGrid | None = None) -> None:
+        self.settings = st = settings or ConvertSettings()
         self.calib = calib
         self.n_views = n_views
         H, W = image.shape[:2]
-        self.grid = build_grid(calib, W, H)
-        try:
-            self.layout: ViewLayout = make_layout(self.grid, n_views, self.settings.tile_size,
-                                                  self.settings.view_spacing_px)
-        except ValueError as exc:
-            raise ConvertError(f"{source} with {calib.source}: {exc}") from None
-        max_q = math.hypot(1, 1) * (n_views - 1) / 2 * self.layout.q
+        if grid is not None and (grid.width, grid.height) != (W, H):
+            raise ConvertError(f"{source}: the grid was built for {grid.width}x{grid.height}, "
+                               f"the image is {W}x{H}")
+        self.grid = grid if grid is not None else build_grid(calib, W, H)
+        self.bits = significant_bits(image, st.bit_depth)
+        if image.dtype == np.uint16:
+            log.info("%s: 16-bit image with %d significant bits (max %d)", source, self.bits,
+                     int(image.max()))
+        self._source = to_unit_float(image, self.bits)
+        q = st.view_spacing_px if st.view_spacing_px is not None else view_spacing(
+            calib.safe_diameter, n_views)
+        max_q = math.hypot(1, 1) * (n_views - 1) / 2 * q
         if max_q >= calib.safe_diameter / 2:
-            raise ConvertError(f"view spacing q = {self.layout.q:.3f} px puts the corner views "
+            raise ConvertError(f"view spacing q = {q:.3f} px puts the corner views "
                                f"{max_q:.2f} px from the lens centre, outside the safe micro "
                                f"image (radius {calib.safe_diameter / 2:.2f} px): lower "
                                "convert.view_spacing_px or the number of views")
-        self.patch: PatchSizeResult = estimate_patch_size(image, self.grid, self.settings.patch)
+        gray = to_gray(self._source)
+        self.mla, self.mla_scores = st.mla, None
+        if st.mla == "auto":
+            self.mla, k, g = detect_mla_kind(gray, self.grid, st.patch)
+            self.mla_scores = {"keplerian": k, "galilean": g}
+            log.info("%s: MLA kind from the image: %s (mean best ZNCC: points moving towards "
+                     "the neighbour %.3f, away %.3f)", source, self.mla, k, g)
+        self.patch: PatchSizeResult = estimate_patch_size(gray, self.grid, st.patch,
+                                                          mla=self.mla)
         for note in self.patch.warnings:
             log.warning("%s: %s", source, note)
+        inside = self.grid.inside(0.0)
+        tile = resolve_tile(st.tile_size, self.patch.patch[inside],
+                            self.patch.confident[inside], st.upsample)
+        try:
+            self.layout: ViewLayout = make_layout(self.grid, n_views, tile, q, mla=self.mla,
+                                                  even=st.even_size)
+        except ValueError as exc:
+            raise ConvertError(f"{source} with {calib.source}: {exc}") from None
         self.used_patch = self.patch.patch[self.layout.lens_index]
         self.plan: RenderPlan = make_plan(self.layout, self.used_patch, calib.safe_diameter,
-                                          self.settings.render)
-        self._source = _source_float(image)
+                                          st.render, self.patch.focus[self.layout.lens_index])
 
     def view_float(self, r: int, c: int) -> np.ndarray:
         return render_view(self.plan, self._source, r, c)

@@ -1,0 +1,41 @@
+"""Grey levels of the lenslet image: how many bits a 16-bit PNG really holds.
+
+Most sensors deliver 10, 12 or 14 bits; written LSB-aligned into a 16-bit PNG the
+image holds values up to 1023, 4095 or 16383, and read as 16-bit data it is 1/64 to
+1/4 as bright as it should be. ``bit_depth: auto`` takes the smallest of 10, 12, 14,
+16 bits that holds the image's maximum (8-bit images are 8 bits); a number (8..16)
+states it. Values are then scaled by ``1 / (2^bits - 1)`` to [0, 1].
+
+``auto`` cannot tell a 12-bit image from a dark 16-bit one whose maximum stays below
+4096: state ``bit_depth: 16`` for those (the log names the depth it took).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from plenocal.convert.errors import ConvertError
+
+AUTO_DEPTHS = (10, 12, 14, 16)
+
+
+def significant_bits(image: np.ndarray, setting: int | str = "auto") -> int:
+    """Bits of data in ``image`` (uint8: 8; uint16: see the module docstring)."""
+    if image.dtype == np.uint8:
+        return 8
+    if image.dtype != np.uint16:
+        raise ConvertError(f"lenslet image of type {image.dtype}: need 8- or 16-bit data")
+    peak = int(image.max()) if image.size else 0
+    if setting != "auto":
+        bits = int(setting)
+        if peak > (1 << bits) - 1:
+            raise ConvertError(f"convert.bit_depth: {bits} bits, but the image holds values up "
+                               f"to {peak}: set a larger bit depth or 'auto'")
+        return bits
+    return next(b for b in AUTO_DEPTHS if peak <= (1 << b) - 1)
+
+
+def to_unit_float(image: np.ndarray, bits: int) -> np.ndarray:
+    """float32 in [0, 1] (contiguous) of an 8/16-bit image holding ``bits`` bits."""
+    f = image.astype(np.float32) * np.float32(1.0 / ((1 << bits) - 1))
+    return np.ascontiguousarray(f)
