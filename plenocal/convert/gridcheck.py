@@ -31,7 +31,7 @@ when the offset is read from ``((W-1)/2, (H-1)/2)`` (this project's convention,
 :mod:`plenocal.raytrix`). TLCT's ``(W/2, H/2)`` puts the grid half a pixel further right
 and down, so under TLCT's reading the micro images would sit at about (-0.2, -0.5) px
 from its grid. In y the measurement is clear (within 0.1 px of ``(H-1)/2``, 0.5 px from
-``H/2``); in x it lies between the two (0.08..0.42 px, frame to frame), so x alone does
+``H/2``); in x it lies between the two (0.07..0.42 px, frame to frame), so x alone does
 not decide, and the project keeps ``((W-1)/2, (H-1)/2)``. On synthetic frames with known
 centres the check is unbiased to 0.03 px, so these offsets are the files', not the
 method's. (Figures: ``bench/bench_real.py``, BENCHMARKS.md.)
@@ -40,8 +40,8 @@ Known limits. The phase measures the centre of the repeating micro-image pattern
 vignetting is weak and the scene repeats strongly from lens to lens (the TSPC frames,
 Galilean, with bright micro images and thin borders) scene content biases it: the per-lens
 residual is 8 px of 70 there against ~1 px of 23-35 on the Raytrix frames. On HandTools
-the refined grid lies 0.3-5 px from the four corner centres of the TSPC tools (the file's
-grid 12-14 px); on Boys2 it lies 14-18 px from them (the file's 5-21 px): the check sees
+the refined grid lies 0.7-6 px from the four corner centres of the TSPC tools (the file's
+grid 12-14 px); on Boys2 it lies 16-18 px from them (the file's 5-21 px): the check sees
 the drift towards the right edge, but its Boys2 fit is not better than the file.
 
 ``convert.grid`` values:
@@ -56,7 +56,7 @@ the drift towards the right edge, but its Boys2 fit is not better than the file.
   output pixels (seams at tile borders), so half a pixel would be the ideal bar; but the
   measurement repeats only to ~0.6 px at the corners between Fujita2 and Origami (same
   camera, same calib.xml, different scenes), and refining on less than that would chase the
-  scene, not the grid. The Raytrix files (drift 0.7-1.35 px, standard error 0.1-0.4) stay;
+  scene, not the grid. The Raytrix files (drift 0.7-1.3 px, standard error 0.1-0.4) stay;
   the TSPC files (drift 12-36 px) are refined.
 - A grid that is not on the micro images at all (a calib.xml from another camera or for
   another sensor crop) is recognised as foreign: fewer than ``MIN_SHARE`` of the lenses
@@ -230,7 +230,7 @@ def _measure(image: np.ndarray, origin: np.ndarray, A: np.ndarray, centres: np.n
     d = d0 - e @ np.linalg.pinv(2 * np.pi * ks).T
     d = _nearest_cell(d, A_s, np.zeros_like(d))
     amp = np.abs(z).min(axis=1)
-    margin = box  # windows that reach past the border are unreliable
+    margin = box // 2 + 1  # windows reaching well past the border are unreliable
     inside = ((pts[:, 0] >= margin) & (pts[:, 0] <= Ws - 1 - margin)
               & (pts[:, 1] >= margin) & (pts[:, 1] <= Hs - 1 - margin))
     ok = inside & (np.abs(closure) < CLOSURE_TOL) & (amp > 0.05 * np.maximum(ref, 1e-6))

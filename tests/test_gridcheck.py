@@ -1,0 +1,207 @@
+"""Grid check and refinement (plenocal.convert.gridcheck): synthetic lattices with known
+centres, and the real frames (crops, the TSPC four-corner files)."""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from plenocal.convert.gridcheck import (
+    AUTO_DRIFT_PX,
+    check_grid,
+    decide,
+    refine_calib,
+    refine_grid,
+)
+from plenocal.convert.synthetic import lenslet_from_patch_size, random_texture
+from plenocal.grid import MicrolensGrid
+from plenocal.raytrix import LensType, RayCalib
+
+FRAMES = Path(__file__).resolve().parents[2] / "shared" / "real" / "frames"
+
+
+def _calib(D: float, rotation: float, offset=(3.3, -2.1)) -> RayCalib:
+    s3 = math.sqrt(3) / 2
+    return RayCalib(diameter=D, offset=offset, rotation=rotation, lens_border=1.0,
+                    lens_base_x=(1.0, 0.0), lens_base_y=(0.5, s3),
+                    lens_types=(LensType(0, (0.0, 0.0), 1.0, 100.0),))
+
+
+def _frame(calib: RayCalib, W: int, H: int, seed: int = 0) -> np.ndarray:
+    grid = MicrolensGrid(calib, W, H)
+    return lenslet_from_patch_size(grid, calib.diameter / 3, random_texture(256, 1.5, seed),
+                                   0.5)
+
+
+def _centre_errors(refined: MicrolensGrid, truth: MicrolensGrid) -> np.ndarray:
+    where = {tuple(k): c for k, c in zip(truth.ij, truth.centres, strict=True)}
+    return np.array([np.linalg.norm(c - where[tuple(k)])
+                     for k, c in zip(refined.ij, refined.centres, strict=True)
+                     if tuple(k) in where])
+
+
+@pytest.mark.parametrize("D,rotation", [(23.2, math.pi / 2), (35.0, 0.0)])
+def test_exact_grid_is_left_alone(D, rotation):
+    calib = _calib(D, rotation)
+    W, H = 700, 560
+    img = _frame(calib, W, H)
+    check = check_grid(img, MicrolensGrid(calib, W, H))
+    assert check.measured_share > 0.5
+    assert check.drift_max_px < 0.35  # unbiased: the pixel-centre conventions agree
+    assert abs(check.offset_px[0]) < 0.1 and abs(check.offset_px[1]) < 0.1
+    assert not check.foreign and not check.refine_auto
+    assert not decide("auto", check) and not decide("file", check) and decide("refine", check)
+
+
+@pytest.mark.parametrize("change", ["shift", "pitch", "rotation"])
+def test_wrong_grid_recovered(change):
+    """A file grid shifted by (1.7, -0.9) px, with a pitch 0.4 % off, or turned 0.15 deg:
+    the check sees the drift, auto refines, and the refined centres are the true ones."""
+    true = _calib(23.2, math.pi / 2)
+    W, H = 900, 700
+    img = _frame(true, W, H, seed=1)
+    wrong = {"shift": replace(true, offset=(5.0, -1.2)),
+             "pitch": replace(true, diameter=23.2 * 1.004),
+             "rotation": replace(true, rotation=math.pi / 2 + math.radians(0.15))}[change]
+    grid = MicrolensGrid(wrong, W, H)
+    truth = MicrolensGrid(true, W, H)
+    before = _centre_errors(grid, truth)
+    check = check_grid(img, grid)
+    assert check.drift_max_px > AUTO_DRIFT_PX
+    assert abs(check.drift_max_px - before.max()) < 0.3
+    assert check.refine_auto and decide("auto", check) and not check.foreign
+    refined = refine_grid(grid, check)
+    err = _centre_errors(refined, truth)
+    assert err.max() < 0.15, err.max()
+    assert before.max() > 1.0
+    # the RayCalib form (a similarity) holds this change too
+    rc = MicrolensGrid(refine_calib(wrong, check), W, H)
+    assert _centre_errors(rc, truth).max() < 0.15
+    if change == "shift":
+        assert check.offset_px == pytest.approx((-1.7, 0.9), abs=0.1)
+    if change == "pitch":
+        assert check.pitch_ratio == pytest.approx(1 / 1.004, abs=2e-4)
+
+
+def test_foreign_grid_flagged():
+    """Another camera's file: the pitch is 30 % off, the lattice is not found."""
+    calib = _calib(23.2, math.pi / 2)
+    W, H = 700, 560
+    img = _frame(calib, W, H)
+    check = check_grid(img, MicrolensGrid(replace(calib, diameter=30.0), W, H))
+    assert check.foreign
+    assert not check.refine_auto and not decide("auto", check)
+    assert any("does not" in w for w in check.warnings)
+    d = check.to_dict()
+    assert d["foreign"] is True and "rule" in d
+
+
+def test_offset_half_a_lens_off_flagged():
+    """The right pitch but the origin 0.4 lens off (a file for another sensor crop)."""
+    calib = _calib(35.0, 0.0)
+    W, H = 700, 560
+    img = _frame(calib, W, H)
+    off = replace(calib, offset=(calib.offset[0] + 14.0, calib.offset[1]))
+    check = check_grid(img, MicrolensGrid(off, W, H))
+    assert check.foreign
+    assert check.drift_max_px == pytest.approx(14.0, abs=1.0)
+
+
+def test_decide_rejects_unknown_mode():
+    calib = _calib(23.2, 0.0)
+    img = _frame(calib, 400, 300)
+    check = check_grid(img, MicrolensGrid(calib, 400, 300))
+    with pytest.raises(ValueError, match="convert.grid"):
+        decide("sometimes", check)
+
+
+def _read_frame(name: str) -> tuple[np.ndarray, RayCalib]:
+    from plenocal.raytrix import read_calib  # noqa: PLC0415
+
+    img = cv2.imread(str(FRAMES / f"{name}.png"), cv2.IMREAD_COLOR)
+    assert img is not None, f"missing {FRAMES / name}.png"
+    return img[:, :, ::-1], read_calib(FRAMES / f"{name}.xml")
+
+
+def _corners(name: str) -> np.ndarray:
+    root = ET.parse(FRAMES / f"{name}_TSPC_corners_calib.xml").getroot()
+    return np.array([[float(root.find(f"centers/{k}/{a}").text) for a in "xy"]
+                     for k in ("ltop", "rtop", "lbot", "rbot")])
+
+
+def _nearest(grid: MicrolensGrid, pts: np.ndarray) -> np.ndarray:
+    return np.array([np.linalg.norm(grid.centres - p, axis=1).min() for p in pts])
+
+
+@pytest.mark.skipif(not FRAMES.is_dir(), reason="shared/real/frames not present")
+def test_boys2_file_grid_drifts_towards_the_right_edge():
+    """The TSPC corner centres show the Boys2 file grid 5 px off at the left corners and
+    ~20 px at the right ones; the check sees the same: drift past the auto bar, larger on
+    the right than on the left, and a pitch larger than the file's."""
+    img, calib = _read_frame("Boys2")
+    H, W = img.shape[:2]
+    grid = MicrolensGrid(calib, W, H)
+    tspc = _nearest(grid, _corners("Boys2"))
+    assert tspc[[1, 3]].min() > 3 * tspc[[0, 2]].max()  # the corner file's own statement
+    check = check_grid(img, grid)
+    r = check.regions
+    left = max(r["top_left"]["fit_drift_px"], r["bottom_left"]["fit_drift_px"])
+    right = min(r["top_right"]["fit_drift_px"], r["bottom_right"]["fit_drift_px"])
+    assert right > left + 5
+    assert check.pitch_ratio > 1.002
+    assert check.refine_auto and not check.foreign
+    assert check.seconds < 2.0
+
+
+@pytest.mark.skipif(not FRAMES.is_dir(), reason="shared/real/frames not present")
+def test_handtools_refined_grid_meets_the_tspc_corners():
+    img, calib = _read_frame("HandTools")
+    H, W = img.shape[:2]
+    grid = MicrolensGrid(calib, W, H)
+    pts = _corners("HandTools")
+    before = _nearest(grid, pts)
+    check = check_grid(img, grid)
+    after = _nearest(refine_grid(grid, check), pts)
+    assert before.min() > 10
+    assert after.max() < 0.6 * before.min()
+
+
+@pytest.mark.skipif(not FRAMES.is_dir(), reason="shared/real/frames not present")
+def test_raytrix_crop_file_grid_kept():
+    """A 1024 x 1024 crop of the Origami frame, its grid carried over from the full frame's
+    file: on the micro images (no foreign flag, drift about a pixel or less, not refined)."""
+    img, calib = _read_frame("Origami")
+    H, W = img.shape[:2]
+    x0, y0, w = 512, 512, 1024
+    full = MicrolensGrid(calib, W, H)
+    cx, cy = full.origin - (x0, y0)
+    crop_calib = replace(calib, offset=(cx - (w - 1) / 2, (w - 1) / 2 - cy))
+    grid = MicrolensGrid(crop_calib, w, w)
+    check = check_grid(img[y0:y0 + w, x0:x0 + w], grid)
+    assert not check.foreign
+    assert check.measured_share > 0.5
+    assert check.drift_max_px < 1.0
+    assert not check.refine_auto
+
+
+@pytest.mark.skipif(not FRAMES.is_dir(), reason="shared/real/frames not present")
+def test_refined_grid_keeps_the_lens_types():
+    """Fujita2's three lens types: a refined lattice gives every lens index its file type."""
+    from plenocal.raytrix import read_calib  # noqa: PLC0415
+
+    calib = read_calib(FRAMES / "Fujita2.xml")
+    W, H = 600, 500
+    calib = replace(calib, offset=(2.0, -1.0))
+    grid = MicrolensGrid(calib, W, H)
+    shift = np.array([0.8, -0.6])
+    moved = MicrolensGrid(calib, W, H, lattice=(grid.origin + shift, grid.A * 1.001))
+    types = {tuple(k): t for k, t in zip(grid.ij, grid.types, strict=True)}
+    common = [i for i, k in enumerate(moved.ij) if tuple(k) in types]
+    assert len(common) > 0.9 * len(grid)
+    assert all(moved.types[i] == types[tuple(moved.ij[i])] for i in common)
