@@ -26,7 +26,7 @@ region.
 
 Where is the RayCalibData offset measured from? On the three Raytrix frames whose files
 fit their micro images (Fujita2, Origami, Boxer-IrishMan-Gladiator2), the fitted lattice
-at the image centre lies at file + (+0.28, -0.08), (+0.08, +0.01) and (+0.42, +0.06) px
+at the image centre lies at file + (+0.31, -0.05), (+0.07, +0.03) and (+0.42, +0.06) px
 when the offset is read from ``((W-1)/2, (H-1)/2)`` (this project's convention,
 :mod:`plenocal.raytrix`). TLCT's ``(W/2, H/2)`` puts the grid half a pixel further right
 and down, so under TLCT's reading the micro images would sit at about (-0.2, -0.5) px
