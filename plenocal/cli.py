@@ -1,0 +1,235 @@
+"""``plenocal convert``: one lenslet image and its calib.xml into N x N subaperture views,
+as RLC / TLCT users expect, writing what the workflow's rule ``convert`` writes.
+
+    plenocal convert LENSLET CALIB.xml -o DIR [--views N] [--galilean | --mla KIND]
+        [--tile-size auto|N] [--grid file|refine|auto] [--bit-depth auto|N]
+        [--set key=value ...]
+
+Options map onto the keys of the config's ``convert`` block (``mla``, ``tile_size``,
+``grid``, ``bit_depth``; ``--set`` reaches any other key, dotted for nested blocks, e.g.
+``--set patch_size.block=7``) and go through :meth:`ConvertSettings.from_config`, like
+the workflow's. Progress goes to stderr; errors (a missing file, a malformed calib.xml,
+a bad option) print one line naming the file or key and exit with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import inspect
+import logging
+import sys
+import time
+from pathlib import Path
+
+import yaml
+
+from plenocal.convert.errors import ConvertError
+
+EXIT_USAGE = 2
+
+CONVERT_HELP = """\
+Convert one lenslet image into its N x N subaperture views (the RLC of the paper,
+Fig. 1 (a)). DIR receives what the workflow's rule `convert` writes:
+
+  <r>_<c>.png        view (r, c) for r, c = 0..N-1 (uint8 RGB); r grows as the viewpoint
+                     moves down, c as it moves right
+  patch_size.npy     patch size (px) of every lens used by the views
+  patch_size.png     the patch-size map with a colour bar (dark: filled from neighbours)
+  disparity.json     the disparity range between adjacent views (paper's Eq. 1 sign),
+                     the view geometry, patch-size statistics and the grid check
+"""
+
+
+def _value(text: str):
+    """A --set value as YAML reads it (numbers, booleans, lists), else the string."""
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+
+
+def _set_key(cfg: dict, dotted: str, value) -> None:
+    keys = dotted.split(".")
+    node = cfg
+    for k in keys[:-1]:
+        child = node.get(k)
+        if not isinstance(child, dict):
+            child = node[k] = {}
+        node = child
+    node[keys[-1]] = value
+
+
+def _int_or_auto(name: str):
+    def parse(text: str):
+        if text == "auto":
+            return "auto"
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name}: 'auto' or a whole number, not "
+                                             f"{text!r}") from None
+        if v < 1:
+            raise argparse.ArgumentTypeError(f"{name}: must be >= 1 (got {v})")
+        return v
+    return parse
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="plenocal",
+        description="Calibration of plenoptic 2.0 camera arrays. The workflow runs through "
+                    "snakemake; this command converts single lenslet images.")
+    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    c = sub.add_parser("convert", help="lenslet image + calib.xml -> N x N views",
+                       description=CONVERT_HELP,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    c.add_argument("lenslet", metavar="LENSLET",
+                   help="the lenslet (raw plenoptic) image: 8- or 16-bit grey or RGB PNG, the "
+                        "full sensor readout the calib.xml belongs to")
+    c.add_argument("calib", metavar="CALIB.xml",
+                   help="the camera's RayCalibData file (Raytrix calib.xml: micro-image "
+                        "diameter, grid offset and rotation, lens types)")
+    c.add_argument("-o", "--out", required=True, metavar="DIR",
+                   help="output folder (created; files in it with the same names are "
+                        "replaced)")
+    c.add_argument("--views", type=int, default=5, metavar="N",
+                   help="N x N views (default 5, as TLCT); N >= 1")
+    kind = c.add_mutually_exclusive_group()
+    kind.add_argument("--galilean", action="store_const", const="galilean", dest="mla",
+                      help="the MLA is Galilean (TSPC and other cameras whose micro images "
+                           "are upright); same as --mla galilean")
+    kind.add_argument("--mla", choices=("auto", "keplerian", "galilean"), default=None,
+                      help="MLA kind (convert.mla): keplerian (Raytrix: micro images "
+                           "inverted), galilean (TSPC: upright), or auto (detected from the "
+                           "image where the converter supports it). Default: the "
+                           "converter's default")
+    c.add_argument("--tile-size", type=_int_or_auto("--tile-size"), default=None,
+                   metavar="auto|N",
+                   help="output pixels per micro-image pitch (convert.tile_size): auto (from "
+                        "the patch sizes: the views' natural resolution) or a number. "
+                        "Default: the converter's default")
+    c.add_argument("--grid", choices=("file", "refine", "auto"), default=None,
+                   help="microlens grid (convert.grid): file (calib.xml as it is), refine "
+                        "(fit the lattice to the micro-image centres in the image), auto "
+                        "(refine when the file's grid drifts more than 1 px from the micro "
+                        "images, see plenocal.convert.gridcheck). The check always runs and "
+                        "lands in disparity.json. Default: auto")
+    c.add_argument("--bit-depth", type=_int_or_auto("--bit-depth"), default=None,
+                   metavar="auto|N",
+                   help="significant bits of a 16-bit image (convert.bit_depth): auto (10, "
+                        "12 or 14 bits recognised from the maximum) or 8..16. Default: "
+                        "the converter's default")
+    c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="any other key of the config's convert block, dotted for nested "
+                        "ones (e.g. --set upsample=1.5 --set patch_size.block=7); values "
+                        "are read as YAML; repeatable")
+    c.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+    return ap
+
+
+def convert_config(args: argparse.Namespace) -> dict:
+    """The convert block the options describe (``--set`` first, named options win)."""
+    cfg: dict = {}
+    for item in args.set:
+        key, sep, val = item.partition("=")
+        if not sep or not key.strip():
+            raise ConvertError(f"--set {item!r}: expected KEY=VALUE")
+        _set_key(cfg, key.strip(), _value(val))
+    if args.mla is not None:
+        cfg["mla"] = args.mla
+    if args.tile_size is not None:
+        cfg["tile_size"] = args.tile_size
+    if args.bit_depth is not None:
+        cfg["bit_depth"] = args.bit_depth
+    if args.grid is not None or "grid" not in cfg:
+        cfg["grid"] = args.grid or "auto"
+    return cfg
+
+
+def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
+    import cv2  # noqa: F401, PLC0415  (cv2 before anything that may import pycolmap)
+
+    from plenocal.convert import ConvertSettings, ShotConversion  # noqa: PLC0415
+    from plenocal.convert.gridcheck import (  # noqa: PLC0415
+        GRID_MODES,
+        check_grid,
+        decide,
+        refine_calib,
+        refine_grid,
+    )
+    from plenocal.convert.shot import build_grid, load_calib, load_lenslet  # noqa: PLC0415
+    from plenocal.io import write_image, write_json, write_npy  # noqa: PLC0415
+
+    t0 = time.perf_counter()
+    if args.views < 1:
+        raise ConvertError(f"--views: must be >= 1 (got {args.views})")
+    cfg = convert_config(args)
+    mode = cfg.get("grid", "auto")
+    if mode not in GRID_MODES:
+        raise ConvertError(f"convert.grid: {mode!r} is not one of {', '.join(GRID_MODES)}")
+    settings = ConvertSettings.from_config(cfg)
+    for path, what in ((args.lenslet, "lenslet image"), (args.calib, "calib.xml")):
+        if not Path(path).is_file():
+            raise ConvertError(f"{path}: {what} not found")
+    image = load_lenslet(args.lenslet)
+    calib = load_calib(args.calib)
+    H, W = image.shape[:2]
+    log.info("%s: %dx%d %s, %s: D = %.2f px", args.lenslet, W, H, image.dtype, args.calib,
+             calib.diameter)
+    grid = build_grid(calib, W, H)
+    check = check_grid(image, grid)
+    log.info("%s", check.summary())
+    for note in check.warnings:
+        log.warning("%s", note)
+    use_refined = decide(mode, check)
+    if mode == "refine" and not check.fitted:
+        log.warning("convert.grid refine: the lattice could not be fitted; the file's grid "
+                    "is used")
+    kwargs = {}
+    if use_refined:
+        if "grid" in inspect.signature(ShotConversion).parameters:
+            kwargs["grid"] = refine_grid(grid, check)
+        else:  # a converter without the grid argument: the RayCalib form (a similarity)
+            calib = refine_calib(calib, check)
+        log.info("grid: refined from the image (convert.grid %s)", mode)
+    else:
+        log.info("grid: calib.xml's (convert.grid %s)", mode)
+    shot = ShotConversion(image, calib, args.views, settings, source=str(args.lenslet),
+                          **kwargs)
+    stats = shot.disparity()
+    stats["grid_check"] = {**check.to_dict(), "mode": mode, "refined": bool(use_refined)}
+    log.info("patch sizes %.2f..%.2f px (median %.2f, %.0f%% confident); views %dx%d; "
+             "%.2f s", stats["patch_size_px"]["min"], stats["patch_size_px"]["max"],
+             stats["patch_size_px"]["median"], 100 * stats["patch_size_px"]["confident_share"],
+             stats["width"], stats["height"], time.perf_counter() - t0)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_npy(out / "patch_size.npy", shot.used_patch)
+    write_image(out / "patch_size.png", shot.patch_picture())
+    n = args.views * args.views
+    for k, (name, img) in enumerate(shot.views(), start=1):
+        write_image(out / f"{name}.png", img)
+        log.info("view %s (%d/%d) written", name, k, n)
+    write_json(out / "disparity.json", stats)
+    log.info("%s: %d views, disparity.json, patch_size.npy/.png; %.2f s in all", out, n,
+             time.perf_counter() - t0)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(stream=sys.stderr, level=logging.WARNING if args.quiet else logging.INFO,
+                        format="plenocal: %(message)s", force=True)
+    log = logging.getLogger("plenocal.cli")
+    from plenocal.raytrix import CalibError  # noqa: PLC0415
+
+    try:
+        if args.command == "convert":
+            run_convert(args, log)
+    except (ConvertError, CalibError, OSError) as exc:
+        print(f"plenocal {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,114 @@
+"""``plenocal convert`` (plenocal.cli): options, outputs, errors and exit codes."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from plenocal.cli import build_parser, convert_config, main
+from plenocal.convert.synthetic import lenslet_from_patch_size, random_texture
+from plenocal.grid import MicrolensGrid
+from plenocal.io import read_image, write_image
+from plenocal.raytrix import LensType, RayCalib, write_calib
+from plenocal.viewgeom import view_names
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "plenocal.cli", *args], capture_output=True,
+                          text=True, timeout=120)
+
+
+@pytest.fixture(scope="module")
+def shot(tmp_path_factory) -> tuple[Path, Path]:
+    """A small lenslet image (one textured plane, patch size 7 px, D = 23.2 px) and its
+    calib.xml, the file's grid 1.5 px off the micro images (so auto refines)."""
+    folder = tmp_path_factory.mktemp("shot")
+    s3 = math.sqrt(3) / 2
+    true = RayCalib(diameter=23.2, offset=(2.0, -1.0), rotation=math.pi / 2, lens_border=1.0,
+                    lens_base_x=(0.0, 1.0), lens_base_y=(s3, 0.5),
+                    lens_types=(LensType(0, (0.0, 0.0), 1.0, 100.0),), source="true")
+    img = lenslet_from_patch_size(MicrolensGrid(true, 480, 400), 7.0,
+                                  random_texture(256, 1.5, 3), 0.5)
+    lenslet, calib = folder / "lenslet.png", folder / "calib.xml"
+    write_image(lenslet, img)
+    write_calib(RayCalib(**{**true.__dict__, "offset": (3.5, -1.0), "source": "x"}), calib)
+    return lenslet, calib
+
+
+def test_help_explains_every_option():
+    r = _cli("convert", "--help")
+    assert r.returncode == 0
+    for opt in ("--views", "--galilean", "--mla", "--tile-size", "--grid", "--bit-depth",
+                "--set", "-o", "disparity.json", "patch_size.npy", "patch_size.png"):
+        assert opt in r.stdout, opt
+    sub = build_parser()._subparsers._group_actions[0].choices["convert"]
+    for action in sub._actions:
+        assert action.help, f"{action.dest} has no help"
+
+
+def test_missing_file_and_malformed_xml_exit_2(tmp_path, shot):
+    lenslet, calib = shot
+    r = _cli("convert", str(tmp_path / "none.png"), str(calib), "-o", str(tmp_path / "o"))
+    assert r.returncode == 2
+    assert "none.png" in r.stderr and "not found" in r.stderr
+    bad = tmp_path / "bad.xml"
+    bad.write_text("<RayCalibData><diameter>23")
+    r = _cli("convert", str(lenslet), str(bad), "-o", str(tmp_path / "o"))
+    assert r.returncode == 2
+    assert "bad.xml" in r.stderr and "malformed" in r.stderr
+    r = _cli("convert", str(lenslet), str(calib), "-o", str(tmp_path / "o"), "--grid", "x")
+    assert r.returncode == 2
+    assert not (tmp_path / "o").exists()
+
+
+def test_options_map_onto_the_convert_keys():
+    p = build_parser()
+    a = p.parse_args(["convert", "l.png", "c.xml", "-o", "d", "--galilean", "--tile-size",
+                      "auto", "--grid", "refine", "--bit-depth", "12", "--set",
+                      "upsample=1.5", "--set", "patch_size.block=7"])
+    cfg = convert_config(a)
+    assert cfg == {"mla": "galilean", "tile_size": "auto", "grid": "refine", "bit_depth": 12,
+                   "upsample": 1.5, "patch_size": {"block": 7}}
+    a = p.parse_args(["convert", "l.png", "c.xml", "-o", "d", "--tile-size", "9"])
+    cfg = convert_config(a)
+    assert cfg["tile_size"] == 9 and cfg["grid"] == "auto" and "mla" not in cfg
+    with pytest.raises(SystemExit):
+        p.parse_args(["convert", "l.png", "c.xml", "-o", "d", "--tile-size", "big"])
+    with pytest.raises(SystemExit):
+        p.parse_args(["convert", "l.png", "c.xml", "-o", "d", "--galilean", "--mla",
+                      "keplerian"])
+
+
+def test_convert_writes_what_rule_convert_writes(tmp_path, shot, capsys):
+    lenslet, calib = shot
+    out = tmp_path / "views"
+    rc = main(["convert", str(lenslet), str(calib), "-o", str(out), "--views", "3",
+               "--tile-size", "6", "--mla", "keplerian"])
+    assert rc == 0
+    err = capsys.readouterr().err
+    assert "grid check" in err and "view 2_2 (9/9) written" in err
+    names = sorted(p.name for p in out.iterdir())
+    assert names == sorted([f"{v}.png" for v in view_names(3)]
+                           + ["disparity.json", "patch_size.npy", "patch_size.png"])
+    stats = json.loads((out / "disparity.json").read_text())
+    assert stats["n_views"] == 3 and stats["tile"] == 6
+    g = stats["grid_check"]
+    assert g["mode"] == "auto" and g["refined"] is True  # the file is 1.5 px off
+    assert g["drift_max_px"] == pytest.approx(1.5, abs=0.3)
+    views = [read_image(out / f"{v}.png") for v in view_names(3)]
+    assert all(v.shape == views[0].shape and v.dtype == np.uint8 for v in views)
+    assert views[0].shape[:2] == (stats["height"], stats["width"])
+    patch = np.load(out / "patch_size.npy")
+    assert len(patch) == stats["used_lenses"]
+    assert np.median(patch) == pytest.approx(7.0, abs=1.0)
+    # --grid file keeps the file's grid
+    out2 = tmp_path / "file"
+    assert main(["convert", str(lenslet), str(calib), "-o", str(out2), "--views", "3",
+                 "--tile-size", "6", "--mla", "keplerian", "--grid", "file", "-q"]) == 0
+    assert json.loads((out2 / "disparity.json").read_text())["grid_check"]["refined"] is False
