@@ -1,0 +1,218 @@
+"""The converter on real lenslet frames (issue 12): every frame in shared/real/frames.
+
+    python bench/bench_real.py [--out BENCHMARKS.md] [--frames Boys2 Fujita2 ...]
+                               [--views 5] [--grid auto|file|refine] [--pictures bench/out]
+
+For each frame (its RayCalibData xml beside it): the grid check (plenocal.convert.gridcheck:
+the file grid's drift from the micro-image centres, refined or not under ``--grid``), then
+the conversion of all N x N views on one core (OpenCV, OpenMP, numba: one thread), timed
+without PNG encoding: the check, the preparation (patch sizes, layout, render plan) and
+the views. Reported: the view size, the confident share of patch sizes, the grid drift,
+and against the reference converter's central view where shared/real/reference has one
+(TLCT v1.6.0 / RLC 4.0): the SSIM after alignment and the sharpness ratio
+(plenocal.convert.compare; targets 0.85 and 0.8) and the sizes.
+
+MLA kind per frame (RayCalibData does not say): the TSPC cameras (Boys2, HandTools) are
+Galilean, the Raytrix ones (Fujita2, Origami, Boxer-IrishMan-Gladiator2, R42_klein_crop)
+Keplerian (shared/real/README.md); a frame not in the table is converted with the
+converter's default (``convert.mla``), and the table is the only per-frame setting.
+
+Pictures (``--pictures``, git-ignored bench/out/): ``<frame>.png`` side by side at the
+central view's height: the raw frame (area-downscaled) | our central view | the
+reference's (where there is one) | the patch-size map; and ``<frame>_centre.png``, our
+central view at full size, to look at at 100 %.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ[_v] = "1"
+
+import argparse  # noqa: E402
+import inspect  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from benchmd import Lines, update_sections  # noqa: E402
+
+from plenocal.convert import ConvertSettings, ShotConversion  # noqa: E402
+from plenocal.convert.gridcheck import check_grid, decide, refine_grid  # noqa: E402
+from plenocal.convert.shot import build_grid, load_calib, load_lenslet  # noqa: E402
+from plenocal.io import read_image, write_image  # noqa: E402
+from plenocal.viewgeom import central_view  # noqa: E402
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "real"
+# RayCalibData does not say which kind an MLA is: shared/real/README.md does
+MLA = {
+    "Boys2": "galilean",  # TSPC (Tsinghua)
+    "HandTools": "galilean",  # TSPC
+    "Fujita2": "keplerian",  # Raytrix
+    "Origami": "keplerian",  # Raytrix
+    "Boxer-IrishMan-Gladiator2": "keplerian",  # Raytrix
+    "R42_klein_crop": "keplerian",  # Raytrix R42
+}
+HEADING = "Real frames (bench_real.py)"
+
+
+def _fit_height(img: np.ndarray, h: int) -> np.ndarray:
+    if img.ndim == 2:
+        img = np.repeat(img[..., None], 3, axis=2)
+    w = max(1, int(round(img.shape[1] * h / img.shape[0])))
+    interp = cv2.INTER_AREA if img.shape[0] > h else cv2.INTER_LINEAR
+    return cv2.resize(np.ascontiguousarray(img[..., :3]), (w, h), interpolation=interp)
+
+
+def side_by_side(panels: list[tuple[str, np.ndarray]], h: int) -> np.ndarray:
+    gap = np.full((h, 8, 3), 255, np.uint8)
+    parts = []
+    for label, img in panels:
+        p = _fit_height(img, h).copy()
+        cv2.putText(p, label, (8, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (0, 0, 0), 3, cv2.LINE_AA)
+        cv2.putText(p, label, (8, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (255, 255, 255), 1,
+                    cv2.LINE_AA)
+        parts += [p, gap]
+    return np.concatenate(parts[:-1], axis=1)
+
+
+def _to8(img: np.ndarray) -> np.ndarray:
+    if img.dtype == np.uint16:
+        top = max(int(img.max()), 1)
+        return np.clip(img.astype(np.float32) * (255.0 / top), 0, 255).astype(np.uint8)
+    return img
+
+
+def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
+                compare) -> dict:
+    lenslet = REAL / "frames" / f"{name}.png"
+    calib = load_calib(REAL / "frames" / f"{name}.xml")
+    image = load_lenslet(lenslet)
+    H, W = image.shape[:2]
+    cfg = {"mla": MLA[name]} if name in MLA else {}
+    settings = ConvertSettings.from_config(cfg)
+    t0 = time.perf_counter()
+    grid = build_grid(calib, W, H)
+    check = check_grid(image, grid)
+    t_check = time.perf_counter() - t0
+    refined = decide(grid_mode, check)
+    kwargs = {}
+    if refined and "grid" in inspect.signature(ShotConversion).parameters:
+        kwargs["grid"] = refine_grid(grid, check)
+    elif refined:
+        from plenocal.convert.gridcheck import refine_calib  # noqa: PLC0415
+
+        calib = refine_calib(calib, check)
+    t1 = time.perf_counter()
+    shot = ShotConversion(image, calib, views, settings, source=str(lenslet), **kwargs)
+    t_prep = time.perf_counter() - t1
+    t2 = time.perf_counter()
+    centre_name = central_view(views)
+    centre = None
+    for vname, img in shot.views():
+        if vname == centre_name:
+            centre = img
+    t_views = time.perf_counter() - t2
+    stats = shot.disparity()
+    row = {
+        "name": name, "size": f"{W}x{H}", "mp": W * H / 1e6, "mla": getattr(shot, "mla",
+                                                                             cfg.get("mla")),
+        "t_check": t_check, "t_prep": t_prep, "t_views": t_views,
+        "t_total": t_check + t_prep + t_views, "view": (stats["width"], stats["height"]),
+        "confident": stats["patch_size_px"]["confident_share"],
+        "median_patch": stats["patch_size_px"]["median"], "check": check, "refined": refined,
+        "cmp": None,
+    }
+    ref_path = REAL / "reference" / name / "centre.png"
+    ref = read_image(ref_path) if ref_path.is_file() else None
+    if ref is not None and compare is not None:
+        try:
+            row["cmp"] = compare(centre, ref)
+        except ValueError as exc:  # ConvertError: alignment failed
+            row["cmp"] = {"error": str(exc)}
+    if pictures is not None:
+        pictures.mkdir(parents=True, exist_ok=True)
+        h = centre.shape[0]
+        panels = [("raw frame", _to8(image)), ("ours (centre)", centre)]
+        if ref is not None:
+            panels.append(("reference (TLCT)", ref))
+        panels.append(("patch size", shot.patch_picture()))
+        write_image(pictures / f"{name}.png", side_by_side(panels, h))
+        write_image(pictures / f"{name}_centre.png", centre)
+    return row
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=None, help="also write the figures into this BENCHMARKS.md")
+    ap.add_argument("--frames", nargs="*", default=None, help="frame names (default: all)")
+    ap.add_argument("--views", type=int, default=5)
+    ap.add_argument("--grid", default="auto", choices=("file", "refine", "auto"))
+    ap.add_argument("--pictures", default=str(Path(__file__).resolve().parent / "out"),
+                    help="folder for the side-by-side pictures ('' for none)")
+    args = ap.parse_args()
+    cv2.setNumThreads(1)
+    try:
+        from plenocal.convert.compare import compare_to_reference as compare  # noqa: PLC0415
+    except ImportError:
+        compare = None
+    frames = sorted(p.stem for p in (REAL / "frames").glob("*.png"))
+    if args.frames:
+        frames = [f for f in frames if f in args.frames]
+    pictures = Path(args.pictures) if args.pictures else None
+    out = Lines()
+    out.say(f"{args.views} x {args.views} views per frame, one thread, `convert.grid: "
+            f"{args.grid}`, converter defaults otherwise (MLA kind from the table in "
+            "bench/bench_real.py). Times without PNG encoding: grid check, preparation "
+            "(patch sizes, layout, plan), all views.")
+    if compare is None:
+        out.say("(plenocal.convert.compare not present: no comparison with the reference)")
+    out.say("")
+    out.say("| frame | size | MLA | check s | prepare s | views s | total s | s / 4 MP | view "
+            "| ref. view | confident | grid drift max / rms px | refined | SSIM | sharpness |")
+    out.say("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    rows = []
+    for name in frames:
+        r = bench_frame(name, args.views, args.grid, pictures, compare)
+        rows.append(r)
+        ck, cmp = r["check"], r["cmp"] or {}
+        ref_size = "x".join(str(v) for v in cmp["reference_size"]) if "reference_size" in cmp \
+            else "-"
+        ssim = f"{cmp['ssim']:.3f}" if "ssim" in cmp else ("failed" if "error" in cmp else "-")
+        sharp = f"{cmp['sharpness_ratio']:.2f}" if "sharpness_ratio" in cmp else "-"
+        drift = (f"{ck.drift_max_px:.2f} / {ck.drift_rms_px:.2f}"
+                 + (" (foreign)" if ck.foreign else ""))
+        out.say(f"| {name} | {r['size']} | {r['mla']} | {r['t_check']:.2f} | {r['t_prep']:.2f} "
+                f"| {r['t_views']:.2f} | {r['t_total']:.2f} | {r['t_total'] * 4 / r['mp']:.2f} "
+                f"| {r['view'][0]}x{r['view'][1]} | {ref_size} | {100 * r['confident']:.0f}% "
+                f"| {drift} | {'yes' if r['refined'] else 'no'} | {ssim} | {sharp} |")
+    out.say("")
+    out.say("Grid check per frame (fitted lattice minus the file's grid at the lens nearest each "
+            "corner and the centre, px; lenses measured; fitted pitch and rotation against "
+            "the file's; the fit's residual):")
+    out.say("")
+    out.say("| frame | measured | top left | top right | centre | bottom left | bottom right "
+            "| pitch | rotation deg | residual px |")
+    out.say("|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        ck = r["check"]
+        if not ck.fitted:
+            out.say(f"| {r['name']} | {100 * ck.measured_share:.0f}% | not fitted |||||||")
+            continue
+        cells = " | ".join(
+            f"({ck.regions[k]['fit_dx_px']:+.1f}, {ck.regions[k]['fit_dy_px']:+.1f})"
+            for k in ("top_left", "top_right", "centre", "bottom_left", "bottom_right"))
+        out.say(f"| {r['name']} | {100 * ck.measured_share:.0f}% | {cells} | "
+                f"x{ck.pitch_ratio:.5f} | {ck.rotation_deg:+.4f} | {ck.residual_rms_px:.2f} |")
+    if args.out:
+        update_sections(args.out, {HEADING: list(out)})
+
+
+if __name__ == "__main__":
+    main()
