@@ -116,3 +116,54 @@ def test_chief_rays_of_a_view_meet_on_the_main_lens_plane():
 def test_impossible_optics_raise(bad):
     with pytest.raises(ValueError):
         bad()
+
+
+def _thin_lens_blur_px(opt: o.PlenopticOptics, v: float, lens_type: int) -> float:
+    """Blur disc from first principles: a point a = v s in front of a lens of focal f_i
+    (a < 0: a virtual object behind it) images at b' (1/b' = 1/f_i - 1/a); a disc of
+    the lens aperture D meets the sensor s behind the lens at D |s - b'| / b'."""
+    a = v * opt.s
+    b = 1.0 / (1.0 / opt.type_f(lens_type) - 1.0 / a)
+    return opt.mla_pitch * abs(opt.s - b) / b / opt.pixel_size
+
+
+@pytest.mark.parametrize("kind", ["keplerian", "galilean"])
+def test_lens_types_blur_by_the_thin_lens_law(kind):
+    opt = o.PlenopticOptics(0.035, 0.6, 130e-6, 2.8, 5.0, 5.5e-6, 2048, 1536, kind=kind,
+                            type_focal_ratios=(0.94, 1.0, 1.068))
+    sign = 1.0 if kind == "keplerian" else -1.0
+    sharp = [1.0 / opt.type_kappa(i) for i in range(3)]
+    # the middle type is the reference: sharp at the focus plane, v = k - 1 (Keplerian)
+    # or -(k + 1) (Galilean: a virtual image behind the MLA)
+    assert sharp[1] == pytest.approx(4.0 if kind == "keplerian" else -6.0)
+    assert opt.virtual_depth(0.6) == pytest.approx(sharp[1])
+    assert opt.t == pytest.approx(sign * 5.0 * opt.f)
+    assert (opt.s < opt.f) == (kind == "galilean")
+    for i in range(3):
+        assert opt.type_t(i) / opt.s == pytest.approx(sharp[i])  # v_i = t_i / s
+        assert opt.blur_px(sharp[i], i) == pytest.approx(0.0, abs=1e-9)
+        for v in (2.5, 3.3, 4.7, 9.0):
+            assert opt.blur_px(sign * v, i) == pytest.approx(
+                _thin_lens_blur_px(opt, sign * v, i), rel=1e-9)
+        lo, hi = opt.depth_of_field(i, 1.0)
+        assert lo < abs(sharp[i]) < hi
+        assert opt.blur_px(sign * lo, i) == pytest.approx(1.0)
+        if math.isfinite(hi):
+            assert opt.blur_px(sign * hi, i) == pytest.approx(1.0)
+    # three different types, three different blurs of one depth
+    blurs = [opt.blur_px(sign * 3.3, i) for i in range(3)]
+    assert len({round(b, 6) for b in blurs}) == 3
+
+
+def test_galilean_optics_share_the_chief_rays():
+    """Chief rays do not see the microlens focal length: a Galilean camera with the same
+    s and L has the same view geometry (its micro images are upright, not its views)."""
+    kep = o.PlenopticOptics(0.035, 0.6, 130e-6, 2.8, 5.0, 5.5e-6, 2048, 1536)
+    gal = o.PlenopticOptics(0.035, 0.6, 130e-6, 2.8, 5.0, 5.5e-6, 2048, 1536, kind="galilean")
+    assert gal.L == pytest.approx(gal.focal_length + gal.e - 5.0 * gal.f)
+    assert gal.aperture == pytest.approx(gal.mla_pitch * gal.L / gal.s)
+    # beyond the focus plane the main-lens image moves towards the MLA: |v| shrinks
+    assert gal.virtual_depth(0.74) < 0 and abs(gal.virtual_depth(0.74)) < 6.0
+    assert gal.micro_image_disparity_px(0.5) < 0 < kep.micro_image_disparity_px(0.5)
+    with pytest.raises(ValueError):
+        o.PlenopticOptics(0.035, 0.6, 130e-6, 2.8, 5.0, 5.5e-6, 64, 64, kind="newtonian")

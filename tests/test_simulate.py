@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
+import math
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 import yaml
@@ -13,11 +16,17 @@ from plenocal.config import validate_config
 from plenocal.grid import MicrolensGrid
 from plenocal.io import read_image, to_float
 from plenocal.optics import PlenopticOptics
+from plenocal.raytrix import read_calib, write_calib
 from plenocal.simulate.dataset import make_calib, nearest_lens_map, render_shot, setup_dataset
+from plenocal.simulate.mla import lens_type_map
 from plenocal.simulate.raytrace import render_lenslet
-from plenocal.simulate.scene import scene_arrays
+from plenocal.simulate.scene import SceneArrays, scene_arrays
+from plenocal.simulate.sensor import natural_vignetting, read_out
 
 ROOT = Path(__file__).resolve().parents[1]
+# a real pi/2 Raytrix file (shared/fixtures/raytrix-calib/Fujita2.xml), to 6 decimals
+FUJITA = {"lens_base_x": (0.0, 1.0), "lens_base_y": (0.866025, 0.5),
+          "sub_grid_base": (1.732051, 3.0), "offsets": [(0.0, 0.0), (0.0, 1.0), (0.0, -1.0)]}
 
 
 def small_sim(width=400, height=300) -> dict:
@@ -40,15 +49,17 @@ def optics_of(sim: dict) -> PlenopticOptics:
     return optics_from_config(sim)
 
 
-def neighbour_shift(img: np.ndarray, grid: MicrolensGrid, half: int = 3) -> float:
+def neighbour_shift(img: np.ndarray, grid: MicrolensGrid, half: int = 3,
+                    cand: np.ndarray | None = None) -> float:
     """Median horizontal shift of content between each lens and its right neighbour,
-    by sub-pixel NCC over candidate shifts along the lattice row."""
+    by sub-pixel NCC over candidate shifts along the lattice row (default: positive
+    shifts, inverted micro images; negative ones: upright micro images)."""
     import cv2
 
     gray = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY).astype(np.float32)
     inside = grid.inside(2.0)
     shifts = []
-    cand = np.arange(1.0, 14.0, 0.02)
+    cand = np.arange(1.0, 14.0, 0.02) if cand is None else cand
     ys, xs = np.mgrid[-half:half + 1, -half:half + 1].astype(np.float32)
     for i in np.flatnonzero(inside)[::7]:
         j = grid.neighbours[i, 0]  # right neighbour, +x
@@ -157,3 +168,192 @@ def test_shots_array_on_the_stage_and_hand_held_orbiting_the_scene():
         assert miss <= np.sqrt(3) * hh["max_offset_m"] + 1e-12
         assert abs(R[:, 2] @ to_centre - dist) <= np.sqrt(3) * hh["max_offset_m"]
     assert make_shots(sim, centre)["hand01"].tobytes() == shots["hand01"].tobytes()
+
+
+# --- the Raytrix-like camera: multi-focus MLA, turned grid, noise (issue 13) ----------
+
+RAYTRIX_ROTATION = math.pi / 2 + 0.001
+
+
+def raytrix_sim(width=240, height=200, **mla) -> dict:
+    sim = small_sim(width, height)
+    sim["mla"].update({"lens_types": 3, "rotation_rad": RAYTRIX_ROTATION, **mla})
+    return sim
+
+
+def texture_plane(z: float, texel: float, texture: np.ndarray | None = None) -> SceneArrays:
+    """A fronto-parallel plane at depth z with a seeded random texture (the same detail
+    everywhere, so that every lens sees statistically the same content)."""
+    if texture is None:
+        rng = np.random.default_rng(0)
+        texture = cv2.GaussianBlur(rng.random((256, 256)).astype(np.float32), (0, 0), 1.0)
+    tex = np.ascontiguousarray(np.repeat(texture[:, :, None], 3, axis=2)[None])
+    w = 0.4
+    return SceneArrays(p0=np.array([[-w / 2, -w / 2, z]]), u=np.array([[w, 0.0, 0.0]]),
+                       v=np.array([[0.0, w, 0.0]]), normal=np.array([[0.0, 0.0, 1.0]]),
+                       tex_id=np.array([0]), texel=np.array([texel]), atlas=tex,
+                       tex_h=np.array([tex.shape[1]]), tex_w=np.array([tex.shape[2]]))
+
+
+def test_calib_xml_is_written_as_raytrix_writes_a_turned_multi_focus_mla(tmp_path: Path):
+    sim = raytrix_sim()
+    setup_dataset(sim, tmp_path)
+    calib = read_calib(tmp_path / "calib.xml")
+    # the layout of the real pi/2 files: rotation and base vectors turned together
+    assert calib.rotation == pytest.approx(RAYTRIX_ROTATION, abs=1e-12)
+    for key in ("lens_base_x", "lens_base_y", "sub_grid_base"):
+        np.testing.assert_allclose(getattr(calib, key), FUJITA[key], atol=1e-6)
+    for mine, real in zip(calib.lens_types, FUJITA["offsets"], strict=True):
+        np.testing.assert_allclose(mine.offset, real, atol=1e-6)
+    optics = optics_of(sim)
+    sharp = [1.0 / optics.type_kappa(i) for i in range(3)]
+    ranges = [(t.depth_min, t.depth_max) for t in calib.lens_types]
+    assert sharp[0] < sharp[1] < sharp[2]
+    for (lo, hi), v in zip(ranges, sharp, strict=True):
+        assert lo < v < hi
+    # neighbouring types overlap a little; the outer ends open as Raytrix writes them
+    assert ranges[0][0] == 1.0 and ranges[2][1] == 100.0
+    for a, b in ((0, 1), (1, 2)):
+        assert 0 < ranges[a][1] - ranges[b][0] < 0.5
+    # the types cover the scene
+    v_scene = [optics.virtual_depth(z) for z in (sim["scene"]["near_m"], sim["scene"]["far_m"])]
+    assert ranges[0][0] < min(v_scene) and max(v_scene) < ranges[2][1]
+    # interleaving: a third of the lenses per type, no two neighbours of one type
+    grid = MicrolensGrid(calib, optics.width, optics.height)
+    counts = np.bincount(grid.types, minlength=3)
+    assert counts.min() >= 0.25 * len(grid)
+    nb = grid.neighbours
+    has = nb >= 0
+    assert has.sum() > 3 * len(grid)
+    assert not (grid.types[nb[has]] == np.repeat(grid.types, 6).reshape(-1, 6)[has]).any()
+    # datasheet: the three F-numbers, the middle one the reference type's
+    cam = yaml.safe_load((tmp_path / "camera.yaml").read_text())
+    fns = cam["mla"]["f_numbers"]
+    assert len(fns) == 3 and sorted(fns)[1] == sim["mla"]["f_number"]
+
+
+@pytest.mark.parametrize("type_sharp", [0, 1, 2])
+def test_each_lens_type_is_sharpest_at_its_own_depth(tmp_path: Path, type_sharp):
+    """Render with the simulator's calib, measure with the types the file gives back:
+    at the virtual depth where type i is in focus its micro images are the sharpest, and
+    the others lose sharpness in the order of their predicted blur discs."""
+    sim = raytrix_sim()
+    optics = optics_of(sim)
+    calib = make_calib(sim, optics)
+    lens_map = nearest_lens_map(MicrolensGrid(calib, optics.width, optics.height))
+    v = 1.0 / optics.type_kappa(type_sharp)
+    z = float(optics.depth_from_virtual_depth(v))
+    img = render_lenslet(texture_plane(z, 0.0003), optics, lens_map, np.eye(4), 16, 0,
+                         lens_types=lens_type_map(calib, lens_map)).mean(axis=2)
+    write_calib(calib, tmp_path / "calib.xml")
+    grid = MicrolensGrid(read_calib(tmp_path / "calib.xml"), optics.width, optics.height)
+    lap = cv2.Laplacian(img.astype(np.float32), cv2.CV_32F) ** 2
+    ys, xs = np.mgrid[0:optics.height, 0:optics.width]
+    sharpness = np.zeros(3)
+    for k in range(3):
+        vals = [lap[np.hypot(xs - c[0], ys - c[1]) < 0.3 * grid.diameter].mean()
+                for c, t, ok in zip(grid.centres, grid.types, grid.inside(), strict=True)
+                if t == k and ok]
+        assert len(vals) >= 8
+        sharpness[k] = np.mean(vals)
+    blur = np.array([optics.blur_px(v, k) for k in range(3)])
+    assert blur[type_sharp] == pytest.approx(0.0, abs=1e-9)
+    assert int(np.argmax(sharpness)) == type_sharp, (sharpness, blur)
+    assert sharpness[type_sharp] > 1.2 * np.delete(sharpness, type_sharp).max()
+    if type_sharp != 1:  # the middle type's neighbours blur alike (1.9 px both)
+        assert list(np.argsort(-sharpness)) == list(np.argsort(blur)), (sharpness, blur)
+
+
+@pytest.mark.parametrize("rotation", [RAYTRIX_ROTATION, 0.02])
+def test_turned_grid_puts_micro_images_where_the_xml_says(tmp_path: Path, rotation):
+    """A white plane: every micro image is a symmetric disc around its centre; measured
+    centroids sit on the lattice of the written calib.xml, not on an unturned one."""
+    sim = raytrix_sim(rotation_rad=rotation)
+    optics = optics_of(sim)
+    setup_dataset(sim, tmp_path)
+    calib = read_calib(tmp_path / "calib.xml")
+    grid = MicrolensGrid(calib, optics.width, optics.height)
+    white = texture_plane(0.6, 0.001, np.ones((8, 8), dtype=np.float32))
+    img = render_lenslet(white, optics, nearest_lens_map(grid), np.eye(4), 16, 0,
+                         lens_types=lens_type_map(calib, nearest_lens_map(grid))).mean(axis=2)
+    ys, xs = np.mgrid[0:optics.height, 0:optics.width]
+    err = []
+    for c in grid.centres[grid.inside(1.0)]:
+        # intensity centroid under a smooth window centred on the xml's centre
+        w = img * np.exp(-((xs - c[0]) ** 2 + (ys - c[1]) ** 2) / (0.2 * grid.diameter) ** 2)
+        err.append(np.hypot((xs * w).sum() / w.sum() - c[0], (ys * w).sum() / w.sum() - c[1]))
+    assert len(err) >= 30 and np.mean(err) < 0.03 and max(err) < 0.08, (np.mean(err), max(err))
+    # the test can fail: an unturned grid misses the micro images
+    unturned = MicrolensGrid(dataclasses.replace(calib, rotation=0.0), optics.width,
+                             optics.height)
+    near = np.linalg.norm(unturned.centres[:, None] - grid.centres[None], axis=2).min(axis=1)
+    assert near.max() > 1.0  # 12x the tolerance above
+
+
+def test_sensor_noise_is_seeded_and_12_bit_data_spans_its_range(tmp_path: Path):
+    sim = raytrix_sim(160, 120)
+    sim["sensor"].update(bit_depth=12, full_well_e=13500, noise_std=0.001)
+    setup_dataset(sim, tmp_path)
+    for name in ("a", "b"):
+        render_shot(sim, tmp_path, "hand01", tmp_path / f"{name}.png", log=lambda m: None)
+    assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
+    other = copy.deepcopy(sim)
+    other["seed"] += 1
+    render_shot(other, tmp_path, "hand01", tmp_path / "c.png", log=lambda m: None)
+    assert (tmp_path / "a.png").read_bytes() != (tmp_path / "c.png").read_bytes()
+    img = read_image(tmp_path / "a.png")
+    assert img.dtype == np.uint16 and (img % 16 == 0).all()  # 12 bits, MSB-aligned
+    assert len(np.unique(img)) > 1000  # more levels than 8 bits hold
+    # the full 12-bit range: a ramp from black to white, every level once
+    ramp = np.linspace(0.0, 1.0, 4096, dtype=np.float32)[None, :, None]
+    out = read_out(ramp, np.random.default_rng(0), 0.0, None, 12)
+    assert out.min() == 0 and out.max() == 4095 << 4 and len(np.unique(out)) == 4096
+    # shot + read noise: the variance of a flat field is x / full_well + sigma^2
+    flat = np.full((200, 200, 3), 0.5, dtype=np.float32)
+    dn = read_out(flat, np.random.default_rng(1), 0.001, 13500, 12).astype(float) / 65520
+    assert dn.std() == pytest.approx(math.sqrt(0.5 / 13500 + 0.001 ** 2), rel=0.05)
+    assert dn.mean() == pytest.approx(0.5, abs=1e-3)
+
+
+def test_vignetting_darkens_the_sensor_edges():
+    """cos^4 of the chief ray and a front stop: the sensor's edges are darker than its
+    centre, the centre is untouched by the stop."""
+    sim = small_sim(2048, 24)
+    optics = optics_of(sim)
+    grid = MicrolensGrid(make_calib(sim, optics), optics.width, optics.height)
+    lens_map = nearest_lens_map(grid)
+    cos4 = natural_vignetting(optics, lens_map)
+    r = np.hypot(*optics.sensor_to_metric(lens_map[..., 0], lens_map[..., 1]))
+    r_lens = r * optics.L / (optics.L + optics.s)
+    np.testing.assert_allclose(cos4, np.cos(np.arctan(r_lens / optics.L)) ** 4, rtol=1e-5)
+    white = texture_plane(0.6, 0.001, np.ones((8, 8), dtype=np.float32))
+    plain = render_lenslet(white, optics, lens_map, np.eye(4), 16, 0).mean(axis=2)
+    stopped = render_lenslet(white, optics, lens_map, np.eye(4), 16, 0, stop_distance=0.01,
+                             stop_diameter=optics.aperture).mean(axis=2)
+    farther = render_lenslet(white, optics, lens_map, np.eye(4), 16, 0, stop_distance=0.02,
+                             stop_diameter=optics.aperture).mean(axis=2)
+    centre, edge = slice(984, 1064), slice(0, 80)
+    assert stopped[:, centre].mean() == pytest.approx(plain[:, centre].mean(), rel=0.02)
+    assert stopped[:, edge].mean() < 0.95 * plain[:, edge].mean()
+    assert farther[:, edge].mean() < 0.9 * stopped[:, edge].mean()  # a deeper barrel clips more
+
+
+def test_galilean_micro_images_are_upright():
+    """Galilean: the main-lens image lies behind the MLA; a point moves against the lens
+    step across neighbouring micro images (upright), by the predicted disparity."""
+    sim = small_sim()
+    sim["mla"]["kind"] = "galilean"
+    optics = optics_of(sim)
+    assert optics.galilean and optics.t < 0
+    z = float(optics.depth_from_virtual_depth(-4.0))
+    assert 0.4 < z < 0.9
+    calib = make_calib(sim, optics)
+    assert calib.lens_types[0].depth_min > 0  # magnitudes, as the TSPC files write them
+    grid = MicrolensGrid(calib, optics.width, optics.height)
+    img = render_lenslet(scene_arrays(plane_scene(z)), optics, nearest_lens_map(grid),
+                         np.eye(4), 8, 0)
+    img8 = np.clip(img * 255, 0, 255).astype(np.uint8)
+    expected = float(optics.micro_image_disparity_px(z))
+    assert expected < -1.0
+    measured = neighbour_shift(img8, grid, cand=np.arange(-14.0, -1.0, 0.02))
+    assert abs(measured - expected) < 0.15, (measured, expected)
