@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from plenocal.grid import MicrolensGrid
 from plenocal.optics import PlenopticOptics
@@ -99,15 +100,27 @@ def lens_type_map(calib: RayCalib, lens_map: np.ndarray) -> np.ndarray:
         return np.zeros((height, width), dtype=np.int64)
     pad = int(math.ceil(2 * calib.diameter))
     big = MicrolensGrid(calib, width + 2 * pad, height + 2 * pad)
-    small_origin = big.origin - pad
-    ij = np.rint((lens_map - small_origin) @ np.linalg.inv(big.A).T).astype(np.int64)
     lo = big.ij.min(axis=0)
     table = np.full(tuple(big.ij.max(axis=0) - lo + 1), -1, dtype=np.int64)
     table[big.ij[:, 0] - lo[0], big.ij[:, 1] - lo[1]] = big.types
-    k = ij - lo
-    ok = ((k >= 0) & (k < np.array(table.shape))).all(axis=-1)
-    out = np.full((height, width), -1, dtype=np.int64)
-    out[ok] = table[k[ok][:, 0], k[ok][:, 1]]
+    out = np.empty((height, width), dtype=np.int64)
+    _lookup_types(np.ascontiguousarray(lens_map, dtype=np.float64), big.origin - pad,
+                  np.ascontiguousarray(np.linalg.inv(big.A)), lo.astype(np.int64), table, out)
     if (out < 0).any():
         raise ValueError(f"{int((out < 0).sum())} pixels lie under no lens of the grid")
     return out
+
+
+@njit(cache=True)
+def _lookup_types(lens_map, origin, Ainv, lo, table, out):
+    """Per pixel: lattice index of its lens centre, then that lens's type (-1: none)."""
+    for row in range(lens_map.shape[0]):
+        for col in range(lens_map.shape[1]):
+            rx = lens_map[row, col, 0] - origin[0]
+            ry = lens_map[row, col, 1] - origin[1]
+            i = int(round(Ainv[0, 0] * rx + Ainv[0, 1] * ry)) - lo[0]
+            j = int(round(Ainv[1, 0] * rx + Ainv[1, 1] * ry)) - lo[1]
+            if 0 <= i < table.shape[0] and 0 <= j < table.shape[1]:
+                out[row, col] = table[i, j]
+            else:
+                out[row, col] = -1
