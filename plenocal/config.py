@@ -111,7 +111,9 @@ def _check_semantics(config: dict) -> None:
         from plenocal.simulate.optics_setup import optics_from_config  # noqa: PLC0415
 
         optics = optics_from_config(sim)
-        v_near = float(optics.virtual_depth(near))
+        # the smallest |v| of the scene: at the near plane, or (Galilean, v < 0) the far one
+        v_near = float(-optics.virtual_depth(far) if optics.galilean
+                       else optics.virtual_depth(near))
         if v_near < 1.5:
             raise _fail(f"{key}.scene.near_m", near,
                         f"virtual depth {v_near:.2f} at the near plane: below 1.5 a point is "
