@@ -3,11 +3,14 @@ calibration (cameras dict ``"<cam>/<view>" -> PinholeCamera``), the captured vie
 and the ``verify`` config, so that the same experiment runs on the complete
 calibration and on the ground-truth cameras (the dB lost to calibration).
 
-For each experiment: the depth of every input view is estimated by the plane sweep
-with the calibration under test (sources: the same view of the nearest other array
-shots and the nearest views of the input's own set), the targets are synthesized by
-DIBR (:mod:`plenocal.dibr`) from the inputs, and each is scored by PSNR against the
-captured (converted) view, excluding a border.
+For each experiment: every input view has one z-depth map (given - the workflow
+computes them once with the complete calibration, :mod:`plenocal.depth.views` - or,
+when not given, estimated here with the calibration under test, by SGM over the
+plane-sweep cost volume), the targets are rendered from the inputs by the project's
+DIBR (:mod:`plenocal.dibr`) or by MPEG's RVS (``verify.renderer: rvs``,
+:mod:`plenocal.verify.rvs`), and each is scored by PSNR against the captured
+(converted) view, excluding a border. The dB lost to calibration compares the two
+camera sets with one and the same depth maps.
 
 - Exp. 1 (Fig. 6a / 7): central view of every array shot from the central views of
   the four corner shots; grid = array rows x cols.
@@ -28,10 +31,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from plenocal.camera import PinholeCamera
-from plenocal.depth import planesweep_options
-from plenocal.depth.inputs import nearest_sources
-from plenocal.depth.planesweep import plane_sweep_depth
+from plenocal.depth.views import estimate_view_depth
 from plenocal.dibr import DibrOptions, View, psnr, synthesize
+from plenocal.export.mpeg import mpeg_name
 from plenocal.io import read_image, to_float
 from plenocal.viewgeom import central_view, parse_view, view_name
 
@@ -89,8 +91,8 @@ class SynthesisContext:
     near: float
     far: float
     config: dict = field(default_factory=dict)
+    depths: dict[str, np.ndarray] = field(default_factory=dict)
     _images: dict = field(default_factory=dict)
-    _depths: dict = field(default_factory=dict)
 
     def camera(self, key: str) -> PinholeCamera:
         if key not in self.cameras:
@@ -110,39 +112,50 @@ class SynthesisContext:
             self._images[key] = img
         return self._images[key]
 
-    def depth_sources(self, key: str) -> list[str]:
-        cam, view = key.split("/")
-        k_shots = int(self.config.get("depth_sources_shots", 4))
-        k_set = int(self.config.get("depth_sources_set", 4))
-        same_view = [f"{c}/{view}" for c in self.layout.cams if f"{c}/{view}" in self.cameras]
-        own_set = [f"{cam}/{v}" for v in _all_views(self.layout.n_views)
-                   if f"{cam}/{v}" in self.cameras]
-        picked = nearest_sources(key, self.cameras, k_shots, same_view)
-        picked += nearest_sources(key, self.cameras, k_set, own_set)
-        if not picked:
-            raise ValueError(f"synthesis: no source view to estimate the depth of {key}")
-        return picked
-
     def depth(self, key: str) -> np.ndarray:
-        if key not in self._depths:
-            srcs = self.depth_sources(key)
-            log.info("depth of %s from %s", key, ", ".join(srcs))
-            self._depths[key] = plane_sweep_depth(
-                self.camera(key), self.image(key), [self.camera(s) for s in srcs],
-                [self.image(s) for s in srcs], self.near, self.far,
-                planesweep_options(self.config.get("depth", {})))
-        return self._depths[key]
+        """The depth map of ``key``: the given one, else estimated with this calibration."""
+        if key not in self.depths:
+            d, srcs = estimate_view_depth(
+                key, self.cameras, self.image, self.near, self.far, self.layout.n_views,
+                self.config.get("depth", {}), int(self.config.get("depth_sources_shots", 4)),
+                int(self.config.get("depth_sources_set", 4)))
+            log.info("depth of %s estimated from %s", key, ", ".join(srcs))
+            self.depths[key] = d
+        return self.depths[key]
 
     def synthesize(self, inputs: list[str], target: str) -> tuple[np.ndarray, np.ndarray]:
         views = [View(self.camera(k), self.image(k), self.depth(k)) for k in inputs]
         return synthesize(views, self.camera(target), dibr_options(self.config))
 
+    def render(self, inputs: list[str], targets: list[str]) -> dict[str, np.ndarray]:
+        """Every target rendered from the inputs by the configured renderer."""
+        renderer = self.config.get("renderer", "dibr")
+        if renderer == "dibr":
+            return {t: self.synthesize(inputs, t)[0] for t in targets}
+        if renderer != "rvs":
+            raise ValueError(f"config: verify.renderer = {renderer!r}: must be dibr or rvs")
+        from plenocal.verify.rvs import RvsError, rvs_synthesize  # noqa: PLC0415
+
+        binary = self.config.get("rvs_binary")
+        if not binary:
+            raise RvsError("config: verify.renderer is rvs but verify.rvs_binary is not "
+                           "set; give the path of an RVS 4.0 binary (README, 'MPEG exports "
+                           "and RVS')")
+        ins = [(mpeg_name(k), self.camera(k), self.image(k), self.depth(k)) for k in inputs]
+        outs = rvs_synthesize(binary, ins, [(mpeg_name(t), self.camera(t)) for t in targets],
+                              (self.near, self.far),
+                              float(self.config.get("rvs_blending_factor", 5.0)))
+        return {t: outs[mpeg_name(t)] for t in targets}
+
     def score(self, inputs: list[str], targets: list[str],
               keep: set[str] | None = None) -> tuple[dict[str, float], dict[str, np.ndarray]]:
         border = int(self.config.get("psnr_border_px", 8))
         scores, kept = {}, {}
+        rendered = self.render(inputs, targets)
         for t in targets:
-            out, _ = self.synthesize(inputs, t)
+            out = rendered[t]
+            if out.ndim == 3 and self.image(t).ndim == 2:
+                out = out.mean(axis=2)
             scores[t] = psnr(out, self.image(t), border)
             log.info("synthesized %s: %.2f dB", t, scores[t])
             if keep and t in keep:
@@ -180,14 +193,52 @@ def _summary(scores: dict[str, float]) -> dict:
             "max_psnr": float(vals.max()), "count": int(len(vals))}
 
 
+def experiment_plan(layout: ArrayLayout, exp: int, exp2_sets: list[str] | None = None,
+                    stride: int = 1,
+                    lateral: Callable[[str], str] | None = None) -> dict[str, tuple[list[str],
+                                                                                   list[str]]]:
+    """The (inputs, targets) of experiment ``exp`` by run name: ``exp1``;
+    ``exp2_<cam>`` per set of ``exp2_sets`` (default the middle shot's); ``exp3_central``
+    and ``exp3_lateral`` (every ``stride``-th view row/column, the centre always
+    included; ``lateral`` maps a corner shot to its lateral view, default
+    :func:`inner_corner_view`)."""
+    L = layout
+    n, cv = L.n_views, L.centre_view
+    corners = [f"{c}/{cv}" for c in L.corners]
+    if exp == 1:
+        return {"exp1": (corners, [f"{c}/{cv}" for c in L.cams if f"{c}/{cv}" not in corners])}
+    if exp == 2:
+        out = {}
+        for cam in exp2_sets or [L.middle_cam]:
+            inputs = [f"{cam}/{v}" for v in L.side_views()]
+            out[f"exp2_{cam}"] = (inputs, [f"{cam}/{v}" for v in _all_views(n)
+                                           if f"{cam}/{v}" not in inputs])
+        return out
+    if exp == 3:
+        h = (n - 1) // 2
+        idx = sorted({i for i in range(n) if (i - h) % stride == 0})
+        views = [view_name(r, c) for r in idx for c in idx]
+        lat = lateral or (lambda cam: inner_corner_view(L, cam))
+        out = {}
+        for variant, inputs in (("central", corners),
+                                ("lateral", [f"{c}/{lat(c)}" for c in L.corners])):
+            out[f"exp3_{variant}"] = (inputs, [f"{c}/{v}" for c in L.cams for v in views
+                                               if f"{c}/{v}" not in inputs])
+        return out
+    raise ValueError(f"synthesis: no experiment {exp} (1, 2 or 3)")
+
+
+def _known(ctx: SynthesisContext, keys: list[str]) -> list[str]:
+    return [k for k in keys if k in ctx.cameras]
+
+
 def experiment1(ctx: SynthesisContext) -> tuple[dict, dict[str, np.ndarray]]:
     """Central views of every array shot from the corner shots' central views."""
     L = ctx.layout
     cv = L.centre_view
-    inputs = [f"{c}/{cv}" for c in L.corners]
-    targets = [f"{c}/{cv}" for c in L.cams if f"{c}/{cv}" not in inputs]
+    inputs, targets = experiment_plan(L, 1)["exp1"]
     keep = {f"{L.middle_cam}/{cv}"}
-    scores, kept = ctx.score(inputs, targets, keep)
+    scores, kept = ctx.score(inputs, _known(ctx, targets), keep)
     grid = [[scores.get(f"{L.cam(c, r)}/{cv}") for c in range(L.cols)] for r in range(L.rows)]
     return {"inputs": inputs, "psnr": scores, "grid": grid, **_summary(scores)}, kept
 
@@ -198,9 +249,8 @@ def experiment2(ctx: SynthesisContext, cams: list[str]) -> tuple[dict, dict[str,
     n = L.n_views
     sets, all_scores, kept = {}, {}, {}
     for cam in cams:
-        inputs = [f"{cam}/{v}" for v in L.side_views()]
-        targets = [f"{cam}/{v}" for v in _all_views(n) if f"{cam}/{v}" not in inputs]
-        scores, k = ctx.score(inputs, targets, {f"{cam}/{L.centre_view}"})
+        inputs, targets = experiment_plan(L, 2, [cam])[f"exp2_{cam}"]
+        scores, k = ctx.score(inputs, _known(ctx, targets), {f"{cam}/{L.centre_view}"})
         kept.update(k)
         grid = [[scores.get(f"{cam}/{view_name(r, c)}") for c in range(n)] for r in range(n)]
         sets[cam] = {"inputs": inputs, "psnr": scores, "grid": grid, **_summary(scores)}
@@ -213,15 +263,12 @@ def experiment3(ctx: SynthesisContext, stride: int = 1) -> tuple[dict, dict[str,
     always included) from the corner shots' central (a) and lateral (b) views."""
     L = ctx.layout
     n = L.n_views
-    h = (n - 1) // 2
-    idx = sorted({i for i in range(n) if (i - h) % stride == 0})
-    views = [view_name(r, c) for r in idx for c in idx]
+    plan = experiment_plan(L, 3, stride=stride, lateral=lambda c: lateral_view(ctx, c))
     result, kept = {}, {}
-    for variant, inputs in (("central", [f"{c}/{L.centre_view}" for c in L.corners]),
-                            ("lateral", [f"{c}/{lateral_view(ctx, c)}" for c in L.corners])):
-        targets = [f"{c}/{v}" for c in L.cams for v in views if f"{c}/{v}" not in inputs]
+    for variant in ("central", "lateral"):
+        inputs, targets = plan[f"exp3_{variant}"]
         keep = {f"{L.middle_cam}/{L.centre_view}"}
-        scores, k = ctx.score(inputs, targets, keep)
+        scores, k = ctx.score(inputs, _known(ctx, targets), keep)
         kept.update({f"{variant}:{key}": img for key, img in k.items()})
         grid = [[None] * (L.cols * n) for _ in range(L.rows * n)]
         for key, val in scores.items():
@@ -238,3 +285,73 @@ def lost_db(ours: dict, truth: dict) -> float | None:
     if ours.get("mean_psnr") is None or truth.get("mean_psnr") is None:
         return None
     return float(truth["mean_psnr"] - ours["mean_psnr"])
+
+
+def inner_corner_view(layout: ArrayLayout, cam: str) -> str:
+    """The corner view of shot ``cam``'s set on the array's inner side by the view and
+    shot numbering (view row/column grow with the shot row/column): what
+    :func:`lateral_view` finds with a calibration, known before any calibration."""
+    n = layout.n_views - 1
+    col, row = int(cam[1:3]), int(cam[5:7])
+    return view_name(n if 2 * row < layout.rows - 1 else 0, n if 2 * col < layout.cols - 1 else 0)
+
+
+def experiment_input_views(layout: ArrayLayout, exp: int, exp2_sets: str = "middle") -> list[str]:
+    """The views whose depth maps experiment ``exp`` reads (Exp. 3's lateral views as
+    :func:`inner_corner_view` predicts them)."""
+    sets = [layout.middle_cam] if exp2_sets == "middle" else layout.cams
+    plan = experiment_plan(layout, exp, sets)
+    return list(dict.fromkeys(k for inputs, _ in plan.values() for k in inputs))
+
+
+def run_experiment(exp: int, cameras: dict[str, PinholeCamera],
+                   image_path: Callable[[str, str], str], layout: ArrayLayout, near: float,
+                   far: float, config: dict,
+                   depths: dict[str, np.ndarray] | None = None) -> tuple[dict,
+                                                                        dict[str, np.ndarray]]:
+    """Experiment ``exp`` with one camera set and (optionally) given depth maps."""
+    ctx = SynthesisContext(cameras, image_path, layout, near, far, config, dict(depths or {}))
+    if exp == 1:
+        return experiment1(ctx)
+    if exp == 2:
+        sets = [layout.middle_cam] if config.get("exp2_sets", "middle") == "middle" \
+            else layout.cams
+        return experiment2(ctx, sets)
+    if exp == 3:
+        return experiment3(ctx, int(config.get("exp3_view_stride", 1)))
+    raise ValueError(f"synthesis: no experiment {exp} (1, 2 or 3)")
+
+
+def _lost(exp: int, ours: dict | None, truth: dict | None) -> float | dict | None:
+    if ours is None or truth is None:
+        return None
+    if exp == 3:
+        return {v: lost_db(ours[v], truth[v]) for v in ("central", "lateral")}
+    return lost_db(ours, truth)
+
+
+def _block(exp: int, runs: dict, renderer: str) -> dict:
+    """Results of one renderer: ``calibrations`` (the project's depth) and
+    ``true_depth`` by camera set, and the dB lost to calibration (same depth, same
+    renderer) with each depth and to depth (complete calibration)."""
+    est = {c: r for (rd, d, c), r in runs.items() if rd == renderer and d == "estimated"}
+    true = {c: r for (rd, d, c), r in runs.items() if rd == renderer and d == "true"}
+    out: dict = {"calibrations": est}
+    if "ground_truth" in est:
+        out["db_lost"] = _lost(exp, est.get("complete"), est["ground_truth"])
+    if true:
+        out["true_depth"] = true
+        if "ground_truth" in true:
+            out["db_lost_true_depth"] = _lost(exp, true.get("complete"), true["ground_truth"])
+        out["db_lost_to_depth"] = _lost(exp, est.get("complete"), true.get("complete"))
+    return out
+
+
+def synthesis_summary(exp: int, runs: dict[tuple[str, str, str], dict],
+                      renderers: list[str]) -> dict:
+    """The experiment's JSON body from ``runs[(renderer, depth, cameras)]`` (depth
+    ``estimated`` | ``true``, cameras ``complete`` | ``ground_truth``): the first
+    renderer's block at the top level, every renderer's under ``renderers``."""
+    out = {"renderer": renderers[0], **_block(exp, runs, renderers[0])}
+    out["renderers"] = {r: _block(exp, runs, r) for r in renderers[1:]}
+    return out

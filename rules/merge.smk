@@ -55,3 +55,47 @@ rule merge:
 
 
 TARGETS.append(merge_targets)
+
+
+def mpeg_views_inputs(wildcards):
+    d = wildcards.dataset
+    keys = depth_view_keys(d)
+    return {
+        "mpeg": res(d, "calibration", "mpeg", "cameras.json"),
+        "depth": [depth_view_path(d, k) for k in keys],
+        "views": [res(d, "views", *k.split("/")) + ".png" for k in keys],
+    }
+
+
+rule mpeg_views:
+    """Depth maps, textures and RVS configurations beside the MPEG camera JSON."""
+    input:
+        unpack(mpeg_views_inputs),
+    output:
+        depth=directory("results/{dataset}/calibration/mpeg/depth"),
+        texture=directory("results/{dataset}/calibration/mpeg/texture"),
+        rvs=directory("results/{dataset}/calibration/mpeg/rvs"),
+    log:
+        log_path("mpeg_views"),
+    benchmark:
+        bench_path("mpeg_views")
+    conda:
+        "../envs/plenocal.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    params:
+        array_cams=lambda wc: array_cams(wc.dataset),
+        n_views=lambda wc: n_views(wc.dataset),
+        verify=lambda wc: {
+            k: stage_config("verify")[k]
+            for k in ("exp2_sets", "exp3_view_stride", "rvs_blending_factor")
+        },
+    script:
+        "../scripts/mpeg_views.py"
+
+
+TARGETS.append(
+    lambda d: [res(d, "calibration", "mpeg", f) for f in ("depth", "texture", "rvs")]
+)

@@ -1,5 +1,24 @@
-"""View-synthesis experiments of Section III (Figs. 6-9): DIBR from plane-sweep depth
-with the complete calibration and, on synthetic data, the ground-truth cameras."""
+"""View-synthesis experiments of Section III (Figs. 6-9): the inputs' depth maps
+(rule depth_view, complete calibration) rendered by the project's DIBR or by RVS
+(verify.renderer) with the complete calibration and, on synthetic data, with the
+ground-truth cameras (same depth: the dB lost to calibration) and with the true depth
+(the dB lost to depth)."""
+
+
+def synthesis_exp_inputs(exp):
+    def inputs(wildcards):
+        d = wildcards.dataset
+        out = synthesis_inputs(wildcards)
+        keys = experiment_views(d, exp)
+        out["depth"] = [depth_view_path(d, k) for k in keys]
+        if is_synthetic(d):
+            out["true_depth"] = [
+                res(d, "ground_truth", "depth", *k.split("/")) + ".npy" for k in keys
+            ]
+        return out
+
+    return inputs
+
 
 for _exp in (1, 2, 3):
 
@@ -7,7 +26,7 @@ for _exp in (1, 2, 3):
         name:
             f"synthesis_exp{_exp}"
         input:
-            unpack(synthesis_inputs),
+            unpack(synthesis_exp_inputs(_exp)),
         output:
             json=f"results/{{dataset}}/eval/synthesis_exp{_exp}.json",
             synth=directory(f"results/{{dataset}}/eval/synth/exp{_exp}"),
@@ -24,7 +43,7 @@ for _exp in (1, 2, 3):
         params:
             experiment=_exp,
             verify=lambda wc: stage_config("verify"),
-            depth=lambda wc: stage_config("depth"),
+            depth=lambda wc: synthesis_depth_config(),
             views_dir=lambda wc: res(wc.dataset, "views"),
             array_cams=lambda wc: array_cams(wc.dataset),
             n_views=lambda wc: n_views(wc.dataset),

@@ -1,24 +1,22 @@
-"""Rules synthesis_exp1..3: one view-synthesis experiment of Fig. 6 on the complete
-calibration and, on synthetic data, on the ground-truth cameras (the dB lost to
-calibration). See plenocal.synthesis."""
+"""Rules synthesis_exp1..3: one view-synthesis experiment of Fig. 6. The inputs' depth
+maps (rule depth_view, computed once with the complete calibration) are rendered with
+the complete calibration and, on synthetic data, with the ground-truth cameras - the
+same depth for both, so their difference is the dB lost to calibration - and again
+with the true depth (the dB lost to depth). Renderer: verify.renderer (the project's
+DIBR, or RVS with the DIBR beside it). See plenocal.synthesis."""
 
 import logging
 import time
 from pathlib import Path
 
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
+import numpy as np
 
 from plenocal.camera import read_cameras
 from plenocal.depth.inputs import rig_bounds
+from plenocal.depth.quality import depth_quality
 from plenocal.io import read_json, to_uint8, write_image, write_json
-from plenocal.synthesis import (
-    SynthesisContext,
-    experiment1,
-    experiment2,
-    experiment3,
-    layout_from_cams,
-    lost_db,
-)
+from plenocal.synthesis import layout_from_cams, run_experiment, synthesis_summary
 
 snakemake = globals()["snakemake"]
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
@@ -32,37 +30,48 @@ views_dir = Path(snakemake.params.views_dir)
 layout = layout_from_cams(list(snakemake.params.array_cams), int(snakemake.params.n_views))
 near, far = rig_bounds(read_json(snakemake.input.rig), float(cfg["depth"].get("bounds_margin",
                                                                               0.15)))
-calibs = {"complete": snakemake.input.calibration}
+
+
+def load_depths(paths):
+    """{"<cam>/<view>": z-depth} of results/.../<cam>/<view>.npy files."""
+    return {f"{Path(p).parent.name}/{Path(p).stem}": np.load(p) for p in paths}
+
+
+depths = {"estimated": load_depths(snakemake.input.depth)}
+if snakemake.input.get("true_depth"):
+    depths["true"] = load_depths(snakemake.input.true_depth)
+cameras = {"complete": read_cameras(snakemake.input.calibration)}
 if snakemake.input.get("truth"):
-    calibs["ground_truth"] = snakemake.input.truth
+    cameras["ground_truth"] = read_cameras(snakemake.input.truth)
+renderers = [cfg.get("renderer", "dibr")]
+if renderers[0] == "rvs" and cfg.get("rvs_compare_dibr", True):
+    renderers.append("dibr")
 
+runs, kept_all = {}, {}
+for renderer in renderers:
+    for dname, dmaps in depths.items():
+        for cname, cams in cameras.items():
+            t0 = time.perf_counter()
+            res, kept = run_experiment(exp, cams, lambda c, v: str(views_dir / c / f"{v}.png"),
+                                       layout, near, far, {**cfg, "renderer": renderer},
+                                       dict(dmaps))
+            res["seconds"] = round(time.perf_counter() - t0, 1)
+            runs[(renderer, dname, cname)] = res
+            log.info("%s, %s depth, %s cameras: experiment %d, %.1f s", renderer, dname, cname,
+                     exp, res["seconds"])
+            if dname == "estimated" and renderer == renderers[0]:
+                kept_all.update({f"{cname}_{k}": img for k, img in kept.items()})
+
+quality = {}
+if "true" in depths:
+    quality = {k: depth_quality(z, depths["true"][k], 0.01, int(cfg.get("psnr_border_px", 8)))
+               for k, z in depths["estimated"].items() if k in depths["true"]}
 out = {"experiment": exp, "near_m": near, "far_m": far,
-       "psnr_border_px": int(cfg.get("psnr_border_px", 8)), "calibrations": {}}
+       "psnr_border_px": int(cfg.get("psnr_border_px", 8)),
+       "depth_method": cfg["depth"].get("synthesis_method", "sgm"),
+       "depth_quality": quality, **synthesis_summary(exp, runs, renderers)}
 synth_dir = Path(snakemake.output.synth)
-for name, path in calibs.items():
-    t0 = time.perf_counter()
-    ctx = SynthesisContext(read_cameras(path),
-                           lambda cam, view: str(views_dir / cam / f"{view}.png"),
-                           layout, near, far, cfg)
-    if exp == 1:
-        res, kept = experiment1(ctx)
-    elif exp == 2:
-        sets = [layout.middle_cam] if cfg.get("exp2_sets", "middle") == "middle" else layout.cams
-        res, kept = experiment2(ctx, sets)
-    else:
-        res, kept = experiment3(ctx, int(cfg.get("exp3_view_stride", 1)))
-    res["seconds"] = round(time.perf_counter() - t0, 1)
-    out["calibrations"][name] = res
-    log.info("%s: experiment %d done in %.1f s", name, exp, res["seconds"])
-    for key, img in sorted(kept.items()):
-        write_image(synth_dir / f"{name}_{key.replace('/', '_').replace(':', '_')}.png",
-                    to_uint8(img))
-
-if "ground_truth" in out["calibrations"]:
-    c, g = out["calibrations"]["complete"], out["calibrations"]["ground_truth"]
-    if exp == 3:
-        out["db_lost"] = {v: lost_db(c[v], g[v]) for v in ("central", "lateral")}
-    else:
-        out["db_lost"] = lost_db(c, g)
+for key, img in sorted(kept_all.items()):
+    write_image(synth_dir / f"{key.replace('/', '_').replace(':', '_')}.png", to_uint8(img))
 synth_dir.mkdir(parents=True, exist_ok=True)
 write_json(snakemake.output.json, out)

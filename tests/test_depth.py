@@ -8,7 +8,7 @@ import pytest
 
 from plenocal.depth import DepthBackendError, estimate_depth, resolve_backend
 from plenocal.depth.colmap_mvs import colmap_available, prepare_workspace, read_colmap_array
-from plenocal.depth.inputs import depth_to_disparity16, disparity16_to_depth, nearest_sources
+from plenocal.depth.inputs import nearest_sources
 from plenocal.depth.planesweep import PlaneSweepOptions, plane_homography, plane_sweep_depth
 from plenocal.depth.quality import depth_quality
 from plenocal.depth.sgbm import sgbm_depth
@@ -96,14 +96,6 @@ def test_colmap_array_reader(tmp_path):
     p = tmp_path / "d.bin"
     p.write_bytes(b"4&3&1&" + a.tobytes())  # per channel, row after row (COLMAP Mat)
     np.testing.assert_array_equal(read_colmap_array(p), a)
-
-
-def test_disparity16_round_trip():
-    z = np.array([[0.47, 0.6], [0.74, 0.0]], dtype=np.float32)
-    L = depth_to_disparity16(z, 0.47, 0.74)
-    assert L[0, 0] == 65535 and L[1, 0] == 0 and L[1, 1] == 0
-    back = disparity16_to_depth(np.where(z > 0, np.maximum(L, 1), 0), 0.47, 0.74)
-    np.testing.assert_allclose(back[0], z[0], rtol=1e-4)
 
 
 def test_nearest_sources_order():

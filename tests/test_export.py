@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 import math
 
-import cv2  # noqa: F401  (before pycolmap, see DESIGN.md)
+import cv2  # (before pycolmap, see DESIGN.md)
 import numpy as np
 import pytest
 
@@ -172,5 +172,23 @@ def test_depth16_files(tmp_path):
         np.array(0.6), 0.4, 0.8)
     depthmaps.write_depth16_yuv(tmp_path / "d.yuv", z, 0.4, 0.8)
     raw = np.frombuffer((tmp_path / "d.yuv").read_bytes(), dtype="<u2")
-    assert raw.size == 5 * 7 + 2 * 3 * 4
+    assert raw.size == 5 * 7 + 2 * 2 * 3  # chroma W // 2 x H // 2, as RVS reads it
     np.testing.assert_array_equal(raw[:35].reshape(5, 7), img)
+
+
+@pytest.mark.parametrize("size", [(6, 4), (7, 5)])
+def test_texture_yuv420(tmp_path, size):
+    w, h = size
+    rng = np.random.default_rng(0)
+    rgb = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    rgb[:, :] = rgb[:1, :1]  # flat colour: 4:2:0 loses nothing
+    depthmaps.write_texture_yuv(tmp_path / "t.yuv", rgb)
+    raw = np.frombuffer((tmp_path / "t.yuv").read_bytes(), dtype=np.uint8)
+    assert raw.size == w * h + 2 * (w // 2) * (h // 2)
+    y = raw[: w * h].reshape(h, w)
+    u = raw[w * h: w * h + (w // 2) * (h // 2)]
+    v = raw[w * h + (w // 2) * (h // 2):]
+    yuv = np.dstack([y[: 2 * (h // 2): 2, : 2 * (w // 2): 2].astype(np.uint8),
+                     u.reshape(h // 2, w // 2), v.reshape(h // 2, w // 2)])
+    back = cv2.cvtColor(yuv, cv2.COLOR_YUV2RGB)  # what RVS does with it
+    assert np.abs(back.astype(int) - rgb[: 2 * (h // 2): 2, : 2 * (w // 2): 2]).max() <= 2

@@ -127,18 +127,3 @@ def preview(depth: np.ndarray) -> np.ndarray:
     out[v] = col[v]
     return out
 
-
-def depth_to_disparity16(depth: np.ndarray, near: float, far: float) -> np.ndarray:
-    """MPEG 16-bit normalised disparity L = round((2^16-1)(1/z - 1/far)/(1/near - 1/far)),
-    0 for invalid pixels."""
-    z = np.asarray(depth, np.float64)
-    with np.errstate(divide="ignore"):
-        L = (65535.0 * (1.0 / z - 1.0 / far) / (1.0 / near - 1.0 / far))
-    L = np.where(z > 0, np.clip(np.rint(L), 0, 65535), 0)
-    return L.astype(np.uint16)
-
-
-def disparity16_to_depth(L: np.ndarray, near: float, far: float) -> np.ndarray:
-    L = np.asarray(L, np.float64)
-    inv = L / 65535.0 * (1.0 / near - 1.0 / far) + 1.0 / far
-    return np.where(L > 0, 1.0 / inv, 0.0).astype(np.float32)

@@ -4,7 +4,13 @@
 (metres) and the camera's ``Depth_range`` [near, far]: near -> 65535, far -> 0.
 The camera JSON declares ``HasInvalidDepth: true``, so level 0 means "no depth":
 invalid pixels (z <= 0 or not finite) are written as 0 and valid ones are clipped to
-[1, 65535].
+[1, 65535]. This is the project's one 16-bit depth encoder.
+
+Raw YUV 4:2:0 files (depth and textures) have chroma planes of ``W // 2 x H // 2``,
+the layout RVS 4.0 reads (OpenCV's ``Size / 2``); for even sizes that is the standard
+layout, for odd sizes the usual ``(W + 1) // 2`` differs, so views of even size
+(``convert.even_size``) are the portable choice. Textures are written in OpenCV's
+full-range YUV (``cv2.COLOR_RGB2YUV``), the conversion RVS inverts.
 """
 
 from __future__ import annotations
@@ -52,9 +58,30 @@ def write_depth16_png(path: str | Path, z: np.ndarray, near: float, far: float) 
 
 def write_depth16_yuv(path: str | Path, z: np.ndarray, near: float, far: float) -> None:
     """One frame of raw YUV 4:2:0, 16 bits little-endian (``DepthColorSpace: YUV420``):
-    the levels in Y, the chroma planes ((W+1)/2 x (H+1)/2) at mid-grey 32768."""
+    the levels in Y, the chroma planes (W // 2 x H // 2) at mid-grey 32768."""
     y = depth16(z, near, far)
     h, w = y.shape
-    c = np.full(((h + 1) // 2, (w + 1) // 2), 1 << 15, dtype="<u2")
+    c = np.full((h // 2, w // 2), 1 << 15, dtype="<u2")
     data = y.astype("<u2").tobytes() + c.tobytes() + c.tobytes()
     atomic_write_bytes(path, data)
+
+
+def texture_yuv420(rgb: np.ndarray) -> bytes:
+    """One frame of raw 8-bit YUV 4:2:0 of an RGB uint8 image: full-range YUV
+    (``cv2.COLOR_RGB2YUV``), chroma averaged over 2 x 2 pixels (W // 2 x H // 2)."""
+    import cv2  # noqa: PLC0415
+
+    rgb = np.asarray(rgb)
+    if rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError("texture_yuv420 needs an RGB uint8 image (H, W, 3)")
+    yuv = cv2.cvtColor(rgb, cv2.COLOR_RGB2YUV).astype(np.float32)
+    h, w = rgb.shape[:2]
+    h2, w2 = h // 2, w // 2
+    ch = yuv[: 2 * h2, : 2 * w2, 1:].reshape(h2, 2, w2, 2, 2).mean(axis=(1, 3))
+    planes = [yuv[..., 0], ch[..., 0], ch[..., 1]]
+    return b"".join(np.clip(np.rint(p), 0, 255).astype(np.uint8).tobytes() for p in planes)
+
+
+def write_texture_yuv(path: str | Path, rgb: np.ndarray) -> None:
+    """A texture as one frame of raw 8-bit YUV 4:2:0 (``ColorSpace: YUV420``)."""
+    atomic_write_bytes(path, texture_yuv420(rgb))

@@ -1,0 +1,49 @@
+"""Rule depth_view: the dense z-depth map of one view of the complete calibration for
+view synthesis and the MPEG exports (SGM over the multi-view plane-sweep cost volume
+by default). See plenocal.depth.views."""
+
+import logging
+import time
+from pathlib import Path
+
+import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
+
+from plenocal.camera import read_cameras
+from plenocal.depth.inputs import preview, rig_bounds
+from plenocal.depth.views import estimate_view_depth
+from plenocal.io import read_image, read_json, write_image, write_json, write_npy
+
+snakemake = globals()["snakemake"]
+logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
+                    format="%(asctime)s %(levelname)s %(message)s")
+log = logging.getLogger("depth_view")
+
+cfg = dict(snakemake.params.depth)
+verify = dict(snakemake.params.verify)
+key = f"{snakemake.wildcards.cam}/{snakemake.wildcards.view}"
+views_dir = Path(snakemake.params.views_dir)
+cameras = read_cameras(snakemake.input.calibration)
+near, far = rig_bounds(read_json(snakemake.input.rig), float(cfg.get("bounds_margin", 0.15)))
+images = {}
+
+
+def image(k):
+    if k not in images:
+        cam, view = k.split("/")
+        images[k] = read_image(views_dir / cam / f"{view}.png")
+    return images[k]
+
+
+t0 = time.perf_counter()
+depth, srcs = estimate_view_depth(key, cameras, image, near, far, int(snakemake.params.n_views),
+                                  cfg, int(verify.get("depth_sources_shots", 4)),
+                                  int(verify.get("depth_sources_set", 4)))
+valid = float((depth > 0).mean())
+log.info("%s: %s, %.1f s, %.1f %% valid, sources %s", key, cfg.get("synthesis_method", "sgm"),
+         time.perf_counter() - t0, 100 * valid, ", ".join(srcs))
+write_npy(snakemake.output.depth, depth)
+write_image(snakemake.output.preview, preview(depth))
+write_json(snakemake.output.info, {"method": cfg.get("synthesis_method", "sgm"), "near": near,
+                                   "far": far, "units": "m", "sources": srcs,
+                                   "valid_share": valid, "view": key,
+                                   "calibration": "complete"})

@@ -1,0 +1,34 @@
+"""Rule mpeg_views: the depth maps (16-bit normalised disparity, YUV 4:2:0 and PNG),
+the textures (YUV 4:2:0) and one RVS configuration per view-synthesis experiment
+beside calibration/mpeg/cameras.json. See plenocal.export.mpeg_views."""
+
+import logging
+from pathlib import Path
+
+import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
+import numpy as np
+
+from plenocal.export.mpeg_views import export_views
+from plenocal.io import read_image
+from plenocal.synthesis import experiment_plan, layout_from_cams
+
+snakemake = globals()["snakemake"]
+logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
+                    format="%(asctime)s %(levelname)s %(message)s")
+log = logging.getLogger("mpeg_views")
+
+verify = dict(snakemake.params.verify)
+layout = layout_from_cams(list(snakemake.params.array_cams), int(snakemake.params.n_views))
+depth_files = {f"{Path(p).parent.name}/{Path(p).stem}": p for p in snakemake.input.depth}
+view_files = {f"{Path(p).parent.name}/{Path(p).stem}": p for p in snakemake.input.views}
+sets = [layout.middle_cam] if verify["exp2_sets"] == "middle" else layout.cams
+plans = {}
+for exp in (1, 2, 3):
+    plans.update(experiment_plan(layout, exp, sets, int(verify["exp3_view_stride"])))
+out_dir = Path(snakemake.input.mpeg).parent
+written = export_views(out_dir, snakemake.input.mpeg, sorted(depth_files),
+                       lambda k: np.load(depth_files[k]), lambda k: read_image(view_files[k]),
+                       plans, float(verify["rvs_blending_factor"]))
+for name in ("depth", "texture", "rvs"):
+    (out_dir / name).mkdir(parents=True, exist_ok=True)
+log.info("wrote %d files under %s: %s", len(written), out_dir, ", ".join(plans))
