@@ -143,7 +143,8 @@ def _nearest(grid: MicrolensGrid, pts: np.ndarray) -> np.ndarray:
 def test_boys2_file_grid_drifts_towards_the_right_edge():
     """The TSPC corner centres show the Boys2 file grid 5 px off at the left corners and
     ~20 px at the right ones; the check sees the same: drift past the auto bar, larger on
-    the right than on the left, and a pitch larger than the file's."""
+    the right than on the left, a pitch larger than the file's; and the refined grid meets
+    the four corner centres."""
     img, calib = _read_frame("Boys2")
     H, W = img.shape[:2]
     grid = MicrolensGrid(calib, W, H)
@@ -157,6 +158,8 @@ def test_boys2_file_grid_drifts_towards_the_right_edge():
     assert check.pitch_ratio > 1.002
     assert check.refine_auto and not check.foreign
     assert check.seconds < 2.0
+    after = _nearest(refine_grid(grid, check), _corners("Boys2"))
+    assert after.max() < 0.35 * tspc.max()
 
 
 @pytest.mark.skipif(not FRAMES.is_dir(), reason="shared/real/frames not present")

@@ -1,19 +1,31 @@
 """Check the calib.xml microlens grid against the micro images of the frame, and refine it.
 
-Measurement. The micro images repeat on the MLA lattice, so the grey frame has its
-strongest periodic components at the lattice's three shortest reciprocal vectors
-``k_1, k_2, k_3 = -(k_1 + k_2)`` (cycles per pixel, ``k_i . a_j = delta_ij``). The frame is
-divided by its local mean (vignetting is multiplicative: bright and dark parts of the
-scene then weigh alike), demodulated at each ``k_j`` relative to the file's grid and
-low-passed over a few lenses. For micro images ``v(x - c_i)`` of a point-symmetric profile
-centred at ``c_i = c_i^file + delta``, the local coefficient is
+Measurement. The micro images repeat on the MLA lattice, and so do their borders: the
+discontinuities between neighbouring micro images (and the dark vignetted rims where there
+are any) form a honeycomb centred on the lens centres. The frame is reduced by area
+averaging to about 10 px per lens (the phase keeps sub-pixel accuracy), its gradient
+magnitude taken (``FEATURE``; the borders are where the gradient is, wherever the scene
+is), divided by its local mean (bright and dark parts of the scene weigh alike),
+demodulated at the lattice's three shortest reciprocal vectors
+``k_1, k_2, k_3 = -(k_1 + k_2)`` (cycles per pixel, ``k_i . a_j = delta_ij``) relative to
+the file's grid, and low-passed over a few lenses (``BOX_LENSES``). For a pattern
+``v(x - c_i)`` point-symmetric about ``c_i = c_i^file + delta``, the local coefficient is
 ``z_j = V(k_j) exp(-2 pi i k_j . delta)``: its phase gives the local shift ``delta`` of the
 true lattice against the file's, modulo one lens. ``V`` is real, of one sign for the three
 ``k_j`` (hexagonal symmetry); the phase closure ``arg(z_1 z_2 z_3) = 3 arg V`` (the
 ``delta`` terms cancel, as ``k_1 + k_2 + k_3 = 0``) gives that sign, and lenses whose closure
-is far from it (scene content at the lattice frequency, dark or textureless regions) are
-not measured. The frame is first reduced by area averaging to about 10 px per lens
-(the phase keeps sub-pixel accuracy), which makes the check take ~0.1 s per 4 MP frame.
+is far from it (scene content at the lattice frequency, dark or flat regions) are not
+measured. About 0.2-0.4 s per 4 MP frame on one core.
+
+Why the gradient and not the grey level: the grey level's phase is biased by scene content
+that repeats from lens to lens, worst where vignetting is weak (the TSPC frames, Galilean,
+bright micro images with thin borders). Against the four corner centres that the TSPC
+tools measured, the grey-level fit lands 16-18 px off on Boys2 (worse than the file's grid:
+5-21 px) and 0.7-6 px off on HandTools (file: 12-14 px); the gradient fit lands 3.3-4.7 px
+off on Boys2 and 1.5-2.3 px on HandTools, and its residual is lower on every frame
+(6.1 / 6.6 px on the 70-px TSPC lenses, 0.7-1.4 px on the Raytrix ones; grey level
+7.7 / 8.5 and 0.9-4.0 px). On synthetic lattices with known centres both are unbiased
+to 0.04 px.
 
 Fit. ``c_i^measured = o + M (i, j)`` by least squares with outlier trimming (3 robust
 sigmas): an affine lattice (offset, pitch, rotation, and anisotropic scale / shear), and
@@ -26,23 +38,14 @@ region.
 
 Where is the RayCalibData offset measured from? On the three Raytrix frames whose files
 fit their micro images (Fujita2, Origami, Boxer-IrishMan-Gladiator2), the fitted lattice
-at the image centre lies at file + (+0.31, -0.05), (+0.07, +0.03) and (+0.42, +0.06) px
-when the offset is read from ``((W-1)/2, (H-1)/2)`` (this project's convention,
-:mod:`plenocal.raytrix`). TLCT's ``(W/2, H/2)`` puts the grid half a pixel further right
-and down, so under TLCT's reading the micro images would sit at about (-0.2, -0.5) px
-from its grid. In y the measurement is clear (within 0.1 px of ``(H-1)/2``, 0.5 px from
-``H/2``); in x it lies between the two (0.07..0.42 px, frame to frame), so x alone does
-not decide, and the project keeps ``((W-1)/2, (H-1)/2)``. On synthetic frames with known
-centres the check is unbiased to 0.03 px, so these offsets are the files', not the
-method's. (Figures: ``bench/bench_real.py``, BENCHMARKS.md.)
-
-Known limits. The phase measures the centre of the repeating micro-image pattern; where
-vignetting is weak and the scene repeats strongly from lens to lens (the TSPC frames,
-Galilean, with bright micro images and thin borders) scene content biases it: the per-lens
-residual is 8 px of 70 there against ~1 px of 23-35 on the Raytrix frames. On HandTools
-the refined grid lies 0.7-6 px from the four corner centres of the TSPC tools (the file's
-grid 12-14 px); on Boys2 it lies 16-18 px from them (the file's 5-21 px): the check sees
-the drift towards the right edge, but its Boys2 fit is not better than the file.
+at the image centre lies at file + (-0.11, +0.24), (-0.19, -0.04) and (+0.35, -0.16) px
+(mean (+0.02, +0.01)) when the offset is read from ``((W-1)/2, (H-1)/2)`` (this project's
+convention, :mod:`plenocal.raytrix`). TLCT's ``(W/2, H/2)`` puts the grid half a pixel
+further right and down: the micro images would then sit at (-0.5, -0.5) px from its grid,
+on average. The measurement supports ``((W-1)/2, (H-1)/2)``, by 0.5 px against a frame-to-
+frame spread of 0.2-0.35 px; on synthetic frames the check is unbiased to 0.04 px, so the
+offsets are the files', not the method's. (The grey-level phase says the same in y,
+(+0.31, -0.05), (+0.07, +0.03), (+0.42, +0.06); in x it is less clear.)
 
 ``convert.grid`` values:
 
@@ -53,20 +56,23 @@ the drift towards the right edge, but its Boys2 fit is not better than the file.
   lattice by more than ``AUTO_DRIFT_PX`` = 1 px somewhere on the sensor, and by more than
   ``AUTO_DRIFT_SIGMAS`` = 4 standard errors of that drift, and the file is not foreign.
   Why 1 px: a centre error of ``e`` px shifts that lens's tile in a view by ``e T / P``
-  output pixels (seams at tile borders), so half a pixel would be the ideal bar; but the
-  measurement repeats only to ~0.6 px at the corners between Fujita2 and Origami (same
-  camera, same calib.xml, different scenes), and refining on less than that would chase the
-  scene, not the grid. The Raytrix files (drift 0.7-1.3 px, standard error 0.1-0.4) stay;
-  the TSPC files (drift 12-36 px) are refined.
+  output pixels (seams at tile borders), so half a pixel would be the ideal bar, but it is
+  below what the check can tell apart from its own systematic error: on the simulator's
+  frames, whose calib.xml is exact by construction, it reads 0.43-0.54 px (max drift over
+  the sensor), and the grey-level and gradient fits of the same Raytrix frame differ by up
+  to 0.65 px (Origami), 0.88 px (Boxer). Frames here: Fujita2 0.77 px (kept), Origami
+  1.48 and Boxer 1.11 px (refined: a pitch x1.0009 / x1.0003 that both measures find),
+  Boys2 18 px and HandTools 16 px (refined).
 - A grid that is not on the micro images at all (a calib.xml from another camera or for
   another sensor crop) is recognised as foreign: fewer than ``MIN_SHARE`` of the lenses
   measured, a fitted pitch more than ``FOREIGN_PITCH`` (2 %) from the file's, the lattice
   more than a quarter lens off at the image centre, or measurements more than a fifth of a
   lens (rms) from any lattice. It is reported with its measured drift
   (``GridCheck.foreign``, a warning in ``GridCheck.warnings``) and never refined
-  automatically: a wrong file should be replaced, not patched (``refine`` still may). The
-  R42_klein_crop file is one: a crop of a larger frame whose offset was left for the full
-  sensor (lattice 14 px = 0.4 lens off).
+  automatically: a wrong file should be replaced, not patched (``refine`` still may).
+  R42_klein_crop is one: 16 % of its lenses measured; its file's centres fall on the
+  micro-image borders (a crop whose offset was not moved with it: the grey-level phase
+  puts the lattice 14 px, 0.4 lens, off).
 """
 
 from __future__ import annotations
@@ -88,6 +94,7 @@ FOREIGN_OFFSET = 0.25  # lenses: fitted lattice this far from the file's at the 
 FOREIGN_RESIDUAL = 0.2  # lenses: measurements this far from any lattice (rms)
 WORK_PX_PER_LENS = 10.0  # the frame is reduced to about this many pixels per lens
 CLOSURE_TOL = 0.6  # rad: phase closure of a measured lens
+FEATURE = "gradient"  # intensity | gradient | both: the image the phase is measured on
 BOX_LENSES = 3.0  # low-pass: two box filters this many lenses wide
 MIN_LENSES = 30  # fewer measured lenses: no fit
 GRID_MODES = ("file", "refine", "auto")
@@ -192,18 +199,46 @@ def _measure(image: np.ndarray, origin: np.ndarray, A: np.ndarray, centres: np.n
     # small pixel u covers big pixels s u .. s u + s - 1: its centre is at s u + (s - 1) / 2
     o_s = (origin - (s - 1) / 2) / s
     A_s = A / s
-    wide = max(3, int(round(2 * Ds)) | 1)
-    mean = cv2.blur(cv2.blur(g, (wide, wide)), (wide, wide))
-    n = g / np.maximum(mean, np.float32(1e-3 * max(float(g.max()), 1e-6))) - np.float32(1.0)
     K = np.linalg.inv(A_s)  # rows: reciprocal vectors k_1, k_2 (cycles per small pixel)
     ks = np.stack([K[0], K[1], -(K[0] + K[1])])
-    xs = np.arange(Ws, dtype=np.float64) - o_s[0]
-    ys = np.arange(Hs, dtype=np.float64) - o_s[1]
     box = max(3, int(round(BOX_LENSES * Ds)) | 1)
     pts = ((centres - (s - 1) / 2) / s).astype(np.float32)
+    features = []
+    if FEATURE in ("intensity", "both"):
+        features.append(g)
+    if FEATURE in ("gradient", "both"):
+        features.append(cv2.magnitude(cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3),
+                                      cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)))
+    z = sum(_coefficients(f, ks, o_s, Ds, box, pts) for f in features)
+    phi = np.angle(z)
+    closure = _wrap(phi.sum(axis=1))
+    # delta from phases 1 and 2 (k_i . a_j = delta_ij), then least squares with all three
+    d0 = -(phi[:, :1] * A_s[:, 0] + phi[:, 1:2] * A_s[:, 1]) / (2 * np.pi)
+    e = _wrap(phi + 2 * np.pi * d0 @ ks.T)
+    d = d0 - e @ np.linalg.pinv(2 * np.pi * ks).T
+    d = _nearest_cell(d, A_s, np.zeros_like(d))
+    amp = np.abs(z).min(axis=1) / len(features)
+    margin = box // 2 + 1  # windows reaching well past the border are unreliable
+    inside = ((pts[:, 0] >= margin) & (pts[:, 0] <= Ws - 1 - margin)
+              & (pts[:, 1] >= margin) & (pts[:, 1] <= Hs - 1 - margin))
+    ok = inside & (np.abs(closure) < CLOSURE_TOL) & (amp > 0.05)
+    return d * s, ok
+
+
+def _coefficients(f: np.ndarray, ks: np.ndarray, o_s: np.ndarray, Ds: float, box: int,
+                  pts: np.ndarray) -> np.ndarray:
+    """(n, 3) local Fourier coefficients of the feature image ``f`` at the reciprocal
+    vectors ``ks``, phase relative to the lattice origin ``o_s``, at the points ``pts``;
+    relative to the local mean absolute contrast and with the sign making the phase
+    closure positive (``V > 0``)."""
+    Hs, Ws = f.shape
+    wide = max(3, int(round(2 * Ds)) | 1)
+    mean = cv2.blur(cv2.blur(f, (wide, wide)), (wide, wide))
+    n = f / np.maximum(mean, np.float32(1e-3 * max(float(f.max()), 1e-6))) - np.float32(1.0)
+    xs = np.arange(Ws, dtype=np.float64) - o_s[0]
+    ys = np.arange(Hs, dtype=np.float64) - o_s[1]
     mx, my = pts[:, 0].reshape(-1, 1), pts[:, 1].reshape(-1, 1)
-    z = np.empty((len(centres), 3), dtype=np.complex128)
-    amp_ref = cv2.blur(cv2.blur(np.abs(n), (box, box)), (box, box))
+    z = np.empty((len(pts), 3), dtype=np.complex128)
     for j, k in enumerate(ks):
         ax, ay = 2 * np.pi * k[0] * xs, 2 * np.pi * k[1] * ys
         cx, sx = np.cos(ax).astype(np.float32), np.sin(ax).astype(np.float32)
@@ -217,24 +252,11 @@ def _measure(image: np.ndarray, origin: np.ndarray, A: np.ndarray, centres: np.n
             parts.append(cv2.remap(sm, mx, my, cv2.INTER_LINEAR,
                                    borderMode=cv2.BORDER_REPLICATE)[:, 0])
         z[:, j] = parts[0] + 1j * parts[1]
+    amp_ref = cv2.blur(cv2.blur(np.abs(n), (box, box)), (box, box))
     ref = cv2.remap(amp_ref, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[:, 0]
+    z /= np.maximum(ref, 1e-6)[:, None]
     triple = z[:, 0] * z[:, 1] * z[:, 2]
-    sign = 1.0 if float(np.sum(triple).real) >= 0 else -1.0
-    if sign < 0:
-        z = -z
-    phi = np.angle(z)
-    closure = _wrap(phi.sum(axis=1))
-    # delta from phases 1 and 2 (k_i . a_j = delta_ij), then least squares with all three
-    d0 = -(phi[:, :1] * A_s[:, 0] + phi[:, 1:2] * A_s[:, 1]) / (2 * np.pi)
-    e = _wrap(phi + 2 * np.pi * d0 @ ks.T)
-    d = d0 - e @ np.linalg.pinv(2 * np.pi * ks).T
-    d = _nearest_cell(d, A_s, np.zeros_like(d))
-    amp = np.abs(z).min(axis=1)
-    margin = box // 2 + 1  # windows reaching well past the border are unreliable
-    inside = ((pts[:, 0] >= margin) & (pts[:, 0] <= Ws - 1 - margin)
-              & (pts[:, 1] >= margin) & (pts[:, 1] <= Hs - 1 - margin))
-    ok = inside & (np.abs(closure) < CLOSURE_TOL) & (amp > 0.05 * np.maximum(ref, 1e-6))
-    return d * s, ok
+    return z if float(np.sum(triple).real) >= 0 else -z
 
 
 def _nearest_cell(d: np.ndarray, A: np.ndarray, target: np.ndarray) -> np.ndarray:
