@@ -208,3 +208,36 @@ def test_refined_grid_keeps_the_lens_types():
     common = [i for i, k in enumerate(moved.ij) if tuple(k) in types]
     assert len(common) > 0.9 * len(grid)
     assert all(moved.types[i] == types[tuple(moved.ij[i])] for i in common)
+
+
+def test_simulator_shot(tmp_path):
+    """A lenslet image of the simulator (tests/tiny optics, 640 x 480): its exact grid is
+    not refined, and a file grid moved by (1.2, 0.8) px (file frame, y up) is seen moved
+    by exactly that against the micro images."""
+    import copy  # noqa: PLC0415
+
+    import yaml  # noqa: PLC0415
+
+    from plenocal.config import validate_config  # noqa: PLC0415
+    from plenocal.io import read_image  # noqa: PLC0415
+    from plenocal.raytrix import read_calib  # noqa: PLC0415
+    from plenocal.simulate.dataset import render_shot, setup_dataset  # noqa: PLC0415
+
+    root = Path(__file__).resolve().parents[1]
+    cfg = validate_config(yaml.safe_load((root / "tests" / "tiny" / "config.yaml").read_text()))
+    sim = copy.deepcopy(cfg["datasets"]["tiny"]["simulate"])
+    sim["sensor"].update(width=640, height=480)
+    sim["render"]["samples"] = 4
+    setup_dataset(sim, tmp_path)
+    render_shot(sim, tmp_path, "hand01", tmp_path / "shot.png", log=lambda m: None)
+    img = read_image(tmp_path / "shot.png")
+    calib = read_calib(tmp_path / "calib.xml")
+    H, W = img.shape[:2]
+    exact = check_grid(img, MicrolensGrid(calib, W, H))
+    assert exact.measured_share > 0.4
+    assert not exact.foreign and not exact.refine_auto
+    moved = replace(calib, offset=(calib.offset[0] + 1.2, calib.offset[1] + 0.8))
+    check = check_grid(img, MicrolensGrid(moved, W, H))
+    seen = np.subtract(check.offset_px, exact.offset_px)
+    np.testing.assert_allclose(seen, (-1.2, 0.8), atol=0.15)
+    assert not check.foreign
