@@ -138,6 +138,9 @@ class GridCheck:
         return d
 
     def summary(self) -> str:
+        if not self.fitted:
+            return (f"grid check: {self.measured} of {self.lenses} lenses measured, too few "
+                    "to fit the lattice - FOREIGN GRID or no micro images")
         r = self.regions
         corners = ", ".join(f"{k} {r[k]['fit_drift_px']:.2f}" for k in REGIONS if k in r)
         return (f"grid check: {100 * self.measured_share:.0f}% of {self.lenses} lenses "
@@ -339,7 +342,8 @@ def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
     share = measured / max(n_lens, 1)
     if P is None:
         warnings.append(f"grid check: only {measured} of {n_lens} lenses measured: cannot fit "
-                        "the lattice; the calib.xml grid does not match the micro images")
+                        "the lattice; either the calib.xml grid does not match the micro "
+                        "images (another camera's file?) or the frame shows none (dark, flat)")
         return GridCheck(W, H, D, n_lens, measured, share, False, math.nan, math.nan, math.nan,
                          {}, (math.nan, math.nan), math.nan, math.nan, [], (math.nan,) * 2,
                          [], (math.nan,) * 2, math.nan, math.nan, True, False, warnings,
