@@ -79,6 +79,8 @@ class PatchSizeResult:
 def to_gray(image: np.ndarray) -> np.ndarray:
     """Grey float32 in [0, 1] of a uint8/uint16/float image (RGB or grey)."""
     img = image
+    if img.dtype == np.float32 and img.ndim == 2 and img.flags.c_contiguous:
+        return img
     if img.dtype == np.uint8:
         img = img.astype(np.float32) / 255.0
     elif img.dtype == np.uint16:

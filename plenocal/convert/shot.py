@@ -12,13 +12,15 @@ the micro-image centre, ``q = D' sin(45 deg) / N`` by default: the N x N view po
 then span a square of side ``(N-1)/N D' sin 45`` inscribed (with a margin of one
 ``q``) in the safe micro-image disc of diameter ``D' = D - 2 lens_border``.
 
-Disparity between views. A point whose patch size is ``P`` moves by ``q T / P``
-output pixels from view (r, c) to view (r, c+1) (towards +x: the tile of a lens
-samples ``q_rc - (u - o_i) P / T``, so a step of ``q`` in the view offset is a step
-of ``q T / P`` in ``u``). In the paper's Eq. 1, ``d = u_h - u_(h+1)``, so
-``d = -q T / P``: negative everywhere, because the simulated scene (and any scene of
-a Keplerian camera with virtual depths > 0) lies beyond the plane conjugate to the
-MLA, where all views converge.
+Disparity between views. The tile of lens ``i`` samples
+``m_i + q_rc + s (u - o_i) P / T`` (``s = -1`` Keplerian, ``+1`` Galilean; see
+:mod:`plenocal.viewgeom`), so a point whose patch size is ``P`` moves by
+``u_(h+1) - u_h = -s q T / P`` output pixels from view (r, c) to view (r, c+1). In the
+paper's Eq. 1, ``d = u_h - u_(h+1) = s q T / P``. Keplerian (the simulator, the TSPC
+frames): ``-q T / P``, negative everywhere, because the scene lies beyond the plane
+conjugate to the MLA, where all views converge, and nearer points have larger ``P``.
+Galilean (the Raytrix frames): ``+q T / P``, nearer points have smaller ``P``. In both,
+D_max belongs to the nearest object (the paper's sign).
 """
 
 from __future__ import annotations
@@ -42,6 +44,7 @@ from plenocal.convert.patchsize import (
     to_gray,
 )
 from plenocal.convert.render import RenderPlan, RenderSettings, make_plan, render_view
+from plenocal.convert.vignetting import radial_profile
 from plenocal.grid import MicrolensGrid
 from plenocal.io import read_image
 from plenocal.optics import view_spacing
@@ -76,6 +79,7 @@ class ConvertSettings:
     mla: str = "auto"
     even_size: bool = True
     bit_depth: int | str = "auto"
+    devignette: bool = True
     patch: PatchSizeSettings = field(default_factory=PatchSizeSettings)
     render: RenderSettings = field(default_factory=RenderSettings)
 
@@ -106,6 +110,7 @@ class ConvertSettings:
             mla=str(cfg.get("mla", "auto")),
             even_size=bool(cfg.get("even_size", True)),
             bit_depth=bits if isinstance(bits, str) else int(bits),
+            devignette=bool(cfg.get("devignette", True)),
             patch=_known_fields(PatchSizeSettings, cfg.get("patch_size") or {}),
             render=_known_fields(RenderSettings, cfg.get("blend") or {}),
         )
@@ -241,8 +246,10 @@ class ShotConversion:
         except ValueError as exc:
             raise ConvertError(f"{source} with {calib.source}: {exc}") from None
         self.used_patch = self.patch.patch[self.layout.lens_index]
+        self.profile = radial_profile(gray, self.grid) if st.devignette else None
         self.plan: RenderPlan = make_plan(self.layout, self.used_patch, calib.safe_diameter,
-                                          st.render, self.patch.focus[self.layout.lens_index])
+                                          st.render, self.patch.focus[self.layout.lens_index],
+                                          self.profile)
 
     def view_float(self, r: int, c: int) -> np.ndarray:
         return render_view(self.plan, self._source, r, c)
@@ -278,18 +285,23 @@ def disparity_summary(layout: ViewLayout, calib: RayCalib, patch: np.ndarray,
     sign, Eq. 1), the geometry it refers to and the patch-size statistics."""
     q, T = layout.q, layout.tile
     p_lo, p_hi = (float(x) for x in np.percentile(patch, percentiles))
-    shift_far, shift_near = q * T / p_lo, q * T / p_hi  # u_(h+1) - u_h, output pixels
+    sign = layout.sign
+    # |u_(h+1) - u_h| of the farthest and nearest points: Keplerian far = small P
+    shift_far, shift_near = (q * T / p_lo, q * T / p_hi) if sign < 0 else (q * T / p_hi,
+                                                                             q * T / p_lo)
     pct = {f"p{int(p):02d}": float(np.percentile(patch, p)) for p in (2, 10, 25, 50, 75, 90, 98)}
     return {
         "convention": "paper",
         "convention_note": (
             "D = u_h - u_(h+1): a point's x in view (r, c) minus its x in view (r, c+1), "
-            "output pixels (the paper's Eq. 1). Here D = -q T / P: negative, because the "
-            "scene lies beyond the plane conjugate to the MLA (Z0), where the views converge. "
-            "D_max belongs to the nearest object (largest patch size). shift_* are the "
-            "magnitudes |D| = q T / P (view shift u_(h+1) - u_h, positive)."),
-        "D_min": -shift_far,
-        "D_max": -shift_near,
+            "output pixels (the paper's Eq. 1). Keplerian MLA: D = -q T / P, negative, "
+            "because the scene lies beyond the plane conjugate to the MLA (Z0), where the "
+            "views converge; Galilean MLA: D = +q T / P. D_max belongs to the nearest "
+            "object (largest P for Keplerian, smallest for Galilean). shift_* are the "
+            "magnitudes |D| = q T / P."),
+        "mla": layout.mla,
+        "D_min": sign * shift_far,
+        "D_max": sign * shift_near,
         "shift_far_px": shift_far,
         "shift_near_px": shift_near,
         "percentiles": list(percentiles),
