@@ -45,14 +45,46 @@ def _atomic(path: str | Path, write: Callable[[Any], None], mode: str) -> None:
         raise
 
 
+TEMP_DIR_SUFFIX = ".tmpdir"
+
+
+def clean_stale_temps(parent: str | Path, prefix: str) -> list[Path]:
+    """Remove the temporary folders ``<prefix>*.tmpdir`` in ``parent`` that a killed job
+    left behind (Snakemake runs one job per output at a time, so none is in use).
+    Returns what was removed."""
+    import shutil  # noqa: PLC0415
+
+    parent = Path(parent)
+    if not parent.is_dir():
+        return []
+    stale = sorted(p for p in parent.iterdir() if p.is_dir() and p.name.startswith(prefix)
+                   and p.name.endswith(TEMP_DIR_SUFFIX))
+    for p in stale:
+        shutil.rmtree(p, ignore_errors=True)
+    return stale
+
+
+def make_temp_dir(parent: str | Path, prefix: str) -> Path:
+    """A new temporary folder ``<prefix>XXXX.tmpdir`` in ``parent``, after removing the
+    stale ones of the same prefix (a killed job's), readable as the umask allows."""
+    parent = Path(parent)
+    parent.mkdir(parents=True, exist_ok=True)
+    clean_stale_temps(parent, prefix)
+    tmp = Path(tempfile.mkdtemp(prefix=prefix, suffix=TEMP_DIR_SUFFIX, dir=parent))
+    # mkdtemp creates drwx------: other users of a shared cluster could not read it
+    os.chmod(tmp, 0o777 & ~_umask())
+    return tmp
+
+
 def atomic_write_dir(folder: str | Path, write: Callable[[Path], None]) -> None:
     """Fill a folder atomically: ``write`` fills a temporary sibling, which then
-    replaces ``folder`` (a killed job leaves no half-written folder under its name)."""
+    replaces ``folder`` (a killed job leaves no half-written folder under its name, and
+    its temporary sibling is removed by the next write). The folder gets the usual
+    permissions (0o777 less the umask), not mkdtemp's 0o700."""
     import shutil  # noqa: PLC0415
 
     folder = Path(folder)
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
+    tmp = make_temp_dir(folder.parent, f".{folder.name}.")
     try:
         write(tmp)
         if folder.exists():

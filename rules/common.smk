@@ -283,6 +283,10 @@ def report_inputs(wildcards):
         out["convert_quality"] = res(d, "convert", "quality.json")
     if have("convert"):
         out["patch_size"] = [res(d, "views", c, "patch_size.png") for c in cams(d)]
+        # their warnings reach the report's first screen
+        out["disparity"] = [res(d, "views", c, "disparity.json") for c in cams(d)]
+    if have("features_a"):
+        out["features"] = res(d, "reg_a", "features.json")
     if have("depth"):
         out["depth"] = [
             res(d, "depth", r, f"{c}.png") for r in ("a", "b") for c in cams(d)

@@ -1,12 +1,12 @@
 """Rule view_matches: SIFT of every subaperture view and the matching of the pairs
 that Table I and the baseline share (plenocal.sfm.viewdb)."""
-import tempfile
+import shutil
 from pathlib import Path
 
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 import numpy as np
 
-from plenocal.io import read_json, write_json
+from plenocal.io import make_temp_dir, read_json, write_json
 from plenocal.sfm import log_to_file, viewdb
 
 log_to_file(snakemake.log[0])  # noqa: F821
@@ -18,8 +18,10 @@ centres = {cam: np.asarray(d["cam_to_world"], dtype=float)[:3, 3]
            for cam, d in reg_a["cameras"].items()}
 out_db = Path(sm.output.database)
 out_db.parent.mkdir(parents=True, exist_ok=True)
-with tempfile.TemporaryDirectory(prefix=".view_matches.", dir=out_db.parent) as tmp:
-    work = Path(tmp)  # the database moves into place only once complete
+# the database moves into place only once complete; a killed job's temporary folder is
+# removed by the next run (make_temp_dir)
+work = make_temp_dir(out_db.parent, ".view_matches.")
+try:
     info = viewdb.build_view_database(views, work / "database.db", work,
                                       shot_centres=centres,
                                       shot_neighbours=cfg["view_matching"]["shot_neighbours"],
@@ -27,4 +29,6 @@ with tempfile.TemporaryDirectory(prefix=".view_matches.", dir=out_db.parent) as 
                                       max_num_features=cfg["max_num_features"],
                                       seed=cfg["seed"], num_threads=sm.threads)
     (work / "database.db").replace(out_db)
+finally:
+    shutil.rmtree(work, ignore_errors=True)
 write_json(sm.output.info, info)

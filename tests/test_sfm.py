@@ -108,3 +108,51 @@ def test_views_of_different_sizes_are_refused(capture, tmp_path):
     write_image(small, np.zeros((H // 2, W // 2, 3), np.uint8))
     with pytest.raises(RegistrationError, match="differ in size"):
         features_a(dict(views, hand05=small), tmp_path / "images", tmp_path / "db.db")
+
+
+def test_model_folder_is_readable_and_stale_temps_are_removed(capture, registered, tmp_path):
+    """The COLMAP model folder gets the umask's permissions (not mkdtemp's 0700: other
+    users of a shared cluster read it), and a killed map_a's temporary folders are
+    removed by the next run instead of staying behind for ever."""
+    import os
+    import stat
+
+    ra, _ = registered
+    old = os.umask(0o022)
+    try:
+        out = tmp_path / "reg_a"
+        out.mkdir()
+        stale = [out / ".map_a.dead1.tmpdir", out / ".model.dead3.tmpdir"]
+        for p in stale:
+            (p / "sub").mkdir(parents=True)
+        keep = out / ".model.json.x.part"  # another writer's file temp: not a folder temp
+        keep.write_text("x")
+        db = out / "database.db"
+        db.write_bytes((ra / "database.db").read_bytes())
+        doc = map_a(db, ra / "images", out / "model")
+    finally:
+        os.umask(old)
+    assert len(doc["cameras"]) == len(list((ra / "images").glob("*.png")))
+    mode = stat.S_IMODE((out / "model").stat().st_mode)
+    assert mode == 0o755, oct(mode)
+    assert not any(p.exists() for p in stale), sorted(p.name for p in out.iterdir())
+    assert keep.exists()
+    assert sorted(p.name for p in out.iterdir()) == [".model.json.x.part", "database.db",
+                                                    "model"]
+
+
+def test_few_features_warning_is_in_the_output(tmp_path):
+    """A texture-poor central view is named in features.json's warnings (which the
+    report shows), not only in the job's log."""
+    rng = np.random.default_rng(0)
+    views = {}
+    for k, name in enumerate(["x00_y00", "x01_y00", "x02_y00", "hand00"]):
+        img = np.full((H, W, 3), 128, np.uint8)
+        if name != "hand00":  # the hand-held shot sees a blank wall
+            img = cv2.GaussianBlur(rng.integers(0, 255, (H, W, 3), dtype=np.uint8), (5, 5),
+                                   1.5 + 0.1 * k)
+        views[name] = tmp_path / "views" / name / "1_1.png"
+        write_image(views[name], img)
+    info = features_a(views, tmp_path / "images", tmp_path / "features.db")
+    assert len(info["warnings"]) == 1, info["warnings"]
+    assert "hand00 (" in info["warnings"][0] and "x00_y00" not in info["warnings"][0]

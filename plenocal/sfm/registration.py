@@ -24,14 +24,13 @@ from __future__ import annotations
 
 import logging
 import shutil
-import tempfile
 import time
 from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
-from plenocal.io import atomic_write_dir
+from plenocal.io import atomic_write_dir, make_temp_dir
 from plenocal.sfm import colmap as cm
 
 log = logging.getLogger(__name__)
@@ -53,6 +52,10 @@ def check_shots(cams: list[str]) -> None:
             "Add a few shots taken by hand with rotations of several degrees.")
     if len(cams) < 3:
         raise RegistrationError(f"registration A needs at least 3 shots, got {cams}")
+
+
+#: fewer SIFT keypoints than this in a central view: a warning (it may not register)
+MIN_KEYPOINTS = 100
 
 
 def features_a(views: Mapping[str, str | Path], image_dir: str | Path,
@@ -79,13 +82,18 @@ def features_a(views: Mapping[str, str | Path], image_dir: str | Path,
         ncam = db.num_cameras()
     if ncam != 1:
         raise RegistrationError(f"expected one shared camera in {database}, found {ncam}")
-    poor = sorted(n for n, k in kp.items() if k < 100)
+    poor = sorted(n for n, k in kp.items() if k < MIN_KEYPOINTS)
     for n in sorted(kp):
         log.info("features_a: %s %d keypoints", n, kp[n])
+    warnings = []
     if poor:
-        log.warning("few features (< 100) in %s: texture-poor views may not register",
-                    ", ".join(poor))
-    return {"num_images": len(kp), "keypoints": kp}
+        warnings.append(
+            f"few features (< {MIN_KEYPOINTS} SIFT keypoints) in the central views of "
+            + ", ".join(f"{n[:-4]} ({kp[n]})" for n in poor)
+            + ": texture-poor views may not register (more texture, light or focus)")
+        log.warning("%s", warnings[-1])
+    # warnings: read by the report's Warnings box (plenocal.report.html)
+    return {"num_images": len(kp), "keypoints": kp, "warnings": warnings}
 
 
 def match_a(database: str | Path, *, seed: int = 0, num_threads: int = 1) -> dict:
@@ -145,7 +153,7 @@ def run_mapper(database: str | Path, image_dir: str | Path, *, mapper: str = "in
     import pycolmap  # noqa: PLC0415
 
     pycolmap.set_random_seed(seed)
-    out = Path(tempfile.mkdtemp(prefix=".mapper_", dir=Path(database).parent))
+    out = make_temp_dir(Path(database).parent, ".mapper.")
     try:
         if mapper == "incremental":
             recs = pycolmap.incremental_mapping(str(database), str(image_dir), str(out),
@@ -241,10 +249,14 @@ def map_a(database: str | Path, image_dir: str | Path, model_dir: str | Path, *,
     check_shots([n[:-4] for n in names])
     t0 = time.perf_counter()
     # the mapper works on a copy: the database input of the rule stays untouched
-    with tempfile.TemporaryDirectory(dir=Path(model_dir).parent) as tmp:
-        db_copy = Path(tmp) / "database.db"
+    # (in a temporary folder that a killed job's successor removes: make_temp_dir)
+    tmp = make_temp_dir(Path(model_dir).parent, ".map_a.")
+    try:
+        db_copy = tmp / "database.db"
         shutil.copyfile(database, db_copy)
         recs = run_mapper(db_copy, image_dir, mapper=mapper, seed=seed, num_threads=num_threads)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
     seconds = time.perf_counter() - t0
     rec = check_models(recs, names, mapper)
     log.info("map_a (%s): %d images, %d points, %.1f s", mapper, rec.num_reg_images(),
