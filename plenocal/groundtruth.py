@@ -97,12 +97,14 @@ def shot_cameras(optics: PlenopticOptics, grid: MicrolensGrid, layout: ViewLayou
 
 
 def ground_truth_shot(data_dir: str | Path, cam: str, n_views: int, tile: int,
-                      q: float | None, out_json: str | Path, log=print) -> None:
-    """Write the cameras of every view of shot ``cam`` (plain format, one shot)."""
+                      q: float | None, out_json: str | Path, log=print,
+                      even: bool = True) -> None:
+    """Write the cameras of every view of shot ``cam`` (plain format, one shot).
+    ``even``: the converter's ``convert.even_size`` (the views' size must match)."""
     data_dir = Path(data_dir)
     optics = optics_from_truth(data_dir / "truth" / "optics.json")
     grid = MicrolensGrid(read_calib(data_dir / "calib.xml"), optics.width, optics.height)
-    layout = make_layout(grid, n_views, tile, q)
+    layout = make_layout(grid, n_views, tile, q, even=even)
     shots = read_json(data_dir / "truth" / "shots.json")
     if cam not in shots:
         raise KeyError(f"{cam}: not a shot of {data_dir / 'truth' / 'shots.json'} "

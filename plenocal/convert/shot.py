@@ -73,7 +73,7 @@ class ConvertSettings:
     the number of significant bits (8..16)."""
 
     tile_size: int | str = "auto"
-    upsample: float = 2.0
+    upsample: float = 1.5
     view_spacing_px: float | None = None
     percentiles: tuple[float, float] = (2.0, 98.0)
     mla: str = "auto"
@@ -104,7 +104,7 @@ class ConvertSettings:
         bits = cfg.get("bit_depth", "auto")
         return cls(
             tile_size=tile if isinstance(tile, str) else int(tile),
-            upsample=float(cfg.get("upsample", 2.0)),
+            upsample=float(cfg.get("upsample", 1.5)),
             view_spacing_px=cfg.get("view_spacing_px"),
             percentiles=(float(pct[0]), float(pct[1])),
             mla=str(cfg.get("mla", "auto")),
