@@ -1,6 +1,7 @@
-"""Depth quality and speed: the plane sweep beside OpenCV's StereoSGBM.
+"""Depth quality and speed: SGM and the plane sweep beside OpenCV's StereoSGBM, and the
+view synthesis they give.
 
-    python bench/bench_depth.py [--dataset synthetic] [--cam x03_y01]
+    python bench/bench_depth.py [--dataset synthetic] [--cam x03_y01] [--results DIR]
 
 With a dataset whose ground truth exists (results/<d>/ground_truth/: cameras.json and
 depth/<cam>/<view>.npy) the reference is the central view of ``cam`` with the
@@ -9,7 +10,13 @@ and from the central views of the neighbouring shots (as registration A), and SG
 on the rectified pair (central view, next central view to the right). Without one,
 a textured slanted plane rendered by plenocal.depth.synthetic is used. Prints the
 share of valid pixels, the share within 1 % of the true depth, and the throughput in
-megapixels x depth labels per second."""
+megapixels x depth labels per second.
+
+With ``--results DIR`` (a folder whose rules depth_view and synthesis_exp<k> ran, e.g. a
+worktree's ``results/<dataset>``) it also prints, per synthesis input view, the depth
+quality of rule depth_view against the true depth, and per experiment the mean PSNR by
+renderer, camera set and depth, with the dB lost to calibration (same depth) and to
+depth."""
 
 from __future__ import annotations
 
@@ -34,13 +41,14 @@ from plenocal.depth.planesweep import (  # noqa: E402
 )
 from plenocal.depth.quality import depth_quality  # noqa: E402
 from plenocal.depth.sgbm import sgbm_depth  # noqa: E402
+from plenocal.depth.sgm import SgmOptions, sgm_depth  # noqa: E402
 from plenocal.depth.synthetic import (  # noqa: E402
     camera_at,
     fronto_plane,
     photo_texture,
     render_plane,
 )
-from plenocal.io import read_image  # noqa: E402
+from plenocal.io import read_image, read_json  # noqa: E402
 
 
 def run_sweep(out, label, ref, img, srcs, simgs, near, far, gt, opt):
@@ -54,6 +62,16 @@ def run_sweep(out, label, ref, img, srcs, simgs, near, far, gt, opt):
     out.say(f"{label:34s} valid {q['valid_share']:6.1%}  within 1% {q['within_share']:6.1%} "
           f"(of valid {q['within_of_valid']:6.1%})  median rel {q['median_rel_error']:.4f}  "
           f"{dt:6.2f} s  {n} labels x {len(srcs)} sources  {mpl:7.1f} MP*labels/s")
+
+
+def run_sgm(out, label, ref, img, srcs, simgs, near, far, gt, opt):
+    t = time.perf_counter()
+    d = sgm_depth(ref, img, srcs, simgs, near, far, opt)
+    dt = time.perf_counter() - t
+    q = depth_quality(d, gt, 0.01, border=8)
+    out.say(f"{label:34s} valid {q['valid_share']:6.1%}  within 1% {q['within_share']:6.1%} "
+            f"(of valid {q['within_of_valid']:6.1%})  median rel {q['median_rel_error']:.4f}  "
+            f"{dt:6.2f} s  {len(srcs)} sources (SGM, 8 directions, consistency check)")
 
 
 def run_sgbm(out, label, c1, i1, c2, i2, near, far, gt):
@@ -74,13 +92,56 @@ def main() -> None:
     ap.add_argument("--cam", default=None)
     ap.add_argument("--near", type=float, default=0.47 * 0.85)
     ap.add_argument("--far", type=float, default=0.74 * 1.15)
+    ap.add_argument("--results", default=None,
+                    help="results/<dataset> folder with depth_view and synthesis outputs")
     a = ap.parse_args()
     out = Lines()
     measure(a, out)
+    sections = {"Plane sweep against StereoSGBM (quality and throughput)": [
+        "`python bench/bench_depth.py` (one process, the same views):", "", "```", *out,
+        "```"]}
+    if a.results:
+        syn = Lines()
+        synthesis_figures(Path(a.results), syn)
+        sections["Depth for view synthesis and RVS"] = [
+            f"`python bench/bench_depth.py --results {a.results}` (rules depth_view and "
+            "synthesis_exp<k> of a default run; PSNR in dB, mean over the targets):", "",
+            "```", *syn, "```"]
     if a.out:
-        update_sections(a.out, {"Plane sweep against StereoSGBM (quality and throughput)": [
-            "`python bench/bench_depth.py` (one process, the same views):", "", "```",
-            *out, "```"]})
+        update_sections(a.out, sections)
+
+
+def synthesis_figures(root: Path, out: Lines) -> None:
+    """Depth quality of rule depth_view and the synthesis PSNR of every experiment."""
+    for p in sorted((root / "depth" / "views").glob("*/*.npy")):
+        key = f"{p.parent.name}/{p.stem}"
+        gt = root / "ground_truth" / "depth" / p.parent.name / p.name
+        if not gt.is_file():
+            continue
+        q = depth_quality(np.load(p), np.load(gt), 0.01, border=8)
+        info = read_json(p.with_suffix(".json"))
+        out.say(f"depth {key:14s} {info['method']:10s} valid {q['valid_share']:6.1%}  "
+                f"within 1% {q['within_share']:6.1%}  median rel {q['median_rel_error']:.4f}")
+    for k in (1, 2, 3):
+        path = root / "eval" / f"synthesis_exp{k}.json"
+        if not path.is_file():
+            continue
+        doc = read_json(path)
+        blocks = {doc["renderer"]: doc, **doc.get("renderers", {})}
+        for name, b in blocks.items():
+            for depth_name, key in (("estimated", "calibrations"), ("true", "true_depth")):
+                for cams, r in b.get(key, {}).items():
+                    out.say(f"Exp. {k} {name:5s} {depth_name:9s} depth, {cams:12s} cameras: "
+                            + _psnr_text(r))
+            out.say(f"Exp. {k} {name:5s} dB lost to calibration (same depth): "
+                    f"{b.get('db_lost')}; with the true depth: {b.get('db_lost_true_depth')}; "
+                    f"to depth: {b.get('db_lost_to_depth')}")
+
+
+def _psnr_text(r: dict) -> str:
+    if "mean_psnr" in r:
+        return f"{r['mean_psnr']:.2f} (min {r['min_psnr']:.2f}, {r['count']} views)"
+    return "; ".join(f"{v} {r[v]['mean_psnr']:.2f}" for v in ("central", "lateral") if v in r)
 
 
 def measure(a, out: Lines) -> None:
@@ -110,6 +171,13 @@ def measure(a, out: Lines) -> None:
                            ("plane sweep, neighbour shots (A)", src_a)):
             run_sweep(out, label, cams[ref_key], img, [cams[k] for k in src],
                       [load(k) for k in src], a.near, a.far, gt, opt)
+        # the synthesis depth's sources: 4 nearest shots' same view + 4 own-set views
+        src_s = nearest_sources(ref_key, cams, 4, [f"{s}/{cv}" for s in shots])
+        src_s += nearest_sources(ref_key, cams, 4, own)
+        for label, fn, o in (("plane sweep, synthesis sources", run_sweep, opt),
+                             ("SGM, synthesis sources", run_sgm, SgmOptions())):
+            fn(out, label, cams[ref_key], img, [cams[k] for k in src_s],
+               [load(k) for k in src_s], a.near, a.far, gt, o)
         def offset(k):  # source centre in the reference camera frame
             return (cams[ref_key].world_to_cam @ cams[k].cam_to_world)[:3, 3]
 
@@ -130,6 +198,7 @@ def measure(a, out: Lines) -> None:
     img, gt = render_plane(ref, plane)
     simgs = [render_plane(s, plane)[0] for s in srcs]
     run_sweep(out, "plane sweep, 8 sources", ref, img, srcs, simgs, 0.4, 0.9, gt, opt)
+    run_sgm(out, "SGM, 8 sources", ref, img, srcs, simgs, 0.4, 0.9, gt, SgmOptions())
     right = srcs[6]  # (+1, 0)
     run_sweep(out, "plane sweep, same pair as SGBM", ref, img, [right], [simgs[6]], 0.4, 0.9, gt,
               PlaneSweepOptions(lr_check=False, best_fraction=1.0))

@@ -12,8 +12,12 @@ from plenocal.synthesis import (
     experiment1,
     experiment2,
     experiment3,
+    experiment_input_views,
+    inner_corner_view,
     lateral_view,
     layout_from_cams,
+    run_experiment,
+    synthesis_summary,
 )
 from plenocal.viewgeom import view_names
 
@@ -79,3 +83,38 @@ def test_bad_calibration_loses_db(dataset):
     bad, _ = experiment1(_ctx(root, bad_cams))
     assert bad["mean_psnr"] < good["mean_psnr"] - 1.0, (good["mean_psnr"], bad["mean_psnr"])
     assert np.isfinite(good["mean_psnr"])
+
+
+def test_plan_and_shared_depth(dataset):
+    """Depth maps given once serve every camera set (the dB lost to calibration with one
+    and the same depth); the plan lists what each experiment reads; the summary puts the
+    first renderer on top and the others under ``renderers``."""
+    root, cams = dataset
+    layout = layout_from_cams(sorted({k.split("/")[0] for k in cams}), N)
+    plane = fronto_plane(0.6, 0.8, photo_texture(384, noise=0.005), 20.0)
+    keys = experiment_input_views(layout, 1)
+    assert keys == [f"{c}/1_1" for c in layout.corners]
+    assert experiment_input_views(layout, 3)[4:] == [
+        f"{c}/{inner_corner_view(layout, c)}" for c in layout.corners]
+    assert [lateral_view(_ctx(root, cams), c) for c in layout.corners] == [
+        inner_corner_view(layout, c) for c in layout.corners]
+    true = {k: render_plane(cams[k], plane)[1] for k in keys}
+    bad_cams = dict(cams)
+    k = "x01_y00/1_1"  # a target off by 1 mm
+    M = cams[k].cam_to_world.copy()
+    M[0, 3] += 0.001
+    bad_cams[k] = PinholeCamera(cams[k].K, M, W, H)
+    runs = {}
+    for name, cs in (("complete", bad_cams), ("ground_truth", cams)):
+        res, _ = run_experiment(1, cs, lambda c, v: str(root / c / f"{v}.png"), layout, 0.45,
+                                0.8, CFG, true)
+        runs[("dibr", "true", name)] = runs[("dibr", "estimated", name)] = res
+    good, bad = runs[("dibr", "true", "ground_truth")], runs[("dibr", "true", "complete")]
+    assert good["psnr"]["x01_y00/1_1"] > bad["psnr"]["x01_y00/1_1"] + 3.0
+    # the other targets see the same cameras and the same depth: the same PSNR
+    assert good["psnr"]["x01_y01/1_1"] == bad["psnr"]["x01_y01/1_1"]
+    out = synthesis_summary(1, runs, ["dibr"])
+    assert out["renderer"] == "dibr" and out["renderers"] == {}
+    assert out["db_lost"] == out["db_lost_true_depth"] > 0.5
+    assert out["db_lost_to_depth"] == 0.0
+    assert set(out["calibrations"]) == set(out["true_depth"]) == {"complete", "ground_truth"}
