@@ -162,6 +162,98 @@ def test_views_match_the_ideal_view_of_the_plane():
         assert q["psnr_db"] > 36, (r, c, q)
 
 
+@pytest.mark.parametrize("mla", ["keplerian", "galilean"])
+@pytest.mark.parametrize("rotation", [0.0, np.pi / 2, 0.0007])
+def test_views_upright_for_every_grid_rotation_and_mla_kind(rotation, mla):
+    """The view equals the (upright) virtual image whatever the grid's rotation, for both
+    MLA kinds; the kind is read from the image."""
+    base = calib_for_optics(small_optics())
+    calib = RayCalib(**{**base.__dict__, "rotation": rotation})
+    grid = MicrolensGrid(calib, 400, 300)
+    tex = random_texture(512, 1.5, 6)
+    P = 6.0
+    shot = ShotConversion(lenslet_from_patch_size(grid, P, tex, mla=mla), calib, 5, FIXED_TILE)
+    assert shot.mla == mla
+    L = shot.layout
+    v = calib.diameter / P
+    s = -1.0 if mla == "keplerian" else 1.0
+    ys, xs = np.mgrid[0:L.height, 0:L.width].astype(np.float64)
+    for r, c in ((2, 2), (0, 4)):
+        d = np.stack([xs - L.tile_centres[0, 0], ys - L.tile_centres[0, 1]], -1) * (
+            calib.diameter / L.tile)
+        y = L.lens_centres[0] + d + s * v * L.offset_image(r, c)
+        t = (y / v + 256).astype(np.float32)
+        ideal = cv2.remap(tex, t[..., 0], t[..., 1], cv2.INTER_LINEAR)
+        ideal8 = np.clip(np.rint(ideal * 255), 0, 255).astype(np.uint8)
+        q = view_quality(shot.view(r, c), ideal8, border=L.tile)
+        assert q["psnr_db"] > 33, (rotation, mla, r, c, q)
+
+
+def test_galilean_disparity_has_the_other_sign():
+    """Paper sign (Eq. 1): Keplerian D = -q T / P < 0, Galilean D = +q T / P > 0, and the
+    content moves the way the sign says between views (2, 2) and (2, 3)."""
+    calib = calib_for_optics(small_optics())
+    grid = MicrolensGrid(calib, 400, 300)
+    tex = random_texture(512, 1.5, 7)
+    for mla, sign in (("keplerian", -1.0), ("galilean", 1.0)):
+        shot = ShotConversion(lenslet_from_patch_size(grid, 5.0, tex, mla=mla), calib, 5,
+                              FIXED_TILE)
+        d = shot.disparity()
+        expect = shot.layout.q * shot.layout.tile / 5.0
+        assert d["mla"] == mla
+        assert sign * d["D_min"] > 0 and sign * d["D_max"] > 0
+        assert d["D_max"] == pytest.approx(sign * expect, rel=0.03)
+        # u_(h+1) - u_h = -D
+        assert measure_shift(shot.view(2, 2), shot.view(2, 3), axis=0) == pytest.approx(
+            -sign * expect, abs=0.08)
+
+
+def test_tile_auto_follows_the_patch_size_and_even_sizes():
+    calib = calib_for_optics(small_optics())
+    grid = MicrolensGrid(calib, 400, 300)
+    tex = random_texture(512, 1.5, 8)
+    for P, T in ((5.0, 8), (7.4, 12)):  # ceil(1.5 P)
+        shot = ShotConversion(lenslet_from_patch_size(grid, P, tex), calib, 3)
+        assert shot.layout.tile == T
+        assert shot.layout.width % 2 == 0 and shot.layout.height % 2 == 0
+        odd = ShotConversion(lenslet_from_patch_size(grid, P, tex), calib, 3,
+                             ConvertSettings(even_size=False))
+        assert odd.layout.width - shot.layout.width in (0, 1)
+        assert odd.layout.height - shot.layout.height in (0, 1)
+        assert odd.layout.width % 2 == 1 and odd.layout.height % 2 == 1
+        assert np.array_equal(odd.view(1, 1)[:shot.layout.height, :shot.layout.width],
+                              shot.view(1, 1))
+
+
+@pytest.mark.parametrize("bits", [10, 12, 14])
+def test_16_bit_images_are_scaled_to_their_real_range(bits):
+    calib = calib_for_optics(small_optics())
+    grid = MicrolensGrid(calib, 400, 300)
+    img8 = lenslet_from_patch_size(grid, 5.0, random_texture(256, 1.5, 9))
+    full = (1 << bits) - 1
+    img16 = np.rint(img8.astype(np.float64) * full / 255).astype(np.uint16)
+    a = ShotConversion(img8, calib, 3, FIXED_TILE)
+    b = ShotConversion(img16, calib, 3, FIXED_TILE)
+    assert b.bits == bits
+    diff = np.abs(a.view(1, 1).astype(int) - b.view(1, 1).astype(int))
+    assert diff.max() <= 1, diff.max()
+    # stated depth; a value above it is refused with the key named
+    c = ShotConversion(img16, calib, 3, ConvertSettings(tile_size=6, bit_depth=16))
+    assert c.bits == 16 and c.view(1, 1).mean() < a.view(1, 1).mean() / 3
+    with pytest.raises(ConvertError, match="convert.bit_depth"):
+        ShotConversion(img16 | np.uint16(1 << bits), calib, 3,
+                       ConvertSettings(tile_size=6, bit_depth=bits))
+
+
+def test_settings_errors_name_the_key():
+    with pytest.raises(ConvertError, match="convert.tile_size"):
+        ConvertSettings.from_config({"tile_size": "big"})
+    with pytest.raises(ConvertError, match="convert.mla"):
+        ConvertSettings.from_config({"mla": "plenoptic"})
+    with pytest.raises(ConvertError, match="convert.bit_depth"):
+        ConvertSettings.from_config({"bit_depth": 20})
+
+
 # ---------------------------------------------------------------------------
 # (3) every fixture calibration drives a conversion
 # ---------------------------------------------------------------------------

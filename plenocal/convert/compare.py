@@ -84,7 +84,7 @@ def onto_reference(ours: np.ndarray, ref_shape: tuple[int, int], M: np.ndarray
                       [0, 0, 1]])
         M = (np.vstack([M, [0, 0, 1]]) @ np.linalg.inv(S))[:2]
     H, W = ref_shape
-    warped = cv2.warpAffine(src, M, (W, H), flags=cv2.INTER_LINEAR,
+    warped = cv2.warpAffine(src, M, (W, H), flags=cv2.INTER_LANCZOS4,
                             borderMode=cv2.BORDER_CONSTANT, borderValue=0)
     mask = cv2.warpAffine(np.ones(src.shape[:2], np.uint8), M, (W, H), flags=cv2.INTER_NEAREST,
                           borderMode=cv2.BORDER_CONSTANT, borderValue=0)

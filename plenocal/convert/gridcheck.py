@@ -324,6 +324,13 @@ def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
     r_lens = np.linalg.norm(c_file - centre, axis=1)
     r_max = float(r_lens.max()) + 1
     radius = max(8 * D, 0.15 * r_max)
+    central = ok & (r_lens <= radius)
+    if central.sum() >= MIN_LENSES:
+        # start from the mean shift of the central lenses on the torus (lattice cell):
+        # a file half a lens off splits no cluster across the cell's edge
+        kd = d[central] @ np.linalg.inv(grid.A).T  # shift in lattice units, mod 1
+        frac = np.angle(np.exp(2j * np.pi * kd).sum(axis=0)) / (2 * np.pi)
+        d = _nearest_cell(d, grid.A, np.broadcast_to(grid.A @ frac, d.shape))
     P = None
     keep = ok
     cov = np.eye(3)

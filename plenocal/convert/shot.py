@@ -269,9 +269,15 @@ class ShotConversion:
             yield name, self.view(r, c)
 
     def disparity(self) -> dict:
-        return disparity_summary(self.layout, self.calib, self.used_patch,
-                                 self.patch.confident[self.layout.lens_index],
-                                 self.settings.percentiles)
+        out = disparity_summary(self.layout, self.calib, self.used_patch,
+                                self.patch.confident[self.layout.lens_index],
+                                self.settings.percentiles)
+        out["mla_source"] = "image" if self.mla_scores is not None else "setting"
+        if self.mla_scores is not None:
+            out["mla_match_scores"] = dict(self.mla_scores)
+        out["tile_source"] = "auto" if self.settings.tile_size == "auto" else "setting"
+        out["bit_depth"] = self.bits
+        return out
 
     def patch_picture(self) -> np.ndarray:
         return patch_size_picture(self.layout, self.used_patch,

@@ -73,13 +73,18 @@ def _finish(img: np.ndarray, dist: np.ndarray, radius: float) -> np.ndarray:
 
 
 def lenslet_from_patch_size(grid: MicrolensGrid, patch: float, texture: np.ndarray,
-                            texture_scale: float = 1.0) -> np.ndarray:
+                            texture_scale: float = 1.0, mla: str = "keplerian") -> np.ndarray:
     """uint8 RGB lenslet image whose patch size is ``patch`` pixels at every lens.
 
-    ``texture_scale``: texture pixels per micro-image pixel."""
+    ``texture_scale``: texture pixels per micro-image pixel. ``mla``: ``keplerian``
+    (micro images inverted, pixel ``p`` sees ``m - (D/P)(p - m)``) or ``galilean``
+    (upright: ``m + (D/P)(p - m)``, a point moves away from the neighbour by ``P``)."""
+    if mla not in ("keplerian", "galilean"):
+        raise ValueError(f"mla: keplerian or galilean, not {mla!r}")
     pix, m, dist = _owner(grid)
     v = grid.diameter / patch
-    y = m - v * (pix - m)  # the virtual-image point this pixel sees
+    sign = -1.0 if mla == "keplerian" else 1.0
+    y = m + sign * v * (pix - m)  # the virtual-image point this pixel sees
     t = y / v * texture_scale + np.array(texture.shape[1::-1]) / 2
     img = _sample(texture, t[..., 0], t[..., 1])
     return _finish(img, dist, grid.calib.safe_diameter / 2)

@@ -1,0 +1,152 @@
+"""Converter on real lenslet frames (issue 12): crops of the MPEG lenslet sequences in
+shared/real/frames (Raytrix and TSPC cameras), with their RayCalibData files.
+
+Skipped, with the reason, where the shared folder is absent. Crops keep the tests fast:
+the calibration's grid offset is moved with the crop (:func:`crop`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from plenocal.convert import ConvertSettings, ShotConversion
+from plenocal.convert.compare import compare_to_reference, fine_detail
+from plenocal.convert.render import blend_disagreement
+from plenocal.grid import MicrolensGrid
+from plenocal.raytrix import RayCalib, read_calib
+
+_CANDIDATES = [Path("/work/shared/real"), Path(__file__).resolve().parents[2] / "shared/real"]
+REAL = next((p for p in _CANDIDATES if (p / "frames").is_dir()), None)
+pytestmark = pytest.mark.skipif(REAL is None, reason="shared/real (real lenslet frames) is "
+                                "not beside the repository")
+
+
+def crop(name: str, x0: int, y0: int, w: int, h: int) -> tuple[np.ndarray, RayCalib]:
+    """RGB crop [y0:y0+h, x0:x0+w] of a frame and its calibration with the grid moved
+    into the crop's coordinates (the origin is given from the image centre, y up)."""
+    assert REAL is not None
+    img = cv2.imread(str(REAL / "frames" / f"{name}.png"), cv2.IMREAD_UNCHANGED)
+    calib = read_calib(REAL / "frames" / f"{name}.xml")
+    H, W = img.shape[:2]
+    origin = np.array([(W - 1) / 2 + calib.offset[0], (H - 1) / 2 - calib.offset[1]])
+    # move the origin into the crop by whole steps of 3 lenses along both lattice axes
+    # (a lattice point of the same lens type: the types repeat every 3 lenses)
+    A3 = 3 * MicrolensGrid(calib, W, H).A
+    target = np.array([x0 + (w - 1) / 2, y0 + (h - 1) / 2])
+    k = np.rint(np.linalg.solve(A3, target - origin))
+    ox, oy = origin + A3 @ k
+    offset = (ox - x0 - (w - 1) / 2, -(oy - y0 - (h - 1) / 2))
+    part = np.ascontiguousarray(img[y0:y0 + h, x0:x0 + w, ::-1])
+    return part, RayCalib(**{**calib.__dict__, "offset": offset})
+
+
+def phase_shift(a: np.ndarray, b: np.ndarray, box: tuple[int, int, int, int]
+                ) -> tuple[float, float]:
+    """(dx, dy) of the content of box (x, y, w, h) from view ``a`` to view ``b``."""
+    x, y, w, h = box
+    ga = cv2.cvtColor(a[y:y + h, x:x + w], cv2.COLOR_RGB2GRAY).astype(np.float32)
+    gb = cv2.cvtColor(b[y:y + h, x:x + w], cv2.COLOR_RGB2GRAY).astype(np.float32)
+    win = cv2.createHanningWindow(ga.shape[::-1], cv2.CV_32F)
+    (dx, dy), _ = cv2.phaseCorrelate(ga, gb, win)
+    return dx, dy
+
+
+# Fujita2, sensor x 250..1330, y 250..830: the books on the left (far), the kangaroo's
+# head and shoulders on the right (in front of the books)
+FUJITA_CROP = (250, 250, 1080, 580)
+
+
+@pytest.fixture(scope="module")
+def fujita():
+    img, calib = crop("Fujita2", *FUJITA_CROP)
+    return ShotConversion(img, calib, 5, ConvertSettings(tile_size=8)), img, calib
+
+
+@pytest.mark.parametrize(("name", "box", "kind"), [
+    ("Fujita2", (700, 700, 560, 480), "galilean"),
+    ("Origami", (700, 700, 560, 480), "galilean"),
+    ("Boxer-IrishMan-Gladiator2", (1500, 700, 700, 560), "galilean"),
+    ("R42_klein_crop", (100, 100, 700, 450), "galilean"),
+    ("Boys2", (1500, 1100, 900, 700), "keplerian"),
+    ("HandTools", (1500, 1100, 900, 700), "keplerian"),
+])
+def test_mla_kind_is_read_from_the_frame(name, box, kind):
+    """Raytrix micro images match only with points moving away from the neighbour,
+    TSPC ones only towards it (by a wide margin: a wrong kind is never close)."""
+    img, calib = crop(name, *box)
+    shot = ShotConversion(img, calib, 3, ConvertSettings(tile_size=4))
+    assert shot.mla == kind
+    scores = shot.mla_scores
+    other = "keplerian" if kind == "galilean" else "galilean"
+    assert scores[kind] > 0.7 and scores[kind] - scores[other] > 0.4, scores
+
+
+def test_views_upright_and_parallax_direction(fujita):
+    """View (r, c): c grows as the viewpoint moves right, r as it moves down. From view
+    (2, 0) to (2, 4) the kangaroo, in front of the books, moves LEFT against them; from
+    (0, 2) to (4, 2) it moves UP against them. The books' and the kangaroo's boxes in
+    the crop's view are where they lie on the sensor (views stand as the frame does)."""
+    shot, _, _ = fujita
+    L = shot.layout
+    scale = L.tile / shot.calib.diameter
+
+    def box(x, y, w, h):  # sensor box of the crop -> view box
+        cx, cy = (shot.grid.width - 1) / 2, (shot.grid.height - 1) / 2
+        return (int((x - cx) * scale + L.width / 2), int((y - cy) * scale + L.height / 2),
+                int(w * scale), int(h * scale))
+
+    books = box(40, 60, 300, 420)  # book spines, sensor x 290..590 of the frame
+    kangaroo = box(620, 150, 250, 300)  # its head, sensor x 870..1120 of the frame
+    left, right = shot.view(2, 0), shot.view(2, 4)
+    up, down = shot.view(0, 2), shot.view(4, 2)
+    bx, _ = phase_shift(left, right, books)
+    kx, _ = phase_shift(left, right, kangaroo)
+    assert kx - bx < -3.0, (kx, bx)
+    _, by = phase_shift(up, down, books)
+    _, ky = phase_shift(up, down, kangaroo)
+    assert ky - by < -3.0, (ky, by)
+    # the horizontal pair does not move vertically, nor the vertical pair horizontally
+    assert abs(phase_shift(left, right, kangaroo)[1]) < 1.0
+    assert abs(phase_shift(up, down, kangaroo)[0]) < 1.0
+
+
+def test_mosaic_measure_fails_the_wrong_kind_and_passes_the_right_one(fujita):
+    """The blend disagreement (lenses blended into one pixel that see different things)
+    is ~1 for the mosaic that the HEAD converter made of Fujita2 (measured on HEAD's
+    code: 1.24 central, 0.91 corner view) and for this crop converted as Keplerian;
+    clean views stay well below."""
+    shot, img, calib = fujita
+    wrong = ShotConversion(img, calib, 5, ConvertSettings(tile_size=8, mla="keplerian"))
+    for r, c in ((2, 2), (0, 0)):
+        assert blend_disagreement(wrong.plan, wrong._source, r, c) > 0.6
+        assert blend_disagreement(shot.plan, shot._source, r, c) < 0.4
+
+
+def test_tspc_crop_converts_clean_and_upright():
+    """Boys2 (TSPC, D = 70 px): the central view of a crop is clean (no mosaic) and
+    the tile follows its patch sizes (~17 px) instead of a fixed 6."""
+    img, calib = crop("Boys2", 1400, 900, 1120, 840)
+    shot = ShotConversion(img, calib, 5)
+    assert shot.mla == "keplerian"
+    assert shot.layout.tile >= 20
+    assert shot.disparity()["patch_size_px"]["confident_share"] > 0.4
+    assert blend_disagreement(shot.plan, shot._source, 2, 2) < 0.4
+
+
+def test_compare_measures_by_construction():
+    """compare_to_reference: a view against itself scaled, shifted and stretched (as
+    TLCT's non-square pixels are) gives SSIM ~1 and sharpness ~1; a blurred one loses
+    sharpness."""
+    img, _ = crop("Fujita2", 200, 200, 1200, 1000)
+    small = cv2.resize(img, (600, 500), interpolation=cv2.INTER_AREA)
+    ref = cv2.resize(small, (372, 290), interpolation=cv2.INTER_AREA)[6:286, 4:364]
+    same = compare_to_reference(small, ref)
+    assert same["ssim"] > 0.9 and same["sharpness_ratio"] > 0.85, same
+    assert same["scale_xy"][0] == pytest.approx(0.62, abs=0.01)
+    blurred = compare_to_reference(cv2.GaussianBlur(small, (0, 0), 3.0), ref)
+    assert blurred["sharpness_ratio"] < 0.6, blurred
+    g = np.zeros((50, 50), np.float32)
+    assert fine_detail(g, g > -1) == 0.0
