@@ -70,9 +70,9 @@ offsets are the files', not the method's. (The grey-level phase says the same in
   lens (rms) from any lattice. It is reported with its measured drift
   (``GridCheck.foreign``, a warning in ``GridCheck.warnings``) and never refined
   automatically: a wrong file should be replaced, not patched (``refine`` still may).
-  R42_klein_crop is one: 16 % of its lenses measured; its file's centres fall on the
-  micro-image borders (a crop whose offset was not moved with it: the grey-level phase
-  puts the lattice 14 px, 0.4 lens, off).
+  R42_klein_crop is one: 16 % of its lenses measured, the lattice 18 px (half a lens) off
+  the file's at the centre (the grey-level phase: 14 px); its file's centres fall on the
+  micro-image borders (a crop whose offset was not moved with it, by the look of it).
 """
 
 from __future__ import annotations
