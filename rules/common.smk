@@ -233,6 +233,78 @@ def depth_inputs(wildcards):
     }
 
 
+# depth settings of the synthesis depth maps only (rule depth_view)
+SYNTHESIS_DEPTH_KEYS = ("synthesis_method", "views", "sgm")
+
+
+def registration_depth_config():
+    """The depth settings the registrations' depth maps read: a change to the synthesis
+    depth maps' settings does not rerun them (nor the scale and merge)."""
+    return {
+        k: v for k, v in stage_config("depth").items() if k not in SYNTHESIS_DEPTH_KEYS
+    }
+
+
+def synthesis_depth_config():
+    """The depth settings that depth_view reads - its method's (the plane-sweep ones only
+    when it is the plane sweep) and the bounds."""
+    cfg = stage_config("depth")
+    if cfg["synthesis_method"] == "planesweep":
+        return {k: v for k, v in cfg.items() if k not in ("views", "sgm")}
+    return {k: cfg[k] for k in ("synthesis_method", "sgm", "bounds_margin")}
+
+
+def synthesis_layout(dataset):
+    from plenocal.synthesis import layout_from_cams
+
+    return layout_from_cams(array_cams(dataset), n_views(dataset))
+
+
+def experiment_views(dataset, exp):
+    """The views whose depth maps experiment ``exp`` reads."""
+    from plenocal.synthesis import experiment_input_views
+
+    return experiment_input_views(
+        synthesis_layout(dataset), exp, stage_config("verify")["exp2_sets"]
+    )
+
+
+def depth_view_keys(dataset):
+    """Views with a depth map for synthesis and the MPEG exports (depth.views)."""
+    if stage_config("depth")["views"] == "all":
+        return [f"{c}/{v}" for c in cams(dataset) for v in views(dataset)]
+    keys = [k for e in (1, 2, 3) for k in experiment_views(dataset, e)]
+    return list(dict.fromkeys(keys))
+
+
+def depth_view_path(dataset, key, ext="npy"):
+    cam, view = key.split("/")
+    return res(dataset, "depth", "views", cam, f"{view}.{ext}")
+
+
+def depth_view_inputs(wildcards):
+    d = wildcards.dataset
+    return {
+        "calibration": res(d, "calibration", "cameras.json"),
+        "rig": res(d, "reg_b", "rig.json"),
+        # candidate sources: the same view of every array shot, every view of its set
+        "views": sorted(
+            {res(d, "views", c, f"{wildcards.view}.png") for c in array_cams(d)}
+            | {res(d, "views", wildcards.cam, f"{v}.png") for v in views(d)}
+        ),
+    }
+
+
+def view_path(dataset, key):
+    cam, view = key.split("/")
+    return res(dataset, "views", cam, f"{view}.png")
+
+
+def true_depth_path(dataset, key):
+    cam, view = key.split("/")
+    return res(dataset, "ground_truth", "depth", cam, f"{view}.npy")
+
+
 # --- helpers of rules/merge.smk -------------------------------------------------------
 
 
@@ -252,6 +324,16 @@ def merge_targets(dataset):
         res(dataset, "calibration", "mpeg", "cameras.json"),
         res(dataset, "calibration", "colmap"),
     ]
+
+
+def mpeg_views_inputs(wildcards):
+    d = wildcards.dataset
+    keys = depth_view_keys(d)
+    return {
+        "mpeg": res(d, "calibration", "mpeg", "cameras.json"),
+        "depth": [depth_view_path(d, k) for k in keys],
+        "views": [view_path(d, k) for k in keys],
+    }
 
 
 # --- helpers of rules/report.smk ------------------------------------------------------
@@ -423,6 +505,18 @@ def synthesis_inputs(wildcards):
     }
     if is_synthetic(d):
         out["truth"] = res(d, "ground_truth", "cameras.json")
+    return out
+
+
+def synthesis_exp_inputs(wildcards, exp):
+    """Inputs of synthesis_exp<exp> - the views, cameras and the depth maps (and on
+    synthetic data the true depth) of the views the experiment reads."""
+    d = wildcards.dataset
+    out = synthesis_inputs(wildcards)
+    keys = experiment_views(d, exp)
+    out["depth"] = [depth_view_path(d, k) for k in keys]
+    if is_synthetic(d):
+        out["true_depth"] = [true_depth_path(d, k) for k in keys]
     return out
 
 

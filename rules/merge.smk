@@ -57,16 +57,6 @@ rule merge:
 TARGETS.append(merge_targets)
 
 
-def mpeg_views_inputs(wildcards):
-    d = wildcards.dataset
-    keys = depth_view_keys(d)
-    return {
-        "mpeg": res(d, "calibration", "mpeg", "cameras.json"),
-        "depth": [depth_view_path(d, k) for k in keys],
-        "views": [res(d, "views", *k.split("/")) + ".png" for k in keys],
-    }
-
-
 rule mpeg_views:
     """Depth maps, textures and RVS configurations beside the MPEG camera JSON."""
     input:

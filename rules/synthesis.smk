@@ -4,21 +4,7 @@
 ground-truth cameras (same depth: the dB lost to calibration) and with the true depth
 (the dB lost to depth)."""
 
-
-def synthesis_exp_inputs(exp):
-    def inputs(wildcards):
-        d = wildcards.dataset
-        out = synthesis_inputs(wildcards)
-        keys = experiment_views(d, exp)
-        out["depth"] = [depth_view_path(d, k) for k in keys]
-        if is_synthetic(d):
-            out["true_depth"] = [
-                res(d, "ground_truth", "depth", *k.split("/")) + ".npy" for k in keys
-            ]
-        return out
-
-    return inputs
-
+from functools import partial
 
 for _exp in (1, 2, 3):
 
@@ -26,7 +12,7 @@ for _exp in (1, 2, 3):
         name:
             f"synthesis_exp{_exp}"
         input:
-            unpack(synthesis_exp_inputs(_exp)),
+            unpack(partial(synthesis_exp_inputs, exp=_exp)),
         output:
             json=f"results/{{dataset}}/eval/synthesis_exp{_exp}.json",
             synth=directory(f"results/{{dataset}}/eval/synth/exp{_exp}"),
