@@ -23,8 +23,8 @@ from plenocal.viewgeom import view_names
 
 W, H, F, N = 160, 120, 250.0, 3
 COLS, ROWS, STEP, B = 3, 2, 0.01, 0.002
-CFG = {"psnr_border_px": 6, "depth": {"lr_check": False, "max_depths": 48},
-       "depth_sources_shots": 2, "depth_sources_set": 2}
+CFG = {"psnr_border_px": 6, "depth_sources_shots": 2, "depth_sources_set": 2,
+       "depth": {"lr_check": False, "max_depths": 48, "sgm": {"max_depths": 64}}}
 
 
 @pytest.fixture(scope="module")
