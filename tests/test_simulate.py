@@ -357,3 +357,11 @@ def test_galilean_micro_images_are_upright():
     assert expected < -1.0
     measured = neighbour_shift(img8, grid, cand=np.arange(-14.0, -1.0, 0.02))
     assert abs(measured - expected) < 0.15, (measured, expected)
+
+
+@pytest.mark.parametrize("kind,ratios,bad_type", [("keplerian", [0.94, 1.3], 2),
+                                                  ("galilean", [0.8, 1.1], 0)])
+def test_a_lens_type_that_images_no_plane_is_refused(kind, ratios, bad_type):
+    sim = raytrix_sim(kind=kind, focal_ratios=ratios)
+    with pytest.raises(ValueError, match=f"focal_ratios: lens type {bad_type} "):
+        optics_of(sim)

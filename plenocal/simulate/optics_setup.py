@@ -19,8 +19,12 @@ def type_focal_ratios(mla: dict) -> tuple[float, ...]:
 
 
 def optics_from_config(sim: dict) -> PlenopticOptics:
-    """The simulated camera (lengths in metres) from a validated ``simulate`` block."""
-    return PlenopticOptics(
+    """The simulated camera (lengths in metres) from a validated ``simulate`` block.
+
+    Every lens type must image a plane on the set-up's side of the MLA sharply:
+    kappa_i = s / f_i - 1 > 0 (Keplerian, f_i < s) or < 0 (Galilean, f_i > s); a
+    ValueError names ``simulate.mla.focal_ratios`` otherwise."""
+    optics = PlenopticOptics(
         focal_length=sim["main_lens"]["focal_length_mm"] / 1000.0,
         focus_distance=sim["main_lens"]["focus_distance_m"],
         mla_pitch=sim["mla"]["pitch_um"] * 1e-6,
@@ -33,3 +37,14 @@ def optics_from_config(sim: dict) -> PlenopticOptics:
         kind=sim["mla"].get("kind", "keplerian"),
         type_focal_ratios=type_focal_ratios(sim["mla"]),
     )
+    sign = -1.0 if optics.galilean else 1.0
+    for i in range(optics.lens_types):
+        if sign * optics.type_kappa(i) <= 0:
+            raise ValueError(
+                f"simulate.mla.focal_ratios: lens type {i} (focal length "
+                f"{optics.type_f(i) * 1e6:.1f} um, MLA-to-sensor distance "
+                f"{optics.s * 1e6:.1f} um) images no {optics.kind} plane sharply; a "
+                f"{optics.kind} type needs a focal length "
+                f"{'below' if sign > 0 else 'above'} s (ratio "
+                f"{'<' if sign > 0 else '>'} {optics.s / optics.f:.4f})")
+    return optics
