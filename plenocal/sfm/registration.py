@@ -178,12 +178,17 @@ def check_models(recs: dict, all_names: list[str], mapper: str) -> object:
         raise RegistrationError(f"registration A ({mapper}) built no model from "
                                 f"{len(all_names)} views; {hint}")
     models = sorted(recs.values(), key=lambda r: -r.num_reg_images())
-    if len(models) > 1:
-        parts = "; ".join(
-            f"model {i}: " + ", ".join(sorted(r.image(j).name[:-4] for j in r.reg_image_ids()))
-            for i, r in enumerate(models))
+    parts = "; ".join(
+        f"model {i}: " + ", ".join(sorted(r.image(j).name[:-4] for j in r.reg_image_ids()))
+        for i, r in enumerate(models))
+    if len(models) > 1 and models[0].num_reg_images() < len(all_names):
         raise RegistrationError(f"registration A ({mapper}) split the scene into "
                                 f"{len(models)} models ({parts}); {hint}")
+    if len(models) > 1:
+        # COLMAP may start a second model from views that are already in the first one
+        # (leftover pairs); the first holds every view and is the registration
+        log.warning("registration A (%s): %d models, the first holds every view and is "
+                    "used (%s)", mapper, len(models), parts)
     rec = models[0]
     reg = {rec.image(j).name for j in rec.reg_image_ids()}
     missing = sorted(n[:-4] for n in all_names if n not in reg)
