@@ -79,6 +79,7 @@ def test_wrong_grid_recovered(change):
     refined = refine_grid(grid, check)
     err = _centre_errors(refined, truth)
     assert err.max() < 0.15, err.max()
+    np.testing.assert_array_equal(refine_grid(wrong, check).centres, refined.centres)
     assert before.max() > 1.0
     # the RayCalib form (a similarity) holds this change too
     rc = MicrolensGrid(refine_calib(wrong, check), W, H)

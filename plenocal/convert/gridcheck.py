@@ -437,11 +437,14 @@ def _regions(W: int, H: int, D: float, c: np.ndarray, drift: np.ndarray, d: np.n
 # ---------------------------------------------------------------------------
 
 
-def refine_grid(grid: MicrolensGrid, check: GridCheck) -> MicrolensGrid:
-    """The grid on the fitted affine lattice (same lens indices and types as ``grid``);
-    ``calib`` becomes :func:`refine_calib`'s similarity (diameter: the fitted mean pitch)."""
+def refine_grid(grid: MicrolensGrid | RayCalib, check: GridCheck) -> MicrolensGrid:
+    """The grid on the fitted affine lattice (same lens indices and types as the file's
+    grid; ``grid`` may be that grid or its RayCalib); its ``calib`` is
+    :func:`refine_calib`'s similarity (diameter: the fitted mean pitch)."""
     if not check.fitted:
         raise ValueError("grid check found too few lenses to fit the lattice: cannot refine")
+    if isinstance(grid, RayCalib):
+        grid = MicrolensGrid(grid, check.width, check.height)
     calib = refine_calib(grid.calib, check)
     return MicrolensGrid(calib, grid.width, grid.height,
                          lattice=(np.array(check.origin), np.array(check.A)))
