@@ -31,7 +31,6 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_
     os.environ[_v] = "1"
 
 import argparse  # noqa: E402
-import inspect  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -44,7 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmd import Lines, update_sections  # noqa: E402
 
 from plenocal.convert import ConvertSettings, ShotConversion  # noqa: E402
-from plenocal.convert.gridcheck import check_grid, decide, refine_grid  # noqa: E402
+from plenocal.convert.gridcheck import grid_for_mode  # noqa: E402
 from plenocal.convert.shot import build_grid, load_calib, load_lenslet  # noqa: E402
 from plenocal.io import read_image, write_image  # noqa: E402
 from plenocal.viewgeom import central_view  # noqa: E402
@@ -98,19 +97,11 @@ def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
     cfg = {"mla": MLA[name]} if name in MLA else {}
     settings = ConvertSettings.from_config(cfg)
     t0 = time.perf_counter()
-    grid = build_grid(calib, W, H)
-    check = check_grid(image, grid)
+    grid, check = grid_for_mode(image, build_grid(calib, W, H), grid_mode)
     t_check = time.perf_counter() - t0
-    refined = decide(grid_mode, check)
-    kwargs = {}
-    if refined and "grid" in inspect.signature(ShotConversion).parameters:
-        kwargs["grid"] = refine_grid(grid, check)
-    elif refined:
-        from plenocal.convert.gridcheck import refine_calib  # noqa: PLC0415
-
-        calib = refine_calib(calib, check)
+    refined = check.refined
     t1 = time.perf_counter()
-    shot = ShotConversion(image, calib, views, settings, source=str(lenslet), **kwargs)
+    shot = ShotConversion(image, calib, views, settings, source=str(lenslet), grid=grid)
     t_prep = time.perf_counter() - t1
     t2 = time.perf_counter()
     centre_name = central_view(views)

@@ -15,7 +15,6 @@ a bad option) print one line naming the file or key and exit with status 2.
 from __future__ import annotations
 
 import argparse
-import inspect
 import logging
 import sys
 import time
@@ -150,13 +149,7 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     import cv2  # noqa: F401, PLC0415  (cv2 before anything that may import pycolmap)
 
     from plenocal.convert import ConvertSettings, ShotConversion  # noqa: PLC0415
-    from plenocal.convert.gridcheck import (  # noqa: PLC0415
-        GRID_MODES,
-        check_grid,
-        decide,
-        refine_calib,
-        refine_grid,
-    )
+    from plenocal.convert.gridcheck import GRID_MODES, grid_for_mode  # noqa: PLC0415
     from plenocal.convert.shot import build_grid, load_calib, load_lenslet  # noqa: PLC0415
     from plenocal.io import write_image, write_json, write_npy  # noqa: PLC0415
 
@@ -176,28 +169,16 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     H, W = image.shape[:2]
     log.info("%s: %dx%d %s, %s: D = %.2f px", args.lenslet, W, H, image.dtype, args.calib,
              calib.diameter)
-    grid = build_grid(calib, W, H)
-    check = check_grid(image, grid)
+    grid, check = grid_for_mode(image, build_grid(calib, W, H), mode)
     log.info("%s", check.summary())
     for note in check.warnings:
         log.warning("%s", note)
-    use_refined = decide(mode, check)
-    if mode == "refine" and not check.fitted:
-        log.warning("convert.grid refine: the lattice could not be fitted; the file's grid "
-                    "is used")
-    kwargs = {}
-    if use_refined:
-        if "grid" in inspect.signature(ShotConversion).parameters:
-            kwargs["grid"] = refine_grid(grid, check)
-        else:  # a converter without the grid argument: the RayCalib form (a similarity)
-            calib = refine_calib(calib, check)
-        log.info("grid: refined from the image (convert.grid %s)", mode)
-    else:
-        log.info("grid: calib.xml's (convert.grid %s)", mode)
+    log.info("grid: %s (convert.grid %s)", "refined from the image" if check.refined
+             else "calib.xml's", mode)
     shot = ShotConversion(image, calib, args.views, settings, source=str(args.lenslet),
-                          **kwargs)
+                          grid=grid)
     stats = shot.disparity()
-    stats["grid_check"] = {**check.to_dict(), "mode": mode, "refined": bool(use_refined)}
+    stats["grid_check"] = check.to_dict()
     log.info("patch sizes %.2f..%.2f px (median %.2f, %.0f%% confident); views %dx%d; "
              "%.2f s", stats["patch_size_px"]["min"], stats["patch_size_px"]["max"],
              stats["patch_size_px"]["median"], 100 * stats["patch_size_px"]["confident_share"],

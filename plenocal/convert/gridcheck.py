@@ -129,6 +129,8 @@ class GridCheck:
     refine_auto: bool
     warnings: list[str] = field(default_factory=list)
     seconds: float = 0.0
+    mode: str = ""  # convert.grid, where grid_for_mode chose
+    refined: bool = False  # the conversion used the refined grid
 
     def to_dict(self) -> dict:
         """For disparity.json (plain floats and lists)."""
@@ -149,6 +151,20 @@ class GridCheck:
                 f"offset ({self.offset_px[0]:+.2f}, {self.offset_px[1]:+.2f}) px, pitch x"
                 f"{self.pitch_ratio:.5f}, rotation {self.rotation_deg:+.4f} deg; residual "
                 f"{self.residual_rms_px:.2f} px" + (" - FOREIGN GRID" if self.foreign else ""))
+
+
+def grid_for_mode(image: np.ndarray, grid: MicrolensGrid, mode: str
+                  ) -> tuple[MicrolensGrid, GridCheck]:
+    """Check ``grid`` (the file's) on ``image`` and return the grid ``convert.grid`` =
+    ``mode`` asks for (the file's or the refined one) with the check (``mode``, ``refined``
+    filled in)."""
+    check = check_grid(image, grid)
+    check.mode = mode
+    check.refined = decide(mode, check)
+    if mode == "refine" and not check.fitted:
+        check.warnings.append("convert.grid refine: the lattice could not be fitted; the "
+                              "file's grid is used")
+    return (refine_grid(grid, check) if check.refined else grid), check
 
 
 def decide(mode: str, check: GridCheck) -> bool:
