@@ -59,8 +59,9 @@ offsets are the files', not the method's. (The grey-level phase says the same in
   output pixels (seams at tile borders), so half a pixel would be the ideal bar, but it is
   below what the check can tell apart from its own systematic error: on the 28 shots of the
   simulator's default dataset (2048 x 1536, D = 23.9 px), whose calib.xml is exact by
-  construction, it reads 0.37-0.54 px (max drift over the sensor; none refined), and the grey-level and gradient fits of the same Raytrix frame differ by up
-  to 0.65 px (Origami), 0.88 px (Boxer). Frames here: Fujita2 0.77 px (kept), Origami
+  construction, it reads 0.37-0.54 px (max drift over the sensor; none refined), and the
+  grey-level and gradient fits of the same Raytrix frame differ by up to 0.65 px (Origami),
+  0.88 px (Boxer). Frames here: Fujita2 0.77 px (kept), Origami
   1.48 and Boxer 1.11 px (refined: a pitch x1.0009 / x1.0003 that both measures find),
   Boys2 18 px and HandTools 16 px (refined).
 - A grid that is not on the micro images at all (a calib.xml from another camera or for
