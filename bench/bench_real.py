@@ -43,7 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmd import Lines, update_sections  # noqa: E402
 
 from plenocal.convert import ConvertSettings, ShotConversion  # noqa: E402
-from plenocal.convert.gridcheck import grid_for_mode  # noqa: E402
+from plenocal.convert.gridcheck import grid_for_mode, refine_grid  # noqa: E402
 from plenocal.convert.shot import build_grid, load_calib, load_lenslet  # noqa: E402
 from plenocal.io import read_image, write_image  # noqa: E402
 from plenocal.viewgeom import central_view  # noqa: E402
@@ -88,6 +88,23 @@ def _to8(img: np.ndarray) -> np.ndarray:
     return img
 
 
+def tspc_corners(name: str, grid, check) -> tuple[float, float] | None:
+    """Largest distance from the four corner micro-image centres that the TSPC tools
+    measured (``<frame>_TSPC_corners_calib.xml``) to the nearest lens of the file's grid
+    and of the fitted lattice (px), where the frame has such a file."""
+    import defusedxml.ElementTree as ET  # noqa: PLC0415
+
+    path = REAL / "frames" / f"{name}_TSPC_corners_calib.xml"
+    if not path.is_file() or not check.fitted:
+        return None
+    root = ET.parse(path).getroot()
+    pts = np.array([[float(root.find(f"centers/{k}/{a}").text) for a in "xy"]
+                    for k in ("ltop", "rtop", "lbot", "rbot")])
+    fitted = refine_grid(grid, check)
+    return tuple(float(max(np.linalg.norm(g.centres - p, axis=1).min() for p in pts))
+                 for g in (grid, fitted))
+
+
 def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
                 compare) -> dict:
     lenslet = REAL / "frames" / f"{name}.png"
@@ -97,9 +114,11 @@ def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
     cfg = {"mla": MLA[name]} if name in MLA else {}
     settings = ConvertSettings.from_config(cfg)
     t0 = time.perf_counter()
-    grid, check = grid_for_mode(image, build_grid(calib, W, H), grid_mode)
+    file_grid = build_grid(calib, W, H)
+    grid, check = grid_for_mode(image, file_grid, grid_mode)
     t_check = time.perf_counter() - t0
     refined = check.refined
+    corners = tspc_corners(name, file_grid, check)
     t1 = time.perf_counter()
     shot = ShotConversion(image, calib, views, settings, source=str(lenslet), grid=grid)
     t_prep = time.perf_counter() - t1
@@ -118,7 +137,7 @@ def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
         "t_total": t_check + t_prep + t_views, "view": (stats["width"], stats["height"]),
         "confident": stats["patch_size_px"]["confident_share"],
         "median_patch": stats["patch_size_px"]["median"], "check": check, "refined": refined,
-        "cmp": None,
+        "cmp": None, "corners": corners,
     }
     ref_path = REAL / "reference" / name / "centre.png"
     ref = read_image(ref_path) if ref_path.is_file() else None
@@ -186,21 +205,25 @@ def main() -> None:
     out.say("")
     out.say("Grid check per frame (fitted lattice minus the file's grid at the lens nearest each "
             "corner and the centre, px; lenses measured; fitted pitch and rotation against "
-            "the file's; the fit's residual):")
+            "the file's; the fit's residual; where the TSPC tools measured the four corner "
+            "micro images: the largest distance from them to the file's grid and to the "
+            "fitted lattice):")
     out.say("")
     out.say("| frame | measured | top left | top right | centre | bottom left | bottom right "
-            "| pitch | rotation deg | residual px |")
-    out.say("|---|---|---|---|---|---|---|---|---|---|")
+            "| pitch | rotation deg | residual px | TSPC corners: file / fit px |")
+    out.say("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         ck = r["check"]
         if not ck.fitted:
-            out.say(f"| {r['name']} | {100 * ck.measured_share:.0f}% | not fitted |||||||")
+            out.say(f"| {r['name']} | {100 * ck.measured_share:.0f}% | not fitted ||||||||")
             continue
         cells = " | ".join(
             f"({ck.regions[k]['fit_dx_px']:+.1f}, {ck.regions[k]['fit_dy_px']:+.1f})"
             for k in ("top_left", "top_right", "centre", "bottom_left", "bottom_right"))
+        tspc = "-" if r["corners"] is None else "{:.1f} / {:.1f}".format(*r["corners"])
         out.say(f"| {r['name']} | {100 * ck.measured_share:.0f}% | {cells} | "
-                f"x{ck.pitch_ratio:.5f} | {ck.rotation_deg:+.4f} | {ck.residual_rms_px:.2f} |")
+                f"x{ck.pitch_ratio:.5f} | {ck.rotation_deg:+.4f} | {ck.residual_rms_px:.2f} "
+                f"| {tspc} |")
     if args.out:
         update_sections(args.out, {HEADING: list(out)})
 
