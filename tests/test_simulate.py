@@ -365,3 +365,32 @@ def test_a_lens_type_that_images_no_plane_is_refused(kind, ratios, bad_type):
     sim = raytrix_sim(kind=kind, focal_ratios=ratios)
     with pytest.raises(ValueError, match=f"focal_ratios: lens type {bad_type} "):
         optics_of(sim)
+
+
+def test_white_image_flat_fields_the_vignetting(tmp_path: Path):
+    """The white image carries the falloff of the main lens (cos^4 and the front stop):
+    a white plane's shot divided by it is flat from the centre to the edge."""
+    from plenocal.simulate.dataset import _trace_shot, render_white, sensor_truth
+
+    sim = raytrix_sim(2048, 24)
+    sim["main_lens"]["vignetting"] = {"cos4": True, "stop_distance_mm": 10.0,
+                                      "stop_diameter_scale": 1.0}
+    sim["sensor"]["bit_depth"] = 12
+    setup_dataset(sim, tmp_path)
+    render_white(sim, tmp_path, tmp_path / "white.png")
+    white = to_float(read_image(tmp_path / "white.png")).mean(axis=2)
+    optics = optics_of(sim)
+    calib = read_calib(tmp_path / "calib.xml")
+    lens_map = nearest_lens_map(MicrolensGrid(calib, optics.width, optics.height))
+    shot = _trace_shot(sim, optics, texture_plane(0.6, 0.001, np.full((8, 8), 0.7, np.float32)),
+                       lens_map, lens_type_map(calib, lens_map), np.eye(4),
+                       sensor_truth(sim)).mean(axis=2)
+    r = np.hypot(*(np.mgrid[0:24, 0:2048][::-1] - np.moveaxis(lens_map, 2, 0)))
+    core = r < 0.4 * calib.diameter  # every micro image, less its dark rim
+    centre, edge = core & (np.arange(2048) > 900) & (np.arange(2048) < 1148), core.copy()
+    edge[:, 100:] = False
+    assert white[centre].mean() > 0.9
+    assert white[edge].mean() < 0.93 * white[centre].mean()  # the falloff is in the image
+    flat = shot / np.maximum(white, 1e-3)
+    assert flat[edge].mean() == pytest.approx(flat[centre].mean(), rel=0.02)
+    assert flat[centre].mean() == pytest.approx(0.7, rel=0.02)

@@ -17,7 +17,7 @@ from plenocal.raytrix import read_calib, write_calib
 from plenocal.simulate.mla import lens_type_map, make_calib
 from plenocal.simulate.optics_setup import optics_from_config
 from plenocal.simulate.raytrace import nearest_lens_centres, render_lenslet
-from plenocal.simulate.scene import make_scene, scene_arrays
+from plenocal.simulate.scene import SceneArrays, make_scene, scene_arrays
 from plenocal.simulate.sensor import natural_vignetting, read_out
 
 
@@ -153,6 +153,45 @@ def nearest_lens_map(grid: MicrolensGrid) -> np.ndarray:
     return nearest_lens_centres(grid.origin, grid.A, grid.width, grid.height)
 
 
+def white_scene() -> SceneArrays:
+    """A white plane far away, filling every ray's view (Raytrix's white image)."""
+    w, z = 200.0, 50.0
+    return SceneArrays(p0=np.array([[-w / 2, -w / 2, z]]), u=np.array([[w, 0.0, 0.0]]),
+                       v=np.array([[0.0, w, 0.0]]), normal=np.array([[0.0, 0.0, 1.0]]),
+                       tex_id=np.array([0]), texel=np.array([w / 7]),
+                       atlas=np.ones((1, 8, 8, 3), dtype=np.float32), tex_h=np.array([8]),
+                       tex_w=np.array([8]))
+
+
+def render_white(sim: dict, data_dir: str | Path, out_png: str | Path) -> None:
+    """The white image of the simulated camera, as Raytrix ships one with a calibration:
+    a uniformly white scene through the same MLA, aperture and vignetting, without noise
+    (a white image is the mean of many frames), quantised like the shots. Dividing a
+    shot by it removes the main lens's falloff (flat field)."""
+    data_dir = Path(data_dir)
+    optics = optics_from_truth(data_dir / "truth" / "optics.json")
+    calib = read_calib(data_dir / "calib.xml")
+    lens_map = nearest_lens_map(MicrolensGrid(calib, optics.width, optics.height))
+    sensor = sensor_truth(sim)
+    img = _trace_shot(sim, optics, white_scene(), lens_map, lens_type_map(calib, lens_map),
+                      np.eye(4), sensor)
+    write_image(out_png, read_out(img, np.random.default_rng(0), 0.0, None,
+                                  sensor["bit_depth"]))
+
+
+def _trace_shot(sim: dict, optics: PlenopticOptics, scene: SceneArrays, lens_map: np.ndarray,
+                types: np.ndarray, cam_to_world: np.ndarray, sensor: dict) -> np.ndarray:
+    """Trace one lenslet image with the block's rays, front stop and cos^4 falloff."""
+    stop = sensor["front_stop_distance_m"]
+    img = render_lenslet(scene, optics, lens_map, cam_to_world, sim["render"]["samples"],
+                         sim["seed"], lens_types=types, stop_distance=stop,
+                         stop_diameter=sensor["front_stop_diameter_scale"] * optics.aperture
+                         if stop > 0 else 0.0)
+    if sensor["vignetting_cos4"]:
+        img = img * natural_vignetting(optics, lens_map)[..., None]
+    return img
+
+
 def render_shot(sim: dict, data_dir: str | Path, cam: str, out_png: str | Path,
                 log=print) -> None:
     """Render the lenslet image of shot ``cam`` into ``out_png``: 8-bit RGB, or 12-bit
@@ -172,14 +211,8 @@ def render_shot(sim: dict, data_dir: str | Path, cam: str, out_png: str | Path,
     index = sorted(shots).index(cam)
     log(f"{cam}: tracing {optics.width}x{optics.height} px x {sim['render']['samples']} rays"
         f" ({optics.lens_types} lens type(s), {optics.kind})")
-    stop = sensor["front_stop_distance_m"]
-    img = render_lenslet(scene, optics, lens_map, np.asarray(shots[cam]["cam_to_world"]),
-                         sim["render"]["samples"], sim["seed"], lens_types=types,
-                         stop_distance=stop,
-                         stop_diameter=sensor["front_stop_diameter_scale"] * optics.aperture
-                         if stop > 0 else 0.0)
-    if sensor["vignetting_cos4"]:
-        img = img * natural_vignetting(optics, lens_map)[..., None]
+    img = _trace_shot(sim, optics, scene, lens_map, types,
+                      np.asarray(shots[cam]["cam_to_world"]), sensor)
     rng = np.random.default_rng([sim["seed"], 5, index])
     write_image(out_png, read_out(img, rng, sensor["noise_std"], sensor["full_well_e"],
                                   sensor["bit_depth"]))
