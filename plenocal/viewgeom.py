@@ -181,19 +181,20 @@ def nearest_lenses(layout: ViewLayout, k: int = 7) -> tuple[np.ndarray, np.ndarr
     shape = lat.max(axis=0) - lo + 3
     table = np.full(tuple(shape), -1, dtype=np.int64)
     table[lat[:, 0] - lo[0], lat[:, 1] - lo[1]] = np.arange(len(c0))
-    pix = np.stack([xs - ref[0], ys - ref[1]], axis=-1)
-    a = np.rint(pix @ Binv.T).astype(np.int64)
+    ax = np.rint(Binv[0, 0] * (xs - ref[0]) + Binv[0, 1] * (ys - ref[1])).astype(np.int64)
+    ay = np.rint(Binv[1, 0] * (xs - ref[0]) + Binv[1, 1] * (ys - ref[1])).astype(np.int64)
     steps = np.array([(0, 0), (1, 0), (0, 1), (-1, 1), (-1, 0), (0, -1), (1, -1),
                       (1, 1), (-1, -1), (2, -1), (-2, 1), (1, -2), (-1, 2)])[: max(k, 1)]
     idx = np.full((layout.height, layout.width, len(steps)), -1, dtype=np.int64)
     dist2 = np.full(idx.shape, np.inf)
+    cx = np.append(c0[:, 0], np.nan)  # index -1: no lens
+    cy = np.append(c0[:, 1], np.nan)
     for n, st in enumerate(steps):
-        q = a + st - lo
-        ok = (q[..., 0] >= 0) & (q[..., 0] < shape[0]) & (q[..., 1] >= 0) & (q[..., 1] < shape[1])
-        li = np.full(q.shape[:2], -1, dtype=np.int64)
-        li[ok] = table[q[ok][:, 0], q[ok][:, 1]]
+        qi = ax + (st[0] - lo[0])
+        qj = ay + (st[1] - lo[1])
+        ok = (qi >= 0) & (qi < shape[0]) & (qj >= 0) & (qj < shape[1])
+        li = np.where(ok, table[np.clip(qi, 0, shape[0] - 1), np.clip(qj, 0, shape[1] - 1)], -1)
         idx[..., n] = li
-        have = li >= 0
-        diff = np.stack([xs, ys], axis=-1)[have] - c0[li[have]]
-        dist2[..., n][have] = (diff ** 2).sum(axis=1) / T ** 2
+        d2 = ((xs - cx[li]) ** 2 + (ys - cy[li]) ** 2) / T ** 2
+        dist2[..., n] = np.where(li >= 0, d2, np.inf)
     return idx, dist2
