@@ -15,7 +15,9 @@ and against the reference converter's central view where shared/real/reference h
 MLA kind per frame (RayCalibData does not say): the TSPC cameras (Boys2, HandTools) are
 Galilean, the Raytrix ones (Fujita2, Origami, Boxer-IrishMan-Gladiator2, R42_klein_crop)
 Keplerian (shared/real/README.md); a frame not in the table is converted with the
-converter's default (``convert.mla``), and the table is the only per-frame setting.
+default ``convert.mla``, and the table is the only per-frame setting. Everything else is
+config.schema.yaml's ``convert`` defaults (:func:`plenocal.cli.with_defaults`, as the
+command line ``plenocal convert`` uses them).
 
 Pictures (``--pictures``, git-ignored bench/out/): ``<frame>.png`` side by side at the
 central view's height: the raw frame (area-downscaled) | our central view | the
@@ -42,6 +44,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmd import Lines, update_sections  # noqa: E402
 
+from plenocal.cli import with_defaults  # noqa: E402
 from plenocal.convert import ConvertSettings, ShotConversion  # noqa: E402
 from plenocal.convert.gridcheck import grid_for_mode, refine_grid  # noqa: E402
 from plenocal.convert.shot import build_grid, load_calib, load_lenslet  # noqa: E402
@@ -111,7 +114,7 @@ def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
     calib = load_calib(REAL / "frames" / f"{name}.xml")
     image = load_lenslet(lenslet)
     H, W = image.shape[:2]
-    cfg = {"mla": MLA[name]} if name in MLA else {}
+    cfg = with_defaults({"mla": MLA[name]} if name in MLA else {})
     settings = ConvertSettings.from_config(cfg)
     t0 = time.perf_counter()
     file_grid = build_grid(calib, W, H)
@@ -178,9 +181,9 @@ def main() -> None:
     pictures = Path(args.pictures) if args.pictures else None
     out = Lines()
     out.say(f"{args.views} x {args.views} views per frame, one thread, `convert.grid: "
-            f"{args.grid}`, converter defaults otherwise (MLA kind from the table in "
-            "bench/bench_real.py). Times without PNG encoding: grid check, preparation "
-            "(patch sizes, layout, plan), all views.")
+            f"{args.grid}`, the schema's convert defaults otherwise (as `plenocal convert`; "
+            "MLA kind from the table in bench/bench_real.py). Times without PNG encoding: "
+            "grid check, preparation (patch sizes, layout, plan), all views.")
     if compare is None:
         out.say("(plenocal.convert.compare not present: no comparison with the reference)")
     out.say("")

@@ -7,9 +7,12 @@ as RLC / TLCT users expect, writing what the workflow's rule ``convert`` writes.
 
 Options map onto the keys of the config's ``convert`` block (``mla``, ``tile_size``,
 ``grid``, ``bit_depth``; ``--set`` reaches any other key, dotted for nested blocks, e.g.
-``--set patch_size.block=7``) and go through :meth:`ConvertSettings.from_config`, like
-the workflow's. Progress goes to stderr; errors (a missing file, a malformed calib.xml,
-a bad option) print one line naming the file or key and exit with status 2.
+``--set patch_size.block_samples=9``); the block is checked against config.schema.yaml
+and completed with its defaults (as the workflow's rule ``convert`` gets it; the
+workflow's config.yaml fixes ``tile_size: 6`` for its synthetic ground truth, the command
+line keeps the schema's ``auto``) and goes through :meth:`ConvertSettings.from_config`.
+Progress goes to stderr; errors (a missing file, a malformed calib.xml, a bad option or
+key) print one line naming the file or key and exit with status 2.
 """
 
 from __future__ import annotations
@@ -119,9 +122,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "12 or 14 bits recognised from the maximum) or 8..16. Default: "
                         "the converter's default")
     c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="any other key of the config's convert block, dotted for nested "
-                        "ones (e.g. --set upsample=1.5 --set patch_size.block=7); values "
-                        "are read as YAML; repeatable")
+                   help="any other key of the config's convert block (config.schema.yaml), "
+                        "dotted for nested ones (e.g. --set upsample=1.5 --set "
+                        "patch_size.block_samples=9); values are read as YAML; repeatable")
     c.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     return ap
 
@@ -145,6 +148,15 @@ def convert_config(args: argparse.Namespace) -> dict:
     return cfg
 
 
+def with_defaults(block: dict) -> dict:
+    """A ``convert`` block (without ``grid``, which the command line handles) checked
+    against config.schema.yaml and completed with its defaults, as the workflow's rule
+    ``convert`` gets it. Unknown keys and bad values raise ConfigError naming the key."""
+    from plenocal.config import validate_config  # noqa: PLC0415
+
+    return validate_config({"datasets": {"cli": {}}, "convert": dict(block)})["convert"]
+
+
 def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     import cv2  # noqa: F401, PLC0415  (cv2 before anything that may import pycolmap)
 
@@ -160,7 +172,8 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     mode = cfg.get("grid", "auto")
     if mode not in GRID_MODES:
         raise ConvertError(f"convert.grid: {mode!r} is not one of {', '.join(GRID_MODES)}")
-    settings = ConvertSettings.from_config(cfg)
+    block = with_defaults({k: v for k, v in cfg.items() if k != "grid"})
+    settings = ConvertSettings.from_config(block)
     for path, what in ((args.lenslet, "lenslet image"), (args.calib, "calib.xml")):
         if not Path(path).is_file():
             raise ConvertError(f"{path}: {what} not found")
@@ -201,12 +214,13 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(stream=sys.stderr, level=logging.WARNING if args.quiet else logging.INFO,
                         format="plenocal: %(message)s", force=True)
     log = logging.getLogger("plenocal.cli")
+    from plenocal.config import ConfigError  # noqa: PLC0415
     from plenocal.raytrix import CalibError  # noqa: PLC0415
 
     try:
         if args.command == "convert":
             run_convert(args, log)
-    except (ConvertError, CalibError, OSError) as exc:
+    except (ConvertError, CalibError, ConfigError, OSError) as exc:
         print(f"plenocal {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     return 0

@@ -64,6 +64,10 @@ def test_missing_file_and_malformed_xml_exit_2(tmp_path, shot):
     assert "bad.xml" in r.stderr and "malformed" in r.stderr
     r = _cli("convert", str(lenslet), str(calib), "-o", str(tmp_path / "o"), "--grid", "x")
     assert r.returncode == 2
+    r = _cli("convert", str(lenslet), str(calib), "-o", str(tmp_path / "o"), "--set",
+             "tile_sise=4")
+    assert r.returncode == 2
+    assert "tile_sise" in r.stderr
     assert not (tmp_path / "o").exists()
 
 
@@ -71,10 +75,10 @@ def test_options_map_onto_the_convert_keys():
     p = build_parser()
     a = p.parse_args(["convert", "l.png", "c.xml", "-o", "d", "--galilean", "--tile-size",
                       "auto", "--grid", "refine", "--bit-depth", "12", "--set",
-                      "upsample=1.5", "--set", "patch_size.block=7"])
+                      "upsample=1.5", "--set", "patch_size.block_samples=9"])
     cfg = convert_config(a)
     assert cfg == {"mla": "galilean", "tile_size": "auto", "grid": "refine", "bit_depth": 12,
-                   "upsample": 1.5, "patch_size": {"block": 7}}
+                   "upsample": 1.5, "patch_size": {"block_samples": 9}}
     a = p.parse_args(["convert", "l.png", "c.xml", "-o", "d", "--tile-size", "9"])
     cfg = convert_config(a)
     assert cfg["tile_size"] == 9 and cfg["grid"] == "auto" and "mla" not in cfg
