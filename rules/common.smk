@@ -457,12 +457,11 @@ def sim_config(wildcards):
 
 
 def setup_config(wildcards):
-    """The simulate slice without what only the lenslet renders use (rays per pixel,
-    sensor noise): changing those re-renders the lenslet images and nothing else."""
+    """The simulate slice without what only the lenslet renders use (rays per pixel):
+    changing it re-renders the lenslet images and nothing else. The sensor's readout
+    (noise, bit depth) stays: simulate_setup records it in truth/optics.json."""
     sim = sim_config(wildcards)
-    out = {k: v for k, v in sim.items() if k != "render"}
-    out["sensor"] = {k: v for k, v in sim["sensor"].items() if k != "noise_std"}
-    return out
+    return {k: v for k, v in sim.items() if k != "render"}
 
 
 def view_geometry(wildcards):
