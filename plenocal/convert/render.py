@@ -83,10 +83,19 @@ def make_plan(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
     lens = np.where(have, idx, 0)
     H, W = layout.height, layout.width
     ys, xs = np.mgrid[0:H, 0:W].astype(np.float64)
-    out_xy = np.broadcast_to(np.stack([xs, ys], axis=-1)[:, :, None, :], (H, W, K, 2))
-    h = (layout.n_views - 1) // 2  # the central view: q_rc = 0
-    pts = layout.sensor_points(h, h, lens, out_xy, patch[lens])
-    off = pts - layout.lens_centres[lens]
+    # the central view (q_rc = 0) samples m_i + s (u - o_i) P_i / T (ViewLayout.sensor_points)
+    scale = patch / layout.tile
+    map_x, map_y = (np.empty((K, H, W), np.float32) for _ in range(2))
+    off_x, off_y = (np.empty((K, H, W), np.float32) for _ in range(2))
+    for k in range(K):
+        li = lens[..., k]
+        sk = scale[li]
+        ox = layout.sign * (xs - layout.tile_centres[li, 0]) * sk
+        oy = layout.sign * (ys - layout.tile_centres[li, 1]) * sk
+        off_x[k], off_y[k] = ox, oy
+        ok = have[..., k]
+        map_x[k] = np.where(ok, layout.lens_centres[li, 0] + ox, -1e4)
+        map_y[k] = np.where(ok, layout.lens_centres[li, 1] + oy, -1e4)
     R = settings.fade_radius
     wt = np.clip(1.0 - dist2 / (R * R), 0.0, None) ** 2
     if focus is not None:
@@ -94,14 +103,10 @@ def make_plan(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
     wt = np.where(have, wt, 0.0)
     # the nearest lens always keeps a tiny weight (every pixel has a lens within 0.577)
     wt[..., 0] = np.maximum(wt[..., 0], np.where(have[..., 0], _FLOOR, 0.0))
-    pts = np.where(have[..., None], pts, -1e4)
-
-    def kf(a: np.ndarray) -> np.ndarray:
-        return np.ascontiguousarray(np.moveaxis(a, 2, 0), dtype=np.float32)
 
     return RenderPlan(
-        layout=layout, map_x=kf(pts[..., 0]), map_y=kf(pts[..., 1]),
-        off_x=kf(off[..., 0]), off_y=kf(off[..., 1]), tile_weight=kf(wt),
+        layout=layout, map_x=map_x, map_y=map_y, off_x=off_x, off_y=off_y,
+        tile_weight=np.ascontiguousarray(np.moveaxis(wt, 2, 0), dtype=np.float32),
         rim_radius=safe_diameter / 2.0 - settings.rim_px, rim_ramp=settings.rim_ramp_px,
         centre_power=settings.centre_power,
         profile=None if profile is None else gain_table(profile),
@@ -114,13 +119,23 @@ def view_weights(plan: RenderPlan, r: int, c: int, with_gain: bool = False) -> n
     o = plan.layout.offset_image(r, c)
     ox = plan.off_x + np.float32(o[0])
     oy = plan.off_y + np.float32(o[1])
-    rad = np.sqrt(ox * ox + oy * oy)
-    rim = np.clip((plan.rim_radius - rad) / plan.rim_ramp, 0.0, 1.0)
+    r2 = ox * ox
+    r2 += oy * oy
+    rad = np.sqrt(r2)
+    w = (np.float32(plan.rim_radius) - rad) * np.float32(1.0 / plan.rim_ramp)
+    np.clip(w, 0.0, 1.0, out=w)  # the rim ramp
     if plan.centre_power > 0:
         half = plan.rim_radius + 1.0  # D'/2 - rim_px + rim_px ~ D'/2
-        rim = rim * np.clip(1.0 - (rad / half) ** 2, 0.0, 1.0) ** np.float32(plan.centre_power)
-    w = plan.tile_weight * (rim + _FLOOR)
-    w /= np.maximum(w.sum(axis=0, keepdims=True), 1e-12)
+        centre = np.float32(1.0) - r2 * np.float32(1.0 / (half * half))
+        np.clip(centre, 0.0, 1.0, out=centre)
+        if plan.centre_power != 1.0:
+            centre **= np.float32(plan.centre_power)
+        w *= centre
+    w += np.float32(_FLOOR)
+    w *= plan.tile_weight
+    total = w.sum(axis=0, keepdims=True)
+    np.maximum(total, np.float32(1e-12), out=total)
+    w /= total
     if with_gain and plan.profile is not None:
         w *= gain(plan.profile, rad)
     return w
@@ -139,7 +154,8 @@ def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int) -> np.ndar
         s = cv2.remap(source, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         if s.ndim == 2:
             s = s[..., None]
-        out += s * w[k][..., None]
+        s *= w[k][..., None]
+        out += s
     return out
 
 
