@@ -16,9 +16,10 @@ views stand as the scene stands in the raw frame whatever the grid's rotation (0
 pi/2 or a small angle). The optical axis lands on the centre of every view's tile
 grid, which is what registration A assumes (principal point at the image centre) for
 the central view. ``W_v`` and ``H_v`` are chosen symmetric about the axis so that every
-output pixel lies inside the span of used lens centres (odd; with ``even`` the last
-column / row is cropped, so that both are even for YUV 4:2:0 tools: the axis then
-lies half a pixel right of and below the centre).
+output pixel lies inside the span of used lens centres: odd, ``2 floor(half) + 1``,
+or with ``even`` one pixel less, ``2 floor(half)``, for YUV 4:2:0 tools; either way
+the axis lies on the image centre ``((W_v - 1) / 2, (H_v - 1) / 2)`` (between two
+pixels for even sizes), where registration A puts the principal point.
 
 Sampling. View (r, c) of an N x N set has the offset
 ``q_rc = ((c - (N-1)/2) q, (r - (N-1)/2) q)`` (pixels, image axes) from the
@@ -149,11 +150,9 @@ def make_layout(grid: MicrolensGrid, n_views: int, tile: int, q: float | None = 
     half = np.minimum(-lo, hi) * tile
     if (half <= 1).any():
         raise ValueError("the sensor centre lies outside the microlens grid")
-    size = 2 * np.floor(half).astype(int) + 1
+    size = 2 * np.floor(half).astype(int) + (0 if even else 1)
     width, height = int(size[0]), int(size[1])
     centre_out = np.array([(width - 1) / 2, (height - 1) / 2])
-    if even:
-        width, height = width - width % 2, height - height % 2
     tile_centres = rel * tile + centre_out
     return ViewLayout(
         n_views=n_views, tile=int(tile), q=float(q), width=width, height=height,

@@ -221,8 +221,12 @@ def test_tile_auto_follows_the_patch_size_and_even_sizes():
         assert odd.layout.width - shot.layout.width in (0, 1)
         assert odd.layout.height - shot.layout.height in (0, 1)
         assert odd.layout.width % 2 == 1 and odd.layout.height % 2 == 1
-        assert np.array_equal(odd.view(1, 1)[:shot.layout.height, :shot.layout.width],
-                              shot.view(1, 1))
+        # both centred on the optical axis: the even layout is the odd one shifted by
+        # half a pixel, its axis between the two middle pixels
+        for L in (shot.layout, odd.layout):
+            axis = (np.array([(grid.width - 1) / 2, (grid.height - 1) / 2])
+                    - L.lens_centres[0]) * L.tile / calib.diameter + L.tile_centres[0]
+            assert axis == pytest.approx([(L.width - 1) / 2, (L.height - 1) / 2], abs=1e-9)
 
 
 @pytest.mark.parametrize("bits", [10, 12, 14])
