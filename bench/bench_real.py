@@ -184,6 +184,10 @@ def main() -> None:
             f"{args.grid}`, the schema's convert defaults otherwise (as `plenocal convert`; "
             "MLA kind from the table in bench/bench_real.py). Times without PNG encoding: "
             "grid check, preparation (patch sizes, layout, plan), all views.")
+    out.say("Targets (issue 12): at most 3 s per 4 MP for all views on one core; central view "
+            "at least the reference's size, SSIM >= 0.85 and sharpness >= 0.8 against it "
+            "(plenocal.convert.compare). Pictures: bench/out/<frame>.png (raw | ours | "
+            "reference | patch sizes) and <frame>_centre.png.")
     if compare is None:
         out.say("(plenocal.convert.compare not present: no comparison with the reference)")
     out.say("")
