@@ -242,3 +242,17 @@ def test_simulator_shot(tmp_path):
     seen = np.subtract(check.offset_px, exact.offset_px)
     np.testing.assert_allclose(seen, (-1.2, 0.8), atol=0.15)
     assert not check.foreign
+
+
+def test_grey_and_16_bit_frames_measure_alike():
+    """8-bit RGB, 12-bit data in a 16-bit PNG and one grey channel: the same lattice."""
+    true = _calib(23.2, 0.0)
+    W, H = 600, 480
+    img = _frame(true, W, H, seed=2)
+    grid = MicrolensGrid(replace(true, offset=(4.1, -2.6)), W, H)
+    ref = check_grid(img, grid)
+    for variant in (img.astype(np.uint16) * 16, cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)):
+        other = check_grid(variant, grid)
+        np.testing.assert_allclose(other.offset_px, ref.offset_px, atol=0.05)
+        assert other.measured_share == pytest.approx(ref.measured_share, abs=0.05)
+    np.testing.assert_allclose(ref.offset_px, (-0.8, -0.5), atol=0.1)
