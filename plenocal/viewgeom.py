@@ -39,10 +39,13 @@ read out so that the scene stands upright (image turned by the main lens and tur
 back by the readout), which turns the pupil with it. So a step of ``+q`` along image
 x in every micro image is a viewpoint step to the RIGHT, ``+q`` along y a step DOWN,
 for Keplerian and Galilean MLAs alike: view (r, c) has r growing as the viewpoint
-moves down and c as it moves right. Measured: on the real Raytrix (Keplerian) and
-TSPC (Galilean) frames near content moves left against far content from view
-(2, 0) to (2, 4) (``tests/test_convert_real.py``), and on the simulator the view
-cameras' centres move right with c (``tests/test_groundtruth.py``).
+moves down and c as it moves right. Measured: on Fujita2 (a Raytrix frame, whose
+micro images are upright: ``galilean``) the kangaroo moves left against the books
+behind it from view (2, 0) to (2, 4) and up from (0, 2) to (4, 2)
+(``tests/test_convert_real.py``); on Boys2 (TSPC, ``keplerian``) the boy's hair moves
+4-14 px left / up while the backdrop moves 26 px right / down (by hand: the face is
+too plain for a test); on the simulator (``keplerian``) the view cameras' centres
+move right with c (``tests/test_groundtruth.py``).
 """
 
 from __future__ import annotations
