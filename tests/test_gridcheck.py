@@ -21,6 +21,7 @@ from plenocal.convert.gridcheck import (
 )
 from plenocal.convert.synthetic import lenslet_from_patch_size, random_texture
 from plenocal.grid import MicrolensGrid
+from plenocal.io import dumps_json
 from plenocal.raytrix import LensType, RayCalib
 
 FRAMES = Path(__file__).resolve().parents[2] / "shared" / "real" / "frames"
@@ -101,6 +102,8 @@ def test_foreign_grid_flagged():
     assert any("does not" in w for w in check.warnings)
     d = check.to_dict()
     assert d["foreign"] is True and "rule" in d
+    again = check_grid(img, MicrolensGrid(replace(calib, diameter=30.0), W, H)).to_dict()
+    assert dumps_json(again) == dumps_json(d)  # deterministic, no timings
 
 
 def test_offset_half_a_lens_off_flagged():

@@ -134,8 +134,10 @@ class GridCheck:
     refined: bool = False  # the conversion used the refined grid
 
     def to_dict(self) -> dict:
-        """For disparity.json (plain floats and lists)."""
+        """For disparity.json (plain floats and lists; without the time it took, which would
+        make the file differ from run to run)."""
         d = asdict(self)
+        del d["seconds"]
         d["rule"] = (f"convert.grid auto refines when drift_max_px > {AUTO_DRIFT_PX} and "
                      f"> {AUTO_DRIFT_SIGMAS:g} x drift_stderr_px, and not foreign")
         return d
