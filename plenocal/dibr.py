@@ -39,6 +39,10 @@ class DibrOptions:
     filled_weight: float = 0.3  # weight of samples whose input depth was filled
     distance_eps: float = 1e-3  # metres (or model units): weight regulariser
     inpaint: bool = True
+    interpolation: str = "cubic"  # colour sampling in the input: cubic or linear (as RVS)
+
+
+_INTERPOLATION = {"linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC}
 
 
 @dataclass
@@ -137,7 +141,11 @@ def warp_view(view: View, tgt: PinholeCamera, opt: DibrOptions) -> tuple[np.ndar
     mx = np.where(have, uvs[..., 0], -10).astype(np.float32)
     my = np.where(have, uvs[..., 1], -10).astype(np.float32)
     img = to_float(view.image)
-    colour = cv2.remap(img, mx, my, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE)
+    if opt.interpolation not in _INTERPOLATION:
+        raise ValueError(f"config: verify.dibr.interpolation = {opt.interpolation!r}: must be "
+                         f"one of {', '.join(_INTERPOLATION)}")
+    colour = cv2.remap(img, mx, my, _INTERPOLATION[opt.interpolation],
+                       borderMode=cv2.BORDER_REPLICATE)
     if colour.ndim == 2:
         colour = colour[..., None]
     own = cv2.remap(dense, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
