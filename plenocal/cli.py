@@ -98,13 +98,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="N x N views (default 5, as TLCT); N >= 1")
     kind = c.add_mutually_exclusive_group()
     kind.add_argument("--galilean", action="store_const", const="galilean", dest="mla",
-                      help="the MLA is Galilean (TSPC and other cameras whose micro images "
-                           "are upright); same as --mla galilean")
+                      help="the MLA is Galilean (micro images upright: a point moves away "
+                           "from the neighbouring lens); same as --mla galilean")
     kind.add_argument("--mla", choices=("auto", "keplerian", "galilean"), default=None,
-                      help="MLA kind (convert.mla): keplerian (Raytrix: micro images "
-                           "inverted), galilean (TSPC: upright), or auto (detected from the "
-                           "image where the converter supports it). Default: the "
-                           "converter's default")
+                      help="MLA kind (convert.mla): keplerian (micro images inverted: a point "
+                           "moves towards the neighbouring lens), galilean (upright), or auto "
+                           "(read from the image by matching both ways; the default, and the "
+                           "choice unless the frame has no texture; the README's 'MLA kinds' "
+                           "says what it finds on real cameras)")
     c.add_argument("--tile-size", type=_int_or_auto("--tile-size"), default=None,
                    metavar="auto|N",
                    help="output pixels per micro-image pitch (convert.tile_size): auto (from "
