@@ -113,9 +113,10 @@ class Page:
                 f"<style>{CSS}</style></head><body><main>"
                 f"<h1>plenocal report: <code>{escape(self.dataset)}</code></h1>"
                 "<p class=\"note\">Calibration of a plenoptic 2.0 camera array (the method "
-                "of the paper in <code>seed/</code>): Table I, errors against ground truth, "
-                "view synthesis (Figs. 7-10) and the stages' previews. Every figure links "
-                "its source file under <code>results/" + escape(self.dataset) + "/</code>."
+                "of the paper in <code>seed/</code>): Table I, errors against ground truth "
+                "(synthetic datasets), view synthesis (Figs. 7-10) and the stages' previews. "
+                "Every figure links its source file under <code>results/"
+                + escape(self.dataset) + "/</code>."
                 f"</p><nav>{nav}</nav>" + "\n".join(self.parts) + "</main></body></html>\n")
 
 
