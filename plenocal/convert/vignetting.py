@@ -65,22 +65,3 @@ def radial_profile(gray: np.ndarray, grid: MicrolensGrid) -> np.ndarray:
     if ref <= 0:
         return np.ones(nbins, dtype=np.float32)
     return np.maximum(prof / ref, FLOOR).astype(np.float32)
-
-
-LUT_STEP = 0.05  # pixels
-
-
-def gain_table(profile: np.ndarray) -> np.ndarray:
-    """1 / profile every ``LUT_STEP`` pixels of radius (linear between the bins), for
-    :func:`gain`."""
-    k = np.arange(len(profile)) * BIN_PX
-    r = np.arange(0.0, k[-1] + LUT_STEP, LUT_STEP)
-    return (1.0 / np.interp(r, k, profile)).astype(np.float32)
-
-
-def gain(table: np.ndarray, radius: np.ndarray) -> np.ndarray:
-    """1 / profile at ``radius`` (pixels from the micro-image centre), from
-    :func:`gain_table` (nearest entry: 0.05 px apart)."""
-    i = np.minimum((radius * np.float32(1.0 / LUT_STEP) + np.float32(0.5)).astype(np.int32),
-                   len(table) - 1)
-    return table[i]
