@@ -194,6 +194,9 @@ def check_datasheet(doc: Any, source: str | Path = "camera.yaml") -> dict:
     if errors:
         # the deepest error is the most specific; ties in file order
         err = max(errors, key=lambda e: len(e.absolute_path))
+        if err.validator == "required":
+            raise DatasheetError(f"{source}: {_schema_message(err)} (the datasheet must give "
+                                 "it; see plenocal/datasheet.py SCHEMA for every key)")
         shown = err.instance if not isinstance(err.instance, Mapping) else "{...}"
         raise _fail(source, _dotted(err.absolute_path), shown, _schema_message(err))
     _check_ranges(doc, SCHEMA, (), source)
