@@ -1,6 +1,9 @@
 """Lenslet-to-multiview conversion (the paper's RLC, Fig. 1 (a)): patch sizes by block
-matching (:mod:`.patchsize`), view rendering (:mod:`.render`), the per-shot driver and
-``disparity.json`` (:mod:`.shot`), quality against ideal renders (:mod:`.quality`)."""
+matching and the MLA kind read from the image (:mod:`.patchsize`), view rendering
+(:mod:`.render`), grey levels of 10-16-bit frames (:mod:`.levels`), micro-image
+vignetting (:mod:`.vignetting`), the per-shot driver and ``disparity.json``
+(:mod:`.shot`), quality against ideal renders (:mod:`.quality`) and against another
+converter's views of a real frame (:mod:`.compare`)."""
 
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.patchsize import PatchSizeSettings, estimate_patch_size
