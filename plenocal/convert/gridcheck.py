@@ -65,15 +65,19 @@ offsets are the files', not the method's. (The grey-level phase says the same in
   1.48 and Boxer 1.11 px (refined: a pitch x1.0009 / x1.0003 that both measures find),
   Boys2 18 px and HandTools 16 px (refined).
 - A grid that is not on the micro images at all (a calib.xml from another camera or for
-  another sensor crop) is recognised as foreign: fewer than ``MIN_SHARE`` of the lenses
-  measured, a fitted pitch more than ``FOREIGN_PITCH`` (2 %) from the file's, the lattice
-  more than a quarter lens off at the image centre, or measurements more than a fifth of a
-  lens (rms) from any lattice. It is reported with its measured drift
+  another sensor crop) is recognised as foreign when the check measured enough lenses
+  (``MIN_SHARE``): a fitted pitch more than ``FOREIGN_PITCH`` (2 %) from the file's, the
+  lattice more than a quarter lens off at the image centre, or measurements more than a
+  fifth of a lens (rms) from any lattice. It is reported with its measured drift
   (``GridCheck.foreign``, a warning in ``GridCheck.warnings``) and never refined
   automatically: a wrong file should be replaced, not patched (``refine`` still may).
-  R42_klein_crop is one: 16 % of its lenses measured, the lattice 18 px (half a lens) off
-  the file's at the centre (the grey-level phase: 14 px); its file's centres fall on the
-  micro-image borders (a crop whose offset was not moved with it, by the look of it).
+- Fewer than ``MIN_SHARE`` of the lenses measured (or none fitted): the check cannot
+  confirm the grid either way (``verified`` false, a warning); auto keeps the file's grid.
+  A far-off grid (another camera's pitch) ends here, and so does R42_klein_crop, whose file
+  is right: 16 % of its lenses measured, and the lattice it fits (18 px off the file's at
+  the centre) is wrong - the views made on the file's grid are clean, those made with the
+  fitted offset a mosaic. Its micro images (strongly textured, crossed by the sharp rim
+  of a blue object) defeat the measurement; an unverified check is no verdict on the file.
 """
 
 from __future__ import annotations
@@ -126,8 +130,9 @@ class GridCheck:
     similarity_origin: tuple[float, float]  # centre of lens (0, 0) on the best similarity
     residual_rms_px: float  # measurements vs the affine fit
     similarity_residual_rms_px: float  # measurements vs the best similarity
-    foreign: bool
+    foreign: bool  # the file's grid is measurably not on the micro images
     refine_auto: bool
+    verified: bool = True  # enough lenses measured for the figures to mean something
     warnings: list[str] = field(default_factory=list)
     seconds: float = 0.0
     mode: str = ""  # convert.grid, where grid_for_mode chose
@@ -139,13 +144,13 @@ class GridCheck:
         d = asdict(self)
         del d["seconds"]
         d["rule"] = (f"convert.grid auto refines when drift_max_px > {AUTO_DRIFT_PX} and "
-                     f"> {AUTO_DRIFT_SIGMAS:g} x drift_stderr_px, and not foreign")
+                     f"> {AUTO_DRIFT_SIGMAS:g} x drift_stderr_px, verified and not foreign")
         return d
 
     def summary(self) -> str:
         if not self.fitted:
             return (f"grid check: {self.measured} of {self.lenses} lenses measured, too few "
-                    "to fit the lattice - FOREIGN GRID or no micro images")
+                    "to fit the lattice - UNVERIFIED")
         r = self.regions
         corners = ", ".join(f"{k} {r[k]['fit_drift_px']:.2f}" for k in REGIONS if k in r)
         return (f"grid check: {100 * self.measured_share:.0f}% of {self.lenses} lenses "
@@ -153,7 +158,8 @@ class GridCheck:
                 f"{self.drift_rms_px:.2f}, +-{self.drift_stderr_px:.2f}) [{corners}]; fitted "
                 f"offset ({self.offset_px[0]:+.2f}, {self.offset_px[1]:+.2f}) px, pitch x"
                 f"{self.pitch_ratio:.5f}, rotation {self.rotation_deg:+.4f} deg; residual "
-                f"{self.residual_rms_px:.2f} px" + (" - FOREIGN GRID" if self.foreign else ""))
+                f"{self.residual_rms_px:.2f} px" + (" - FOREIGN GRID" if self.foreign else "")
+                + ("" if self.verified else " - UNVERIFIED (too few lenses measured)"))
 
 
 def grid_for_mode(image: np.ndarray, grid: MicrolensGrid, mode: str
@@ -369,11 +375,17 @@ def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
     if P is None:
         warnings.append(f"grid check: only {measured} of {n_lens} lenses measured: cannot fit "
                         "the lattice; either the calib.xml grid does not match the micro "
-                        "images (another camera's file?) or the frame shows none (dark, flat)")
-        return GridCheck(W, H, D, n_lens, measured, share, False, math.nan, math.nan, math.nan,
-                         {}, (math.nan, math.nan), math.nan, math.nan, [], (math.nan,) * 2,
-                         [], (math.nan,) * 2, math.nan, math.nan, True, False, warnings,
-                         time.perf_counter() - t0)
+                        "images (another camera's or another sensor crop's file?) or the "
+                        "check cannot see them in this frame (dark, flat)")
+        nan2 = (math.nan, math.nan)
+        return GridCheck(
+            width=W, height=H, diameter_px=float(D), lenses=n_lens, measured=measured,
+            measured_share=float(share), fitted=False, drift_max_px=math.nan,
+            drift_rms_px=math.nan, drift_stderr_px=math.nan, regions={}, offset_px=nan2,
+            pitch_ratio=math.nan, rotation_deg=math.nan, affine=[], origin=nan2, A=[],
+            similarity_origin=nan2, residual_rms_px=math.nan,
+            similarity_residual_rms_px=math.nan, foreign=False, refine_auto=False,
+            verified=False, warnings=warnings, seconds=time.perf_counter() - t0)
     X = np.column_stack([np.ones(len(ij)), ij])
     fit = X @ P.T
     drift = fit - c_file
@@ -397,12 +409,20 @@ def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
     off = origin_fit + A_fit @ ij_c - centre
     regions = _regions(W, H, D, c_file, drift, d, keep)
     res_rms = float(np.sqrt(np.mean(resid[keep] ** 2)))
-    foreign = bool(share < MIN_SHARE or abs(scale - 1) > FOREIGN_PITCH
-                   or float(np.linalg.norm(off)) > FOREIGN_OFFSET * D
-                   or res_rms > FOREIGN_RESIDUAL * D)
-    refine_auto = bool(not foreign and dn.max() > AUTO_DRIFT_PX
+    verified = bool(share >= MIN_SHARE)
+    foreign = bool(verified and (abs(scale - 1) > FOREIGN_PITCH
+                                 or float(np.linalg.norm(off)) > FOREIGN_OFFSET * D
+                                 or res_rms > FOREIGN_RESIDUAL * D))
+    refine_auto = bool(verified and not foreign and dn.max() > AUTO_DRIFT_PX
                        and dn.max() > AUTO_DRIFT_SIGMAS * stderr)
-    if foreign:
+    if not verified:
+        warnings.append(
+            f"grid check: only {100 * share:.0f}% of the lenses measured: the check cannot "
+            "confirm the calib.xml grid on this frame and its figures are unreliable (fitted "
+            f"drift {dn.max():.1f} px); the file's grid is used. Either calib.xml is for "
+            "another camera or sensor crop, or the frame's micro images are too dark, flat or "
+            "repetitive for the check")
+    elif foreign:
         warnings.append(
             f"grid check: the calib.xml grid does not fit the micro images of this frame "
             f"({100 * share:.0f}% of lenses measured, fitted pitch x{scale:.4f}, drift up to "
@@ -421,7 +441,7 @@ def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
         origin=(float(origin_fit[0]), float(origin_fit[1])), A=A_fit.tolist(),
         residual_rms_px=res_rms, similarity_origin=(float(o_sim[0]), float(o_sim[1])),
         similarity_residual_rms_px=float(np.sqrt(np.mean(sim_res[keep] ** 2))),
-        foreign=foreign, refine_auto=refine_auto, warnings=warnings,
+        foreign=foreign, refine_auto=refine_auto, verified=verified, warnings=warnings,
         seconds=time.perf_counter() - t0)
 
 
