@@ -1,7 +1,7 @@
 """The converter on real lenslet frames (issue 12): every frame in shared/real/frames.
 
     python bench/bench_real.py [--out BENCHMARKS.md] [--frames Boys2 Fujita2 ...]
-                               [--views 5] [--grid auto|file|refine] [--mla table|auto]
+                               [--views 5] [--grid auto|file|refine] [--grid-ab] [--mla table|auto]
                                [--pictures bench/out]
 
 For each frame (its RayCalibData xml beside it): the grid check (plenocal.convert.gridcheck:
@@ -117,7 +117,7 @@ def tspc_corners(name: str, grid, check) -> tuple[float, float] | None:
 
 
 def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
-                compare, mla_mode: str = "table") -> dict:
+                compare, mla_mode: str = "table", grid_ab: bool = False) -> dict:
     lenslet = REAL / "frames" / f"{name}.png"
     calib = load_calib(REAL / "frames" / f"{name}.xml")
     image = load_lenslet(lenslet)
@@ -157,6 +157,19 @@ def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
             row["cmp"] = compare(centre, ref)
         except ValueError as exc:  # ConvertError: alignment failed
             row["cmp"] = {"error": str(exc)}
+    if grid_ab and refined:
+        # the same conversion on the file's grid, for what the refinement changed
+        file_shot = ShotConversion(image, calib, views, settings, source=str(lenslet),
+                                   grid=file_grid)
+        r_c = tuple(int(v) for v in centre_name.split("_"))
+        fstats = file_shot.disparity()
+        row["file_grid"] = {"confident": fstats["patch_size_px"]["confident_share"],
+                            "cmp": None}
+        if ref is not None and compare is not None:
+            try:
+                row["file_grid"]["cmp"] = compare(file_shot.view(*r_c), ref)
+            except ValueError as exc:
+                row["file_grid"]["cmp"] = {"error": str(exc)}
     if pictures is not None:
         pictures.mkdir(parents=True, exist_ok=True)
         h = centre.shape[0]
@@ -175,6 +188,9 @@ def main() -> None:
     ap.add_argument("--frames", nargs="*", default=None, help="frame names (default: all)")
     ap.add_argument("--views", type=int, default=5)
     ap.add_argument("--grid", default="auto", choices=("file", "refine", "auto"))
+    ap.add_argument("--grid-ab", action="store_true",
+                    help="where the grid was refined, convert on the file's grid too and "
+                         "report both (not timed)")
     ap.add_argument("--mla", default="table", choices=("table", "auto"),
                     help="MLA kind from the table in this script, or read by the converter")
     ap.add_argument("--pictures", default=str(Path(__file__).resolve().parent / "out"),
@@ -208,7 +224,7 @@ def main() -> None:
     out.say("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     rows = []
     for name in frames:
-        r = bench_frame(name, args.views, args.grid, pictures, compare, args.mla)
+        r = bench_frame(name, args.views, args.grid, pictures, compare, args.mla, args.grid_ab)
         rows.append(r)
         ck, cmp = r["check"], r["cmp"] or {}
         ref_size = "x".join(str(v) for v in cmp["reference_size"]) if "reference_size" in cmp \
@@ -216,7 +232,8 @@ def main() -> None:
         ssim = f"{cmp['ssim']:.3f}" if "ssim" in cmp else ("failed" if "error" in cmp else "-")
         sharp = f"{cmp['sharpness_ratio']:.2f}" if "sharpness_ratio" in cmp else "-"
         drift = (f"{ck.drift_max_px:.2f} / {ck.drift_rms_px:.2f}"
-                 + (" (foreign)" if ck.foreign else ""))
+                 + (" (foreign)" if ck.foreign else "")
+                 + ("" if ck.verified else " (unverified)"))
         out.say(f"| {name} | {r['size']} | {r['mla']} | {r['t_check']:.2f} | {r['t_prep']:.2f} "
                 f"| {r['t_views']:.2f} | {r['t_total']:.2f} | {r['t_total'] * 4 / r['mp']:.2f} "
                 f"| {r['view'][0]}x{r['view'][1]} | {ref_size} | {100 * r['confident']:.0f}% "
@@ -243,6 +260,26 @@ def main() -> None:
         out.say(f"| {r['name']} | {100 * ck.measured_share:.0f}% | {cells} | "
                 f"x{ck.pitch_ratio:.5f} | {ck.rotation_deg:+.4f} | {ck.residual_rms_px:.2f} "
                 f"| {tspc} |")
+    ab = [r for r in rows if "file_grid" in r]
+    if ab:
+        out.say("")
+        out.say("The refined grid against the file's (the same conversion otherwise; central "
+                "view against the reference):")
+        out.say("")
+        out.say("| frame | grid drift max px | confident: file / refined | SSIM: file / "
+                "refined | sharpness: file / refined |")
+        out.say("|---|---|---|---|---|")
+        for r in ab:
+            f, c = r["file_grid"]["cmp"] or {}, r["cmp"] or {}
+
+            def pair(key: str, fmt: str, a: dict = f, b: dict = c) -> str:
+                if key in a and key in b:
+                    return f"{a[key]:{fmt}} / {b[key]:{fmt}}"
+                return "-"
+
+            out.say(f"| {r['name']} | {r['check'].drift_max_px:.2f} | "
+                    f"{100 * r['file_grid']['confident']:.0f}% / {100 * r['confident']:.0f}% "
+                    f"| {pair('ssim', '.3f')} | {pair('sharpness_ratio', '.2f')} |")
     if args.out:
         update_sections(args.out, {HEADING: list(out)})
 
