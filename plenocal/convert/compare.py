@@ -22,8 +22,6 @@ reference's size.
 
 from __future__ import annotations
 
-import math
-
 import cv2
 import numpy as np
 from skimage.metrics import structural_similarity
@@ -33,8 +31,6 @@ from plenocal.convert.errors import ConvertError
 DETAIL_SIGMA = 1.5
 SSIM_TARGET = 0.85
 SHARPNESS_TARGET = 0.8
-RING_WIDTH = 0.15  # half width of a lattice ring, fraction of its radius
-ANGLE_BIN = 6.0  # degrees
 
 
 def grey(img: np.ndarray) -> np.ndarray:
@@ -124,41 +120,3 @@ def compare_to_reference(ours_img: np.ndarray, ref_img: np.ndarray) -> dict:
         "meets_targets": bool(ssim >= SSIM_TARGET and sharp >= SHARPNESS_TARGET
                               and big_enough),
     }
-
-
-def lattice_artefact_db(view: np.ndarray, tile: float) -> float:
-    """Mosaic / seam measure of a view that needs no reference: how far the view's fine
-    detail peaks at the spatial frequencies of the lens lattice.
-
-    Tiles that do not join (wrong patch sizes: a mosaic of blocks; seams; lens types of
-    different brightness) repeat with the lens pitch ``T`` (output pixels) or with the
-    lens-type pitch ``sqrt(3) T``: a hexagonal lattice puts its first spectral peaks on
-    the ring of radius ``2 / (sqrt(3) T)`` cycles per pixel (``2 / (3 T)`` for the types).
-    On each ring the power of the high-passed grey view (Hann-windowed) is taken per
-    angle (2-degree bins), and the measure is the strongest bin over the ring's median,
-    in dB, the larger of the two rings. Scene content spreads over the angles; a lattice
-    puts six sharp peaks on the ring. Clean views stay near 6 dB (the spread of a
-    ring's bins), mosaics reach 15-25 dB.
-    """
-    g = grey(view)
-    hp = g - cv2.GaussianBlur(g, (0, 0), 2.0)
-    h, w = hp.shape
-    win = np.outer(np.hanning(h), np.hanning(w)).astype(np.float32)
-    F = np.abs(np.fft.fftshift(np.fft.fft2(hp * win))) ** 2
-    fy = (np.arange(h) - h // 2) / h
-    fx = (np.arange(w) - w // 2) / w
-    FX, FY = np.meshgrid(fx, fy)
-    rad = np.hypot(FX, FY)
-    ang = np.degrees(np.arctan2(FY, FX)) % 180.0  # the spectrum is symmetric
-    best = -np.inf
-    for f0 in (2.0 / (math.sqrt(3.0) * tile), 2.0 / (3.0 * tile)):
-        if f0 >= 0.5:
-            continue
-        ring = np.abs(rad - f0) <= max(2.0 / min(h, w), RING_WIDTH * f0)
-        bins = (ang[ring] // ANGLE_BIN).astype(int)
-        power = np.bincount(bins, weights=F[ring], minlength=int(180 // ANGLE_BIN))
-        count = np.bincount(bins, minlength=int(180 // ANGLE_BIN))
-        ok = count > 0
-        mean = power[ok] / count[ok]
-        best = max(best, 10.0 * math.log10(mean.max() / max(np.median(mean), 1e-30)))
-    return float(best)
