@@ -212,6 +212,9 @@ def main() -> None:
             f"{args.grid}`, the schema's convert defaults otherwise (as `plenocal convert`); "
             f"MLA kind: {kinds}. Times without PNG encoding: grid check, preparation (patch "
             "sizes, layout, plan), all views.")
+    load0 = os.getloadavg()[0]
+    out.say(f"Machine: {os.cpu_count()} cores, load average {load0:.1f} at the start (other "
+            "jobs share the cores: times above ~1 per core are inflated accordingly).")
     out.say("Targets (issue 12): at most 3 s per 4 MP for all views on one core; central view "
             "at least the reference's size, SSIM >= 0.85 and sharpness >= 0.8 against it "
             "(plenocal.convert.compare). Pictures: bench/out/<frame>.png (raw | ours | "
