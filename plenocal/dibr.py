@@ -16,7 +16,10 @@ surface over the inputs wins, inputs within ``z_tolerance`` (relative) of it are
 averaged with weights ``1 / (|C_i - C_t|^2 + eps^2)`` (closer cameras see the target
 rays at smaller angles), reduced at the input's depth discontinuities (stretched
 mesh triangles in RVS) and where the input depth was filled rather than measured.
-Holes are filled by push-pull interpolation.
+Holes (pixels no input sees: disocclusions) are filled along the image rows by linear
+interpolation between the seen pixels on either side - what RVS's triangles stretched
+across a depth discontinuity draw - and what remains (holes open to the image border)
+by push-pull interpolation.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import cv2
+import numba
 import numpy as np
 
 from plenocal.camera import PinholeCamera
@@ -40,6 +44,7 @@ class DibrOptions:
     distance_eps: float = 1e-3  # metres (or model units): weight regulariser
     inpaint: bool = True
     interpolation: str = "cubic"  # colour sampling in the input: cubic or linear (as RVS)
+    hole_fill: str = "rows"  # rows (interpolate along rows, as RVS) or pushpull
 
 
 _INTERPOLATION = {"linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC}
@@ -82,6 +87,41 @@ def push_pull(values: np.ndarray, weight: np.ndarray) -> np.ndarray:
         mean = np.where((sw > 0)[..., None], own, up)
     out = np.where((w > 0)[..., None], v, mean)
     return out[..., 0] if squeeze else out
+
+
+@numba.njit(cache=True)
+def _fill_rows(img, seen):  # pragma: no cover - numba
+    H, W, C = img.shape
+    out = img.copy()
+    filled = seen.copy()
+    for y in range(H):
+        x = 0
+        while x < W:
+            if seen[y, x]:
+                x += 1
+                continue
+            x0 = x - 1
+            while x < W and not seen[y, x]:
+                x += 1
+            if x0 < 0 or x >= W:
+                continue
+            n = x - x0
+            for k in range(x0 + 1, x):
+                t = (k - x0) / n
+                for c in range(C):
+                    out[y, k, c] = (1.0 - t) * img[y, x0, c] + t * img[y, x, c]
+                filled[y, k] = True
+    return out, filled
+
+
+def fill_holes_rows(image: np.ndarray, seen: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unseen pixels between two seen ones on their row, linearly interpolated between
+    them; returns (image, mask of the pixels now set)."""
+    img = np.ascontiguousarray(image, dtype=np.float32)
+    squeeze = img.ndim == 2
+    out, filled = _fill_rows(img[..., None] if squeeze else img,
+                             np.ascontiguousarray(seen, dtype=np.bool_))
+    return (out[..., 0] if squeeze else out), filled
 
 
 def densify_depth(depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -186,7 +226,13 @@ def synthesize(views: list[View], target: PinholeCamera,
     seen = tot > 0
     out = acc / np.maximum(tot, 1e-30)[..., None]
     if opt.inpaint and not seen.all():
-        out = push_pull(out, seen.astype(np.float32))
+        have = seen
+        if opt.hole_fill == "rows":
+            out, have = fill_holes_rows(out, seen)
+        elif opt.hole_fill != "pushpull":
+            raise ValueError(f"config: verify.dibr.hole_fill = {opt.hole_fill!r}: must be rows "
+                             "or pushpull")
+        out = push_pull(out, have.astype(np.float32))
     if np.asarray(views[0].image).ndim == 2:
         out = out[..., 0]
     return np.clip(out, 0.0, 1.0).astype(np.float32), seen
