@@ -150,9 +150,9 @@ def convert_config(args: argparse.Namespace) -> dict:
 
 
 def with_defaults(block: dict) -> dict:
-    """A ``convert`` block (without ``grid``, which the command line handles) checked
-    against config.schema.yaml and completed with its defaults, as the workflow's rule
-    ``convert`` gets it. Unknown keys and bad values raise ConfigError naming the key."""
+    """A ``convert`` block checked against config.schema.yaml and completed with its
+    defaults, as the workflow's rule ``convert`` gets it. Unknown keys and bad values
+    raise ConfigError naming the key."""
     from plenocal.config import validate_config  # noqa: PLC0415
 
     return validate_config({"datasets": {"cli": {}}, "convert": dict(block)})["convert"]
@@ -161,38 +161,22 @@ def with_defaults(block: dict) -> dict:
 def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     import cv2  # noqa: F401, PLC0415  (cv2 before anything that may import pycolmap)
 
-    from plenocal.convert import ConvertSettings, ShotConversion  # noqa: PLC0415
-    from plenocal.convert.gridcheck import GRID_MODES, grid_for_mode  # noqa: PLC0415
-    from plenocal.convert.shot import build_grid, load_calib, load_lenslet  # noqa: PLC0415
+    from plenocal.convert import ConvertSettings, convert_files  # noqa: PLC0415
     from plenocal.io import write_image, write_json, write_npy  # noqa: PLC0415
 
     t0 = time.perf_counter()
     if args.views < 1:
         raise ConvertError(f"--views: must be >= 1 (got {args.views})")
-    cfg = convert_config(args)
-    mode = cfg.get("grid", "auto")
-    if mode not in GRID_MODES:
-        raise ConvertError(f"convert.grid: {mode!r} is not one of {', '.join(GRID_MODES)}")
-    block = with_defaults({k: v for k, v in cfg.items() if k != "grid"})
-    settings = ConvertSettings.from_config(block)
+    settings = ConvertSettings.from_config(with_defaults(convert_config(args)))
     for path, what in ((args.lenslet, "lenslet image"), (args.calib, "calib.xml")):
         if not Path(path).is_file():
             raise ConvertError(f"{path}: {what} not found")
-    image = load_lenslet(args.lenslet)
-    calib = load_calib(args.calib)
-    H, W = image.shape[:2]
-    log.info("%s: %dx%d %s, %s: D = %.2f px", args.lenslet, W, H, image.dtype, args.calib,
-             calib.diameter)
-    grid, check = grid_for_mode(image, build_grid(calib, W, H), mode)
-    log.info("%s", check.summary())
-    for note in check.warnings:
-        log.warning("%s", note)
-    log.info("grid: %s (convert.grid %s)", "refined from the image" if check.refined
-             else "calib.xml's", mode)
-    shot = ShotConversion(image, calib, args.views, settings, source=str(args.lenslet),
-                          grid=grid)
+    shot = convert_files(args.lenslet, args.calib, None, args.views, settings)
+    log.info("%s: %dx%d, %s: D = %.2f px; grid: %s (convert.grid %s)", args.lenslet,
+             shot.grid.width, shot.grid.height, args.calib, shot.calib.diameter,
+             "refined from the image" if shot.grid_check["refined"] else "calib.xml's",
+             settings.grid)
     stats = shot.disparity()
-    stats["grid_check"] = check.to_dict()
     log.info("patch sizes %.2f..%.2f px (median %.2f, %.0f%% confident); views %dx%d; "
              "%.2f s", stats["patch_size_px"]["min"], stats["patch_size_px"]["max"],
              stats["patch_size_px"]["median"], 100 * stats["patch_size_px"]["confident_share"],

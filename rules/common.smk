@@ -367,6 +367,7 @@ def report_inputs(wildcards):
         out["patch_size"] = [res(d, "views", c, "patch_size.png") for c in cams(d)]
         # their warnings reach the report's first screen
         out["disparity"] = [res(d, "views", c, "disparity.json") for c in cams(d)]
+        out["convert_setup"] = res(d, "views", "convert_setup.json")
     if have("features_a"):
         out["features"] = res(d, "reg_a", "features.json")
     if have("depth"):
@@ -468,8 +469,8 @@ def view_geometry(wildcards):
     """The convert settings that fix the view geometry (never the image content)."""
     conv = stage_config("convert")
     return {
-        "tile_size": conv["tile_size"],
         "view_spacing_px": conv.get("view_spacing_px"),
+        "even_size": conv["even_size"],
     }
 
 

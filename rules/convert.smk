@@ -6,6 +6,33 @@ Snakemake outputs cannot be functions of the wildcards, and every view is declar
 an output, so the rule is defined once per distinct N among the datasets: `convert`
 for the N of the first dataset (all of them, usually), `convert_n<N>` for others."""
 
+
+rule convert_setup:
+    input:
+        lenslet=lambda wc: data(
+            wc.dataset, "lenslet", f"{full_set_cam(wc.dataset)}.png"
+        ),
+        calib="data/{dataset}/calib.xml",
+        camera="data/{dataset}/camera.yaml",
+    output:
+        setup="results/{dataset}/views/convert_setup.json",
+    log:
+        log_path("convert_setup"),
+    benchmark:
+        bench_path("convert_setup")
+    conda:
+        "../envs/plenocal.yaml"
+    threads: 1
+    resources:
+        mem_mb=2500,
+        runtime=10,
+    params:
+        convert=lambda wc: convert_settings(wc.dataset),
+        views=lambda wc: n_views(wc.dataset),
+    script:
+        "../scripts/convert_setup.py"
+
+
 for _i, (_n, _datasets) in enumerate(convert_groups()):
 
     rule:
@@ -15,6 +42,7 @@ for _i, (_n, _datasets) in enumerate(convert_groups()):
             lenslet="data/{dataset}/lenslet/{cam}.png",
             calib="data/{dataset}/calib.xml",
             camera="data/{dataset}/camera.yaml",
+            setup="results/{dataset}/views/convert_setup.json",
         output:
             views=[f"results/{{dataset}}/views/{{cam}}/{v}.png" for v in view_names(_n)],
             patch_size="results/{dataset}/views/{cam}/patch_size.npy",
@@ -43,6 +71,7 @@ rule convert_quality:
     input:
         truth=convert_quality_truth,
         converted=convert_quality_views,
+        setup="results/{dataset}/views/convert_setup.json",
     output:
         quality="results/{dataset}/convert/quality.json",
     log:
@@ -58,7 +87,6 @@ rule convert_quality:
         mem_mb=1500,
         runtime=10,
     params:
-        tile=lambda wc: stage_config("convert")["tile_size"],
         central=lambda wc: centre(wc.dataset),
         views_dir=lambda wc: res(wc.dataset, "views"),
     script:

@@ -54,6 +54,7 @@ rule ground_truth_cam:
     input:
         TRUTH,
         calib="data/{dataset}/calib.xml",
+        setup="results/{dataset}/views/convert_setup.json",
     output:
         "results/{dataset}/ground_truth/cams/{cam}.json",
     log:

@@ -21,7 +21,7 @@ settings = ConvertSettings.from_config(snakemake.params.convert)
 n_views = int(snakemake.params.views)
 t0 = time.perf_counter()
 shot = convert_files(snakemake.input.lenslet, snakemake.input.calib, snakemake.input.camera,
-                     n_views, settings)
+                     n_views, settings, setup_json=snakemake.input.setup)
 stats = shot.disparity()
 log.info("%s: %d lenses (%d used), patch size %.2f..%.2f px (median %.2f, %.0f%% confident), "
          "%.2f s", cam, len(shot.grid), stats["used_lenses"], stats["patch_size_px"]["min"],

@@ -7,6 +7,7 @@ from pathlib import Path
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
 from plenocal.convert.quality import dataset_quality
+from plenocal.convert.setup import read_setup
 from plenocal.io import write_json
 
 snakemake = globals()["snakemake"]
@@ -19,7 +20,7 @@ for truth in snakemake.input.truth:
     t = Path(truth)
     cam, view = t.parent.name, t.stem
     pairs.append((cam, view, Path(snakemake.params.views_dir) / cam / f"{view}.png", t))
-result = dataset_quality(pairs, border=int(snakemake.params.tile),
+result = dataset_quality(pairs, border=read_setup(snakemake.input.setup).tile,
                          central=snakemake.params.central)
 for cam, views in result["per_view"].items():
     for view, q in views.items():

@@ -80,6 +80,7 @@ class ConvertSettings:
     even_size: bool = True
     bit_depth: int | str = "auto"
     devignette: bool = True
+    grid: str = "auto"  # file | refine | auto (plenocal.convert.gridcheck)
     patch: PatchSizeSettings = field(default_factory=PatchSizeSettings)
     render: RenderSettings = field(default_factory=RenderSettings)
 
@@ -111,6 +112,7 @@ class ConvertSettings:
             even_size=bool(cfg.get("even_size", True)),
             bit_depth=bits if isinstance(bits, str) else int(bits),
             devignette=bool(cfg.get("devignette", True)),
+            grid=str(cfg.get("grid", "auto")),
             patch=_known_fields(PatchSizeSettings, cfg.get("patch_size") or {}),
             render=_known_fields(RenderSettings, cfg.get("blend") or {}),
         )
@@ -206,6 +208,8 @@ class ShotConversion:
                  settings: ConvertSettings | None = None, source: str = "<image>",
                  grid: MicrolensGrid | None = None) -> None:
         self.settings = st = settings or ConvertSettings()
+        self.grid_check: dict | None = None  # set by whoever checked the grid
+        self.warnings: list[str] = []
         self.calib = calib
         self.n_views = n_views
         H, W = image.shape[:2]
@@ -237,6 +241,7 @@ class ShotConversion:
                                                           mla=self.mla)
         for note in self.patch.warnings:
             log.warning("%s: %s", source, note)
+        self.warnings += [f"{source}: {note}" for note in self.patch.warnings]
         inside = self.grid.inside(0.0)
         tile = resolve_tile(st.tile_size, self.patch.patch[inside],
                             self.patch.confident[inside], st.upsample)
@@ -275,6 +280,9 @@ class ShotConversion:
         out["mla_source"] = "image" if self.mla_scores is not None else "setting"
         if self.mla_scores is not None:
             out["mla_match_scores"] = dict(self.mla_scores)
+        if self.grid_check is not None:
+            out["grid_check"] = dict(self.grid_check)
+        out["warnings"] = list(self.warnings)
         out["tile_source"] = "auto" if self.settings.tile_size == "auto" else "setting"
         out["bit_depth"] = self.bits
         return out
@@ -367,9 +375,32 @@ def patch_size_picture(layout: ViewLayout, patch: np.ndarray, confident: np.ndar
 
 
 def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str | Path | None,
-                  n_views: int, settings: ConvertSettings | None = None) -> ShotConversion:
-    """Read the inputs of one shot (with every check) and prepare its conversion."""
+                  n_views: int, settings: ConvertSettings | None = None,
+                  setup_json: str | Path | None = None) -> ShotConversion:
+    """Read the inputs of one shot (with every check) and prepare its conversion.
+
+    ``setup_json``: the camera's ``convert_setup.json`` (rule ``convert_setup``): its MLA
+    kind, tile and grid are used. Without it (one image, the command line) the grid is
+    checked and chosen here per ``settings.grid``, and ``auto`` settings are read from
+    this image."""
+    from plenocal.convert.setup import check_and_grid, read_setup  # noqa: PLC0415
+
+    settings = settings or ConvertSettings()
     sensor = read_sensor_size(camera_yaml) if camera_yaml is not None else None
     image = load_lenslet(lenslet, sensor)
     calib = load_calib(calib_xml)
-    return ShotConversion(image, calib, n_views, settings, source=str(lenslet))
+    H, W = image.shape[:2]
+    if setup_json is not None:
+        setup = read_setup(setup_json)
+        shot = ShotConversion(image, calib, n_views, setup.settings(settings),
+                              source=str(lenslet), grid=setup.grid(calib, W, H))
+        shot.grid_check = setup.grid_check
+        return shot
+    grid, check = check_and_grid(image, calib, settings.grid)
+    log.info("%s", check.summary())
+    for note in check.warnings:
+        log.warning("%s: %s", lenslet, note)
+    shot = ShotConversion(image, calib, n_views, settings, source=str(lenslet), grid=grid)
+    shot.grid_check = check.to_dict()
+    shot.warnings = [f"{lenslet}: {w}" for w in check.warnings] + shot.warnings
+    return shot

@@ -415,7 +415,8 @@ def db_lost(sets: list[PsnrSet]) -> list[tuple[str, str, float, int]]:
 #: ``{cam}`` is filled in with every shot): each stage writes what its log warns about
 #: into its output, so that it reaches the report's first screen.
 WARNING_SOURCES: tuple[str, ...] = (
-    "views/{cam}/disparity.json",  # converter: confident patch sizes, grid drift
+    "views/convert_setup.json",  # converter set-up: grid drift / foreign grid, MLA kind
+    "views/{cam}/disparity.json",  # converter: confident patch sizes
     "reg_a/features.json",  # registration A: views with few features
     "reg_a/reg_a.json",
     "reg_b/rig.json",  # registration B: Eqs. 2-3 inverse check

@@ -1,0 +1,137 @@
+"""What the converter decides once per camera, for every shot of a dataset.
+
+A camera array is one camera model: its MLA kind, its microlens grid and the size of its
+views are the same for every shot. Deciding them per shot would let two shots of one
+array come out with different view sizes (registration A shares one pinhole camera
+among all central views) or read the MLA kind differently. Rule ``convert_setup``
+decides them on one shot (the central array shot) and writes ``convert_setup.json``;
+rule ``convert`` applies it to every shot, and the ground truth of a synthetic dataset
+reads the tile from it (the views' geometry must be known before any render).
+
+Decided here, from ``convert`` settings that may say ``auto``:
+
+* ``mla``: ``keplerian`` / ``galilean``, read from the image by matching both ways
+  (:func:`plenocal.convert.patchsize.detect_mla_kind`) where the setting is ``auto``;
+* ``tile``: output pixels per lens pitch, ``ceil(upsample x median patch size)`` where
+  ``tile_size`` is ``auto`` (:func:`plenocal.convert.shot.resolve_tile`);
+* the grid: the calib.xml grid checked against the micro images
+  (:func:`plenocal.convert.gridcheck.check_grid`) and refined where ``convert.grid``
+  says so (``refine``, or ``auto`` past the drift bar of :mod:`.gridcheck`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from plenocal.convert.errors import ConvertError
+from plenocal.convert.gridcheck import GRID_MODES, GridCheck, grid_for_mode
+from plenocal.convert.shot import ConvertSettings, ShotConversion, build_grid
+from plenocal.grid import MicrolensGrid
+from plenocal.io import read_json, write_json
+from plenocal.raytrix import RayCalib
+
+FORMAT_VERSION = 1
+log = logging.getLogger("plenocal.convert")
+
+
+@dataclass(frozen=True)
+class ConverterSetup:
+    """The per-camera decisions (see the module docstring); ``lattice`` is the refined
+    grid's (origin (2,), A (2, 2) columns) where ``refined``, else None."""
+
+    mla: str
+    tile: int
+    grid_mode: str
+    refined: bool
+    lattice: tuple[tuple[float, float], tuple[tuple[float, float], tuple[float, float]]] | None
+    decided_on: str
+    mla_source: str  # "image" or "setting"
+    tile_source: str  # "auto" or "setting"
+    mla_match_scores: dict[str, float] | None
+    grid_check: dict
+    warnings: tuple[str, ...] = ()
+
+    def settings(self, base: ConvertSettings) -> ConvertSettings:
+        """``base`` with the decided MLA kind and tile (nothing left ``auto``)."""
+        return dataclasses.replace(base, mla=self.mla, tile_size=int(self.tile))
+
+    def grid(self, calib: RayCalib, width: int, height: int) -> MicrolensGrid:
+        """The grid every shot is converted with: the file's, or the refined lattice."""
+        grid = build_grid(calib, width, height)
+        if not self.refined:
+            return grid
+        assert self.lattice is not None
+        origin, A = self.lattice
+        return MicrolensGrid(grid.calib, width, height,
+                             lattice=(np.array(origin, dtype=float), np.array(A, dtype=float)))
+
+    def to_dict(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["warnings"] = list(self.warnings)
+        d["lattice"] = None if self.lattice is None else {
+            "origin_px": list(self.lattice[0]), "A_columns_px": [list(r) for r in self.lattice[1]]}
+        return {"format": "plenocal.convert_setup", "version": FORMAT_VERSION, **d}
+
+    @classmethod
+    def from_dict(cls, d: dict, source: str = "<memory>") -> ConverterSetup:
+        if d.get("format") != "plenocal.convert_setup" or d.get("version") != FORMAT_VERSION:
+            raise ConvertError(f"{source}: not a convert_setup.json of version "
+                               f"{FORMAT_VERSION} (format {d.get('format')!r}, version "
+                               f"{d.get('version')!r}); rerun rule convert_setup")
+        lat = d["lattice"]
+        lattice = None if lat is None else (
+            tuple(float(x) for x in lat["origin_px"]),
+            tuple(tuple(float(x) for x in row) for row in lat["A_columns_px"]))
+        return cls(mla=str(d["mla"]), tile=int(d["tile"]), grid_mode=str(d["grid_mode"]),
+                   refined=bool(d["refined"]), lattice=lattice, decided_on=str(d["decided_on"]),
+                   mla_source=str(d["mla_source"]), tile_source=str(d["tile_source"]),
+                   mla_match_scores=d.get("mla_match_scores"), grid_check=dict(d["grid_check"]),
+                   warnings=tuple(d.get("warnings", ())))
+
+
+def check_and_grid(image: np.ndarray, calib: RayCalib, mode: str
+                   ) -> tuple[MicrolensGrid, GridCheck]:
+    """The file's grid checked on ``image``; the grid that ``convert.grid`` = ``mode``
+    asks for, and the check."""
+    if mode not in GRID_MODES:
+        raise ConvertError(f"convert.grid: {mode!r} is not one of {', '.join(GRID_MODES)}")
+    H, W = image.shape[:2]
+    return grid_for_mode(image, build_grid(calib, W, H), mode)
+
+
+def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: ConvertSettings,
+                 source: str) -> tuple[ConverterSetup, ShotConversion]:
+    """Decide the per-camera set-up on one shot; returns it and that shot's conversion."""
+    grid, check = check_and_grid(image, calib, settings.grid)
+    log.info("%s: %s", source, check.summary())
+    shot = ShotConversion(image, calib, n_views, settings, source=source, grid=grid)
+    lattice = None
+    if check.refined:
+        lattice = (tuple(float(x) for x in grid.origin),
+                   tuple(tuple(float(x) for x in row) for row in grid.A))
+    warnings = [f"{source}: {w}" for w in check.warnings] + shot.warnings
+    setup = ConverterSetup(
+        mla=shot.mla, tile=int(shot.layout.tile), grid_mode=settings.grid,
+        refined=bool(check.refined), lattice=lattice, decided_on=source,
+        mla_source="image" if shot.mla_scores is not None else "setting",
+        tile_source="auto" if settings.tile_size == "auto" else "setting",
+        mla_match_scores=shot.mla_scores, grid_check=check.to_dict(),
+        warnings=tuple(warnings))
+    return setup, shot
+
+
+def write_setup(path: str | Path, setup: ConverterSetup) -> None:
+    write_json(path, setup.to_dict())
+
+
+def read_setup(path: str | Path) -> ConverterSetup:
+    try:
+        doc = read_json(path)
+    except FileNotFoundError:
+        raise ConvertError(f"{path}: no convert_setup.json; run rule convert_setup") from None
+    return ConverterSetup.from_dict(doc, source=str(path))

@@ -1,0 +1,28 @@
+"""Rule convert_setup: the converter's per-camera decisions (MLA kind, tile size, grid),
+made once on the central array shot and shared by every shot (plenocal.convert.setup)."""
+
+import logging
+
+import cv2
+
+from plenocal.convert import ConvertSettings
+from plenocal.convert.setup import decide_setup, write_setup
+from plenocal.convert.shot import load_calib, load_lenslet, read_sensor_size
+
+snakemake = globals()["snakemake"]
+logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
+                    format="%(asctime)s %(levelname)s %(message)s")
+log = logging.getLogger("convert_setup")
+cv2.setNumThreads(max(1, int(snakemake.threads)))
+
+image = load_lenslet(snakemake.input.lenslet, read_sensor_size(snakemake.input.camera))
+calib = load_calib(snakemake.input.calib)
+setup, _ = decide_setup(image, calib, int(snakemake.params.views),
+                        ConvertSettings.from_config(snakemake.params.convert),
+                        source=str(snakemake.input.lenslet))
+log.info("MLA %s (%s), tile %d px per lens pitch (%s), grid %s (convert.grid %s)",
+         setup.mla, setup.mla_source, setup.tile, setup.tile_source,
+         "refined from the image" if setup.refined else "calib.xml's", setup.grid_mode)
+for note in setup.warnings:
+    log.warning("%s", note)
+write_setup(snakemake.output.setup, setup)
