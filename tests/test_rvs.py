@@ -105,7 +105,7 @@ def test_exported_rvs_configuration_runs(rvs_binary, scene, tmp_path):
     write_mpeg(tmp_path / "cameras.json", cams, (0.45, 0.8))
     inputs = _inputs(scene)
     export_views(tmp_path, tmp_path / "cameras.json", inputs, lambda k: scene[k][2],
-                 lambda k: scene[k][1], {"exp1": (inputs, [target])})
+                 lambda k: to_uint8(scene[k][1]), {"exp1": (inputs, [target])})  # as read
     (tmp_path / "rvs").mkdir(exist_ok=True)
     run_rvs(rvs_binary, "rvs/exp1.json", tmp_path)
     out = to_float(read_image(tmp_path / "rvs" / "exp1_x00_y00_1_1.png"))

@@ -23,7 +23,7 @@ import numpy as np
 
 from plenocal.export.depthmaps import write_depth16_png, write_depth16_yuv, write_texture_yuv
 from plenocal.export.mpeg import mpeg_name
-from plenocal.io import read_json, to_uint8, write_json
+from plenocal.io import read_json, to_float, to_uint8, write_json
 
 
 def camera_ranges(mpeg_json: str | Path) -> dict[str, tuple[float, float, int, int]]:
@@ -57,7 +57,7 @@ def export_views(out_dir: str | Path, mpeg_json: str | Path, keys: Sequence[str]
                              f"in {mpeg_json} is {w}x{h}")
         write_depth16_yuv(out_dir / "depth" / f"{name}.yuv", z, near, far)
         write_depth16_png(out_dir / "depth" / f"{name}.png", z, near, far)
-        img = to_uint8(image(key))
+        img = to_uint8(to_float(image(key)))
         if img.ndim == 2:
             img = np.repeat(img[..., None], 3, axis=2)
         write_texture_yuv(out_dir / "texture" / f"{name}.yuv", img)
