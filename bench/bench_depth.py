@@ -95,12 +95,14 @@ def main() -> None:
     ap.add_argument("--results", default=None,
                     help="results/<dataset> folder with depth_view and synthesis outputs")
     a = ap.parse_args()
-    out = Lines()
-    measure(a, out)
-    sections = {"Plane sweep against StereoSGBM (quality and throughput)": [
-        "`python bench/bench_depth.py` (one process, the same views):", "", "```", *out,
-        "```"]}
-    if a.results:
+    sections = {}
+    if not a.results:  # with --results only the figures of that run
+        out = Lines()
+        measure(a, out)
+        sections["Plane sweep against StereoSGBM (quality and throughput)"] = [
+            "`python bench/bench_depth.py` (one process, the same views):", "", "```", *out,
+            "```"]
+    else:
         syn = Lines()
         synthesis_figures(Path(a.results), syn)
         sections["Depth for view synthesis and RVS"] = [
