@@ -108,7 +108,12 @@ def main() -> None:
         sections["Depth for view synthesis and RVS"] = [
             f"`python bench/bench_depth.py --results {a.results}` (rules depth_view and "
             "synthesis_exp<k> of a default run; PSNR in dB, mean over the targets):", "",
-            "```", *syn, "```"]
+            "```", *syn, "```", "",
+            "Depth: rule depth_view (SGM) with the complete calibration against the true "
+            "depth. Each experiment renders the same depth maps with the complete and the "
+            "ground-truth cameras (the dB lost to calibration) and again with the true "
+            "depth; `rvs` is RVS 4.0 (`verify.renderer: rvs`), `dibr` the project's "
+            "renderer on the same inputs."]
     if a.out:
         update_sections(a.out, sections)
 
@@ -136,8 +141,15 @@ def synthesis_figures(root: Path, out: Lines) -> None:
                     out.say(f"Exp. {k} {name:5s} {depth_name:9s} depth, {cams:12s} cameras: "
                             + _psnr_text(r))
             out.say(f"Exp. {k} {name:5s} dB lost to calibration (same depth): "
-                    f"{b.get('db_lost')}; with the true depth: {b.get('db_lost_true_depth')}; "
-                    f"to depth: {b.get('db_lost_to_depth')}")
+                    f"{_db(b.get('db_lost'))}; with the true depth: "
+                    f"{_db(b.get('db_lost_true_depth'))}; to depth: "
+                    f"{_db(b.get('db_lost_to_depth'))}")
+
+
+def _db(v) -> str:
+    if isinstance(v, dict):
+        return ", ".join(f"{k} {_db(x)}" for k, x in v.items())
+    return "-" if v is None else f"{v:.2f}"
 
 
 def _psnr_text(r: dict) -> str:
