@@ -48,15 +48,10 @@ def planned(work: Path) -> dict[str, int]:
 
 
 @pytest.fixture(scope="module")
-def complete_run(tmp_path_factory) -> Path:
-    work = tmp_path_factory.mktemp("complete")
-    for name in FILES:
-        src = ROOT / name
-        (shutil.copytree if src.is_dir() else shutil.copy2)(src, work / name)
-    shutil.copy2(ROOT / "tests" / "tiny" / "config.yaml", work / "config.yaml")
-    proc = snakemake(work)
-    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-4000:]
-    return work
+def complete_run(tiny_complete_run) -> Path:
+    """The session's complete tiny run (tests/conftest.py), shared with the real-capture
+    test so the tiny config is simulated once."""
+    return tiny_complete_run
 
 
 def clone(src: Path, dest: Path) -> Path:

@@ -1,0 +1,137 @@
+"""A real capture through the whole workflow (README, "Bringing a real capture"): the
+tiny simulator's lenslet images, calib.xml and camera.yaml copied into a dataset with
+no `simulate` block. The default target, every `--until` and the report run; nothing
+that needs ground truth is asked for. Bad input stops before any job, naming the file
+and the key."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+import yaml
+from conftest import ROOT, snakemake, workflow_copy
+
+pytestmark = pytest.mark.workflow
+
+NAME = "capture"
+
+
+def real_config() -> dict:
+    """The tiny config's stage settings, the dataset without its simulate block (SfM of
+    all views from scratch left off: it is no check of a real capture's path)."""
+    cfg = yaml.safe_load((ROOT / "tests" / "tiny" / "config.yaml").read_text())
+    tiny = cfg.pop("datasets")["tiny"]
+    cfg["datasets"] = {NAME: {"views": tiny["views"], "mla": "keplerian"}}
+    cfg.setdefault("sfm", {}).setdefault("baseline", {})["from_scratch"] = False
+    return cfg
+
+
+def make_capture(src_run: Path, dest: Path) -> Path:
+    work = workflow_copy(dest)
+    data = work / "data" / NAME
+    (data / "lenslet").mkdir(parents=True)
+    for p in sorted((src_run / "data" / "tiny" / "lenslet").glob("*.png")):
+        shutil.copy2(p, data / "lenslet" / p.name)
+    for name in ("calib.xml", "camera.yaml"):
+        shutil.copy2(src_run / "data" / "tiny" / name, data / name)
+    (work / "config.yaml").write_text(yaml.safe_dump(real_config(), sort_keys=False))
+    return work
+
+
+@pytest.fixture(scope="module")
+def real_run(tiny_complete_run, tmp_path_factory) -> Path:
+    work = make_capture(tiny_complete_run, tmp_path_factory.mktemp("real"))
+    proc = snakemake(work)
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-4000:]
+    return work
+
+
+def test_real_capture_runs_the_default_target(real_run: Path):
+    res = real_run / "results" / NAME
+    shots = sorted(p.stem for p in (real_run / "data" / NAME / "lenslet").glob("*.png"))
+    from plenocal.camera import read_cameras
+
+    views = read_cameras(res / "calibration" / "cameras.json")
+    assert sorted({k.split("/")[0] for k in views}) == shots and len(views) == 10 * 3 * 3
+    for rel in ("reg_a/reg_a.json", "reg_b/rig.json", "merge/scale.json",
+                "eval/reprojection.json", "eval/synthesis_exp3.json", "report/index.html"):
+        assert (res / rel).is_file(), rel
+    # nothing that needs ground truth was made or asked for
+    assert not (res / "ground_truth").exists() and not (res / "eval" / "gt_errors.json").exists()
+    assert not (res / "convert" / "quality.json").exists()
+    table1 = json.loads((res / "eval" / "reprojection.json").read_text())
+    assert "ground_truth" not in table1 and "complete" in table1
+    html = (res / "report" / "index.html").read_text()
+    first = html[:html.index('id="table1"')]
+    assert "Real capture" in first and 'id="not-checked"' in first
+    assert re.search(r'<p id="table1-verdict">.*?0\.927', html)
+    assert 'id="warnings"' in first
+    # and nothing is left to do
+    proc = snakemake(real_run, "-n")
+    assert "Nothing to be done" in proc.stdout + proc.stderr, (proc.stdout + proc.stderr)[-2000:]
+
+
+def test_every_until_builds_its_job_graph(real_run: Path, tmp_path: Path):
+    """From a fresh copy of the capture (no results): each rule's --until dry run plans
+    its jobs; the ground-truth rules plan none."""
+    work = workflow_copy(tmp_path / "w")
+    shutil.copytree(real_run / "data", work / "data")
+    shutil.copy2(real_run / "config.yaml", work / "config.yaml")
+    # one rule per line, a docstring may follow the name
+    rules = [ln.split()[0] for ln in snakemake(work, "--list-rules").stdout.splitlines()
+             if ln.strip()]
+    assert "report" in rules and "convert_quality" in rules
+    gt_rules = {"simulate", "simulate_setup", "ground_truth", "ground_truth_cam",
+                "ground_truth_render", "gt_errors", "convert_quality"}
+    for rule in rules:
+        proc = snakemake(work, "-n", "--until", rule)
+        out = proc.stdout + proc.stderr
+        assert proc.returncode == 0, (rule, out[-2000:])
+        jobs = set(re.findall(r"^(?:local)?rule (\w+):", out, flags=re.M))
+        assert not jobs & gt_rules, (rule, jobs & gt_rules)
+        if rule in ("convert", "map_a", "rig_b", "depth", "merge", "reprojection",
+                    "synthesis_exp3", "report"):
+            assert rule in jobs, (rule, out[-2000:])
+    assert not (work / "results").exists()
+
+
+def _bad(real_run: Path, dest: Path, change) -> tuple[str, Path]:
+    work = workflow_copy(dest)
+    shutil.copytree(real_run / "data" / NAME / "lenslet", work / "data" / NAME / "lenslet")
+    for name in ("calib.xml", "camera.yaml"):
+        shutil.copy2(real_run / "data" / NAME / name, work / "data" / NAME / name)
+    shutil.copy2(real_run / "config.yaml", work / "config.yaml")
+    change(work / "data" / NAME)
+    proc = snakemake(work, "-n")
+    assert proc.returncode != 0
+    assert not (work / "results").exists()
+    return proc.stdout + proc.stderr, work
+
+
+def test_bad_input_stops_before_any_job(real_run: Path, tmp_path: Path):
+    def upper(d: Path):
+        (d / "lenslet" / "hand01.png").rename(d / "lenslet" / "hand01.PNG")
+        (d / "lenslet" / "notes.txt").write_text("shot at 2 pm\n")
+
+    out, _ = _bad(real_run, tmp_path / "a", upper)
+    assert "hand01.PNG (rename it to .png)" in out and "notes.txt" in out, out[-2000:]
+
+    def units(d: Path):
+        doc = yaml.safe_load((d / "camera.yaml").read_text())
+        doc["pixel_size_mm"] = "5.5 um"
+        (d / "camera.yaml").write_text(yaml.safe_dump(doc))
+
+    out, _ = _bad(real_run, tmp_path / "b", units)
+    assert "camera.yaml: pixel_size_mm = '5.5 um'" in out, out[-2000:]
+
+    def micrometres(d: Path):
+        doc = yaml.safe_load((d / "camera.yaml").read_text())
+        doc["mla"]["pitch_mm"] = 1000 * doc["mla"]["pitch_mm"]
+        (d / "camera.yaml").write_text(yaml.safe_dump(doc))
+
+    out, _ = _bad(real_run, tmp_path / "c", micrometres)
+    assert "mla.pitch_mm" in out and "micrometres" in out, out[-2000:]
