@@ -23,6 +23,33 @@ the shift of a point from a view to its right-hand neighbour, counted positive t
 left: ``d = F_m (B / X - tan(alpha))``, larger for nearer objects (negative beyond
 the convergence distance). The converter may report the opposite sign; see
 :func:`read_disparity`.
+
+MLA kinds. The paper's Fig. 2 is Keplerian: the main lens images the scene ``t > 0`` in
+front of the MLA. In a Galilean camera the MLA stands in front of that image, which
+the microlenses see as a virtual object ``|t|`` behind them: ``s < f`` and the signed
+``t = s f / (s - f)`` is negative. Everything else of Section II-C and of the exact
+model holds with the signed ``t`` (the chief rays, hence the views, do not depend on
+the kind): the MLA lies at ``L = F + e + t``, the views converge at the plane
+conjugate to the MLA, ``Z0 = F L / (L - F)``, and the paper's ``C = (e + t) tan(beta)``
+is the same quantity with the paper's ``F``. What differs:
+
+* where the views converge. Keplerian: ``L > F + e``, so ``Z0 < X_o``: the scene lies
+  beyond the convergence plane and every disparity is negative (the converter's
+  ``D = -q T / P``). Galilean: ``L < F + e``, so ``Z0 > X_o``: the views converge behind
+  the scene (a few metres for the tiny set-up) and the disparities are positive
+  (``D = +q T / P``); when ``e < |t|`` (focus far away) even ``L < F``: ``Z0`` and
+  ``alpha`` are negative, the views diverge and ``X_c`` is negative.
+* ``s`` from the datasheet's ``k`` when ``mla.sensor_distance_mm`` is absent:
+  ``k f / (k - 1)`` (the paper; sharp plane ``t = k f`` in front of the MLA) or
+  ``k f / (k + 1)`` (Galilean; sharp virtual plane ``k f`` behind it), the convention
+  of the simulator (``config.schema.yaml``, ``simulate.mla.k``) and of
+  :class:`plenocal.optics.PlenopticOptics`.
+* the accuracy of the paper's ``alpha``: ``e + t`` is a small difference for a
+  Galilean camera, so the paper's ``F = F_m P = L + s`` (instead of the true focal
+  length) in ``e`` moves it by ~20 % instead of ~2 %.
+
+The kind comes from the converter's ``disparity.json`` (key ``mla``, decided once per
+dataset; a file without it predates Galilean support and is Keplerian).
 """
 
 from __future__ import annotations
@@ -39,7 +66,7 @@ from plenocal import optics as o
 from plenocal.camera import PinholeCamera, intrinsics, invert_pose, rotation_angle_deg
 from plenocal.datasheet import load_datasheet
 from plenocal.io import read_json
-from plenocal.viewgeom import central_view, parse_view, view_names, view_position
+from plenocal.viewgeom import MLA_KINDS, central_view, parse_view, view_names, view_position
 
 RIG_MODELS = ("exact", "paper")
 
@@ -130,6 +157,7 @@ class Conversion:
     width: int  # view size
     height: int
     n_views: int | None = None
+    mla: str = "keplerian"  # MLA kind: keplerian (micro images inverted) or galilean
 
 
 _ALIASES = {
@@ -189,6 +217,10 @@ def read_disparity(path: str | Path) -> Conversion:
         raise FileNotFoundError(f"{path}: disparity.json not found; run the convert rule first")
     doc = read_json(path)
     sign = disparity_sign(doc, path)
+    mla = str(doc.get("mla") or "keplerian").strip().lower()
+    if mla not in MLA_KINDS:
+        raise ValueError(f"{path}: mla = {doc.get('mla')!r} is not an MLA kind (one of "
+                         f"{', '.join(MLA_KINDS)}); rerun the convert rule")
     a = sign * float(_lookup(doc, "d_min", path))
     b = sign * float(_lookup(doc, "d_max", path))
     n = _lookup(doc, "n_views", path, required=False)
@@ -201,6 +233,7 @@ def read_disparity(path: str | Path) -> Conversion:
         width=int(_lookup(doc, "width", path)),
         height=int(_lookup(doc, "height", path)),
         n_views=None if n is None else int(n),
+        mla=mla,
     )
 
 
@@ -217,13 +250,17 @@ def combine_conversions(convs: Sequence[Conversion], names: Sequence[str] | None
                 abs(c.q - first.q) > 1e-6 * max(1.0, abs(first.q)):
             raise ValueError(f"shot {name}: view size / tile / q differ from shot {names[0]} "
                              "- every shot must be converted with the same settings")
+        if c.mla != first.mla:
+            raise ValueError(f"shot {name}: disparity.json says mla {c.mla}, shot {names[0]}'s "
+                             f"{first.mla}: one camera has one MLA kind; set convert.mla (or "
+                             "the dataset's mla) and convert again")
     return Conversion(
         d_min=float(median(c.d_min for c in convs)),
         d_max=float(median(c.d_max for c in convs)),
         q=first.q, tile=first.tile,
         pitch_px=float(median(c.pitch_px for c in convs)),
         safe_diameter_px=float(median(c.safe_diameter_px for c in convs)),
-        width=first.width, height=first.height, n_views=first.n_views,
+        width=first.width, height=first.height, n_views=first.n_views, mla=first.mla,
     )
 
 
@@ -232,20 +269,52 @@ def combine_conversions(convs: Sequence[Conversion], names: Sequence[str] | None
 # ---------------------------------------------------------------------------
 
 
+def sensor_distance(k: float, f: float, mla: str) -> float:
+    """``s`` from the datasheet's ``k``: ``k f / (k - 1)`` for a Keplerian MLA (the paper),
+    ``k f / (k + 1)`` for a Galilean one (sharp virtual plane ``k f`` behind the MLA)."""
+    if mla == "galilean":
+        if k <= 0:
+            raise ValueError(f"camera.yaml: mla.k = {k}: must be > 0")
+        return k * f / (k + 1.0)
+    return o.mla_sensor_distance(k, f)
+
+
+def sharp_distance(s: float, f: float, mla: str) -> float:
+    """Signed ``t = s f / (s - f)``: > 0 (Keplerian, ``s > f``: the sharp plane is in
+    front of the MLA), < 0 (Galilean, ``s < f``: a virtual plane behind it). A sensor
+    distance on the wrong side of ``f`` for the MLA kind raises."""
+    if mla not in MLA_KINDS:
+        raise ValueError(f"MLA kind must be one of {', '.join(MLA_KINDS)} (got {mla!r})")
+    keplerian = mla == "keplerian"
+    if s == f or (s > f) != keplerian:
+        raise ValueError(
+            f"camera.yaml: the MLA-sensor distance s = {s:.6g} mm is "
+            f"{'not above' if keplerian else 'not below'} the microlens focal length "
+            f"f = F_n D = {f:.6g} mm, but disparity.json says the MLA is {mla} (which needs "
+            f"s {'>' if keplerian else '<'} f): check mla.sensor_distance_mm / mla.k / "
+            "mla.f_numbers, or the MLA kind (convert.mla, the dataset's mla)")
+    return s * f / (s - f)
+
+
 def paper_symbols(ds: Datasheet, conv: Conversion, F_m: float, n_views: int) -> dict:
     """Every symbol of Section II-C (mm, rad), with the converter's q.
 
     ``P = p w/W``; for this converter ``w/W = D_px / T`` exactly (T output pixels per
     micro-image pitch). ``q_paper`` is the paper's ``D' sin45 / N``; the views were cut
-    at the converter's ``q`` (equal unless convert.view_spacing_px overrides it)."""
+    at the converter's ``q`` (equal unless convert.view_spacing_px overrides it).
+    ``s`` and the signed ``t`` follow the MLA kind (:func:`sensor_distance`,
+    :func:`sharp_distance`; module docstring): for a Galilean MLA ``t < 0``, so
+    ``C = (e + t) tan(beta)`` is small and may be negative (diverging views,
+    ``X_c < 0``); ``X_c`` is infinite when the views are parallel."""
     p = ds.pixel_size
     P = o.multiview_pixel_size(p, conv.pitch_px, conv.tile)
     F = o.main_lens_focal(F_m, P)
     F_n = o.middle_f_number(ds.f_numbers)
     f = o.microlens_focal(F_n, ds.mla_pitch)
-    s = ds.sensor_distance if ds.sensor_distance is not None else o.mla_sensor_distance(ds.k, f)
+    s = ds.sensor_distance if ds.sensor_distance is not None else sensor_distance(ds.k, f,
+                                                                                   conv.mla)
     e = o.focus_shift(F, ds.focus_distance)
-    t = o.sharp_image_distance(s, f)
+    t = sharp_distance(s, f, conv.mla)
     q_paper = o.view_spacing(conv.safe_diameter_px, n_views)
     q_px = conv.q
     q = q_px * p
@@ -253,7 +322,7 @@ def paper_symbols(ds: Datasheet, conv: Conversion, F_m: float, n_views: int) -> 
     B = o.baseline(F, beta)
     C = o.convergence_offset(e, t, beta)
     alpha = o.rotation_angle(C, F)
-    X_c = o.convergence_distance(B, alpha)
+    X_c = o.convergence_distance(B, alpha) if C != 0 else math.inf
     X_n = o.object_distance(B, F, C, conv.d_max, P)
     X_f = o.object_distance(B, F, C, conv.d_min, P)
     return {
@@ -327,6 +396,15 @@ def exact_model(sym: Mapping) -> dict:
     the lens images the focus plane ``X_o`` sharply ``t = s f/(s - f)`` in front of the
     MLA, i.e. at ``L - t``, so ``F = X_o (L - t) / (X_o + L - t)``.
 
+    Galilean MLA: nothing above depends on the kind (a chief ray is the straight line
+    from the sensor point through the lens centre either way; the micro images'
+    orientation only changes which sensor points the OTHER pixels of a tile sample),
+    provided ``s`` and the signed ``t < 0`` are the Galilean ones: the focus plane is
+    imaged ``|t|`` behind the MLA, at ``L - t = L + |t|``. Then ``L < F + e``, ``Z0`` lies
+    beyond the focus distance (the views converge behind the scene, positive
+    disparities), or, when ``L < F``, ``Z0 < 0``: the views diverge and the
+    principal-point shift and ``alpha_equivalent`` are negative.
+
     Relation to the paper: its ``B = F_paper tan(beta)`` uses ``F_paper = F_m P = L + s``
     where the centres are ``L tan(beta)`` apart, so ``B_paper / B_e = (L + s) / L``; its
     rotation ``alpha`` plays the role of the principal-point shift
@@ -338,24 +416,27 @@ def exact_model(sym: Mapping) -> dict:
     s, t, P, F_m, q = sym["s"], sym["t"], sym["P"], sym["F_m_px"], sym["q"]
     L = F_m * P - s
     X_o = sym["X_o"]
-    if L <= t:
+    if L <= max(t, 0.0):
         raise ValueError(f"exact model: main lens-MLA distance L = F_m P - s = {L:.4g} mm is "
-                         f"not beyond the sharp image distance t = {t:.4g} mm; is registration "
-                         "A's focal length in multiview pixels?")
+                         f"not beyond the sharp image distance t = {t:.4g} mm (nor 0); is "
+                         "registration A's focal length in multiview pixels?")
     F_true = X_o * (L - t) / (X_o + L - t)
-    Z0 = F_true * L / (L - F_true)
+    inv_Z0 = (L - F_true) / (F_true * L)  # 1 / Z0: < 0 where the views diverge
+    Z0 = 1.0 / inv_Z0 if inv_Z0 != 0 else math.inf
     B_e = L * q / s
-    pp_shift = F_m * B_e / Z0
-    alpha_e = math.atan(B_e / Z0)
+    pp_shift = F_m * B_e * inv_Z0
+    alpha_e = math.atan(B_e * inv_Z0)
     X_n = X_f = None
-    if sym["D_max_px"] != -F_m * B_e / Z0:
-        X_n = F_m * B_e / (sym["D_max_px"] + F_m * B_e / Z0)
-    if sym["D_min_px"] != -F_m * B_e / Z0:
-        X_f = F_m * B_e / (sym["D_min_px"] + F_m * B_e / Z0)
+    if sym["D_max_px"] != -pp_shift:
+        X_n = F_m * B_e / (sym["D_max_px"] + pp_shift)
+    if sym["D_min_px"] != -pp_shift:
+        X_f = F_m * B_e / (sym["D_min_px"] + pp_shift)
     return {
         "L": L, "F_true": F_true, "e_true": L - t - F_true, "Z0": Z0, "B": B_e,
         "pp_shift_px": pp_shift, "alpha_equivalent": alpha_e, "X_n": X_n, "X_f": X_f,
-        "B_paper_over_B": sym["B"] / B_e, "alpha_paper_over_alpha": sym["alpha"] / alpha_e,
+        "views": "converge" if inv_Z0 > 0 else "diverge" if inv_Z0 < 0 else "parallel",
+        "B_paper_over_B": sym["B"] / B_e,
+        "alpha_paper_over_alpha": sym["alpha"] / alpha_e if alpha_e else None,
     }
 
 
@@ -426,6 +507,7 @@ def build_rig(ds: Datasheet, convs: Sequence[Conversion], F_m: float, n_views: i
                          "scene.near_mm/far_mm in camera.yaml)")
     return {
         "model": model,
+        "mla": conv.mla,
         "units": "m",
         "width": W,
         "height": H,
