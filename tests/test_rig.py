@@ -175,9 +175,42 @@ def test_inverse_check_recovers_the_exact_model(kind, focus, paper_alpha):
     expected = ((e_p + opt.t) / Fp) / ((opt.L - opt.focal_length) / opt.focal_length) - 1
     assert pk["rel_diff_alpha"] == pytest.approx(expected, rel=1e-6)
     assert paper_alpha[0] < pk["rel_diff_alpha"] < paper_alpha[1]
-    # within the 5 % of the check for a Keplerian camera only
-    assert pk["verdict"] == ("pass" if kind == "keplerian" else "fail")
+    # in pixels of principal-point shift per step: 0.17 px Keplerian, 0.2 px / 0.13 px
+    # Galilean (a large relative difference of a small alpha)
+    assert ck["pp_shift_diff_px"] == pytest.approx(0.0, abs=1e-8)
+    tan_e = math.tan(doc["exact"]["alpha_equivalent"])
+    assert pk["pp_shift_diff_px"] == pytest.approx(
+        F_m * (math.tan(doc["paper"]["alpha"]) - tan_e), rel=1e-6)
+    assert pk["pp_shift_diff_px"] == pytest.approx(F_m * tan_e * pk["rel_diff_alpha"],
+                                                   rel=1e-6)
+    assert 0.1 < abs(pk["pp_shift_diff_px"]) < 0.25
+    # within the 5 % of the check: of alpha's shift (Keplerian), of the near disparity
+    # (Galilean: 6-9 px against a shift of 0.9-2.5 px)
+    assert pk["alpha_scale_px"] == pytest.approx(
+        max(F_m * abs(tan_e), abs(conv.d_max)), rel=1e-9)
+    assert (pk["alpha_scale_px"] > 1.01 * F_m * abs(tan_e)) == (kind == "galilean")
+    assert pk["verdict"] == "pass"
     assert doc["check"] is not None and doc["check"]["verdict"] == "pass"
+
+
+@pytest.mark.parametrize("kind,focus", KINDS)
+def test_inverse_check_on_a_measured_disparity_range(kind, focus):
+    """The converter measures the range from patch-size percentiles: the near
+    disparity 1 % small (as in the tiny Galilean run). The exact model still passes
+    (its alpha of a Galilean camera is then 10-20 % off Eq. 3's, 0.1-0.2 px); a wrong
+    alpha (its sign flipped: converging for diverging views) or a B 10 % off fails."""
+    opt = optics(kind, focus)
+    ds, conv, F_m = true_inputs(opt)
+    conv = rig.Conversion(**{**conv.__dict__, "d_max": conv.d_max - 0.01 * abs(conv.d_max)})
+    sym = rig.paper_symbols(ds, conv, F_m, 5)
+    ex = rig.exact_model(sym)
+    ck = rig.inverse_check(sym, 470.0, 740.0, ex["B"], ex["alpha_equivalent"])
+    assert ck["verdict"] == "pass"
+    assert abs(ck["pp_shift_diff_px"]) < 0.25
+    if kind == "galilean":
+        assert abs(ck["rel_diff_alpha"]) > 0.05  # what the relative test would fail
+    for B, alpha in ((ex["B"], -ex["alpha_equivalent"]), (1.1 * ex["B"], ex["alpha_equivalent"])):
+        assert rig.inverse_check(sym, 470.0, 740.0, B, alpha)["verdict"] == "fail"
 
 
 def test_sign_convention_of_the_converter(tmp_path):
