@@ -116,7 +116,9 @@ def _opt(doc: Mapping, path: str):
 def read_datasheet(path: str | Path) -> Datasheet:
     """Read ``camera.yaml``: pixel_size_mm, sensor_width_px, sensor_height_px,
     main_lens.{focus_distance_mm, focal_length_mm}, mla.{pitch_mm, f_numbers, k,
-    sensor_distance_mm (optional)}, array.step_mm, scene.{near_mm, far_mm}.
+    sensor_distance_mm (optional)}, array.step_mm, scene.{near_mm, far_mm}. Without
+    sensor_distance_mm, ``s`` follows from ``k`` by the MLA kind of the converter's
+    disparity.json (:func:`sensor_distance`).
 
     Validated against :data:`plenocal.datasheet.SCHEMA` first: a bad value raises
     :class:`plenocal.datasheet.DatasheetError` naming the file and the key."""

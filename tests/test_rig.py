@@ -1,6 +1,7 @@
 """Registration B (Section II-C): the paper's symbols by hand, the exact model against
 the thin-lens chief rays, the inverse check of Eqs. 2-3, the two view models' first
-order agreement, and rig.json from files."""
+order agreement, and rig.json from files; for Keplerian and Galilean MLAs (the kind
+from disparity.json), against the traced ground truth of the simulator's optics."""
 
 from __future__ import annotations
 
