@@ -11,11 +11,16 @@ pixel is unprojected with its splatted depth and projected back into the input,
 where the colour is sampled bilinearly (``cv2.remap``). A target pixel is kept from
 an input only if the input's own depth there agrees (occlusion check).
 
-Blending (RVS's soft z-test and quality weights): per target pixel the nearest
-surface over the inputs wins, inputs within ``z_tolerance`` (relative) of it are
-averaged with weights ``1 / (|C_i - C_t|^2 + eps^2)`` (closer cameras see the target
-rays at smaller angles), reduced at the input's depth discontinuities (stretched
-mesh triangles in RVS) and where the input depth was filled rather than measured.
+Blending (RVS's soft z-test and quality weights): per target pixel every input that
+sees it is averaged with weights ``(z_near / z_i)^depth_exponent / (|C_i - C_t|^2 +
+eps^2)``, z_near being the nearest of the inputs' depths there: nearer surfaces win
+smoothly, as RVS's ``(quality / z)^BlendingFactor``, and closer cameras (which see the
+target rays at smaller angles) count more; the weights are reduced at the input's
+depth discontinuities (stretched mesh triangles in RVS) and where the input depth was
+filled rather than measured. A hard z-test (only inputs within ``z_tolerance``,
+relative, of the nearest surface) is optional: with estimated depth it lets a distant
+input whose depth is a few per cent too near replace the nearest input's correct
+sample (-1.4 dB on Exp. 1 of the default data, README 'DIBR and RVS').
 Holes (pixels no input sees: disocclusions) are filled along the image rows by linear
 interpolation between the seen pixels on either side - what RVS's triangles stretched
 across a depth discontinuity draw - and what remains (holes open to the image border)
@@ -36,7 +41,7 @@ from plenocal.io import to_float
 
 @dataclass(frozen=True)
 class DibrOptions:
-    z_tolerance: float = 0.02  # soft z-test: relative depth band of the nearest surface
+    z_tolerance: float | None = None  # hard z-test: relative depth band of the nearest surface
     occlusion_tolerance: float = 0.02  # backward check against the input's depth
     edge_ratio: float = 1.03  # depth jump (max/min in 3x3) marking a discontinuity
     edge_weight: float = 0.05  # weight of samples at discontinuities
@@ -45,6 +50,7 @@ class DibrOptions:
     inpaint: bool = True
     interpolation: str = "cubic"  # colour sampling in the input: cubic or linear (as RVS)
     hole_fill: str = "rows"  # rows (interpolate along rows, as RVS) or pushpull
+    depth_exponent: float = 8.0  # soft z-test: weight times (z_nearest / z) ** depth_exponent
 
 
 _INTERPOLATION = {"linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC}
@@ -217,10 +223,15 @@ def synthesize(views: list[View], target: PinholeCamera,
     ws = np.stack([w[2] for w in warped])
     zs_valid = np.where(ws > 0, zs, np.inf)
     zmin = zs_valid.min(axis=0)
-    keep = (ws > 0) & (zs_valid <= zmin * (1.0 + opt.z_tolerance))
+    keep = ws > 0
+    if opt.z_tolerance is not None:
+        keep &= zs_valid <= zmin * (1.0 + opt.z_tolerance)
     dist = np.array([np.linalg.norm(v.camera.centre - target.centre) for v in views])
     q = 1.0 / (dist ** 2 + opt.distance_eps ** 2)
     wt = np.where(keep, ws, 0.0) * q[:, None, None]
+    if opt.depth_exponent > 0:
+        zr = np.where(keep, zmin[None] / np.where(keep, zs_valid, 1.0), 0.0)
+        wt = wt * zr ** opt.depth_exponent
     tot = wt.sum(axis=0)
     acc = sum(wt[i][..., None] * warped[i][0] for i in range(len(views)))
     seen = tot > 0

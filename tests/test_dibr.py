@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from plenocal.depth.synthetic import camera_at, fronto_plane, photo_texture, render_plane
-from plenocal.dibr import View, forward_depth, psnr, push_pull, synthesize
+from plenocal.dibr import DibrOptions, View, forward_depth, psnr, push_pull, synthesize
 
 W, H, F = 320, 240, 500.0
 
@@ -70,3 +70,20 @@ def test_push_pull_fills_holes():
     out = push_pull(v, w)
     assert np.all(out[:, :8] == 1.0)
     assert np.all(np.isfinite(out)) and out[:, 8:].min() > 0.99
+
+
+def test_soft_z_test_keeps_near_input_against_distant_too_near_depth(texture):
+    """A distant input whose depth is 4 % too near (as estimated depth is) must not
+    replace the nearest input's correct samples: the soft z-test blends both (the
+    nearer camera dominating); the hard 2 % band of ``z_tolerance`` lets it win."""
+    plane = fronto_plane(0.6, 0.8, texture, 0.0)
+    tgt = camera_at([0.0, 0.0, 0.0], F, W, H)
+    near_cam, far_cam = camera_at([0.004, 0.0, 0.0], F, W, H), camera_at([-0.03, 0, 0], F, W, H)
+    truth, _ = render_plane(tgt, plane)
+    img_n, d_n = render_plane(near_cam, plane)
+    img_f, d_f = render_plane(far_cam, plane)
+    views = [View(near_cam, img_n, d_n), View(far_cam, img_f, d_f * 0.96)]
+    soft, _ = synthesize(views, tgt)
+    hard, _ = synthesize(views, tgt, DibrOptions(z_tolerance=0.02, depth_exponent=0.0))
+    assert psnr(soft, truth, 16) > 33.0
+    assert psnr(soft, truth, 16) > psnr(hard, truth, 16) + 5.0
