@@ -136,6 +136,30 @@ def test_tspc_crop_converts_clean_and_upright():
     assert blend_disagreement(shot.plan, shot._source, 2, 2) < 0.4
 
 
+def test_tspc_corner_views_need_the_refined_grid():
+    """Boys2's RayCalibData grid drifts from the micro-image centres (8.7 px rms on this
+    crop, up to 18 px on the frame). The central view hardly notices: it samples near
+    the centre of a flat micro image. The corner views of the paper's q sample 27 px out
+    in a 34 px radius, where the micro images fall off steeply and overlap their six
+    neighbours, so a centre that is several pixels off puts their samples in a
+    different part of the rim in every lens: a lattice. Measured (blend disagreement,
+    corners 0_0 4_4 0_4 4_0): file grid 0.66 0.36 0.31 0.68, refined grid (what
+    ``convert_files`` and the workflow use) 0.29 0.35 0.28 0.42, central view 0.15 /
+    0.17."""
+    from plenocal.convert.setup import check_and_grid  # noqa: PLC0415
+
+    img, calib = crop("Boys2", 1400, 900, 1120, 840)
+    corners = ((0, 0), (4, 4), (0, 4), (4, 0))
+    found = {}
+    for mode in ("file", "refine"):
+        grid, _ = check_and_grid(img, calib, mode)
+        shot = ShotConversion(img, calib, 5, grid=grid)
+        found[mode] = [blend_disagreement(shot.plan, shot._source, r, c) for r, c in corners]
+        assert blend_disagreement(shot.plan, shot._source, 2, 2) < 0.25, mode
+    assert max(found["refine"]) < 0.5, found
+    assert max(found["file"]) > 0.6, found  # the lattice that the drift makes
+
+
 def test_compare_measures_by_construction():
     """compare_to_reference: a view against itself scaled, shifted and stretched (as
     TLCT's non-square pixels are) gives SSIM ~1 and sharpness ~1; a blurred one loses
