@@ -192,6 +192,18 @@ def decide(mode: str, check: GridCheck) -> bool:
 # ---------------------------------------------------------------------------
 
 
+def _mul(X: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """``X @ M`` by einsum (no BLAS): OpenBLAS splits large products over its threads
+    with results that differ in the last bits, so a check run on 2 cores and the same
+    check in a one-core cluster job wrote different JSON (tests/test_slurm.py)."""
+    return np.einsum("...j,jk->...k", X, M)
+
+
+def _lstsq(X: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Least squares ``X P = y`` by the normal equations, summed without BLAS."""
+    return np.linalg.solve(np.einsum("ni,nj->ij", X, X), np.einsum("ni,nk->ik", X, y))
+
+
 def _grey(image: np.ndarray) -> np.ndarray:
     """One channel, in the image's own integer type where it has one (fast reductions)."""
     img = np.ascontiguousarray(image)
@@ -242,8 +254,8 @@ def _measure(image: np.ndarray, origin: np.ndarray, A: np.ndarray, centres: np.n
     closure = _wrap(phi.sum(axis=1))
     # delta from phases 1 and 2 (k_i . a_j = delta_ij), then least squares with all three
     d0 = -(phi[:, :1] * A_s[:, 0] + phi[:, 1:2] * A_s[:, 1]) / (2 * np.pi)
-    e = _wrap(phi + 2 * np.pi * d0 @ ks.T)
-    d = d0 - e @ np.linalg.pinv(2 * np.pi * ks).T
+    e = _wrap(phi + 2 * np.pi * _mul(d0, ks.T))
+    d = d0 - _mul(e, np.linalg.pinv(2 * np.pi * ks).T)
     d = _nearest_cell(d, A_s, np.zeros_like(d))
     amp = np.abs(z).min(axis=1) / len(features)
     margin = box // 2 + 1  # windows reaching well past the border are unreliable
@@ -290,14 +302,14 @@ def _coefficients(f: np.ndarray, ks: np.ndarray, o_s: np.ndarray, Ds: float, box
 def _nearest_cell(d: np.ndarray, A: np.ndarray, target: np.ndarray) -> np.ndarray:
     """``d`` moved by whole lattice vectors to the translate nearest ``target``."""
     Ainv = np.linalg.inv(A)
-    base = np.round((target - d) @ Ainv.T)
-    best = d + base @ A.T
+    base = np.round(_mul(target - d, Ainv.T))
+    best = d + _mul(base, A.T)
     best_err = np.linalg.norm(best - target, axis=1)
     for di in (-1, 0, 1):
         for dj in (-1, 0, 1):
             if di == dj == 0:
                 continue
-            cand = d + (base + (di, dj)) @ A.T
+            cand = d + _mul(base + (di, dj), A.T)
             err = np.linalg.norm(cand - target, axis=1)
             better = err < best_err
             best[better], best_err[better] = cand[better], err[better]
@@ -311,15 +323,15 @@ def _fit_affine(ij: np.ndarray, y: np.ndarray, keep: np.ndarray
     X = np.column_stack([np.ones(len(ij)), ij])
     keep = keep.copy()
     for _ in range(4):
-        P, *_ = np.linalg.lstsq(X[keep], y[keep], rcond=None)
-        r = np.linalg.norm(X @ P - y, axis=1)
+        P = _lstsq(X[keep], y[keep])
+        r = np.linalg.norm(_mul(X, P) - y, axis=1)
         sig = 1.4826 * float(np.median(r[keep])) + 1e-3
         new = keep & (r < max(3 * sig, 0.3))
         if new.sum() < MIN_LENSES or np.array_equal(new, keep):
             break
         keep = new
-    P, *_ = np.linalg.lstsq(X[keep], y[keep], rcond=None)
-    cov = np.linalg.inv(X[keep].T @ X[keep])
+    P = _lstsq(X[keep], y[keep])
+    cov = np.linalg.inv(np.einsum("ni,nj->ij", X[keep], X[keep]))
     return P.T, keep, cov
 
 
@@ -353,7 +365,7 @@ def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
     if central.sum() >= MIN_LENSES:
         # start from the mean shift of the central lenses on the torus (lattice cell):
         # a file half a lens off splits no cluster across the cell's edge
-        kd = d[central] @ np.linalg.inv(grid.A).T  # shift in lattice units, mod 1
+        kd = _mul(d[central], np.linalg.inv(grid.A).T)  # shift in lattice units, mod 1
         frac = np.angle(np.exp(2j * np.pi * kd).sum(axis=0)) / (2 * np.pi)
         d = _nearest_cell(d, grid.A, np.broadcast_to(grid.A @ frac, d.shape))
     P = None
@@ -364,7 +376,7 @@ def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
         if sel.sum() >= MIN_LENSES:
             P, keep, cov = _fit_affine(ij, c_file + d, sel)
         if P is not None and radius < r_max:
-            pred = np.column_stack([np.ones(len(ij)), ij]) @ P.T - c_file
+            pred = _mul(np.column_stack([np.ones(len(ij)), ij]), P.T) - c_file
             d = _nearest_cell(d, grid.A, pred)
         if radius >= r_max:
             break
@@ -387,7 +399,7 @@ def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
             similarity_residual_rms_px=math.nan, foreign=False, refine_auto=False,
             verified=False, warnings=warnings, seconds=time.perf_counter() - t0)
     X = np.column_stack([np.ones(len(ij)), ij])
-    fit = X @ P.T
+    fit = _mul(X, P.T)
     drift = fit - c_file
     dn = np.linalg.norm(drift, axis=1)
     resid = np.linalg.norm(fit - (c_file + d), axis=1)
@@ -402,8 +414,8 @@ def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
     # best similarity through the measurements, for the residual a RayCalib would leave
     S = scale * np.array([[math.cos(ang), -math.sin(ang)], [math.sin(ang), math.cos(ang)]])
     A_sim = S @ grid.A
-    o_sim = np.mean((c_file + d)[keep] - ij[keep] @ A_sim.T, axis=0)
-    sim_res = np.linalg.norm(o_sim + ij @ A_sim.T - (c_file + d), axis=1)
+    o_sim = np.mean((c_file + d)[keep] - _mul(ij[keep], A_sim.T), axis=0)
+    sim_res = np.linalg.norm(o_sim + _mul(ij, A_sim.T) - (c_file + d), axis=1)
     # at the image centre: fitted lattice point minus the file's, same lattice coordinates
     ij_c = (centre - grid.origin) @ np.linalg.inv(grid.A).T
     off = origin_fit + A_fit @ ij_c - centre
