@@ -250,26 +250,40 @@ def left_right_check(ref: PinholeCamera, depth: np.ndarray, src: PinholeCamera,
     return (depth > 0) & (agree | ~inside)
 
 
+def check_sweep_inputs(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
+                       near: float, far: float, what: str) -> np.ndarray:
+    """The checks every depth estimator makes of its inputs; the reference as an array."""
+    if not srcs:
+        raise ValueError(f"{what} needs at least one source view")
+    if not 0 < near < far:
+        raise ValueError(f"{what} needs 0 < near < far (got {near}, {far})")
+    ref_img = np.asarray(ref_img)
+    if ref_img.shape[:2] != (ref.height, ref.width):
+        raise ValueError(f"reference image is {ref_img.shape[1]}x{ref_img.shape[0]}, its camera "
+                         f"says {ref.width}x{ref.height}")
+    return ref_img
+
+
+def consistency_partner(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
+                        src_imgs: list[np.ndarray]) -> tuple[int, list, list]:
+    """For the left-right check: the source nearest the reference (by camera centre), and
+    its own sources - the reference and the other sources - with their images."""
+    dist = [np.linalg.norm(s.centre - ref.centre) for s in srcs]
+    j = int(np.argmin(dist))
+    others = [ref] + [s for i, s in enumerate(srcs) if i != j]
+    other_imgs = [ref_img] + [im for i, im in enumerate(src_imgs) if i != j]
+    return j, others, other_imgs
+
+
 def plane_sweep_depth(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
                       src_imgs: list[np.ndarray], near: float, far: float,
                       opt: PlaneSweepOptions | None = None) -> np.ndarray:
     """Float32 z-depth map of the reference (cameras' units), 0 where unreliable."""
     opt = opt or PlaneSweepOptions()
-    if not srcs:
-        raise ValueError("plane sweep needs at least one source view")
-    if not 0 < near < far:
-        raise ValueError(f"plane sweep needs 0 < near < far (got {near}, {far})")
-    ref_img = np.asarray(ref_img)
-    if ref_img.shape[:2] != (ref.height, ref.width):
-        raise ValueError(f"reference image is {ref_img.shape[1]}x{ref_img.shape[0]}, its camera "
-                         f"says {ref.width}x{ref.height}")
+    ref_img = check_sweep_inputs(ref, ref_img, srcs, near, far, "plane sweep")
     depth, _ = _sweep(ref, ref_img, srcs, src_imgs, near, far, opt)
     if opt.lr_check:
-        # nearest source by camera centre, with the reference among its own sources
-        dist = [np.linalg.norm(s.centre - ref.centre) for s in srcs]
-        j = int(np.argmin(dist))
-        others = [ref] + [s for i, s in enumerate(srcs) if i != j]
-        other_imgs = [ref_img] + [im for i, im in enumerate(src_imgs) if i != j]
+        j, others, other_imgs = consistency_partner(ref, ref_img, srcs, src_imgs)
         src_depth, _ = _sweep(srcs[j], src_imgs[j], others, other_imgs, near, far, opt)
         ok = left_right_check(ref, depth, srcs[j], src_depth, opt.lr_tolerance)
         depth = np.where(ok, depth, 0.0).astype(np.float32)

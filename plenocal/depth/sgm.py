@@ -45,7 +45,9 @@ from plenocal.depth.planesweep import (
     _grey,
     _remove_speckles,
     _source_cost,
+    check_sweep_inputs,
     choose_num_depths,
+    consistency_partner,
     depth_labels,
     left_right_check,
     plane_homography,
@@ -325,21 +327,11 @@ def sgm_depth(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera]
     """Dense float32 z-depth map of the reference (cameras' units) for view synthesis
     (0 only where ``fill`` is off and the pixel is unreliable)."""
     opt = opt or SgmOptions()
-    if not srcs:
-        raise ValueError("SGM depth needs at least one source view")
-    if not 0 < near < far:
-        raise ValueError(f"SGM depth needs 0 < near < far (got {near}, {far})")
-    ref_img = np.asarray(ref_img)
-    if ref_img.shape[:2] != (ref.height, ref.width):
-        raise ValueError(f"reference image is {ref_img.shape[1]}x{ref_img.shape[0]}, its camera "
-                         f"says {ref.width}x{ref.height}")
+    ref_img = check_sweep_inputs(ref, ref_img, srcs, near, far, "SGM depth")
     n = choose_num_depths(ref, srcs, near, far, _sweep_options(opt))
     depth, _ = _raw_sgm(ref, ref_img, srcs, src_imgs, near, far, n, opt)
     if opt.consistency:
-        dist = [np.linalg.norm(s.centre - ref.centre) for s in srcs]
-        j = int(np.argmin(dist))
-        others = [ref] + [s for i, s in enumerate(srcs) if i != j]
-        other_imgs = [ref_img] + [im for i, im in enumerate(src_imgs) if i != j]
+        j, others, other_imgs = consistency_partner(ref, ref_img, srcs, src_imgs)
         src_depth, _ = _raw_sgm(srcs[j], src_imgs[j], others, other_imgs, near, far, n, opt)
         ok = left_right_check(ref, depth, srcs[j], src_depth, opt.consistency_tolerance)
         ok = _remove_speckles(_inv_labels(depth, near, far, n), ok, opt.speckle_size,
