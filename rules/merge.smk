@@ -86,6 +86,4 @@ rule mpeg_views:
         "../scripts/mpeg_views.py"
 
 
-TARGETS.append(
-    lambda d: [res(d, "calibration", "mpeg", f) for f in ("depth", "texture", "rvs")]
-)
+TARGETS.append(mpeg_views_targets)
