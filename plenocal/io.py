@@ -65,7 +65,7 @@ def clean_stale_temps(parent: str | Path, prefix: str) -> list[Path]:
 
 
 def make_temp_dir(parent: str | Path, prefix: str) -> Path:
-    """A new temporary folder ``<prefix>XXXX.tmpdir`` in ``parent``, after removing the
+    """A new temporary folder ``<prefix><random>.tmpdir`` in ``parent``, after removing the
     stale ones of the same prefix (a killed job's), readable as the umask allows."""
     parent = Path(parent)
     parent.mkdir(parents=True, exist_ok=True)
