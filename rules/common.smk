@@ -337,8 +337,8 @@ def mpeg_views_inputs(wildcards):
 
 
 def mpeg_views_targets(dataset):
-    """The MPEG depth/texture/RVS exports, where the workflow defines the rules that make
-    their inputs (a workflow that includes only rig and merge, as the tests do, has none)."""
+    """The MPEG depth/texture/RVS exports, where the workflow defines the rules that
+    make their inputs (a workflow of rig and merge alone, as in the tests, has none)."""
     if not all(workflow.is_rule(r) for r in ("depth_view", "convert")):
         return []
     return [res(dataset, "calibration", "mpeg", f) for f in ("depth", "texture", "rvs")]
