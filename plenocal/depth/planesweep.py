@@ -26,6 +26,7 @@ lies in a small connected region (``cv2.filterSpeckles``).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import cv2
@@ -111,74 +112,135 @@ def choose_num_depths(ref: PinholeCamera, srcs: list[PinholeCamera], near: float
     return int(np.clip(n, opt.min_depths, opt.max_depths))
 
 
-def _box(x: np.ndarray, w: int) -> np.ndarray:
-    return cv2.boxFilter(x, cv2.CV_32F, (w, w), normalize=True, borderType=cv2.BORDER_REFLECT)
+def _box(x: np.ndarray, w: int, out: np.ndarray | None = None) -> np.ndarray:
+    return cv2.boxFilter(x, cv2.CV_32F, (w, w), dst=out, normalize=True,
+                         borderType=cv2.BORDER_REFLECT)
+
+
+def plane_homographies(ref: PinholeCamera, src: PinholeCamera,
+                       depths: np.ndarray) -> np.ndarray:
+    """(D, 3, 3) reference-to-source homographies of the planes z_ref = depths, as
+    ``H(d) = K_s R K_r^-1 + K_s t n^T K_r^-1 / d`` (the two terms computed once)."""
+    R, t = relative_pose(ref, src)
+    k_inv = np.linalg.inv(ref.K)
+    a = src.K @ R @ k_inv
+    b = src.K @ np.outer(t, [0.0, 0.0, 1.0]) @ k_inv
+    hs = a[None] + b[None] / np.asarray(depths, np.float64)[:, None, None]
+    return hs / hs[:, 2:3, 2:3]
 
 
 def _source_cost(ref_feat: np.ndarray, ref_stats: tuple, warped: np.ndarray,
-                 opt: PlaneSweepOptions) -> np.ndarray:
+                 opt: PlaneSweepOptions, out: np.ndarray | None = None) -> np.ndarray:
     """Cost of one warped source against the reference, +inf where the window leaves
-    the source image."""
+    the source image (written into ``out`` when given)."""
     w = opt.window
-    valid = _box(warped[..., 3], w) > 0.999
+    invalid = _box(warped[..., 3], w) <= 0.999
     if opt.cost == "zncc":
         mr, sr = ref_stats
-        s = warped[..., 0]
+        s = np.ascontiguousarray(warped[..., 0])
         ms = _box(s, w)
         vs = np.maximum(_box(s * s, w) - ms * ms, 0.0)
         cov = _box(ref_feat[..., 0] * s, w) - mr * ms
         ncc = cov / np.sqrt(np.maximum(sr * sr * vs, 1e-12))
-        cost = 1.0 - np.clip(ncc, -1.0, 1.0)
+        cost = (1.0 - np.clip(ncc, -1.0, 1.0)).astype(np.float32)
+        if out is None:
+            out = cost
+        else:
+            out[...] = cost
     elif opt.cost == "tad":
-        dc = np.minimum(np.abs(ref_feat[..., 0] - warped[..., 0]), 0.08) / 0.08
-        dg = np.minimum(np.abs(ref_feat[..., 1] - warped[..., 1])
-                        + np.abs(ref_feat[..., 2] - warped[..., 2]), 0.04) / 0.04
-        cost = _box((0.3 * dc + 0.7 * dg).astype(np.float32), w)
+        # 0.3 min(|dI|, 0.08) / 0.08 + 0.7 min(|dIx| + |dIy|, 0.04) / 0.04, box-aggregated
+        diff = cv2.absdiff(ref_feat, warped)
+        dc = np.minimum(diff[..., 0], np.float32(0.08))
+        dc /= np.float32(0.08)
+        dg = np.add(diff[..., 1], diff[..., 2])
+        np.minimum(dg, np.float32(0.04), out=dg)
+        dg /= np.float32(0.04)
+        dc *= np.float32(0.3)
+        dg *= np.float32(0.7)
+        dc += dg
+        out = _box(dc, w, out)
     else:
         raise ValueError(f"depth: unknown matching cost {opt.cost!r} (use zncc or tad)")
-    return np.where(valid, cost, np.inf).astype(np.float32)
+    np.copyto(out, np.float32(np.inf), where=invalid)
+    return out
+
+
+def source_costs(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
+                 src_imgs: list[np.ndarray], depths: np.ndarray,
+                 opt: PlaneSweepOptions) -> Iterator[np.ndarray]:
+    """Per depth label, in order: the (S, H, W) float32 costs of the S sources warped onto
+    the reference by the plane homography (+inf where the window leaves a source).
+
+    The plane sweep's and SGM's shared inner loop; one buffer is yielded again and again
+    (overwritten at the next label: reduce it before asking for the next)."""
+    ref_feat = _features(ref_img)
+    w = opt.window
+    mr = _box(ref_feat[..., 0], w)
+    sr = np.sqrt(np.maximum(_box(ref_feat[..., 0] ** 2, w) - mr * mr, 0.0))
+    src_feat = [_features(im) for im in src_imgs]
+    homs = [plane_homographies(ref, sc, depths) for sc in srcs]
+    size = (ref.width, ref.height)
+    per = np.empty((len(srcs), ref.height, ref.width), dtype=np.float32)
+    warped = np.empty((ref.height, ref.width, 4), dtype=np.float32)
+    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+    for i in range(len(depths)):
+        for j, sf in enumerate(src_feat):
+            cv2.warpPerspective(sf, homs[j][i], size, dst=warped, flags=flags,
+                                borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+            _source_cost(ref_feat, (mr, sr), warped, opt, out=per[j])
+        yield per
+
+
+def smallest_first(per: np.ndarray, k: int) -> list[np.ndarray]:
+    """The S planes of ``per`` (S, H, W) reordered per pixel so that the first ``k``
+    hold the k smallest values, ascending (k bubble passes of element-wise min/max:
+    a few whole-image operations instead of a per-pixel partition). Overwrites
+    ``per``; the returned planes are views of it or one scratch plane."""
+    planes = list(per)
+    scratch = np.empty_like(planes[0])
+    for i in range(min(k, len(planes) - 1)):
+        for j in range(len(planes) - 1, i, -1):
+            a, b = planes[j - 1], planes[j]
+            np.minimum(a, b, out=scratch)
+            np.maximum(a, b, out=b)
+            planes[j - 1], scratch = scratch, a
+    return planes
 
 
 def cost_volume(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
                 src_imgs: list[np.ndarray], depths: np.ndarray,
                 opt: PlaneSweepOptions) -> np.ndarray:
     """Aggregated cost (D, H, W), best-k over the sources, +inf where no source sees."""
-    ref_feat = _features(ref_img)
-    w = opt.window
-    mr = _box(ref_feat[..., 0], w)
-    sr = np.sqrt(np.maximum(_box(ref_feat[..., 0] ** 2, w) - mr * mr, 0.0))
-    src_feat = [_features(im) for im in src_imgs]
     S = len(srcs)
     k = max(1, int(math.ceil(S * opt.best_fraction)))
-    size = (ref.width, ref.height)
     vol = np.empty((len(depths), ref.height, ref.width), dtype=np.float32)
-    per = np.empty((S, ref.height, ref.width), dtype=np.float32)
-    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
-    for i, d in enumerate(depths):
-        for j, (sc, sf) in enumerate(zip(srcs, src_feat, strict=True)):
-            H = plane_homography(ref, sc, float(d))
-            warped = cv2.warpPerspective(sf, H, size, flags=flags,
-                                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-            per[j] = _source_cost(ref_feat, (mr, sr), warped, opt)
-        if k < S:
-            best = np.partition(per, k - 1, axis=0)[:k]
-        else:
-            best = per
-        with np.errstate(invalid="ignore"):
-            vol[i] = best.mean(axis=0)
+    for i, per in enumerate(source_costs(ref, ref_img, srcs, src_imgs, depths, opt)):
+        planes = smallest_first(per, k) if k < S else list(per)
+        acc = vol[i]
+        np.copyto(acc, planes[0])
+        for p in planes[1:k]:
+            acc += p
+        acc /= np.float32(k)
     return vol
 
 
 def winner_take_all(vol: np.ndarray, depths: np.ndarray) -> tuple[np.ndarray, np.ndarray,
                                                                    np.ndarray, np.ndarray]:
     """Best label, sub-label inverse depth -> depth, best cost and second-best cost
-    (outside +-1 label) per pixel."""
+    (outside +-1 label) per pixel. Overwrites ``vol``'s non-finite costs with 1e6."""
     D = vol.shape[0]
-    v = np.where(np.isfinite(vol), vol, np.float32(1e6))
-    best = np.argmin(v, axis=0)
+    v = vol
+    np.copyto(v, np.float32(1e6), where=~np.isfinite(v))
+    # first minimum over the labels, label by label (np.argmin's choice, without its
+    # slow strided reduction over the first axis)
+    best = np.zeros(v.shape[1:], np.int64)
+    c0 = v[0].copy()
+    for d in range(1, D):
+        better = v[d] < c0
+        best[better] = d
+        np.minimum(c0, v[d], out=c0)
     ii = np.clip(best, 1, D - 2)
     rows, cols = np.indices(best.shape)
-    c0 = v[best, rows, cols]
     cm = v[ii - 1, rows, cols]
     cp = v[ii + 1, rows, cols]
     cc = v[ii, rows, cols]
@@ -191,12 +253,14 @@ def winner_take_all(vol: np.ndarray, depths: np.ndarray) -> tuple[np.ndarray, np
     step = (inv[-1] - inv[0]) / (D - 1)
     inv_d = inv[0] + (best + off) * step
     depth = (1.0 / inv_d).astype(np.float32)
-    # second best outside the +-1 neighbourhood of the winner
-    masked = v.copy()
-    for o in (-1, 0, 1):
-        j = np.clip(best + o, 0, D - 1)
-        masked[j, rows, cols] = np.float32(1e6)
-    second = masked.min(axis=0)
+    # second best outside the +-1 neighbourhood of the winner: masked in place, restored
+    around = [np.clip(best + o, 0, D - 1) for o in (-1, 0, 1)]
+    kept = [v[j, rows, cols] for j in around]
+    for j in around:
+        v[j, rows, cols] = np.float32(1e6)
+    second = v.min(axis=0)
+    for j, k in zip(around, kept, strict=True):
+        v[j, rows, cols] = k
     return best, depth, c0, second
 
 

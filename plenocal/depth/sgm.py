@@ -33,24 +33,21 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 
-import cv2
 import numba
 import numpy as np
 
 from plenocal.camera import PinholeCamera
 from plenocal.depth.planesweep import (
     PlaneSweepOptions,
-    _box,
-    _features,
     _grey,
     _remove_speckles,
-    _source_cost,
     check_sweep_inputs,
     choose_num_depths,
     consistency_partner,
     depth_labels,
     left_right_check,
-    plane_homography,
+    smallest_first,
+    source_costs,
 )
 from plenocal.io import to_float
 
@@ -99,31 +96,29 @@ def matching_cost(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCam
                   opt: SgmOptions) -> np.ndarray:
     """Cost volume (H, W, D) float32 in [0, 1]: per label the mean of the best
     ``ceil(S' * best_fraction)`` of the S' sources that see the pixel; 1 where none."""
-    popt = _sweep_options(opt)
-    ref_feat = _features(ref_img)
-    w = opt.window
-    mr = _box(ref_feat[..., 0], w)
-    sr = np.sqrt(np.maximum(_box(ref_feat[..., 0] ** 2, w) - mr * mr, 0.0))
-    src_feat = [_features(im) for im in src_imgs]
     S = len(srcs)
-    size = (ref.width, ref.height)
-    vol = np.empty((ref.height, ref.width, len(depths)), dtype=np.float32)
-    per = np.empty((S, ref.height, ref.width), dtype=np.float32)
-    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
-    for i, d in enumerate(depths):
-        for j, (sc, sf) in enumerate(zip(srcs, src_feat, strict=True)):
-            H = plane_homography(ref, sc, float(d))
-            warped = cv2.warpPerspective(sf, H, size, flags=flags,
-                                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-            per[j] = _source_cost(ref_feat, (mr, sr), warped, popt)
-        seen = np.isfinite(per)
-        n_seen = seen.sum(axis=0)
-        k = np.maximum(1, np.ceil(n_seen * opt.best_fraction)).astype(np.int64)
-        srt = np.sort(np.where(seen, per, np.float32(np.inf)), axis=0)
-        csum = np.cumsum(np.where(np.isfinite(srt), srt, 0.0), axis=0)
-        best = np.take_along_axis(csum, (k - 1)[None], axis=0)[0] / k
-        vol[..., i] = np.where(n_seen > 0, best, 1.0)
-    return vol
+    k_max = max(1, int(np.ceil(S * opt.best_fraction)))
+    # k per pixel from the number of sources that see it, by table
+    k_of = np.maximum(1, np.ceil(np.arange(S + 1) * opt.best_fraction)).astype(np.uint8)
+    vol = np.empty((len(depths), ref.height, ref.width), dtype=np.float32)
+    seen = np.empty((ref.height, ref.width), dtype=np.uint8)
+    mean = np.empty((ref.height, ref.width), dtype=np.float32)
+    costs = source_costs(ref, ref_img, srcs, src_imgs, depths, _sweep_options(opt))
+    for i, per in enumerate(costs):
+        seen[...] = 0
+        for p in per:
+            seen += p < np.inf
+        k = k_of[seen]
+        planes = smallest_first(per, k_max)  # unseen (+inf) last
+        acc = vol[i]
+        np.copyto(acc, np.float32(1.0))  # where no source sees the pixel
+        run = planes[0].copy()
+        for m in range(1, k_max + 1):
+            if m > 1:
+                run += planes[m - 1]
+            np.divide(run, np.float32(m), out=mean)
+            np.copyto(acc, mean, where=(k == m) & (seen > 0))
+    return np.ascontiguousarray(vol.transpose(1, 2, 0))
 
 
 @numba.njit(cache=True)
