@@ -29,6 +29,8 @@ by push-pull interpolation.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -146,25 +148,91 @@ def _pixel_grid(H: int, W: int) -> np.ndarray:
     return np.stack([xs, ys], axis=-1)
 
 
+def _geometry(cam: PinholeCamera) -> tuple[np.ndarray, ...]:
+    """(K, K^-1, camera-to-world R, centre C, world-to-camera R, t) as C-contiguous
+    float64 arrays, the arguments of the compiled warps."""
+    w2c = cam.world_to_cam
+
+    def c(a: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(a, dtype=np.float64)
+
+    return (c(cam.K), c(np.linalg.inv(cam.K)), c(cam.R), c(cam.centre), c(w2c[:3, :3]),
+            c(w2c[:3, 3]))
+
+
+@numba.njit(cache=True)
+def _splat(depth, Kinv_s, R_s, C_s, K_t, R_t, t_t, zbuf):  # pragma: no cover - numba
+    """Forward warp of every input pixel with depth > 0 (unproject with the input
+    camera, project into the target) as a 2x2 splat into the target z-buffer ``zbuf``
+    (min; +inf = none). The order of the points does not matter (min), so the result
+    is deterministic."""
+    H, W = depth.shape
+    Ht, Wt = zbuf.shape
+    for y in range(H):
+        for x in range(W):
+            z = depth[y, x]
+            if not z > 0:
+                continue
+            # ray through the pixel (z_cam = 1), world point at z-depth z
+            cx = Kinv_s[0, 0] * x + Kinv_s[0, 1] * y + Kinv_s[0, 2]
+            cy = Kinv_s[1, 0] * x + Kinv_s[1, 1] * y + Kinv_s[1, 2]
+            cz = Kinv_s[2, 0] * x + Kinv_s[2, 1] * y + Kinv_s[2, 2]
+            X0 = C_s[0] + (R_s[0, 0] * cx + R_s[0, 1] * cy + R_s[0, 2] * cz) * z
+            X1 = C_s[1] + (R_s[1, 0] * cx + R_s[1, 1] * cy + R_s[1, 2] * cz) * z
+            X2 = C_s[2] + (R_s[2, 0] * cx + R_s[2, 1] * cy + R_s[2, 2] * cz) * z
+            # into the target camera
+            a = R_t[0, 0] * X0 + R_t[0, 1] * X1 + R_t[0, 2] * X2 + t_t[0]
+            b = R_t[1, 0] * X0 + R_t[1, 1] * X1 + R_t[1, 2] * X2 + t_t[1]
+            zt = R_t[2, 0] * X0 + R_t[2, 1] * X1 + R_t[2, 2] * X2 + t_t[2]
+            if not zt > 0:
+                continue
+            w = K_t[2, 0] * a + K_t[2, 1] * b + K_t[2, 2] * zt
+            u = (K_t[0, 0] * a + K_t[0, 1] * b + K_t[0, 2] * zt) / w
+            v = (K_t[1, 0] * a + K_t[1, 1] * b + K_t[1, 2] * zt) / w
+            if not (u >= -1.0 and u < Wt and v >= -1.0 and v < Ht):
+                continue  # no corner of the splat inside (also NaN / inf)
+            x0 = int(math.floor(u))
+            y0 = int(math.floor(v))
+            for yy in range(max(y0, 0), min(y0 + 2, Ht)):
+                for xx in range(max(x0, 0), min(x0 + 2, Wt)):
+                    if zt < zbuf[yy, xx]:
+                        zbuf[yy, xx] = zt
+
+
 def forward_depth(src: PinholeCamera, depth: np.ndarray, tgt: PinholeCamera) -> np.ndarray:
     """Target z-depth of the input's surface: 2x2 splats with a z-buffer (0 = none)."""
-    H, W = depth.shape
-    ok = depth > 0
-    uv = _pixel_grid(H, W)[ok]
-    X = src.unproject(uv, depth[ok].astype(np.float64))
-    uvt, zt = tgt.project(X)
-    front = (zt > 0) & np.isfinite(uvt).all(axis=1)
-    uvt, zt = uvt[front], zt[front]
-    x0 = np.floor(uvt[:, 0]).astype(np.int64)
-    y0 = np.floor(uvt[:, 1]).astype(np.int64)
-    zbuf = np.full(tgt.height * tgt.width, np.inf)
-    for dx in (0, 1):
-        for dy in (0, 1):
-            x, y = x0 + dx, y0 + dy
-            m = (x >= 0) & (x < tgt.width) & (y >= 0) & (y < tgt.height)
-            np.minimum.at(zbuf, y[m] * tgt.width + x[m], zt[m])
-    zbuf = zbuf.reshape(tgt.height, tgt.width)
+    _, Kinv_s, R_s, C_s, _, _ = _geometry(src)
+    K_t, _, _, _, R_t, t_t = _geometry(tgt)
+    zbuf = np.full((tgt.height, tgt.width), np.inf)
+    _splat(np.ascontiguousarray(depth, dtype=np.float64), Kinv_s, R_s, C_s, K_t, R_t, t_t, zbuf)
     return np.where(np.isfinite(zbuf), zbuf, 0.0).astype(np.float32)
+
+
+@numba.njit(cache=True)
+def _backward(zt, Kinv_t, R_t, C_t, K_s, R_s, t_s, mx, my, zs):  # pragma: no cover - numba
+    """Every target pixel with depth zt > 0 unprojected and projected into the input:
+    the input's pixel (mx, my; -10 where zt = 0) and its z-depth there (zs)."""
+    H, W = zt.shape
+    for y in range(H):
+        for x in range(W):
+            z = zt[y, x]
+            cx = Kinv_t[0, 0] * x + Kinv_t[0, 1] * y + Kinv_t[0, 2]
+            cy = Kinv_t[1, 0] * x + Kinv_t[1, 1] * y + Kinv_t[1, 2]
+            cz = Kinv_t[2, 0] * x + Kinv_t[2, 1] * y + Kinv_t[2, 2]
+            X0 = C_t[0] + (R_t[0, 0] * cx + R_t[0, 1] * cy + R_t[0, 2] * cz) * z
+            X1 = C_t[1] + (R_t[1, 0] * cx + R_t[1, 1] * cy + R_t[1, 2] * cz) * z
+            X2 = C_t[2] + (R_t[2, 0] * cx + R_t[2, 1] * cy + R_t[2, 2] * cz) * z
+            a = R_s[0, 0] * X0 + R_s[0, 1] * X1 + R_s[0, 2] * X2 + t_s[0]
+            b = R_s[1, 0] * X0 + R_s[1, 1] * X1 + R_s[1, 2] * X2 + t_s[1]
+            c = R_s[2, 0] * X0 + R_s[2, 1] * X1 + R_s[2, 2] * X2 + t_s[2]
+            zs[y, x] = c
+            if z > 0:
+                w = K_s[2, 0] * a + K_s[2, 1] * b + K_s[2, 2] * c
+                mx[y, x] = (K_s[0, 0] * a + K_s[0, 1] * b + K_s[0, 2] * c) / w
+                my[y, x] = (K_s[1, 0] * a + K_s[1, 1] * b + K_s[1, 2] * c) / w
+            else:
+                mx[y, x] = -10.0
+                my[y, x] = -10.0
 
 
 def depth_edges(depth: np.ndarray, ratio: float) -> np.ndarray:
@@ -175,43 +243,63 @@ def depth_edges(depth: np.ndarray, ratio: float) -> np.ndarray:
     return mx > ratio * np.maximum(mn, 1e-12)
 
 
-def warp_view(view: View, tgt: PinholeCamera, opt: DibrOptions) -> tuple[np.ndarray, np.ndarray,
-                                                                          np.ndarray]:
-    """(colour (H, W, C), target depth (H, W), sample weight (H, W), 0 = no sample)."""
+@dataclass
+class PreparedView:
+    """What warping an input view needs that does not depend on the target, computed
+    once per input and shared by every target it is warped to."""
+
+    camera: PinholeCamera
+    image: np.ndarray  # float32 (H, W) or (H, W, C), as to_float gives it
+    dense: np.ndarray  # float32 z-depth, invalid pixels filled (densify_depth)
+    aux: np.ndarray  # float32 (H, W, 3): dense depth, discontinuity (1/0), filled (1/0)
+
+
+def prepare_view(view: View | PreparedView, opt: DibrOptions) -> PreparedView:
+    """The input's target-independent part of :func:`warp_view`: dense depth, its
+    discontinuities (``opt.edge_ratio``) and the mask of filled depth."""
+    if isinstance(view, PreparedView):
+        return view
     dense, measured = densify_depth(view.depth)
-    zt = forward_depth(view.camera, dense, tgt)
-    have = zt > 0
-    uv = _pixel_grid(tgt.height, tgt.width)
-    X = tgt.unproject(uv, zt.astype(np.float64))
-    uvs, zs = view.camera.project(X)
-    mx = np.where(have, uvs[..., 0], -10).astype(np.float32)
-    my = np.where(have, uvs[..., 1], -10).astype(np.float32)
-    img = to_float(view.image)
+    edge = depth_edges(dense, opt.edge_ratio)
+    aux = np.ascontiguousarray(np.stack([dense, edge.astype(np.float32),
+                                         (~measured).astype(np.float32)], axis=-1))
+    return PreparedView(view.camera, to_float(view.image), dense, aux)
+
+
+def warp_view(view: View | PreparedView, tgt: PinholeCamera,
+              opt: DibrOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(colour (H, W, C), target depth (H, W), sample weight (H, W), 0 = no sample)."""
     if opt.interpolation not in _INTERPOLATION:
         raise ValueError(f"config: verify.dibr.interpolation = {opt.interpolation!r}: must be "
                          f"one of {', '.join(_INTERPOLATION)}")
-    colour = cv2.remap(img, mx, my, _INTERPOLATION[opt.interpolation],
+    pv = prepare_view(view, opt)
+    zt = forward_depth(pv.camera, pv.dense, tgt)
+    have = zt > 0
+    _, Kinv_t, R_t, C_t, _, _ = _geometry(tgt)
+    K_s, _, _, _, R_s, t_s = _geometry(pv.camera)
+    mx = np.empty(zt.shape, np.float32)
+    my = np.empty(zt.shape, np.float32)
+    zs = np.empty(zt.shape, np.float64)
+    _backward(zt.astype(np.float64), Kinv_t, R_t, C_t, K_s, R_s, t_s, mx, my, zs)
+    colour = cv2.remap(pv.image, mx, my, _INTERPOLATION[opt.interpolation],
                        borderMode=cv2.BORDER_REPLICATE)
     if colour.ndim == 2:
         colour = colour[..., None]
-    own = cv2.remap(dense, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+    # the input's own depth, discontinuities and filled mask at the sample (nearest)
+    aux = cv2.remap(pv.aux, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
                     borderValue=0)
-    inside = (mx >= -0.5) & (mx <= view.camera.width - 0.5) & (my >= -0.5) & \
-        (my <= view.camera.height - 0.5)
+    own, at_edge, was_filled = aux[..., 0], aux[..., 1] > 0, aux[..., 2] > 0
+    W, H = pv.camera.width, pv.camera.height
+    inside = (mx >= -0.5) & (mx <= W - 0.5) & (my >= -0.5) & (my <= H - 0.5)
     agree = np.abs(own - zs) <= opt.occlusion_tolerance * np.abs(zs)
     ok = have & inside & agree
     w = ok.astype(np.float32)
-    edge = depth_edges(dense, opt.edge_ratio).astype(np.float32)
-    at_edge = cv2.remap(edge, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
-                        borderValue=0) > 0
-    was_filled = cv2.remap((~measured).astype(np.float32), mx, my, cv2.INTER_NEAREST,
-                           borderMode=cv2.BORDER_CONSTANT, borderValue=0) > 0
     w = np.where(at_edge, w * opt.edge_weight, w)
     w = np.where(was_filled, w * opt.filled_weight, w)
     return colour.astype(np.float32), np.where(ok, zt, 0.0).astype(np.float32), w
 
 
-def synthesize(views: list[View], target: PinholeCamera,
+def synthesize(views: Sequence[View | PreparedView], target: PinholeCamera,
                opt: DibrOptions | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Synthesized target image (float32 in [0, 1], the inputs' channels) and the mask of
     pixels seen by at least one input (the rest is inpainted)."""

@@ -32,7 +32,7 @@ import numpy as np
 
 from plenocal.camera import PinholeCamera
 from plenocal.depth.views import estimate_view_depth
-from plenocal.dibr import DibrOptions, View, psnr, synthesize
+from plenocal.dibr import DibrOptions, PreparedView, View, prepare_view, psnr, synthesize
 from plenocal.export.mpeg import mpeg_name
 from plenocal.io import read_image, to_float
 from plenocal.viewgeom import central_view, parse_view, view_name
@@ -93,6 +93,7 @@ class SynthesisContext:
     config: dict = field(default_factory=dict)
     depths: dict[str, np.ndarray] = field(default_factory=dict)
     _images: dict = field(default_factory=dict)
+    _prepared: dict[str, PreparedView] = field(default_factory=dict)
 
     def camera(self, key: str) -> PinholeCamera:
         if key not in self.cameras:
@@ -123,9 +124,18 @@ class SynthesisContext:
             self.depths[key] = d
         return self.depths[key]
 
+    def prepared(self, key: str, opt: DibrOptions) -> PreparedView:
+        """Input view ``key`` prepared for warping (dense depth, its discontinuities):
+        once per input, shared by every target rendered from it."""
+        if key not in self._prepared:
+            self._prepared[key] = prepare_view(
+                View(self.camera(key), self.image(key), self.depth(key)), opt)
+        return self._prepared[key]
+
     def synthesize(self, inputs: list[str], target: str) -> tuple[np.ndarray, np.ndarray]:
-        views = [View(self.camera(k), self.image(k), self.depth(k)) for k in inputs]
-        return synthesize(views, self.camera(target), dibr_options(self.config))
+        opt = dibr_options(self.config)
+        views = [self.prepared(k, opt) for k in inputs]
+        return synthesize(views, self.camera(target), opt)
 
     def render(self, inputs: list[str], targets: list[str]) -> dict[str, np.ndarray]:
         """Every target rendered from the inputs by the configured renderer."""
