@@ -73,6 +73,19 @@ def test_colmap_backend_clear_error_without_gpu(texture):
         estimate_depth(ref, ri, srcs[:2], sims[:2], 0.4, 0.9, {"backend": "colmap"})
 
 
+def test_colmap_probe_skipped_without_nvidia_smi(monkeypatch):
+    import plenocal.depth.colmap_mvs as mvs
+
+    def no_subprocess(*a, **k):
+        raise AssertionError("the pycolmap probe ran although nvidia-smi is missing")
+
+    monkeypatch.setattr(mvs.shutil, "which", lambda name: None)
+    monkeypatch.setattr(mvs.subprocess, "run", no_subprocess)
+    ok, why = mvs.colmap_available()
+    assert not ok and "no GPU" in why
+    assert resolve_backend("auto") == "planesweep"
+
+
 def test_colmap_workspace_is_readable(tmp_path, texture):
     import pycolmap
 

@@ -16,6 +16,7 @@ triangulation angles are lowered for the small baselines of subaperture views.
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -63,7 +64,11 @@ _PROBE = (
 
 def colmap_available() -> tuple[bool, str]:
     """(can run, why not) - probed in a subprocess so that a CUDA wheel without a GPU
-    cannot abort this process."""
+    cannot abort this process. Without ``nvidia-smi`` on the PATH the probe's answer is
+    known (no GPU visible) and the subprocess, with its pycolmap import (half a second
+    per depth job), is skipped."""
+    if shutil.which("nvidia-smi") is None:
+        return False, "nvidia-smi not found: no GPU visible"
     try:
         out = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True,
                              timeout=120)
