@@ -164,6 +164,68 @@ def make_layout(grid: MicrolensGrid, n_views: int, tile: int, q: float | None = 
     )
 
 
+_STEPS = np.array([(0, 0), (1, 0), (0, 1), (-1, 1), (-1, 0), (0, -1), (1, -1),
+                   (1, 1), (-1, -1), (2, -1), (-2, 1), (1, -2), (-1, 2)])
+
+
+_MARGIN = 5  # empty lattice cells around the used lenses in the lookup table
+
+
+def _lattice_lookup(layout: ViewLayout, k: int
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The lens table of the tile lattice, flattened with a margin of empty cells (-1),
+    each output pixel's cell (its nearest lattice point; (H, W) int32 into the flat
+    table, kept ``_MARGIN - 3`` cells inside it) and the flat offsets of the first ``k``
+    lattice steps: the candidate lens of step n at pixel u is ``table[cell[u] + off[n]]``."""
+    ys = np.arange(layout.height, dtype=np.float64)[:, None]
+    xs = np.arange(layout.width, dtype=np.float64)[None, :]
+    c0 = layout.tile_centres
+    ref = c0[0]
+    B = layout.basis.T  # columns: output-pixel vectors of the two lattice steps
+    Binv = np.linalg.inv(B)
+    lat = np.rint((c0 - ref) @ Binv.T).astype(np.int64)
+    lo = lat.min(axis=0) - _MARGIN
+    shape = lat.max(axis=0) - lo + 1 + _MARGIN
+    table = np.full(tuple(shape), -1, dtype=np.int32)
+    table[lat[:, 0] - lo[0], lat[:, 1] - lo[1]] = np.arange(len(c0))
+    ax = np.rint(Binv[0, 0] * (xs - ref[0]) + Binv[0, 1] * (ys - ref[1]))
+    ay = np.rint(Binv[1, 0] * (xs - ref[0]) + Binv[1, 1] * (ys - ref[1]))
+    # a pixel clipped in lies >= 3 empty cells from every lens: its steps (<= 2) find none
+    ax = np.clip(ax - lo[0], 2, shape[0] - 3).astype(np.int32)
+    ay = np.clip(ay - lo[1], 2, shape[1] - 3).astype(np.int32)
+    cell = ax * np.int32(shape[1]) + ay
+    steps = _STEPS[: max(k, 1)]
+    return table.ravel(), cell, (steps[:, 0] * shape[1] + steps[:, 1]).astype(np.int32)
+
+
+def _tile_dist2(layout: ViewLayout, li: np.ndarray) -> np.ndarray:
+    """Squared distance (tile units, float32) from each output pixel to the tile centre
+    of lens ``li`` (H, W); inf where ``li`` is -1."""
+    f = np.float32
+    ys = np.arange(layout.height, dtype=f)[:, None]
+    xs = np.arange(layout.width, dtype=f)[None, :]
+    cx = np.append(layout.tile_centres[:, 0], np.nan).astype(f)  # index -1: no lens
+    cy = np.append(layout.tile_centres[:, 1], np.nan).astype(f)
+    dx = xs - cx.take(li)
+    dy = ys - cy.take(li)
+    dx *= dx
+    dy *= dy
+    dx += dy
+    dx *= f(1.0 / layout.tile ** 2)
+    dx[li < 0] = np.inf
+    return dx
+
+
+def _candidates(layout: ViewLayout, k: int):
+    """Yield, for the first ``k`` lattice steps around each output pixel's nearest tile
+    centre, (lens index (H, W) int32, -1 where none; squared distance to its tile
+    centre in tile units (H, W) float32, inf where none)."""
+    table, cell, off = _lattice_lookup(layout, k)
+    for o in off:
+        li = table.take(cell + o)
+        yield li, _tile_dist2(layout, li)
+
+
 def nearest_lenses(layout: ViewLayout, k: int = 7) -> tuple[np.ndarray, np.ndarray]:
     """For every output pixel, up to ``k`` used lenses whose tiles may cover it.
 
@@ -172,31 +234,44 @@ def nearest_lenses(layout: ViewLayout, k: int = 7) -> tuple[np.ndarray, np.ndarr
     is nearest and its six lattice neighbours, so any weight of radius <= 1 tile is
     complete.
     """
-    T = layout.tile
-    ys, xs = np.mgrid[0:layout.height, 0:layout.width].astype(np.float64)
-    c0 = layout.tile_centres
-    ref = c0[0]
-    B = layout.basis.T  # columns: output-pixel vectors of the two lattice steps
-    Binv = np.linalg.inv(B)
-    lat = np.rint((c0 - ref) @ Binv.T).astype(np.int64)
-    lo = lat.min(axis=0) - 2
-    shape = lat.max(axis=0) - lo + 3
-    table = np.full(tuple(shape), -1, dtype=np.int64)
-    table[lat[:, 0] - lo[0], lat[:, 1] - lo[1]] = np.arange(len(c0))
-    ax = np.rint(Binv[0, 0] * (xs - ref[0]) + Binv[0, 1] * (ys - ref[1])).astype(np.int64)
-    ay = np.rint(Binv[1, 0] * (xs - ref[0]) + Binv[1, 1] * (ys - ref[1])).astype(np.int64)
-    steps = np.array([(0, 0), (1, 0), (0, 1), (-1, 1), (-1, 0), (0, -1), (1, -1),
-                      (1, 1), (-1, -1), (2, -1), (-2, 1), (1, -2), (-1, 2)])[: max(k, 1)]
-    idx = np.full((layout.height, layout.width, len(steps)), -1, dtype=np.int64)
-    dist2 = np.full(idx.shape, np.inf)
-    cx = np.append(c0[:, 0], np.nan)  # index -1: no lens
-    cy = np.append(c0[:, 1], np.nan)
-    for n, st in enumerate(steps):
-        qi = ax + (st[0] - lo[0])
-        qj = ay + (st[1] - lo[1])
-        ok = (qi >= 0) & (qi < shape[0]) & (qj >= 0) & (qj < shape[1])
-        li = np.where(ok, table[np.clip(qi, 0, shape[0] - 1), np.clip(qj, 0, shape[1] - 1)], -1)
-        idx[..., n] = li
-        d2 = ((xs - cx[li]) ** 2 + (ys - cy[li]) ** 2) / T ** 2
-        dist2[..., n] = np.where(li >= 0, d2, np.inf)
+    idx, dist2 = zip(*_candidates(layout, k), strict=True)
+    return np.stack(idx, axis=-1).astype(np.int64), np.stack(dist2, axis=-1)
+
+
+_KEY_SCALE = float(1 << 22)  # squared tile distances quantised to 2^-22 for the order
+_KEY_MAX = (1 << 27) - 1  # keys above: d2 >= 32 tiles^2 or no lens
+
+
+def nearest_slots(layout: ViewLayout, keep: int = 3, k: int = 7
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The ``keep`` nearest of :func:`nearest_lenses`'s ``k`` candidates, nearest first,
+    slot-major: (lens index (keep, H, W) int32, -1 where none; squared distance in tile
+    units (keep, H, W) float32, inf where none). Ties (to 2^-22 tile^2) keep the
+    candidate order. A sorting network on int32 keys ``quantised d2 << 3 | candidate``
+    (one pass, 5 min/max per candidate) instead of sorting (H, W, k) arrays."""
+    if k > 8:
+        raise ValueError(f"nearest_slots takes at most 8 candidates, got {k}")
+    keep = min(keep, k)
+    big = np.int32((_KEY_MAX << 3) | 7)
+    slots = None
+    for n, (_, d2) in enumerate(_candidates(layout, k)):
+        key = np.minimum(d2 * _KEY_SCALE, _KEY_MAX).astype(np.int32)
+        key <<= 3
+        key |= np.int32(n)
+        if slots is None:
+            slots = [key] + [np.full_like(key, big) for _ in range(keep - 1)]
+            continue
+        x = key
+        for s in range(keep):  # insert x: slots stay sorted
+            lo_, hi_ = np.minimum(slots[s], x), np.maximum(slots[s], x)
+            slots[s], x = lo_, hi_
+    table, cell, off = _lattice_lookup(layout, k)
+    off = np.append(off, 0).astype(np.int32)  # entry 7 (empty slot): any cell, set to -1
+    idx = np.empty((keep,) + cell.shape, np.int32)
+    dist2 = np.empty(idx.shape, np.float32)
+    for s in range(keep):
+        li = table.take(cell + off.take(slots[s] & 7))
+        li[(slots[s] >> 3) >= _KEY_MAX] = -1
+        idx[s] = li
+        dist2[s] = _tile_dist2(layout, li)
     return idx, dist2
