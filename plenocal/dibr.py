@@ -65,6 +65,55 @@ class View:
     depth: np.ndarray  # float32 z-depth, 0 = invalid
 
 
+@numba.njit(cache=True)
+def _push_down(sv, sw):  # pragma: no cover - numba
+    """One push level: 2x2 block sums of the weighted values and of the weights (odd
+    sizes padded with zeros), in float32 as the levels, summed in the order numpy's
+    ``reshape(H2, 2, W2, 2, C).sum(axis=(1, 3))`` takes (one channel: the two row
+    pairs, then their sum; more: the four values in row order)."""
+    H, W, C = sv.shape
+    H2, W2 = (H + 1) // 2, (W + 1) // 2
+    dv = np.zeros((H2, W2, C), np.float32)
+    dw = np.zeros((H2, W2), np.float32)
+    zero = np.float32(0.0)
+    for y in range(H2):
+        y1 = 2 * y + 1
+        for x in range(W2):
+            x1 = 2 * x + 1
+            w00 = sw[2 * y, 2 * x]
+            w01 = sw[2 * y, x1] if x1 < W else zero
+            w10 = sw[y1, 2 * x] if y1 < H else zero
+            w11 = sw[y1, x1] if (y1 < H and x1 < W) else zero
+            dw[y, x] = (w00 + w01) + (w10 + w11)
+            for c in range(C):
+                a00 = sv[2 * y, 2 * x, c]
+                a01 = sv[2 * y, x1, c] if x1 < W else zero
+                a10 = sv[y1, 2 * x, c] if y1 < H else zero
+                a11 = sv[y1, x1, c] if (y1 < H and x1 < W) else zero
+                if C == 1:
+                    dv[y, x, c] = (a00 + a01) + (a10 + a11)
+                else:
+                    dv[y, x, c] = ((a00 + a01) + a10) + a11
+    return dv, dw
+
+
+@numba.njit(cache=True)
+def _pull_up(mean, sv, sw):  # pragma: no cover - numba
+    """One pull level: the level's own mean where it has weight, else the coarser mean."""
+    H, W, C = sv.shape
+    out = np.empty((H, W, C), np.float32)
+    eps = np.float32(1e-12)
+    for y in range(H):
+        for x in range(W):
+            w = sw[y, x]
+            for c in range(C):
+                if w > 0:
+                    out[y, x, c] = sv[y, x, c] / max(w, eps)
+                else:
+                    out[y, x, c] = mean[y // 2, x // 2, c]
+    return out
+
+
 def push_pull(values: np.ndarray, weight: np.ndarray) -> np.ndarray:
     """Fill pixels of zero weight by push-pull (pyramid) interpolation of the weighted
     ones; pixels of positive weight are returned unchanged."""
@@ -73,26 +122,14 @@ def push_pull(values: np.ndarray, weight: np.ndarray) -> np.ndarray:
     if squeeze:
         v = v[..., None]
     w = (np.asarray(weight, np.float32) > 0).astype(np.float32)
-    levels = [(v * w[..., None], w)]
+    levels = [(np.ascontiguousarray(v * w[..., None]), np.ascontiguousarray(w))]
     while min(levels[-1][1].shape) > 1:
-        sv, sw = levels[-1]
-        H, W = sw.shape
-        H2, W2 = (H + 1) // 2, (W + 1) // 2
-        pv = np.zeros((H2 * 2, W2 * 2, sv.shape[2]), np.float32)
-        pw = np.zeros((H2 * 2, W2 * 2), np.float32)
-        pv[:H, :W] = sv
-        pw[:H, :W] = sw
-        dv = pv.reshape(H2, 2, W2, 2, -1).sum(axis=(1, 3))
-        dw = pw.reshape(H2, 2, W2, 2).sum(axis=(1, 3))
-        levels.append((dv, dw))
+        levels.append(_push_down(*levels[-1]))
     # pull: from coarse to fine, replace empty pixels by the coarser average
     cv_, cw = levels[-1]
     mean = cv_ / np.maximum(cw, 1e-12)[..., None]
     for sv, sw in reversed(levels[:-1]):
-        H, W = sw.shape
-        up = np.repeat(np.repeat(mean, 2, axis=0), 2, axis=1)[:H, :W]
-        own = sv / np.maximum(sw, 1e-12)[..., None]
-        mean = np.where((sw > 0)[..., None], own, up)
+        mean = _pull_up(np.ascontiguousarray(mean), sv, sw)
     out = np.where((w > 0)[..., None], v, mean)
     return out[..., 0] if squeeze else out
 
@@ -299,6 +336,49 @@ def warp_view(view: View | PreparedView, tgt: PinholeCamera,
     return colour.astype(np.float32), np.where(ok, zt, 0.0).astype(np.float32), w
 
 
+@numba.njit(cache=True)
+def _blend(colour, z, w, q, z_tolerance, depth_exponent):  # pragma: no cover - numba
+    """Per target pixel, the inputs' samples (colour (n, H, W, C), depth and weight
+    (n, H, W), float32) averaged with weights ``w q (z_near / z)^depth_exponent``
+    (the soft z-test; ``z_tolerance`` >= 0: only samples within that relative band of
+    the nearest, the hard one). Returns the blend (float64) and the total weight (0:
+    no sample). The arithmetic is numpy's on the stacked arrays, input by input in
+    order (float32 depth ratios and powers, float64 weights and sums)."""
+    n, H, W, C = colour.shape
+    out = np.zeros((H, W, C))
+    tot = np.zeros((H, W))
+    band = np.float32(1.0 + z_tolerance)
+    exponent = np.float32(depth_exponent)
+    acc = np.zeros(C)
+    for y in range(H):
+        for x in range(W):
+            zmin = np.float32(np.inf)
+            for i in range(n):
+                if w[i, y, x] > 0 and z[i, y, x] < zmin:
+                    zmin = z[i, y, x]
+            t = 0.0
+            acc[:] = 0.0
+            for i in range(n):
+                wi = w[i, y, x]
+                if not wi > 0:
+                    continue
+                zi = z[i, y, x]
+                if z_tolerance >= 0 and not zi <= np.float32(zmin * band):
+                    continue
+                wt = np.float64(wi) * q[i]
+                if depth_exponent > 0:
+                    r = np.float32(zmin / zi)
+                    wt = wt * np.float64(r ** exponent)
+                t += wt
+                for c in range(C):
+                    acc[c] += wt * np.float64(colour[i, y, x, c])
+            tot[y, x] = t
+            d = max(t, 1e-30)
+            for c in range(C):
+                out[y, x, c] = acc[c] / d
+    return out, tot
+
+
 def synthesize(views: Sequence[View | PreparedView], target: PinholeCamera,
                opt: DibrOptions | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Synthesized target image (float32 in [0, 1], the inputs' channels) and the mask of
@@ -307,23 +387,13 @@ def synthesize(views: Sequence[View | PreparedView], target: PinholeCamera,
     if not views:
         raise ValueError("DIBR needs at least one input view")
     warped = [warp_view(v, target, opt) for v in views]
-    zs = np.stack([w[1] for w in warped])
-    ws = np.stack([w[2] for w in warped])
-    zs_valid = np.where(ws > 0, zs, np.inf)
-    zmin = zs_valid.min(axis=0)
-    keep = ws > 0
-    if opt.z_tolerance is not None:
-        keep &= zs_valid <= zmin * (1.0 + opt.z_tolerance)
     dist = np.array([np.linalg.norm(v.camera.centre - target.centre) for v in views])
     q = 1.0 / (dist ** 2 + opt.distance_eps ** 2)
-    wt = np.where(keep, ws, 0.0) * q[:, None, None]
-    if opt.depth_exponent > 0:
-        zr = np.where(keep, zmin[None] / np.where(keep, zs_valid, 1.0), 0.0)
-        wt = wt * zr ** opt.depth_exponent
-    tot = wt.sum(axis=0)
-    acc = sum(wt[i][..., None] * warped[i][0] for i in range(len(views)))
+    out, tot = _blend(np.stack([w[0] for w in warped]), np.stack([w[1] for w in warped]),
+                      np.stack([w[2] for w in warped]), q,
+                      -1.0 if opt.z_tolerance is None else float(opt.z_tolerance),
+                      float(opt.depth_exponent))
     seen = tot > 0
-    out = acc / np.maximum(tot, 1e-30)[..., None]
     if opt.inpaint and not seen.all():
         have = seen
         if opt.hole_fill == "rows":
