@@ -93,6 +93,28 @@ def validate_config(config: dict, schema_path: str | Path | None = None) -> dict
     return config
 
 
+def canonical(value: Any) -> Any:
+    """``value`` with every mapping's keys in sorted order, recursively (lists keep their
+    order: it means something there). The workflow passes config slices to its rules as
+    ``params``, and Snakemake compares params by their text: without this, a config whose
+    keys are merely reordered (a YAML tool that sorts keys, a user who moves ``seed``
+    below ``array``) would rerun every rule, simulation included."""
+    if isinstance(value, dict):
+        return {k: canonical(value[k]) for k in sorted(value, key=str)}
+    if isinstance(value, list):
+        return [canonical(v) for v in value]
+    return value
+
+
+def canonicalize(config: dict) -> dict:
+    """Put ``config`` into :func:`canonical` order in place (Snakemake's ``config`` object
+    is shared by every rule file) and return it."""
+    ordered = canonical(config)
+    config.clear()
+    config.update(ordered)
+    return config
+
+
 def _check_semantics(config: dict) -> None:
     for name, ds in config["datasets"].items():
         sim = ds.get("simulate")

@@ -5,7 +5,7 @@ stage's settings reruns that stage and what depends on it, nothing else)."""
 import re
 from pathlib import Path
 
-from plenocal.config import ConfigError, validate_config
+from plenocal.config import ConfigError, canonicalize, validate_config
 from plenocal.datasheet import DatasheetError, load_datasheet
 from plenocal.viewgeom import central_view, view_names
 
@@ -13,6 +13,8 @@ try:
     validate_config(config, Path(workflow.basedir) / "config.schema.yaml")
 except ConfigError as err:
     raise ValueError(str(err)) from None
+# every slice handed to a rule as params in one key order: reordering config.yaml reruns nothing
+canonicalize(config)
 
 DATASETS = sorted(config["datasets"])
 SYNTHETIC = [d for d in DATASETS if "simulate" in config["datasets"][d]]

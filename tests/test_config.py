@@ -75,3 +75,17 @@ def test_unknown_top_level_key():
     c["colmap"] = {}
     with pytest.raises(ConfigError, match="unknown key"):
         validate_config(c)
+
+
+def test_canonical_sorts_mappings_and_keeps_lists():
+    from plenocal.config import canonical, canonicalize
+
+    cfg = {"b": {"z": 1, "a": [{"y": 2, "x": 3}, 4]}, "a": None}
+    out = canonical(cfg)
+    assert list(out) == ["a", "b"]
+    assert list(out["b"]) == ["a", "z"]
+    assert [list(d) for d in out["b"]["a"][:1]] == [["x", "y"]]
+    assert out["b"]["a"][1] == 4
+    assert repr(canonical({"y": 1, "x": 2})) == repr(canonical({"x": 2, "y": 1}))
+    same = canonicalize(cfg)
+    assert same is cfg and list(cfg) == ["a", "b"]
