@@ -46,7 +46,12 @@ for _i, (_n, _datasets) in enumerate(convert_groups()):
         output:
             views=[f"results/{{dataset}}/views/{{cam}}/{v}.png" for v in view_names(_n)],
             patch_size="results/{dataset}/views/{cam}/patch_size.npy",
-            patch_png="results/{dataset}/views/{cam}/patch_size.png",
+            patch_png=report(
+                "results/{dataset}/views/{cam}/patch_size.png",
+                caption="../report/patch_size.rst",
+                category="Conversion",
+                subcategory="{cam}",
+            ),
             disparity="results/{dataset}/views/{cam}/disparity.json",
         log:
             log_path("convert", "{cam}"),
@@ -73,7 +78,11 @@ rule convert_quality:
         converted=convert_quality_views,
         setup="results/{dataset}/views/convert_setup.json",
     output:
-        quality="results/{dataset}/convert/quality.json",
+        quality=report(
+            "results/{dataset}/convert/quality.json",
+            caption="../report/convert_quality.rst",
+            category="Conversion",
+        ),
     log:
         log_path("convert_quality"),
     benchmark:

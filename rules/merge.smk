@@ -35,7 +35,11 @@ rule merge:
         rig="results/{dataset}/reg_b/rig.json",
         scale="results/{dataset}/merge/scale.json",
     output:
-        plain="results/{dataset}/calibration/cameras.json",
+        plain=report(
+            "results/{dataset}/calibration/cameras.json",
+            caption="../report/calibration.rst",
+            category="Calibration",
+        ),
         mpeg="results/{dataset}/calibration/mpeg/cameras.json",
         colmap=directory("results/{dataset}/calibration/colmap"),
     log:

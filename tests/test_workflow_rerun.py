@@ -163,3 +163,16 @@ def test_reordered_config_keys_rerun_nothing(complete_run: Path, tmp_path: Path)
     # and a real change still reruns: the check above is not blind
     edit_config(work, lambda c: c["convert"].update(tile_size=7))
     assert planned(work).get("convert") == 10
+
+
+def test_snakemake_report_attaches_every_caption(complete_run: Path, tmp_path: Path):
+    """Issue 16: every report/*.rst is the caption of an output, and Snakemake's own
+    report builds with all of them."""
+    work = clone(complete_run, tmp_path / "w")
+    used = set()
+    for smk in list((work / "rules").glob("*.smk")) + [work / "Snakefile"]:
+        used |= set(re.findall(r"report/(\w+\.rst)", smk.read_text()))
+    assert used == {p.name for p in (work / "report").glob("*.rst")}
+    proc = snakemake(work, "--report", "report.zip")
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    assert (work / "report.zip").stat().st_size > 10_000
