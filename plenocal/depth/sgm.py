@@ -46,7 +46,6 @@ from plenocal.depth.planesweep import (
     consistency_partner,
     depth_labels,
     left_right_check,
-    smallest_first,
     source_costs,
 )
 from plenocal.io import to_float
@@ -91,55 +90,98 @@ def _sweep_options(opt: SgmOptions) -> PlaneSweepOptions:
                              cost="tad", window=opt.window, best_fraction=opt.best_fraction)
 
 
+@numba.njit(cache=True, fastmath={"nnan", "nsz"})
+def _mean_of_seen_best(per, k_of, k_max, out):  # pragma: no cover - numba
+    """Per pixel of ``per`` (S, H, W, overwritten): the mean of the ``k_of[S']`` smallest
+    of the S' finite costs (summed in ascending order, float32), 1 where no source sees
+    it. Row by row, ``k_max`` bubble passes of min/max (unseen +inf last); the costs are
+    never NaN nor -0 (the fastmath flags that let the min/max vectorise), and the sums
+    keep their order (no reassociation)."""
+    S, H, W = per.shape
+    seen = np.empty(W, np.int64)
+    lo = np.empty(W, np.float32)
+    hi = np.empty(W, np.float32)
+    for y in range(H):
+        seen[:] = 0
+        for s in range(S):
+            row = per[s, y]
+            for x in range(W):
+                seen[x] += row[x] < np.inf
+        for i in range(min(k_max, S - 1)):
+            for j in range(S - 1, i, -1):
+                p = per[j - 1, y]
+                q = per[j, y]
+                for x in range(W):
+                    a = p[x]
+                    b = q[x]
+                    lo[x] = min(a, b)
+                    hi[x] = max(a, b)
+                for x in range(W):
+                    p[x] = lo[x]
+                    q[x] = hi[x]
+        for x in range(W):
+            n = seen[x]
+            if n == 0:
+                out[y, x] = np.float32(1.0)
+            else:
+                k = k_of[n]
+                acc = per[0, y, x]
+                for m in range(1, k):
+                    acc += per[m, y, x]
+                out[y, x] = acc / np.float32(k)
+
+
 def matching_cost(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
                   src_imgs: list[np.ndarray], depths: np.ndarray,
                   opt: SgmOptions) -> np.ndarray:
     """Cost volume (H, W, D) float32 in [0, 1]: per label the mean of the best
     ``ceil(S' * best_fraction)`` of the S' sources that see the pixel; 1 where none."""
     S = len(srcs)
-    k_max = max(1, int(np.ceil(S * opt.best_fraction)))
     # k per pixel from the number of sources that see it, by table
-    k_of = np.maximum(1, np.ceil(np.arange(S + 1) * opt.best_fraction)).astype(np.uint8)
+    k_of = np.maximum(1, np.ceil(np.arange(S + 1) * opt.best_fraction)).astype(np.int64)
+    k_max = int(k_of[-1])
     vol = np.empty((len(depths), ref.height, ref.width), dtype=np.float32)
-    seen = np.empty((ref.height, ref.width), dtype=np.uint8)
-    mean = np.empty((ref.height, ref.width), dtype=np.float32)
-    costs = source_costs(ref, ref_img, srcs, src_imgs, depths, _sweep_options(opt))
-    for i, per in enumerate(costs):
-        seen[...] = 0
-        for p in per:
-            seen += p < np.inf
-        k = k_of[seen]
-        planes = smallest_first(per, k_max)  # unseen (+inf) last
-        acc = vol[i]
-        np.copyto(acc, np.float32(1.0))  # where no source sees the pixel
-        run = planes[0].copy()
-        for m in range(1, k_max + 1):
-            if m > 1:
-                run += planes[m - 1]
-            np.divide(run, np.float32(m), out=mean)
-            np.copyto(acc, mean, where=(k == m) & (seen > 0))
+    for i, per in enumerate(source_costs(ref, ref_img, srcs, src_imgs, depths,
+                                         _sweep_options(opt))):
+        _mean_of_seen_best(per, k_of, k_max, vol[i])
     return np.ascontiguousarray(vol.transpose(1, 2, 0))
 
 
 @numba.njit(cache=True)
+def _path_step(lp, lmin, pp2, p1, c, d):  # pragma: no cover - numba
+    """L_r(p, d) of one label from the previous pixel's path costs ``lp`` (any d)."""
+    D = lp.shape[0]
+    best = lp[d]
+    if d > 0 and lp[d - 1] + p1 < best:
+        best = lp[d - 1] + p1
+    if d < D - 1 and lp[d + 1] + p1 < best:
+        best = lp[d + 1] + p1
+    if lmin + pp2 < best:
+        best = lmin + pp2
+    return c[d] + best - lmin
+
+
+@numba.njit(cache=True)
 def _aggregate_dir(cost, grey, dy, dx, p1, p2, contrast, out):  # pragma: no cover - numba
+    """One direction's path costs added into ``out``. The inner label loop has no
+    branches (the end labels are done apart), so that it vectorises; the arithmetic
+    (float64 from the penalty on, rounded to float32 per label) is the plain
+    recursion's."""
     H, W, D = cost.shape
     prev = np.zeros((W, D), np.float32)
     cur = np.zeros((W, D), np.float32)
     prev_min = np.zeros(W, np.float32)
     cur_min = np.zeros(W, np.float32)
+    step = np.empty(D, np.float32)
     ys = range(H) if dy >= 0 else range(H - 1, -1, -1)
     for y in ys:
         xs = range(W) if dx >= 0 else range(W - 1, -1, -1)
         for x in xs:
             py, px = y - dy, x - dx
-            m = np.float32(1e30)
+            c = cost[y, x]
             if py < 0 or py >= H or px < 0 or px >= W:
                 for d in range(D):
-                    v = cost[y, x, d]
-                    cur[x, d] = v
-                    if v < m:
-                        m = v
+                    step[d] = c[d]
             else:
                 if dy == 0:
                     lp = cur[px]
@@ -151,21 +193,22 @@ def _aggregate_dir(cost, grey, dy, dx, p1, p2, contrast, out):  # pragma: no cov
                 pp2 = p2 / (1.0 + g / contrast)
                 if pp2 < p1:
                     pp2 = p1
-                for d in range(D):
-                    best = lp[d]
-                    if d > 0 and lp[d - 1] + p1 < best:
-                        best = lp[d - 1] + p1
-                    if d < D - 1 and lp[d + 1] + p1 < best:
-                        best = lp[d + 1] + p1
-                    if lmin + pp2 < best:
-                        best = lmin + pp2
-                    v = cost[y, x, d] + best - lmin
-                    cur[x, d] = v
-                    if v < m:
-                        m = v
+                jump = lmin + pp2
+                step[0] = _path_step(lp, lmin, pp2, p1, c, 0)
+                for d in range(1, D - 1):
+                    near = min(lp[d], min(lp[d - 1] + p1, lp[d + 1] + p1))
+                    step[d] = c[d] + min(np.float64(near), jump) - lmin
+                if D > 1:
+                    step[D - 1] = _path_step(lp, lmin, pp2, p1, c, D - 1)
+            m = step[0]
+            for d in range(1, D):
+                m = min(m, step[d])
             cur_min[x] = m
+            row = cur[x]
+            o = out[y, x]
             for d in range(D):
-                out[y, x, d] += cur[x, d]
+                row[d] = step[d]
+                o[d] += step[d]
         tmp = prev
         prev = cur
         cur = tmp
