@@ -37,12 +37,16 @@ def _texel(atlas, th, tw, k, s, t, out):
     """Bilinear lookup with mirrored repetition into ``out`` (3,); s, t in texels."""
     h = th[k]
     w = tw[k]
-    s = s % (2.0 * (w - 1))
+    period = 2.0 * (w - 1)
+    if not 0.0 <= s < period:  # (s % period is s itself there: skip the division)
+        s = s % period
     if s > w - 1:
-        s = 2.0 * (w - 1) - s
-    t = t % (2.0 * (h - 1))
+        s = period - s
+    period = 2.0 * (h - 1)
+    if not 0.0 <= t < period:
+        t = t % period
     if t > h - 1:
-        t = 2.0 * (h - 1) - t
+        t = period - t
     i0 = int(math.floor(t))
     j0 = int(math.floor(s))
     i1 = min(i0 + 1, h - 1)
@@ -56,35 +60,55 @@ def _texel(atlas, th, tw, k, s, t, out):
     return out
 
 
+def quad_table(scene: SceneArrays) -> np.ndarray:
+    """(n, 16) per-quad constants of :func:`_trace`, one contiguous row per quad: P0,
+    normal, U, V, |U|^2, |V|^2, |U|, |V| (computed as the per-ray expressions were, so
+    the traced values are the same bits)."""
+    n = len(scene.p0)
+    out = np.empty((n, 16))
+    out[:, 0:3] = scene.p0
+    out[:, 3:6] = scene.normal
+    out[:, 6:9] = scene.u
+    out[:, 9:12] = scene.v
+    for q in range(n):
+        u, v = scene.u[q], scene.v[q]
+        out[q, 12] = u[0] * u[0] + u[1] * u[1] + u[2] * u[2]
+        out[q, 13] = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+        out[q, 14] = math.sqrt(out[q, 12])
+        out[q, 15] = math.sqrt(out[q, 13])
+    return out
+
+
 @njit(cache=True)
-def _trace(ox, oy, oz, dx, dy, dz, p0, u, v, nrm, tex_id, texel, atlas, th, tw, rgb):
-    """Nearest hit of the ray; writes its colour into rgb and returns the distance
-    along the ray (in units of the direction vector), or -1 for no hit."""
+def _trace(ox, oy, oz, dx, dy, dz, quads, tex_id, texel, atlas, th, tw, rgb):
+    """Nearest hit of the ray among ``quads`` (:func:`quad_table`); writes its colour
+    into rgb and returns the distance along the ray (in units of the direction
+    vector), or -1 for no hit."""
     best = 1e30
     hit = -1
     ba = 0.0
     bb = 0.0
-    for q in range(p0.shape[0]):
-        den = nrm[q, 0] * dx + nrm[q, 1] * dy + nrm[q, 2] * dz
+    for q in range(quads.shape[0]):
+        row = quads[q]
+        den = row[3] * dx + row[4] * dy + row[5] * dz
         if abs(den) < 1e-12:
             continue
-        tt = (nrm[q, 0] * (p0[q, 0] - ox) + nrm[q, 1] * (p0[q, 1] - oy)
-              + nrm[q, 2] * (p0[q, 2] - oz)) / den
+        tt = (row[3] * (row[0] - ox) + row[4] * (row[1] - oy) + row[5] * (row[2] - oz)) / den
         if tt <= 1e-9 or tt >= best:
             continue
-        rx = ox + tt * dx - p0[q, 0]
-        ry = oy + tt * dy - p0[q, 1]
-        rz = oz + tt * dz - p0[q, 2]
-        uu = u[q, 0] * u[q, 0] + u[q, 1] * u[q, 1] + u[q, 2] * u[q, 2]
-        vv = v[q, 0] * v[q, 0] + v[q, 1] * v[q, 1] + v[q, 2] * v[q, 2]
-        a = (rx * u[q, 0] + ry * u[q, 1] + rz * u[q, 2]) / uu
-        b = (rx * v[q, 0] + ry * v[q, 1] + rz * v[q, 2]) / vv
-        if a < 0.0 or a > 1.0 or b < 0.0 or b > 1.0:
+        rx = ox + tt * dx - row[0]
+        ry = oy + tt * dy - row[1]
+        rz = oz + tt * dz - row[2]
+        a = (rx * row[6] + ry * row[7] + rz * row[8]) / row[12]
+        if a < 0.0 or a > 1.0:
+            continue
+        b = (rx * row[9] + ry * row[10] + rz * row[11]) / row[13]
+        if b < 0.0 or b > 1.0:
             continue
         best = tt
         hit = q
-        ba = a * math.sqrt(uu)
-        bb = b * math.sqrt(vv)
+        ba = a * row[14]
+        bb = b * row[15]
     if hit < 0:
         rgb[0] = BACKGROUND
         rgb[1] = BACKGROUND
@@ -96,8 +120,8 @@ def _trace(ox, oy, oz, dx, dy, dz, p0, u, v, nrm, tex_id, texel, atlas, th, tw, 
 
 @njit(cache=True)
 def _render_lenslet(height, width, pix_size, L, s, t_types, lens_type, F, half_ap, stop_z,
-                    stop_half, lens_x, lens_y, half_lens, jitter, disk, R, C, p0, u, v, nrm,
-                    tex_id, texel, atlas, th, tw, out):
+                    stop_half, lens_x, lens_y, half_lens, jitter, disk, R, C, quads, tex_id, texel,
+                    atlas, th, tw, out):
     ns = jitter.shape[0]
     cxs = (width - 1) / 2.0
     cys = (height - 1) / 2.0
@@ -107,12 +131,15 @@ def _render_lenslet(height, width, pix_size, L, s, t_types, lens_type, F, half_a
             lx = lens_x[row, col]
             ly = lens_y[row, col]
             t = t_types[lens_type[row, col]]
+            t_s = t / s
             acc0 = 0.0
             acc1 = 0.0
             acc2 = 0.0
             rot = (row * 7919 + col * 104729) % ns  # decorrelate the sample pattern
             for k in range(ns):
-                kk = (k + rot) % ns
+                kk = k + rot  # (k + rot) % ns
+                if kk >= ns:
+                    kk -= ns
                 # sensor point (metric, 180-degree readout flip)
                 xs = -(col + jitter[kk, 0] - cxs) * pix_size
                 ys = -(row + jitter[kk, 1] - cys) * pix_size
@@ -120,8 +147,8 @@ def _render_lenslet(height, width, pix_size, L, s, t_types, lens_type, F, half_a
                 mx = lx + half_lens * disk[k, 0]
                 my = ly + half_lens * disk[k, 1]
                 # conjugate point of the sensor point, t in front of the MLA
-                px = lx + (lx - xs) * (t / s)
-                py = ly + (ly - ys) * (t / s)
+                px = lx + (lx - xs) * t_s
+                py = ly + (ly - ys) * t_s
                 sx = (px - mx) / t
                 sy = (py - my) / t
                 hx = mx + sx * L
@@ -142,8 +169,7 @@ def _render_lenslet(height, width, pix_size, L, s, t_types, lens_type, F, half_a
                 dx = R[0, 0] * ux + R[0, 1] * uy + R[0, 2]
                 dy = R[1, 0] * ux + R[1, 1] * uy + R[1, 2]
                 dz = R[2, 0] * ux + R[2, 1] * uy + R[2, 2]
-                _trace(ox, oy, oz, dx, dy, dz, p0, u, v, nrm, tex_id, texel, atlas, th, tw,
-                       rgb)
+                _trace(ox, oy, oz, dx, dy, dz, quads, tex_id, texel, atlas, th, tw, rgb)
                 acc0 += rgb[0]
                 acc1 += rgb[1]
                 acc2 += rgb[2]
@@ -165,8 +191,8 @@ def _pixel_ray(Kinv, R, u, v):
 
 
 @njit(cache=True)
-def _render_pinhole(height, width, Kinv, R, C, ss, p0, u, v, nrm, tex_id, texel, atlas, th,
-                    tw, out, depth):
+def _render_pinhole(height, width, Kinv, R, C, ss, quads, tex_id, texel, atlas, th, tw, out,
+                    depth):
     rgb = np.empty(3)
     for row in range(height):
         for col in range(width):
@@ -177,8 +203,8 @@ def _render_pinhole(height, width, Kinv, R, C, ss, p0, u, v, nrm, tex_id, texel,
                 for j in range(ss):
                     dx, dy, dz, _ = _pixel_ray(Kinv, R, col - 0.5 + (j + 0.5) / ss,
                                                row - 0.5 + (i + 0.5) / ss)
-                    _trace(C[0], C[1], C[2], dx, dy, dz, p0, u, v, nrm, tex_id, texel,
-                           atlas, th, tw, rgb)
+                    _trace(C[0], C[1], C[2], dx, dy, dz, quads, tex_id, texel, atlas, th,
+                           tw, rgb)
                     a0 += rgb[0]
                     a1 += rgb[1]
                     a2 += rgb[2]
@@ -188,8 +214,8 @@ def _render_pinhole(height, width, Kinv, R, C, ss, p0, u, v, nrm, tex_id, texel,
             out[row, col, 2] = a2 / n
             # z-depth of the pixel centre's ray (direction has z_cam = 1 by K^-1)
             dx, dy, dz, cz = _pixel_ray(Kinv, R, float(col), float(row))
-            tt = _trace(C[0], C[1], C[2], dx, dy, dz, p0, u, v, nrm, tex_id, texel, atlas,
-                        th, tw, rgb)
+            tt = _trace(C[0], C[1], C[2], dx, dy, dz, quads, tex_id, texel, atlas, th, tw,
+                        rgb)
             depth[row, col] = tt * cz if tt > 0 else 0.0
 
 
@@ -271,9 +297,9 @@ def render_lenslet(scene: SceneArrays, optics, lens_centres_px: np.ndarray,
     C = np.ascontiguousarray(cam_to_world[:3, 3], dtype=np.float64)
     _render_lenslet(optics.height, optics.width, optics.pixel_size, L, s, t_types, lens_types,
                     F, optics.aperture / 2, float(stop_distance), float(stop_diameter) / 2,
-                    lens_x, lens_y, optics.mla_pitch / 2, jitter, disk, R, C, scene.p0,
-                    scene.u, scene.v, scene.normal, scene.tex_id, scene.texel, scene.atlas,
-                    scene.tex_h, scene.tex_w, out)
+                    lens_x, lens_y, optics.mla_pitch / 2, jitter, disk, R, C,
+                    quad_table(scene), scene.tex_id, scene.texel, scene.atlas, scene.tex_h,
+                    scene.tex_w, out)
     return out
 
 
@@ -285,7 +311,7 @@ def render_pinhole(scene: SceneArrays, K: np.ndarray, cam_to_world: np.ndarray, 
     Kinv = np.ascontiguousarray(np.linalg.inv(K))
     R = np.ascontiguousarray(cam_to_world[:3, :3], dtype=np.float64)
     C = np.ascontiguousarray(cam_to_world[:3, 3], dtype=np.float64)
-    _render_pinhole(height, width, Kinv, R, C, int(supersample), scene.p0, scene.u, scene.v,
-                    scene.normal, scene.tex_id, scene.texel, scene.atlas, scene.tex_h,
-                    scene.tex_w, out, depth)
+    _render_pinhole(height, width, Kinv, R, C, int(supersample), quad_table(scene),
+                    scene.tex_id, scene.texel, scene.atlas, scene.tex_h, scene.tex_w, out,
+                    depth)
     return out, depth
