@@ -6,7 +6,7 @@ import logging
 import time
 from pathlib import Path
 
-import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
+import cv2  # (first: see DESIGN.md on cv2/pycolmap)
 
 from plenocal.depth import estimate_depth, resolve_backend
 from plenocal.depth.inputs import (
@@ -23,6 +23,7 @@ snakemake = globals()["snakemake"]
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
                     format="%(asctime)s %(levelname)s %(message)s")
 log = logging.getLogger("depth")
+cv2.setNumThreads(max(1, int(snakemake.threads)))  # the job's cores only
 
 cfg = dict(snakemake.params.depth)
 reg = snakemake.wildcards.reg

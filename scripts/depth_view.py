@@ -6,7 +6,7 @@ import logging
 import time
 from pathlib import Path
 
-import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
+import cv2  # (first: see DESIGN.md on cv2/pycolmap)
 
 from plenocal.camera import read_cameras
 from plenocal.depth.inputs import preview, rig_bounds
@@ -17,6 +17,7 @@ snakemake = globals()["snakemake"]
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
                     format="%(asctime)s %(levelname)s %(message)s")
 log = logging.getLogger("depth_view")
+cv2.setNumThreads(max(1, int(snakemake.threads)))  # the job's cores only
 
 cfg = dict(snakemake.params.depth)
 verify = dict(snakemake.params.verify)
