@@ -16,8 +16,8 @@ include: "rules/common.smk"
 
 wildcard_constraints:
     dataset="|".join(re.escape(d) for d in DATASETS),
-    cam=r"x\d{2}_y\d{2}|hand\d{2}",
-    view=r"\d+_\d+",
+    cam=names.SHOT_PATTERN,
+    view=names.VIEW_PATTERN,
 
 
 include: "rules/simulate.smk"

@@ -56,7 +56,7 @@ from plenocal.convert import ConvertSettings, ShotConversion  # noqa: E402
 from plenocal.convert.gridcheck import grid_for_mode, refine_grid  # noqa: E402
 from plenocal.convert.shot import build_grid, load_calib, load_lenslet  # noqa: E402
 from plenocal.io import read_image, write_image  # noqa: E402
-from plenocal.viewgeom import central_view  # noqa: E402
+from plenocal.names import central_view  # noqa: E402
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "real"
 # RayCalibData does not say which kind an MLA is; in the converter's naming (see the

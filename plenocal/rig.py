@@ -66,7 +66,8 @@ from plenocal import optics as o
 from plenocal.camera import PinholeCamera, intrinsics, invert_pose, rotation_angle_deg
 from plenocal.datasheet import load_datasheet
 from plenocal.io import read_json
-from plenocal.viewgeom import MLA_KINDS, central_view, parse_view, view_names, view_position
+from plenocal.names import central_view, parse_view, view_names
+from plenocal.viewgeom import MLA_KINDS, view_position
 
 RIG_MODELS = ("exact", "paper")
 

@@ -55,25 +55,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from plenocal.grid import MicrolensGrid
+from plenocal.names import central_view, parse_view, view_name, view_names  # noqa: F401
 from plenocal.optics import view_spacing
-
-
-def view_name(r: int, c: int) -> str:
-    return f"{r}_{c}"
-
-
-def parse_view(name: str) -> tuple[int, int]:
-    r, c = name.split("_")
-    return int(r), int(c)
-
-
-def view_names(n: int) -> list[str]:
-    return [view_name(r, c) for r in range(n) for c in range(n)]
-
-
-def central_view(n: int) -> str:
-    h = (n - 1) // 2
-    return view_name(h, h)
 
 
 def view_position(r: int, c: int, n: int) -> tuple[int, int]:

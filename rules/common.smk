@@ -7,7 +7,8 @@ from pathlib import Path
 
 from plenocal.config import ConfigError, canonicalize, validate_config
 from plenocal.datasheet import DatasheetError, load_datasheet
-from plenocal.viewgeom import central_view, view_names
+from plenocal import names
+from plenocal.names import central_view, view_names
 
 try:
     validate_config(config, Path(workflow.basedir) / "config.schema.yaml")
@@ -18,7 +19,6 @@ canonicalize(config)
 
 DATASETS = sorted(config["datasets"])
 SYNTHETIC = [d for d in DATASETS if "simulate" in config["datasets"][d]]
-CAM_RE = re.compile(r"^(x\d{2}_y\d{2}|hand\d{2})$")
 
 
 def ds_config(dataset):
@@ -34,17 +34,15 @@ def array_cams(dataset):
     sim = ds_config(dataset).get("simulate")
     if sim is not None:
         a = sim["array"]
-        return [
-            f"x{c:02d}_y{r:02d}" for r in range(a["rows"]) for c in range(a["cols"])
-        ]
-    return [c for c in real_cams(dataset) if c.startswith("x")]
+        return names.array_shots(a["cols"], a["rows"])
+    return [c for c in real_cams(dataset) if names.is_array_shot(c)]
 
 
 def hand_cams(dataset):
     sim = ds_config(dataset).get("simulate")
     if sim is not None:
-        return [f"hand{k:02d}" for k in range(sim["handheld"]["count"])]
-    return [c for c in real_cams(dataset) if c.startswith("hand")]
+        return names.handheld_shots(sim["handheld"]["count"])
+    return [c for c in real_cams(dataset) if names.is_handheld_shot(c)]
 
 
 def real_cams(dataset):
@@ -66,7 +64,7 @@ def real_cams(dataset):
         elif p.suffix != ".png":
             hint = " (rename it to .png)" if p.suffix.lower() == ".png" else ""
             bad.append(f"{p.name}{hint}")
-        elif not CAM_RE.match(p.stem):
+        elif not names.is_shot(p.stem):
             bad.append(p.name)
     if bad:
         raise ValueError(
@@ -280,7 +278,7 @@ def depth_view_keys(dataset):
 
 
 def depth_view_path(dataset, key, ext="npy"):
-    cam, view = key.split("/")
+    cam, view = names.split_key(key)
     return res(dataset, "depth", "views", cam, f"{view}.{ext}")
 
 
@@ -298,12 +296,12 @@ def depth_view_inputs(wildcards):
 
 
 def view_path(dataset, key):
-    cam, view = key.split("/")
+    cam, view = names.split_key(key)
     return res(dataset, "views", cam, f"{view}.png")
 
 
 def true_depth_path(dataset, key):
-    cam, view = key.split("/")
+    cam, view = names.split_key(key)
     return res(dataset, "ground_truth", "depth", cam, f"{view}.npy")
 
 

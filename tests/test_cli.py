@@ -15,8 +15,8 @@ from plenocal.cli import build_parser, convert_config, main
 from plenocal.convert.synthetic import lenslet_from_patch_size, random_texture
 from plenocal.grid import MicrolensGrid
 from plenocal.io import read_image, write_image
+from plenocal.names import view_names
 from plenocal.raytrix import LensType, RayCalib, write_calib
-from plenocal.viewgeom import view_names
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:

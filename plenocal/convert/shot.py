@@ -47,9 +47,10 @@ from plenocal.convert.render import RenderPlan, RenderSettings, make_plan, rende
 from plenocal.convert.vignetting import radial_profile
 from plenocal.grid import MicrolensGrid
 from plenocal.io import read_image
+from plenocal.names import parse_view, view_names
 from plenocal.optics import view_spacing
 from plenocal.raytrix import CalibError, RayCalib, read_calib
-from plenocal.viewgeom import MLA_KINDS, ViewLayout, make_layout, parse_view, view_names
+from plenocal.viewgeom import MLA_KINDS, ViewLayout, make_layout
 
 log = logging.getLogger("plenocal.convert")
 

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from plenocal.names import key_shot
+
 # Viridis at 9 evenly spaced stops (sRGB): interpolated linearly in between.
 _VIRIDIS = np.array([
     [68, 1, 84], [71, 44, 122], [59, 81, 139], [44, 113, 142], [33, 144, 141],
@@ -231,11 +233,11 @@ def camera_array_svg(cameras: Mapping[str, object], truth: Mapping[str, object] 
     C = np.array([cameras[k].centre for k in keys])
     Rs = [cameras[k].R for k in keys]
     V = _view_basis(Rs, yaw_deg, pitch_deg)
-    shots = sorted({k.split("/")[0] for k in keys})
+    shots = sorted({key_shot(k) for k in keys})
     if frustum_views is None:
         by_shot: dict[str, list[str]] = {}
         for k in keys:
-            by_shot.setdefault(k.split("/")[0], []).append(k)
+            by_shot.setdefault(key_shot(k), []).append(k)
         frustum_views = set()
         for s in shots:
             vs = sorted(by_shot[s])

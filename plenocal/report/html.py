@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocal.io import atomic_write_text, read_json
+from plenocal.names import array_position, array_shot, central_view, key_shot, split_key
 from plenocal.report import figures as fg
 from plenocal.report import sources as src
 
@@ -272,12 +273,12 @@ def section_cameras(page: Page) -> None:
     trel = src.SOURCES["ground_truth"][0]
     if page.has(trel):
         truth = fg.align_truth(cams, read_cameras(page.path(trel)))
-    shots = sorted({k.split("/")[0] for k in cams})
+    shots = sorted({key_shot(k) for k in cams})
     per_shot = len(cams) // max(len(shots), 1)
-    array = [c for c in shots if src._array_pos(c) is not None] or shots
+    array = [c for c in shots if array_position(c) is not None] or shots
     mid = array[len(array) // 2]
-    one = {k: v for k, v in cams.items() if k.split("/")[0] == mid}
-    one_truth = {k: v for k, v in truth.items() if k.split("/")[0] == mid}
+    one = {k: v for k, v in cams.items() if key_shot(k) == mid}
+    one_truth = {k: v for k, v in truth.items() if key_shot(k) == mid}
     links = page.link(rel) + (" and " + page.link(trel) if truth else "")
     page.add('<figure id="camera-array">' + fg.camera_array_svg(
         cams, truth or None, title="oblique view from behind, above") + fg.camera_array_svg(
@@ -300,7 +301,6 @@ def _psnr_section(page: Page, key: str, title: str, paper: str, n_views: int, co
     if doc is None:
         page.missing(key)
         return
-    from plenocal.viewgeom import central_view  # noqa: PLC0415
 
     sets = src.psnr_sets(doc, central_view(n_views))
     if not sets:
@@ -441,7 +441,6 @@ def section_fig10(page: Page, n_views: int, centre_cam: str | None) -> None:
         page.add(f'<p class="missing">No synthesised image named <code>&lt;cam&gt;_&lt;r&gt;_'
                  f"&lt;c&gt;</code> under <code>{escape(rel_dir)}/</code>.</p>")
         return
-    from plenocal.viewgeom import central_view  # noqa: PLC0415
 
     want = f"{centre_cam}/{central_view(n_views)}" if centre_cam else None
     keys = sorted(groups, key=lambda k: (k != want, -len(groups[k]), k))
@@ -451,7 +450,7 @@ def section_fig10(page: Page, n_views: int, centre_cam: str | None) -> None:
              "the syntheses differ most from the capture and where the texture is "
              "finest (nearest-neighbour magnification: one block = one pixel).</p>")
     for key in keys[:2]:
-        cam, view = key.split("/")
+        cam, view = split_key(key)
         cap_rel = f"views/{cam}/{view}.png"
         calib = [s for s in groups[key] if not s.truth]
         truth = [s for s in groups[key] if s.truth]
@@ -523,7 +522,7 @@ def section_convert_quality(page: Page, synthetic: bool = True) -> None:
         return
     by_view: dict[str, list[dict]] = {}
     for k, v in rows.items():
-        by_view.setdefault(k.split("/")[-1], []).append(v)
+        by_view.setdefault(k.split("/")[-1], []).append(v)  # "<cam>/<view>" or "<view>"
 
     def mean(lst, n):
         x = [d[n] for d in lst if n in d]
@@ -647,13 +646,13 @@ def build_report(results: str | Path, out_path: str | Path, dataset: str, *,
     results = Path(results)
     say = log or (lambda _m: None)
     page = Page(results, dataset)
-    pos = [src._array_pos(c) for c in cams]
+    pos = [array_position(c) for c in cams]
     cols = max((p[0] for p in pos if p), default=-1) + 1
     rows = max((p[1] for p in pos if p), default=-1) + 1
     array = [c for c, p in zip(cams, pos, strict=True) if p]
     centre_cam = None
     if array:
-        centre_cam = f"x{cols // 2:02d}_y{rows // 2:02d}"
+        centre_cam = array_shot(cols // 2, rows // 2)
     section_overview(page, synthetic, cams)
     say("overview")
     section_table1(page, synthetic)

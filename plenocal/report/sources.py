@@ -17,6 +17,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from plenocal.names import (
+    SHOT_PATTERN,
+    VIEW_PATTERN,
+    array_position,
+    key_shot,
+    key_view,
+    parse_view,
+    split_key,
+)
+
 #: source key -> (path under results/<d>/, the rule that makes it)
 SOURCES: dict[str, tuple[str, str]] = {
     "reprojection": ("eval/reprojection.json", "reprojection"),
@@ -52,9 +62,9 @@ _ALIASES = {
     "ground_truth": ("ground_truth", "truth", "gt"),
 }
 
-CAM_RE = re.compile(r"^(x(\d{2})_y(\d{2})|hand\d{2})$")
-VIEW_RE = re.compile(r"^(\d+)_(\d+)$")
-KEY_RE = re.compile(r"^(x\d{2}_y\d{2}|hand\d{2})/(\d+_\d+)$")
+CAM_RE = re.compile(rf"^({SHOT_PATTERN})$")
+VIEW_RE = re.compile(rf"^({VIEW_PATTERN})$")
+KEY_RE = re.compile(rf"^({SHOT_PATTERN})/({VIEW_PATTERN})$")
 
 
 def _num(v) -> float | None:
@@ -313,21 +323,14 @@ class Grid:
     outside: dict[str, float]  # values that have no place in the grid (hand-held shots)
 
 
-def _array_pos(cam: str) -> tuple[int, int] | None:
-    m = CAM_RE.match(cam)
-    if m and m.group(2) is not None:
-        return int(m.group(2)), int(m.group(3))
-    return None
-
-
 def layout(ps: PsnrSet, n_views: int, cols: int, rows: int) -> Grid:
     """Place a PSNR table on the array (one cell per shot: Fig. 7), on one N x N set
     (Fig. 8) or on every view of the array (Fig. 9), by what its keys cover."""
     keys = list(ps.values) + list(ps.inputs)
-    cams = sorted({k.split("/")[0] for k in keys})
-    vws = sorted({k.split("/")[1] for k in keys})
-    array_cams = [c for c in cams if _array_pos(c) is not None]
-    outside = {k: v for k, v in ps.values.items() if _array_pos(k.split("/")[0]) is None}
+    cams = sorted({key_shot(k) for k in keys})
+    vws = sorted({key_view(k) for k in keys})
+    array_cams = [c for c in cams if array_position(c) is not None]
+    outside = {k: v for k, v in ps.values.items() if array_position(key_shot(k)) is None}
     inputs = set(ps.inputs)
     if len(vws) == 1 and array_cams:
         kind, R, C = "shots", rows, cols
@@ -340,9 +343,9 @@ def layout(ps: PsnrSet, n_views: int, cols: int, rows: int) -> Grid:
     titles = np.full((R, C), "", dtype=object)
 
     def cell(key: str) -> tuple[int, int] | None:
-        cam, view = key.split("/")
-        pos = _array_pos(cam)
-        r, c = (int(x) for x in view.split("_"))
+        cam, view = split_key(key)
+        pos = array_position(cam)
+        r, c = parse_view(view)
         if kind == "shots":
             return None if pos is None else (pos[1], pos[0])
         if kind == "set":
@@ -360,8 +363,8 @@ def layout(ps: PsnrSet, n_views: int, cols: int, rows: int) -> Grid:
             marks[rc] = "input"
             titles[rc] = f"{key}: input view"
     if kind == "shots":
-        col_labels, row_labels = [f"x{c:02d}" for c in range(C)], [f"y{r:02d}" for r in
-                                                                    range(R)]
+        col_labels = [f"x{c:02d}" for c in range(C)]  # the shots' column and row parts
+        row_labels = [f"y{r:02d}" for r in range(R)]
     elif kind == "set":
         col_labels, row_labels = [str(c) for c in range(C)], [str(r) for r in range(R)]
     else:
@@ -377,7 +380,7 @@ def shot_means(ps: PsnrSet) -> dict[str, float]:
     """Mean PSNR per shot (the summary of a Fig. 9 grid)."""
     acc: dict[str, list[float]] = {}
     for k, v in ps.values.items():
-        acc.setdefault(k.split("/")[0], []).append(v)
+        acc.setdefault(key_shot(k), []).append(v)
     return {c: float(np.mean(v)) for c, v in sorted(acc.items())}
 
 

@@ -43,7 +43,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from plenocal.camera import PinholeCamera, rotation_angle_deg, umeyama
-from plenocal.viewgeom import central_view, parse_view
+from plenocal.names import array_position, central_view, key_shot, key_view, parse_view, split_key
 
 #: Targets of issues 4 and 5: (value key, limit, unit, what it bounds).
 TARGETS = {
@@ -72,10 +72,10 @@ def array_step_m(truth: Mapping[str, PinholeCamera], n_views: int) -> float:
     c = central_view(n_views)
     pos = {}
     for key, cam in truth.items():
-        shot, view = key.split("/")
-        if view == c and shot.startswith("x"):
-            col, row = int(shot[1:3]), int(shot[5:7])
-            pos[(col, row)] = cam.centre
+        shot, view = split_key(key)
+        at = array_position(shot)
+        if view == c and at is not None:
+            pos[at] = cam.centre
     d = [float(np.linalg.norm(pos[(x + 1, y)] - p)) for (x, y), p in pos.items()
          if (x + 1, y) in pos]
     d += [float(np.linalg.norm(pos[(x, y + 1)] - p)) for (x, y), p in pos.items()
@@ -90,7 +90,7 @@ def n_views_of(truth: Mapping[str, PinholeCamera]) -> int:
     """N of the N x N sets, from the largest view index in the truth."""
     n = 0
     for key in truth:
-        r, c = parse_view(key.split("/")[1])
+        r, c = parse_view(key_view(key))
         n = max(n, r + 1, c + 1)
     return n
 
@@ -171,11 +171,10 @@ def registration_b_errors(rig: Mapping, truth: Mapping[str, PinholeCamera]) -> d
     from plenocal.rig import compare_with_truth  # noqa: PLC0415  (rig imports yaml)
 
     n = int(rig["n_views"])
-    shots = sorted({k.split("/")[0] for k in truth})
+    shots = sorted({key_shot(k) for k in truth})
     per_set = {}
     for shot in shots:
-        set_truth = {k.split("/")[1]: cam for k, cam in truth.items()
-                     if k.split("/")[0] == shot}
+        set_truth = {key_view(k): cam for k, cam in truth.items() if key_shot(k) == shot}
         if len(set_truth) < n * n:
             continue
         per_set[shot] = compare_with_truth(rig, set_truth)
