@@ -233,30 +233,51 @@ def sgm_aggregate(cost: np.ndarray, grey: np.ndarray, opt: SgmOptions) -> np.nda
     return out
 
 
-def _wta(agg: np.ndarray, near: float, far: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(depth, continuous label, uniqueness ratio) from the aggregated volume."""
+@numba.njit(cache=True)
+def _wta_kernel(agg, near, far, depth, cont, ratio):  # pragma: no cover - numba
+    """Per pixel in one pass: the first minimum over the labels, its parabolic sub-label
+    offset (float32, as numpy computes it), the depth (uniform in inverse depth) and
+    the best / second-best ratio with the second best taken outside +-1 label."""
     H, W, D = agg.shape
-    best = np.argmin(agg, axis=2)
-    ii = np.clip(best, 1, D - 2)
-    take = np.take_along_axis
-    c0 = take(agg, best[..., None], 2)[..., 0]
-    cm = take(agg, (ii - 1)[..., None], 2)[..., 0]
-    cc = take(agg, ii[..., None], 2)[..., 0]
-    cp = take(agg, (ii + 1)[..., None], 2)[..., 0]
-    denom = cm - 2.0 * cc + cp
-    with np.errstate(divide="ignore", invalid="ignore"):
-        off = np.where(denom > 1e-9, 0.5 * (cm - cp) / denom, 0.0)
-    off = np.where((best >= 1) & (best <= D - 2), np.clip(off, -0.5, 0.5), 0.0)
-    cont = best + off
-    inv = 1.0 / near + cont * (1.0 / far - 1.0 / near) / (D - 1)
-    depth = (1.0 / inv).astype(np.float32)
-    masked = agg.copy()
-    for o in (-1, 0, 1):
-        j = np.clip(best + o, 0, D - 1)
-        np.put_along_axis(masked, j[..., None], np.float32(np.inf), 2)
-    second = masked.min(axis=2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(second > 0, c0 / second, 1.0)
+    f2 = np.float32(2.0)
+    half = np.float32(0.5)
+    eps = np.float32(1e-9)
+    for y in range(H):
+        for x in range(W):
+            a = agg[y, x]
+            best = 0
+            c0 = a[0]
+            for d in range(1, D):
+                if a[d] < c0:
+                    c0 = a[d]
+                    best = d
+            off = np.float32(0.0)
+            if 1 <= best <= D - 2:
+                cm = a[best - 1]
+                cc = a[best]
+                cp = a[best + 1]
+                denom = cm - f2 * cc + cp
+                if denom > eps:
+                    off = half * (cm - cp) / denom
+                    off = min(max(off, -half), half)
+            c = best + np.float64(off)
+            cont[y, x] = c
+            depth[y, x] = np.float32(1.0 / (1.0 / near + c * (1.0 / far - 1.0 / near) / (D - 1)))
+            second = np.float32(np.inf)
+            for d in range(D):
+                if (d < best - 1 or d > best + 1) and a[d] < second:
+                    second = a[d]
+            ratio[y, x] = c0 / second if second > 0 else np.float32(1.0)
+
+
+def _wta(agg: np.ndarray, near: float, far: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(depth, continuous label, uniqueness ratio) from the aggregated volume (H, W, D)."""
+    H, W, _ = agg.shape
+    depth = np.empty((H, W), np.float32)
+    cont = np.empty((H, W), np.float64)
+    ratio = np.empty((H, W), np.float32)
+    _wta_kernel(np.ascontiguousarray(agg, dtype=np.float32), float(near), float(far), depth,
+                cont, ratio)
     return depth, cont, ratio
 
 
