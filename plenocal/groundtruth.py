@@ -113,3 +113,32 @@ def ground_truth_shot(data_dir: str | Path, cam: str, n_views: int, tile: int,
     log(f"{cam}: {len(cams)} view cameras, worst chief-ray fit residual {worst:.2e} px")
     write_json(out_json, {"units": "m", "fit_residual_px": worst,
                           "cameras": {f"{cam}/{k}": v.to_dict() for k, v in cams.items()}})
+
+
+def render_views(scene_json: str | Path, cams_json: str | Path, cam: str, views: list[str],
+                 supersample: int, images: list[str | Path], depths: list[str | Path],
+                 log=print) -> None:
+    """Ideal pinhole renders (box-filtered, ``supersample`` rays per pixel and axis) and
+    z-depth maps of views ``views`` of shot ``cam``, the scene's textures loaded once
+    for all of them (rule ground_truth_render: one view; ground_truth_render_set: the
+    rest of the full set)."""
+    from plenocal.io import to_uint8, write_image, write_npy  # noqa: PLC0415
+    from plenocal.simulate.raytrace import render_pinhole  # noqa: PLC0415
+    from plenocal.simulate.scene import scene_arrays  # noqa: PLC0415
+
+    if not len(views) == len(images) == len(depths):
+        raise ValueError(f"ground truth renders of {cam}: {len(views)} views, {len(images)} "
+                         f"images, {len(depths)} depth maps")
+    cams = read_json(cams_json)["cameras"]
+    scene = scene_arrays(read_json(scene_json))
+    for view, image, depth_path in zip(views, images, depths, strict=True):
+        key = f"{cam}/{view}"
+        if key not in cams:
+            raise KeyError(f"{cams_json}: no camera {key}; rerun rule ground_truth_cam")
+        c = PinholeCamera.from_dict(cams[key])
+        img, depth = render_pinhole(scene, c.K, c.cam_to_world, c.width, c.height,
+                                    int(supersample))
+        write_image(image, to_uint8(img))
+        write_npy(depth_path, depth)
+        log(f"{key}: {c.width}x{c.height}, depth {float(depth[depth > 0].min()):.3f}-"
+            f"{float(depth.max()):.3f} m")
