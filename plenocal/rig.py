@@ -22,7 +22,7 @@ Disparity sign. The paper's Eq. 1 (``X = B F / (C + d P)``) uses ``d = u_h - u_{
 the shift of a point from a view to its right-hand neighbour, counted positive to the
 left: ``d = F_m (B / X - tan(alpha))``, larger for nearer objects (negative beyond
 the convergence distance). The converter may report the opposite sign; see
-:func:`read_disparity`.
+:func:`plenocal.artifacts.disparity.read_disparity`.
 
 MLA kinds. The paper's Fig. 2 is Keplerian: the main lens images the scene ``t > 0`` in
 front of the MLA. In a Galilean camera the MLA stands in front of that image, which
@@ -63,6 +63,7 @@ from statistics import median
 import numpy as np
 
 from plenocal import optics as o
+from plenocal.artifacts.disparity import Conversion
 from plenocal.camera import PinholeCamera, intrinsics, invert_pose, rotation_angle_deg
 from plenocal.datasheet import load_datasheet
 from plenocal.io import read_json
@@ -141,102 +142,6 @@ def read_datasheet(path: str | Path) -> Datasheet:
         array_step=opt_f("array.step_mm"),
         near=opt_f("scene.near_mm"),
         far=opt_f("scene.far_mm"),
-    )
-
-
-@dataclass(frozen=True)
-class Conversion:
-    """What the converter reports for one shot (``disparity.json``).
-
-    ``d_min``/``d_max`` are in the paper's sign convention (see the module docstring):
-    ``d_max`` belongs to the nearest object."""
-
-    d_min: float
-    d_max: float
-    q: float  # view spacing on the sensor, pixels
-    tile: float  # T, output pixels per micro-image pitch
-    pitch_px: float  # D, micro-image pitch, sensor pixels
-    safe_diameter_px: float  # D'
-    width: int  # view size
-    height: int
-    n_views: int | None = None
-    mla: str = "keplerian"  # MLA kind: keplerian (micro images inverted) or galilean
-
-
-_ALIASES = {
-    "d_min": ("D_min", "d_min", "disparity_min"),
-    "d_max": ("D_max", "d_max", "disparity_max"),
-    "q": ("q_px", "q", "view_spacing_px"),
-    "tile": ("tile", "T", "tile_size"),
-    "pitch_px": ("D_px", "diameter_px", "pitch_px", "micro_image_pitch_px", "D"),
-    "safe_diameter_px": ("safe_diameter_px", "D_safe_px", "D_safe", "D'"),
-    "width": ("width", "view_width"),
-    "height": ("height", "view_height"),
-    "n_views": ("n_views", "views", "N"),
-}
-
-
-def _lookup(doc: Mapping, name: str, source: str | Path, required: bool = True):
-    for key in _ALIASES[name]:
-        if key in doc and doc[key] is not None:
-            return doc[key]
-    if required:
-        raise ValueError(f"{source}: missing {name} (one of the keys "
-                         f"{', '.join(_ALIASES[name])}); rerun the convert rule")
-    return None
-
-
-def disparity_sign(doc: Mapping, source: str | Path) -> float:
-    """+1 if the file's disparities follow the paper (nearer = larger, ``u_h - u_{h+1}``),
-    -1 if they are view shifts ``u_{h+1} - u_h`` (nearer = smaller).
-
-    Read from a key ``convention`` (or ``sign_convention``/``disparity_convention``):
-    ``"paper"``, ``"nearer_positive"``, ``"u_left_minus_u_right"`` -> +1;
-    ``"shift"``, ``"view_shift"``, ``"u_right_minus_u_left"``, ``"farther_positive"`` -> -1.
-    """
-    for key in ("convention", "sign_convention", "disparity_convention"):
-        if key in doc:
-            value = str(doc[key]).strip().lower()
-            break
-    else:
-        raise ValueError(f"{source}: no 'convention' key saying which sign the disparities "
-                         "D_min/D_max use ('paper': u_h - u_(h+1), larger for nearer objects; "
-                         "'shift': u_(h+1) - u_h)")
-    if value in ("paper", "nearer_positive", "u_left_minus_u_right", "u_h - u_h+1"):
-        return 1.0
-    if value in ("shift", "view_shift", "u_right_minus_u_left", "farther_positive",
-                 "u_h+1 - u_h"):
-        return -1.0
-    if ("paper" in value) != ("shift" in value):  # e.g. "paper (Eq. 1)", "view shift in px"
-        return 1.0 if "paper" in value else -1.0
-    raise ValueError(f"{source}: unknown disparity convention {value!r} (use 'paper' or "
-                     "'shift')")
-
-
-def read_disparity(path: str | Path) -> Conversion:
-    """Read one shot's ``disparity.json`` and convert its range to the paper's sign."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: disparity.json not found; run the convert rule first")
-    doc = read_json(path)
-    sign = disparity_sign(doc, path)
-    mla = str(doc.get("mla") or "keplerian").strip().lower()
-    if mla not in MLA_KINDS:
-        raise ValueError(f"{path}: mla = {doc.get('mla')!r} is not an MLA kind (one of "
-                         f"{', '.join(MLA_KINDS)}); rerun the convert rule")
-    a = sign * float(_lookup(doc, "d_min", path))
-    b = sign * float(_lookup(doc, "d_max", path))
-    n = _lookup(doc, "n_views", path, required=False)
-    return Conversion(
-        d_min=min(a, b), d_max=max(a, b),
-        q=float(_lookup(doc, "q", path)),
-        tile=float(_lookup(doc, "tile", path)),
-        pitch_px=float(_lookup(doc, "pitch_px", path)),
-        safe_diameter_px=float(_lookup(doc, "safe_diameter_px", path)),
-        width=int(_lookup(doc, "width", path)),
-        height=int(_lookup(doc, "height", path)),
-        n_views=None if n is None else int(n),
-        mla=mla,
     )
 
 

@@ -4,9 +4,10 @@ import logging
 
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
+from plenocal.artifacts.disparity import read_disparity
 from plenocal.io import write_json
 from plenocal.merge import read_reg_a
-from plenocal.rig import build_rig, read_datasheet, read_disparity
+from plenocal.rig import build_rig, read_datasheet
 
 snakemake = globals()["snakemake"]
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,

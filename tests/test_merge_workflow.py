@@ -49,8 +49,9 @@ def test_rig_scale_merge_rules(tmp_path):
     rng = np.random.default_rng(0)
     for i, c in enumerate(cams):
         write_json(res / f"views/{c}/disparity.json", {
+            "format": "plenocal.disparity", "version": 1, "mla": "keplerian",
             "D_min": conv.d_min, "D_max": conv.d_max, "convention": "paper", "q_px": conv.q,
-            "tile": 6, "D_px": conv.pitch_px, "D_safe_px": conv.safe_diameter_px,
+            "tile": 6, "D_px": conv.pitch_px, "safe_diameter_px": conv.safe_diameter_px,
             "width": 301, "height": 225, "n_views": 3})
         M = np.eye(4)
         M[0, 3] = i * 0.5

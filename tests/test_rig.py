@@ -13,6 +13,7 @@ import yaml
 
 from plenocal import optics as o
 from plenocal import rig
+from plenocal.artifacts.disparity import Conversion, read_disparity
 from plenocal.camera import PinholeCamera
 from plenocal.io import write_json
 
@@ -27,11 +28,11 @@ def datasheet(**kw) -> rig.Datasheet:
     return rig.Datasheet(**base)
 
 
-def conversion(**kw) -> rig.Conversion:
+def conversion(**kw) -> Conversion:
     base = dict(d_min=-4.5, d_max=-3.0, q=21.9 * SIN45 / 5, tile=6.0, pitch_px=23.9,
                 safe_diameter_px=21.9, width=301, height=225, n_views=5)
     base.update(kw)
-    return rig.Conversion(**base)
+    return Conversion(**base)
 
 
 def test_paper_symbols_by_hand():
@@ -202,7 +203,7 @@ def test_inverse_check_on_a_measured_disparity_range(kind, focus):
     alpha (its sign flipped: converging for diverging views) or a B 10 % off fails."""
     opt = optics(kind, focus)
     ds, conv, F_m = true_inputs(opt)
-    conv = rig.Conversion(**{**conv.__dict__, "d_max": conv.d_max - 0.01 * abs(conv.d_max)})
+    conv = Conversion(**{**conv.__dict__, "d_max": conv.d_max - 0.01 * abs(conv.d_max)})
     sym = rig.paper_symbols(ds, conv, F_m, 5)
     ex = rig.exact_model(sym)
     ck = rig.inverse_check(sym, 470.0, 740.0, ex["B"], ex["alpha_equivalent"])
@@ -212,24 +213,6 @@ def test_inverse_check_on_a_measured_disparity_range(kind, focus):
         assert abs(ck["rel_diff_alpha"]) > 0.05  # what the relative test would fail
     for B, alpha in ((ex["B"], -ex["alpha_equivalent"]), (1.1 * ex["B"], ex["alpha_equivalent"])):
         assert rig.inverse_check(sym, 470.0, 740.0, B, alpha)["verdict"] == "fail"
-
-
-def test_sign_convention_of_the_converter(tmp_path):
-    opt = optics()
-    ds, conv, F_m = true_inputs(opt)
-    base = {"D_px": conv.pitch_px, "D_safe_px": conv.safe_diameter_px, "q_px": conv.q,
-            "tile": conv.tile, "width": conv.width, "height": conv.height, "n_views": 5}
-    write_json(tmp_path / "a.json", dict(base, D_min=conv.d_min, D_max=conv.d_max,
-                                         convention="paper"))
-    write_json(tmp_path / "b.json", dict(base, D_min=-conv.d_max, D_max=-conv.d_min,
-                                         convention="shift"))
-    a = rig.read_disparity(tmp_path / "a.json")
-    b = rig.read_disparity(tmp_path / "b.json")
-    assert (a.d_min, a.d_max) == pytest.approx((conv.d_min, conv.d_max))
-    assert (b.d_min, b.d_max) == pytest.approx((conv.d_min, conv.d_max))
-    write_json(tmp_path / "c.json", dict(base, D_min=1.0, D_max=2.0))
-    with pytest.raises(ValueError, match="convention"):
-        rig.read_disparity(tmp_path / "c.json")
 
 
 def _pixels(views, X):
@@ -244,7 +227,7 @@ def _model_gap(q_scale: float, points: np.ndarray) -> tuple[float, float]:
     exact views over ``points`` (central-view frame, metres); and the exact alpha."""
     opt = optics()
     ds, conv, F_m = true_inputs(opt)
-    conv = rig.Conversion(**{**conv.__dict__, "q": conv.q * q_scale})
+    conv = Conversion(**{**conv.__dict__, "q": conv.q * q_scale})
     sym = rig.paper_symbols(ds, conv, F_m, 5)
     ex = rig.exact_model(sym)
     paper = rig.view_cameras("paper", 5, 301, 225, F_m, ex["B"], alpha=ex["alpha_equivalent"])
@@ -311,11 +294,12 @@ def test_rig_json_from_files(tmp_path):
     shots = []
     for i, jitter in enumerate((0.0, 0.05, -0.05)):
         p = tmp_path / f"s{i}.json"
-        write_json(p, {"D_min": conv.d_min + jitter, "D_max": conv.d_max - jitter,
+        write_json(p, {"format": "plenocal.disparity", "version": 1, "mla": conv.mla,
+                       "D_min": conv.d_min + jitter, "D_max": conv.d_max - jitter,
                        "convention": "paper", "q_px": conv.q, "tile": conv.tile,
-                       "D_px": conv.pitch_px, "D_safe_px": conv.safe_diameter_px,
-                       "width": conv.width, "height": conv.height})
-        shots.append(rig.read_disparity(p))
+                       "D_px": conv.pitch_px, "safe_diameter_px": conv.safe_diameter_px,
+                       "width": conv.width, "height": conv.height, "n_views": 5})
+        shots.append(read_disparity(p))
     doc = rig.build_rig(read, shots, F_m, 5, model="paper", shot_names=["a", "b", "c"])
     assert doc["symbols"]["D_min_px"] == pytest.approx(conv.d_min)  # median across shots
     assert doc["model"] == "paper" and len(doc["views"]) == 25
@@ -328,7 +312,7 @@ def test_rig_json_from_files(tmp_path):
             np.testing.assert_allclose(K2, built["views"][k]["K"], rtol=1e-12)
             np.testing.assert_allclose(M2, built["views"][k]["cam_to_central"], atol=1e-15)
     with pytest.raises(ValueError, match="view size"):
-        rig.combine_conversions([conv, rig.Conversion(**{**conv.__dict__, "width": 99})])
+        rig.combine_conversions([conv, Conversion(**{**conv.__dict__, "width": 99})])
     with pytest.raises(FileNotFoundError, match="camera.yaml"):
         rig.read_datasheet(tmp_path / "nope" / "camera.yaml")
 
@@ -338,8 +322,8 @@ def _traced_set(kind: str, focus: float, tmp_path, sensor_distance: bool):
     its 5 x 5 views (plenocal.groundtruth), its camera.yaml as the simulator writes it
     (with or without mla.sensor_distance_mm) and the disparity.json the converter
     writes for patch sizes of the true scene range 0.47-0.74 m."""
+    from plenocal.artifacts.disparity import disparity_record
     from plenocal.config import validate_config
-    from plenocal.convert.shot import disparity_summary
     from plenocal.grid import MicrolensGrid
     from plenocal.groundtruth import shot_cameras
     from plenocal.simulate.dataset import datasheet as sim_datasheet
@@ -360,7 +344,7 @@ def _traced_set(kind: str, focus: float, tmp_path, sensor_distance: bool):
     truth, worst = shot_cameras(opt, grid, layout, np.eye(4))
     assert worst < 1e-6
     patch = np.abs([opt.micro_image_disparity_px(z) for z in (0.47, 0.74)])
-    doc = disparity_summary(layout, calib, patch, np.ones(2, bool), (0.0, 100.0))
+    doc = disparity_record(layout, calib, patch, np.ones(2, bool), (0.0, 100.0))
     write_json(tmp_path / "disparity.json", doc)
     cam = sim_datasheet(sim, opt)
     if not sensor_distance:
@@ -378,7 +362,7 @@ def test_registration_b_against_the_traced_truth(kind, focus, sensor_distance, t
     rotations); the paper's views are off by its B and alpha errors, which for a
     Galilean camera are a 0.9 % baseline and a 5-22 % alpha (0.13-0.2 px per step)."""
     opt, truth = _traced_set(kind, focus, tmp_path, sensor_distance)
-    conv = rig.read_disparity(tmp_path / "disparity.json")
+    conv = read_disparity(tmp_path / "disparity.json")
     assert conv.mla == kind
     # the converter's Galilean disparities are positive in the paper's sign: views
     # converging behind the scene (or diverging); Keplerian ones negative
@@ -414,19 +398,22 @@ def test_mla_kind_from_the_converter(tmp_path):
     with the file, the key and the remedy."""
     opt = optics("galilean")
     ds, conv, F_m = true_inputs(opt)
-    base = {"D_px": conv.pitch_px, "D_safe_px": conv.safe_diameter_px, "q_px": conv.q,
+    base = {"format": "plenocal.disparity", "version": 1, "D_px": conv.pitch_px,
+            "safe_diameter_px": conv.safe_diameter_px, "q_px": conv.q,
             "tile": conv.tile, "width": conv.width, "height": conv.height, "n_views": 5,
             "D_min": conv.d_min, "D_max": conv.d_max, "convention": "paper"}
     write_json(tmp_path / "g.json", dict(base, mla="galilean"))
-    write_json(tmp_path / "old.json", base)  # before MLA kinds: the Keplerian converter
+    old = {k: v for k, v in base.items() if k not in ("format", "version")}
+    write_json(tmp_path / "old.json", old)  # before the format: never guessed at
     write_json(tmp_path / "bad.json", dict(base, mla="plenoptic"))
-    g = rig.read_disparity(tmp_path / "g.json")
+    g = read_disparity(tmp_path / "g.json")
     assert (g.d_min, g.d_max) == pytest.approx((conv.d_min, conv.d_max)) and g.d_min > 0
     assert g.mla == "galilean"
-    assert rig.read_disparity(tmp_path / "old.json").mla == "keplerian"
-    with pytest.raises(ValueError, match=r"bad\.json: mla = 'plenoptic'.*convert rule"):
-        rig.read_disparity(tmp_path / "bad.json")
-    kep = rig.Conversion(**{**conv.__dict__, "mla": "keplerian"})
+    with pytest.raises(ValueError, match=r"old\.json: not a disparity.json of version 1"):
+        read_disparity(tmp_path / "old.json")
+    with pytest.raises(ValueError, match=r"bad\.json: mla = 'plenoptic'.*convert the shot"):
+        read_disparity(tmp_path / "bad.json")
+    kep = Conversion(**{**conv.__dict__, "mla": "keplerian"})
     with pytest.raises(ValueError, match="shot 1: disparity.json says mla keplerian"):
         rig.combine_conversions([g, kep])
     # s from k: k f / (k + 1) Galilean, k f / (k - 1) Keplerian (f = 0.364 mm)

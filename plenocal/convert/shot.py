@@ -4,8 +4,9 @@
 ``calib.xml`` (:class:`plenocal.grid.MicrolensGrid`), the output layout
 (:func:`plenocal.viewgeom.make_layout`), the patch-size map
 (:mod:`plenocal.convert.patchsize`) and the view renderer
-(:mod:`plenocal.convert.render`). :func:`disparity_summary` gives the disparity
-range between views that Eqs. 1-3 of the paper use.
+(:mod:`plenocal.convert.render`). ``disparity.json``
+(:func:`plenocal.artifacts.disparity.disparity_record`) gives the disparity range between
+views that Eqs. 1-3 of the paper use.
 
 View spacing. View (r, c) is cut at ``q_rc = ((c - (N-1)/2) q, (r - (N-1)/2) q)`` from
 the micro-image centre, ``q = D' sin(45 deg) / N`` by default: the N x N view points
@@ -34,6 +35,7 @@ import cv2
 import numpy as np
 import yaml
 
+from plenocal.artifacts.disparity import disparity_record
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.levels import significant_bits, to_unit_float
 from plenocal.convert.patchsize import (
@@ -275,7 +277,7 @@ class ShotConversion:
             yield name, self.view(r, c)
 
     def disparity(self) -> dict:
-        out = disparity_summary(self.layout, self.calib, self.used_patch,
+        out = disparity_record(self.layout, self.calib, self.used_patch,
                                 self.patch.confident[self.layout.lens_index],
                                 self.settings.percentiles)
         out["mla_source"] = "image" if self.mla_scores is not None else "setting"
@@ -291,52 +293,6 @@ class ShotConversion:
     def patch_picture(self) -> np.ndarray:
         return patch_size_picture(self.layout, self.used_patch,
                                   self.patch.confident[self.layout.lens_index])
-
-
-def disparity_summary(layout: ViewLayout, calib: RayCalib, patch: np.ndarray,
-                      confident: np.ndarray, percentiles: tuple[float, float] = (2.0, 98.0)
-                      ) -> dict:
-    """``disparity.json``: the disparity range between horizontally adjacent views (paper
-    sign, Eq. 1), the geometry it refers to and the patch-size statistics."""
-    q, T = layout.q, layout.tile
-    p_lo, p_hi = (float(x) for x in np.percentile(patch, percentiles))
-    sign = layout.sign
-    # |u_(h+1) - u_h| of the farthest and nearest points: Keplerian far = small P
-    shift_far, shift_near = (q * T / p_lo, q * T / p_hi) if sign < 0 else (q * T / p_hi,
-                                                                             q * T / p_lo)
-    pct = {f"p{int(p):02d}": float(np.percentile(patch, p)) for p in (2, 10, 25, 50, 75, 90, 98)}
-    return {
-        "convention": "paper",
-        "convention_note": (
-            "D = u_h - u_(h+1): a point's x in view (r, c) minus its x in view (r, c+1), "
-            "output pixels (the paper's Eq. 1). Keplerian MLA: D = -q T / P, negative, "
-            "because the scene lies beyond the plane conjugate to the MLA (Z0), where the "
-            "views converge; Galilean MLA: D = +q T / P. D_max belongs to the nearest "
-            "object (largest P for Keplerian, smallest for Galilean). shift_* are the "
-            "magnitudes |D| = q T / P."),
-        "mla": layout.mla,
-        "D_min": sign * shift_far,
-        "D_max": sign * shift_near,
-        "shift_far_px": shift_far,
-        "shift_near_px": shift_near,
-        "percentiles": list(percentiles),
-        "q_px": q,
-        "q_formula": "q = D' sin(45 deg) / N (the paper), unless convert.view_spacing_px is set",
-        "q_paper_px": calib.safe_diameter * math.sin(math.radians(45.0)) / layout.n_views,
-        "tile": T,
-        "D_px": calib.diameter,
-        "safe_diameter_px": calib.safe_diameter,
-        "n_views": layout.n_views,
-        "width": layout.width,
-        "height": layout.height,
-        "used_lenses": int(len(patch)),
-        "patch_size_px": {
-            "min": float(np.min(patch)), "max": float(np.max(patch)),
-            "median": float(np.median(patch)), "mean": float(np.mean(patch)),
-            "percentiles": pct,
-            "confident_share": float(np.mean(confident)) if len(confident) else 0.0,
-        },
-    }
 
 
 def _label(img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.4) -> None:

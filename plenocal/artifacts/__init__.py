@@ -1,0 +1,7 @@
+"""The files one stage writes and another reads, each with one typed definition: its
+writing, its reading, a format name and version, and a clear error for a file of another
+version (issue 16). Light modules (numpy and the standard library): any stage may import
+them without pulling in OpenCV or COLMAP.
+
+* :mod:`.disparity` - ``views/<shot>/disparity.json`` (convert -> registration B)
+"""

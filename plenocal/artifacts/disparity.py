@@ -1,0 +1,123 @@
+"""``disparity.json``: the converter's record of one shot, read by registration B.
+
+One typed definition for the file: :func:`disparity_record` writes it (rule
+``convert`` and ``plenocal convert``), :func:`read_disparity` reads the part that
+registration B uses into a :class:`Conversion`. The file carries its format name and
+version; a file of another version is refused with the remedy (convert again), never
+guessed at.
+
+The disparity is the paper's (Eq. 1): ``D = u_h - u_(h+1)``, a point's x in view (r, c)
+minus its x in view (r, c+1), in output pixels. Keplerian MLA: ``D = -q T / P`` (the scene
+lies beyond the plane conjugate to the MLA, where the views converge); Galilean:
+``D = +q T / P``. ``D_max`` belongs to the nearest object.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from plenocal.io import read_json
+from plenocal.raytrix import RayCalib
+from plenocal.viewgeom import MLA_KINDS, ViewLayout
+
+FORMAT = "plenocal.disparity"
+VERSION = 1
+
+
+@dataclass(frozen=True)
+class Conversion:
+    """What registration B takes from one shot's ``disparity.json``.
+
+    ``d_min``/``d_max`` in the paper's sign (Eq. 1): ``d_max`` belongs to the nearest
+    object."""
+
+    d_min: float
+    d_max: float
+    q: float  # view spacing on the sensor, pixels
+    tile: float  # T, output pixels per micro-image pitch
+    pitch_px: float  # D, micro-image pitch, sensor pixels
+    safe_diameter_px: float  # D'
+    width: int  # view size
+    height: int
+    n_views: int | None = None
+    mla: str = "keplerian"  # MLA kind: keplerian (micro images inverted) or galilean
+
+
+def disparity_record(layout: ViewLayout, calib: RayCalib, patch: np.ndarray,
+                     confident: np.ndarray, percentiles: tuple[float, float] = (2.0, 98.0)
+                     ) -> dict:
+    """The content of ``disparity.json``: the disparity range between horizontally
+    adjacent views (Eq. 1), the geometry it refers to and the patch-size statistics
+    (``patch``/``confident``: per used lens). The range is taken between the given
+    percentiles of the patch sizes."""
+    q, T = layout.q, layout.tile
+    p_lo, p_hi = (float(x) for x in np.percentile(patch, percentiles))
+    sign = layout.sign
+    # |u_(h+1) - u_h| of the farthest and nearest points: Keplerian far = small P
+    shift_far, shift_near = (q * T / p_lo, q * T / p_hi) if sign < 0 else (q * T / p_hi,
+                                                                             q * T / p_lo)
+    pct = {f"p{int(p):02d}": float(np.percentile(patch, p)) for p in (2, 10, 25, 50, 75, 90, 98)}
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "convention": "paper",
+        "convention_note": (
+            "D = u_h - u_(h+1): a point's x in view (r, c) minus its x in view (r, c+1), "
+            "output pixels (the paper's Eq. 1). Keplerian MLA: D = -q T / P, negative, "
+            "because the scene lies beyond the plane conjugate to the MLA (Z0), where the "
+            "views converge; Galilean MLA: D = +q T / P. D_max belongs to the nearest "
+            "object (largest P for Keplerian, smallest for Galilean). shift_* are the "
+            "magnitudes |D| = q T / P."),
+        "mla": layout.mla,
+        "D_min": sign * shift_far,
+        "D_max": sign * shift_near,
+        "shift_far_px": shift_far,
+        "shift_near_px": shift_near,
+        "percentiles": list(percentiles),
+        "q_px": q,
+        "q_formula": "q = D' sin(45 deg) / N (the paper), unless convert.view_spacing_px is set",
+        "q_paper_px": calib.safe_diameter * math.sin(math.radians(45.0)) / layout.n_views,
+        "tile": T,
+        "D_px": calib.diameter,
+        "safe_diameter_px": calib.safe_diameter,
+        "n_views": layout.n_views,
+        "width": layout.width,
+        "height": layout.height,
+        "used_lenses": int(len(patch)),
+        "patch_size_px": {
+            "min": float(np.min(patch)), "max": float(np.max(patch)),
+            "median": float(np.median(patch)), "mean": float(np.mean(patch)),
+            "percentiles": pct,
+            "confident_share": float(np.mean(confident)) if len(confident) else 0.0,
+        },
+    }
+
+
+def read_disparity(path: str | Path) -> Conversion:
+    """Read one shot's ``disparity.json`` (this version only) into a :class:`Conversion`."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: disparity.json not found; run the convert rule first")
+    doc = read_json(path)
+    if doc.get("format") != FORMAT or doc.get("version") != VERSION:
+        raise ValueError(f"{path}: not a disparity.json of version {VERSION} (format "
+                         f"{doc.get('format')!r}, version {doc.get('version')!r}); convert "
+                         "the shot again (rule convert, or plenocal convert)")
+    try:
+        mla = str(doc["mla"])
+        if mla not in MLA_KINDS:
+            raise ValueError(f"{path}: mla = {mla!r} is not an MLA kind (one of "
+                             f"{', '.join(MLA_KINDS)}); convert the shot again")
+        a, b = float(doc["D_min"]), float(doc["D_max"])
+        return Conversion(
+            d_min=min(a, b), d_max=max(a, b), q=float(doc["q_px"]), tile=float(doc["tile"]),
+            pitch_px=float(doc["D_px"]), safe_diameter_px=float(doc["safe_diameter_px"]),
+            width=int(doc["width"]), height=int(doc["height"]), n_views=int(doc["n_views"]),
+            mla=mla)
+    except KeyError as err:
+        raise ValueError(f"{path}: disparity.json version {VERSION} without key {err}; "
+                         "the file is damaged: convert the shot again") from None

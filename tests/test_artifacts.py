@@ -1,0 +1,60 @@
+"""The files one stage writes and another reads (plenocal.artifacts): each written and
+read by one definition, with a format version that a reader checks."""
+
+from __future__ import annotations
+
+import pytest
+
+from plenocal.artifacts.disparity import FORMAT, VERSION, disparity_record, read_disparity
+from plenocal.convert import ConvertSettings, ShotConversion
+from plenocal.convert.synthetic import calib_for_optics, lenslet_from_patch_size, random_texture
+from plenocal.grid import MicrolensGrid
+from plenocal.io import read_json, write_json
+from plenocal.optics import PlenopticOptics
+
+
+def _shot() -> ShotConversion:
+    opt = PlenopticOptics(focal_length=0.035, focus_distance=0.6, mla_pitch=130e-6,
+                          mla_f_number=2.8, k=5.0, pixel_size=5.5e-6, width=400, height=300)
+    calib = calib_for_optics(opt)
+    grid = MicrolensGrid(calib, 400, 300)
+    img = lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 1))
+    return ShotConversion(img, calib, 5, ConvertSettings(tile_size=6))
+
+
+def test_disparity_round_trip(tmp_path):
+    shot = _shot()
+    doc = shot.disparity()
+    assert doc["format"] == FORMAT and doc["version"] == VERSION
+    write_json(tmp_path / "disparity.json", doc)
+    conv = read_disparity(tmp_path / "disparity.json")
+    # (write_json keeps 12 significant digits)
+    assert (conv.d_min, conv.d_max) == pytest.approx((min(doc["D_min"], doc["D_max"]),
+                                                      max(doc["D_min"], doc["D_max"])), rel=1e-11)
+    assert (conv.q, conv.tile, conv.pitch_px) == pytest.approx(
+        (doc["q_px"], doc["tile"], doc["D_px"]), rel=1e-11)
+    assert (conv.width, conv.height, conv.n_views, conv.mla) == (
+        shot.layout.width, shot.layout.height, 5, shot.mla)
+    # the record is the writer's, whoever calls it
+    again = disparity_record(shot.layout, shot.calib, shot.used_patch,
+                             shot.patch.confident[shot.layout.lens_index],
+                             shot.settings.percentiles)
+    assert {k: doc[k] for k in again} == again
+
+
+def test_disparity_of_another_version_or_damaged_is_refused(tmp_path):
+    doc = _shot().disparity()
+    for name, bad in (("old.json", {k: v for k, v in doc.items() if k != "format"}),
+                      ("v0.json", dict(doc, version=VERSION + 1))):
+        write_json(tmp_path / name, bad)
+        with pytest.raises(ValueError, match=rf"{name}: not a disparity.json of version"):
+            read_disparity(tmp_path / name)
+    write_json(tmp_path / "cut.json", {k: v for k, v in doc.items() if k != "q_px"})
+    with pytest.raises(ValueError, match="without key 'q_px'"):
+        read_disparity(tmp_path / "cut.json")
+    write_json(tmp_path / "mla.json", dict(doc, mla="plenoptic"))
+    with pytest.raises(ValueError, match="'plenoptic' is not an MLA kind"):
+        read_disparity(tmp_path / "mla.json")
+    with pytest.raises(FileNotFoundError, match="run the convert rule"):
+        read_disparity(tmp_path / "absent.json")
+    assert read_json(tmp_path / "cut.json")["format"] == FORMAT
