@@ -9,9 +9,17 @@ import pytest
 
 from plenocal.camera import PinholeCamera, invert_pose, pose
 from plenocal.io import write_image
+from plenocal.sfm import colmap as cm
 from plenocal.sfm import viewdb
 from plenocal.sfm.synthetic import default_scene, render, rig_cameras, view_sets
-from plenocal.verify.reprojection import evaluate_sets, reg_a_views, reprojection_stats
+from plenocal.verify.reprojection import (
+    evaluate_sets,
+    observation_errors,
+    reg_a_views,
+    reprojection_stats,
+    triangulate,
+    triangulation_options,
+)
 
 F, W, H = 600.0, 480, 360
 
@@ -166,3 +174,30 @@ def test_subset_database_sets_each_camera(sets, tmp_path):
     viewdb.subset_database(db, tmp_path / "one.db", names, cams[names[0]])
     with pycolmap.Database.open(str(tmp_path / "one.db")) as d:
         assert d.num_cameras() == 1 and d.num_images() == 9
+
+
+def test_observation_errors_match_the_bindings(sets, tmp_path):
+    """The errors read back from COLMAP's binary model equal those computed through the
+    Python bindings, observation by observation; every registered image keeps its pose."""
+    _, vs, paths = sets
+    names = sorted(n for n in vs if n.startswith("x02_y01"))
+    db = tmp_path / "views.db"
+    viewdb.build_view_database({n: paths[n] for n in names}, db, tmp_path,
+                               max_num_features=1000)
+    sub = tmp_path / "sub.db"
+    viewdb.subset_database(db, sub, names, {n: vs[n] for n in names})
+    cams = {f"{n}.png": vs[n] for n in names}
+    rec = cm.known_pose_reconstruction(sub, cams, update_intrinsics=False)
+    triangulate(rec, sub, triangulation_options(100.0, 0.1, 0, 1), 0)
+    want = []
+    for image_id in sorted(rec.reg_image_ids()):
+        image = rec.image(image_id)
+        pts = [(p.xy, p.point3D_id) for p in image.points2D if p.has_point3D()]
+        xy = np.array([p[0] for p in pts]) - 0.5
+        uv, _ = cams[image.name].project(np.array([rec.point3D(p[1]).xyz for p in pts]))
+        want.append(np.linalg.norm(uv - xy, axis=1))
+        np.testing.assert_allclose(cm.pinhole_from_colmap(image, image.camera).cam_to_world,
+                                   cams[image.name].cam_to_world, atol=1e-9)
+    got = observation_errors(rec, cams, tmp_path)
+    assert got.size > 300
+    np.testing.assert_array_equal(got, np.concatenate(want))
