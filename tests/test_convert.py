@@ -408,3 +408,28 @@ def test_schema_defaults_are_the_settings_defaults():
     cfg = yaml.safe_load((Path(__file__).parents[1] / "config.yaml").read_text())
     cfg["convert"] = {}
     assert ConvertSettings.from_config(validate_config(cfg)["convert"]) == ConvertSettings()
+
+
+def test_views_reaching_the_rim_take_the_wide_blend():
+    """reaches_rim: |q_rc| + P / sqrt(2) beyond D'/2 (hand-computed), and the shot renders
+    exactly those views with the wider blend (more lenses, wider fade, stronger centre
+    weight), the others with the tight one."""
+    from plenocal.convert.render import RenderSettings, reaches_rim
+
+    assert reaches_rim(6.0, 7.1, 20.0) is True  # 6 + 5.02 > 10
+    assert reaches_rim(6.0, 5.6, 20.0) is False  # 6 + 3.96 < 10
+    wide = RenderSettings().wide()
+    assert (wide.slots, wide.fade_radius, wide.centre_power) == (5, 1.5, 3.0)
+    opt = small_optics(480, 300)
+    calib = calib_for_optics(opt)
+    grid = MicrolensGrid(calib, 480, 300)
+    shot = ShotConversion(lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 4)),
+                          calib, 5, FIXED_TILE)
+    P = float(np.median(shot.used_patch))
+    for r in range(5):
+        for c in range(5):
+            off = float(np.hypot(*shot.layout.offset_image(r, c)))
+            expect = reaches_rim(off, P, calib.safe_diameter)
+            assert (shot.plan_for(r, c) is not shot.plan) == expect, (r, c)
+    assert shot.plan_for(0, 0) is not shot.plan and shot.plan_for(2, 2) is shot.plan
+    assert shot.plan_for(0, 0).tile_weight.shape[0] == 5

@@ -43,15 +43,21 @@ def crop(name: str, x0: int, y0: int, w: int, h: int) -> tuple[np.ndarray, RayCa
     return part, RayCalib(**{**calib.__dict__, "offset": offset})
 
 
-def phase_shift(a: np.ndarray, b: np.ndarray, box: tuple[int, int, int, int]
+def content_shift(a: np.ndarray, b: np.ndarray, box: tuple[int, int, int, int]
                 ) -> tuple[float, float]:
-    """(dx, dy) of the content of box (x, y, w, h) from view ``a`` to view ``b``."""
+    """(dx, dy) of the content of box (x, y, w, h) from view ``a`` to view ``b``: the
+    box's inner part (a tenth of its size in from each side) found in ``b`` by
+    normalised cross-correlation (shifts of a third of the box are found; phase
+    correlation of the windowed box lost a 25 px shift of the kangaroo's head)."""
     x, y, w, h = box
-    ga = cv2.cvtColor(a[y:y + h, x:x + w], cv2.COLOR_RGB2GRAY).astype(np.float32)
-    gb = cv2.cvtColor(b[y:y + h, x:x + w], cv2.COLOR_RGB2GRAY).astype(np.float32)
-    win = cv2.createHanningWindow(ga.shape[::-1], cv2.CV_32F)
-    (dx, dy), _ = cv2.phaseCorrelate(ga, gb, win)
-    return dx, dy
+    ga = cv2.cvtColor(a, cv2.COLOR_RGB2GRAY).astype(np.float32)
+    gb = cv2.cvtColor(b, cv2.COLOR_RGB2GRAY).astype(np.float32)
+    mx, my = max(w // 10, 1), max(h // 10, 1)
+    tpl = ga[y + my:y + h - my, x + mx:x + w - mx]
+    score = cv2.matchTemplate(gb, tpl, cv2.TM_CCOEFF_NORMED)
+    _, best, _, (bx, by) = cv2.minMaxLoc(score)
+    assert best > 0.8, f"box {box} not found in the other view (ZNCC {best:.2f})"
+    return float(bx - (x + mx)), float(by - (y + my))
 
 
 # Fujita2, sensor x 250..1330, y 250..830: the books on the left (far), the kangaroo's
@@ -102,15 +108,15 @@ def test_views_upright_and_parallax_direction(fujita):
     kangaroo = box(620, 150, 250, 300)  # its head, sensor x 870..1120 of the frame
     left, right = shot.view(2, 0), shot.view(2, 4)
     up, down = shot.view(0, 2), shot.view(4, 2)
-    bx, _ = phase_shift(left, right, books)
-    kx, _ = phase_shift(left, right, kangaroo)
+    bx, _ = content_shift(left, right, books)
+    kx, _ = content_shift(left, right, kangaroo)
     assert kx - bx < -3.0, (kx, bx)
-    _, by = phase_shift(up, down, books)
-    _, ky = phase_shift(up, down, kangaroo)
+    _, by = content_shift(up, down, books)
+    _, ky = content_shift(up, down, kangaroo)
     assert ky - by < -3.0, (ky, by)
     # the horizontal pair does not move vertically, nor the vertical pair horizontally
-    assert abs(phase_shift(left, right, kangaroo)[1]) < 1.0
-    assert abs(phase_shift(up, down, kangaroo)[0]) < 1.0
+    assert abs(content_shift(left, right, kangaroo)[1]) < 1.0
+    assert abs(content_shift(up, down, kangaroo)[0]) < 1.0
 
 
 def test_mosaic_measure_fails_the_wrong_kind_and_passes_the_right_one(fujita):
@@ -121,8 +127,8 @@ def test_mosaic_measure_fails_the_wrong_kind_and_passes_the_right_one(fujita):
     shot, img, calib = fujita
     wrong = ShotConversion(img, calib, 5, ConvertSettings(tile_size=8, mla="keplerian"))
     for r, c in ((2, 2), (0, 0)):
-        assert blend_disagreement(wrong.plan, wrong._source, r, c) > 0.6
-        assert blend_disagreement(shot.plan, shot._source, r, c) < 0.4
+        assert blend_disagreement(wrong.plan_for(r, c), wrong._source, r, c) > 0.6
+        assert blend_disagreement(shot.plan_for(r, c), shot._source, r, c) < 0.4
 
 
 def test_tspc_crop_converts_clean_and_upright():
@@ -143,9 +149,10 @@ def test_tspc_corner_views_need_the_refined_grid():
     in a 34 px radius, where the micro images fall off steeply and overlap their six
     neighbours, so a centre that is several pixels off puts their samples in a
     different part of the rim in every lens: a lattice. Measured (blend disagreement,
-    corners 0_0 4_4 0_4 4_0): file grid 0.66 0.36 0.31 0.68, refined grid (what
-    ``convert_files`` and the workflow use) 0.29 0.35 0.28 0.42, central view 0.15 /
-    0.17."""
+    corners 0_0 4_4 0_4 4_0, the wide blend of views that reach the rim): file grid
+    0.49 0.23 0.20 0.48, refined grid (what ``convert_files`` and the workflow use)
+    0.18 0.21 0.18 0.24; with the tight blend of the central views they were 0.66 0.36
+    0.31 0.68 and 0.29 0.35 0.28 0.42."""
     from plenocal.convert.setup import check_and_grid  # noqa: PLC0415
 
     img, calib = crop("Boys2", 1400, 900, 1120, 840)
@@ -154,10 +161,11 @@ def test_tspc_corner_views_need_the_refined_grid():
     for mode in ("file", "refine"):
         grid, _ = check_and_grid(img, calib, mode)
         shot = ShotConversion(img, calib, 5, grid=grid)
-        found[mode] = [blend_disagreement(shot.plan, shot._source, r, c) for r, c in corners]
+        found[mode] = [blend_disagreement(shot.plan_for(r, c), shot._source, r, c)
+                       for r, c in corners]
         assert blend_disagreement(shot.plan, shot._source, 2, 2) < 0.25, mode
-    assert max(found["refine"]) < 0.5, found
-    assert max(found["file"]) > 0.6, found  # the lattice that the drift makes
+    assert max(found["refine"]) < 0.3, found
+    assert max(found["file"]) > 1.5 * max(found["refine"]), found  # the drift's lattice
 
 
 def test_compare_measures_by_construction():

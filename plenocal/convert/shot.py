@@ -45,7 +45,13 @@ from plenocal.convert.patchsize import (
     estimate_patch_size,
     to_gray,
 )
-from plenocal.convert.render import RenderPlan, RenderSettings, make_plan, render_view
+from plenocal.convert.render import (
+    RenderPlan,
+    RenderSettings,
+    make_plan,
+    reaches_rim,
+    render_view,
+)
 from plenocal.convert.vignetting import radial_profile
 from plenocal.grid import MicrolensGrid
 from plenocal.io import read_image
@@ -258,9 +264,23 @@ class ShotConversion:
         self.plan: RenderPlan = make_plan(self.layout, self.used_patch, calib.safe_diameter,
                                           st.render, self.patch.focus[self.layout.lens_index],
                                           self.profile)
+        self._wide_plan: RenderPlan | None = None
+
+    def plan_for(self, r: int, c: int) -> RenderPlan:
+        """The render plan of view (r, c): the tight blend, or the wide one where the
+        view's patches reach past the micro image (:func:`reaches_rim`, median patch)."""
+        offset = float(np.hypot(*self.layout.offset_image(r, c)))
+        if not reaches_rim(offset, float(np.median(self.used_patch)),
+                           self.calib.safe_diameter):
+            return self.plan
+        if self._wide_plan is None:
+            self._wide_plan = make_plan(self.layout, self.used_patch, self.calib.safe_diameter,
+                                        self.settings.render.wide(),
+                                        self.patch.focus[self.layout.lens_index], self.profile)
+        return self._wide_plan
 
     def view_float(self, r: int, c: int) -> np.ndarray:
-        return render_view(self.plan, self._source, r, c)
+        return render_view(self.plan_for(r, c), self._source, r, c)
 
     def view(self, r: int, c: int) -> np.ndarray:
         """View (r, c) as uint8 RGB (layout.height x layout.width x 3)."""
