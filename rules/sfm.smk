@@ -1,6 +1,8 @@
 """Registration A (Section II-B of the paper): structure-from-motion of the central
 view of every shot (array + hand-held), the matches of all views that the verification
-shares, and the naive baselines of Table I (A+SfM; SfM of all views from scratch)."""
+shares (SIFT in view_features, which needs no calibration and runs alongside A; the
+matching of A's neighbouring shots in view_matches), and the naive baselines of Table I
+(A+SfM; SfM of all views from scratch)."""
 
 
 rule features_a:
@@ -71,9 +73,32 @@ rule map_a:
         "../scripts/map_a.py"
 
 
-rule view_matches:
+rule view_features:
     input:
         views=all_views,
+    output:
+        db="results/{dataset}/matches/features.db",
+        info="results/{dataset}/matches/features.json",
+    log:
+        log_path("view_features"),
+    benchmark:
+        bench_path("view_features")
+    conda:
+        "../envs/plenocal.yaml"
+    threads: lambda wc: stage_config("sfm")["num_threads"]
+    resources:
+        mem_mb=4000,
+        runtime=60,
+    params:
+        sfm=lambda wc: sfm_params(),
+    script:
+        "../scripts/view_features.py"
+
+
+rule view_matches:
+    input:
+        features="results/{dataset}/matches/features.db",
+        features_info="results/{dataset}/matches/features.json",
         reg_a="results/{dataset}/reg_a/reg_a.json",
     output:
         database="results/{dataset}/matches/database.db",

@@ -1,5 +1,5 @@
-"""Rule view_matches: SIFT of every subaperture view and the matching of the pairs
-that Table I and the baseline share (plenocal.sfm.viewdb)."""
+"""Rule view_matches: the matching of the pairs that Table I and the baseline share,
+added to a copy of the SIFT features of every view (plenocal.sfm.viewdb)."""
 import shutil
 from pathlib import Path
 
@@ -12,7 +12,6 @@ from plenocal.sfm import log_to_file, viewdb
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821
 cfg = sm.params.sfm
-views = {f"{Path(p).parent.name}/{Path(p).stem}": p for p in sm.input.views}
 reg_a = read_json(sm.input.reg_a)
 centres = {cam: np.asarray(d["cam_to_world"], dtype=float)[:3, 3]
            for cam, d in reg_a["cameras"].items()}
@@ -22,13 +21,13 @@ out_db.parent.mkdir(parents=True, exist_ok=True)
 # removed by the next run (make_temp_dir)
 work = make_temp_dir(out_db.parent, ".view_matches.")
 try:
-    info = viewdb.build_view_database(views, work / "database.db", work,
+    info = viewdb.match_view_database(sm.input.features, work / "database.db",
                                       shot_centres=centres,
                                       shot_neighbours=cfg["view_matching"]["shot_neighbours"],
                                       view_radius=cfg["view_matching"]["view_radius"],
-                                      max_num_features=cfg["max_num_features"],
-                                      seed=cfg["seed"], num_threads=sm.threads)
+                                      seed=cfg["seed"], num_threads=sm.threads, work_dir=work)
     (work / "database.db").replace(out_db)
 finally:
     shutil.rmtree(work, ignore_errors=True)
+info.update({k: v for k, v in read_json(sm.input.features_info).items() if k != "num_images"})
 write_json(sm.output.info, info)

@@ -13,6 +13,11 @@ of one calibration, each with its own camera set to that calibration's intrinsic
 all of them sharing one camera (the baselines). Descriptors and raw matches are not
 copied: triangulation and mapping read keypoints and verified matches only.
 
+SIFT needs no calibration and runs as soon as the views exist
+(:func:`extract_view_features`, rule ``view_features``, alongside registration A);
+the matching, whose pairs follow A's camera centres, copies that database and adds
+the verified matches (:func:`match_view_database`, rule ``view_matches``).
+
 Which pairs are matched (:func:`view_pairs`): within a shot, the views at most
 ``view_radius`` apart on the N x N grid; across shots, the same view of each shot and
 its ``shot_neighbours`` nearest shots (by registration A's camera centres). Exhaustive
@@ -100,15 +105,14 @@ def view_pairs(names: Iterable[str], shot_centres: Mapping[str, np.ndarray] | No
     return out
 
 
-def build_view_database(images: Mapping[str, str | Path], database: str | Path,
-                        work_dir: str | Path, *,
-                        shot_centres: Mapping[str, np.ndarray] | None = None,
-                        shot_neighbours: int | None = 4, view_radius: int | None = 1,
-                        max_num_features: int = 8192, seed: int = 0,
-                        num_threads: int = 1) -> dict:
-    """SIFT of ``images`` (``"<cam>/<view>"`` -> png) into a new ``database`` (one
-    shared camera, no prior focal length) and the matching of :func:`view_pairs`.
-    ``work_dir`` receives the staged images. Returns counts and timings."""
+def extract_view_features(images: Mapping[str, str | Path], database: str | Path,
+                          work_dir: str | Path, *, max_num_features: int = 8192,
+                          seed: int = 0, num_threads: int = 1,
+                          first_octave: int = cm.DEFAULT_FIRST_OCTAVE) -> dict:
+    """SIFT of ``images`` (``"<cam>/<view>"`` -> png) into a new ``database``, one
+    shared camera with no prior focal length; ``work_dir`` receives the staged images.
+    Needs no calibration, so it runs while registration A is computed (rule
+    view_features). Returns counts and the time taken."""
     t0 = time.perf_counter()
     image_dir = Path(work_dir) / "images"
     names = cm.stage_images(images, image_dir)
@@ -118,24 +122,63 @@ def build_view_database(images: Mapping[str, str | Path], database: str | Path,
                          "with the same settings")
     cm.extract_features(database, image_dir, [(names, None)], model="PINHOLE",
                         max_num_features=max_num_features, num_threads=num_threads,
-                        seed=seed)
-    t1 = time.perf_counter()
-    pairs = view_pairs(names, shot_centres, shot_neighbours=shot_neighbours,
-                       view_radius=view_radius)
-    n_verified = cm.match(database, pairs, seed=seed, num_threads=num_threads,
-                          work_dir=work_dir)
-    t2 = time.perf_counter()
+                        seed=seed, first_octave=first_octave)
     import pycolmap  # noqa: PLC0415
 
     with pycolmap.Database.open(str(database)) as db:
         kp = [db.num_keypoints_for_image(im.image_id) for im in db.read_all_images()]
-    info = {"num_images": len(names), "num_pairs": len(pairs),
-            "num_verified_pairs": int(n_verified),
-            "keypoints_mean": float(np.mean(kp)), "keypoints_min": int(min(kp)),
-            "shot_neighbours": shot_neighbours, "view_radius": view_radius,
-            "features_s": t1 - t0, "matching_s": t2 - t1}
-    log.info("view database: %d images, %d pairs (%d verified), features %.1f s, "
-             "matching %.1f s", len(names), len(pairs), n_verified, t1 - t0, t2 - t1)
+    seconds = time.perf_counter() - t0
+    log.info("view features: %d images, %.0f keypoints per image, %.1f s", len(names),
+             np.mean(kp), seconds)
+    return {"num_images": len(names), "keypoints_mean": float(np.mean(kp)),
+            "keypoints_min": int(min(kp)), "first_octave": first_octave,
+            "features_s": seconds}
+
+
+def match_view_database(features: str | Path, database: str | Path, *,
+                        shot_centres: Mapping[str, np.ndarray] | None = None,
+                        shot_neighbours: int | None = 4, view_radius: int | None = 1,
+                        seed: int = 0, num_threads: int = 1,
+                        work_dir: str | Path | None = None) -> dict:
+    """Copy the SIFT ``features`` database (:func:`extract_view_features`; left
+    untouched) to ``database`` and match and verify there the pairs of
+    :func:`view_pairs`. Returns counts and the time taken."""
+    t0 = time.perf_counter()
+    names = [f"{n}.png" for n in database_names(features)]
+    database = Path(database)
+    shutil.copyfile(features, database)
+    pairs = view_pairs(names, shot_centres, shot_neighbours=shot_neighbours,
+                       view_radius=view_radius)
+    n_verified = cm.match(database, pairs, seed=seed, num_threads=num_threads,
+                          work_dir=work_dir)
+    seconds = time.perf_counter() - t0
+    log.info("view matches: %d images, %d pairs (%d verified), %.1f s", len(names),
+             len(pairs), n_verified, seconds)
+    return {"num_images": len(names), "num_pairs": len(pairs),
+            "num_verified_pairs": int(n_verified), "shot_neighbours": shot_neighbours,
+            "view_radius": view_radius, "matching_s": seconds}
+
+
+def build_view_database(images: Mapping[str, str | Path], database: str | Path,
+                        work_dir: str | Path, *,
+                        shot_centres: Mapping[str, np.ndarray] | None = None,
+                        shot_neighbours: int | None = 4, view_radius: int | None = 1,
+                        max_num_features: int = 8192, seed: int = 0,
+                        num_threads: int = 1,
+                        first_octave: int = cm.DEFAULT_FIRST_OCTAVE) -> dict:
+    """:func:`extract_view_features` and :func:`match_view_database` in one go (the
+    workflow runs them as two rules): SIFT of ``images`` and the matching of
+    :func:`view_pairs` into a new ``database``; ``work_dir`` receives the staged images
+    and the features database. Returns counts and timings."""
+    features = Path(work_dir) / "features.db"
+    info = extract_view_features(images, features, work_dir,
+                                 max_num_features=max_num_features, seed=seed,
+                                 num_threads=num_threads, first_octave=first_octave)
+    info.update(match_view_database(features, database, shot_centres=shot_centres,
+                                    shot_neighbours=shot_neighbours,
+                                    view_radius=view_radius, seed=seed,
+                                    num_threads=num_threads, work_dir=work_dir))
+    features.unlink()
     return info
 
 

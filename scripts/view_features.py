@@ -1,0 +1,27 @@
+"""Rule view_features: SIFT of every subaperture view into the view database's
+features (plenocal.sfm.viewdb); runs alongside registration A."""
+import shutil
+from pathlib import Path
+
+import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
+
+from plenocal.io import make_temp_dir, write_json
+from plenocal.sfm import log_to_file, viewdb
+
+log_to_file(snakemake.log[0])  # noqa: F821
+sm = snakemake  # noqa: F821
+cfg = sm.params.sfm
+views = {f"{Path(p).parent.name}/{Path(p).stem}": p for p in sm.input.views}
+out_db = Path(sm.output.db)
+out_db.parent.mkdir(parents=True, exist_ok=True)
+# the database moves into place only once complete; a killed job's temporary folder is
+# removed by the next run (make_temp_dir)
+work = make_temp_dir(out_db.parent, ".view_features.")
+try:
+    info = viewdb.extract_view_features(
+        views, work / "features.db", work, max_num_features=cfg["max_num_features"],
+        seed=cfg["seed"], num_threads=sm.threads)
+    (work / "features.db").replace(out_db)
+finally:
+    shutil.rmtree(work, ignore_errors=True)
+write_json(sm.output.info, info)

@@ -1,0 +1,62 @@
+"""The view database in two steps (rules view_features and view_matches): SIFT without
+any calibration, then the matching of the pairs that follow registration A - the same
+database, byte for byte, as SIFT and matching in one go."""
+
+import os
+
+import cv2  # noqa: F401  (before pycolmap)
+import numpy as np
+import pytest
+
+from plenocal.io import write_image
+from plenocal.sfm import viewdb
+from plenocal.sfm.synthetic import default_scene, render, rig_cameras, view_sets
+
+
+@pytest.fixture(scope="module")
+def views(tmp_path_factory):
+    root = tmp_path_factory.mktemp("viewdb")
+    shots = rig_cameras(f=300.0, width=240, height=180, cols=2, rows=1, handheld=1)
+    sets = view_sets(shots, 3, 0.003)
+    scene = default_scene()
+    paths = {}
+    for name, cam in sets.items():
+        paths[name] = root / f"{name}.png"
+        write_image(paths[name], render(cam, scene, ss=1))
+    centres = {k: c.cam_to_world[:3, 3] for k, c in shots.items()}
+    return paths, centres
+
+
+def test_two_steps_give_the_one_step_database(views, tmp_path):
+    paths, centres = views
+    one = tmp_path / "one.db"
+    info = viewdb.build_view_database(paths, one, tmp_path / "w1", shot_centres=centres,
+                                      shot_neighbours=1, max_num_features=1000)
+    feats = tmp_path / "features.db"
+    finfo = viewdb.extract_view_features(paths, feats, tmp_path / "w2", max_num_features=1000)
+    os.utime(feats, ns=(10**18, 10**18))
+    two = tmp_path / "two.db"
+    minfo = viewdb.match_view_database(feats, two, shot_centres=centres, shot_neighbours=1,
+                                       work_dir=tmp_path)
+    assert one.read_bytes() == two.read_bytes()
+    # the features are an input of the matching rule: left untouched
+    assert feats.stat().st_mtime_ns == 10**18
+    assert viewdb.database_names(feats) == viewdb.database_names(two) == sorted(paths)
+    assert finfo["num_images"] == minfo["num_images"] == info["num_images"] == 27
+    # 3 shots of 3 x 3 views: 20 neighbouring pairs each; each shot linked to its nearest
+    assert minfo["num_pairs"] == info["num_pairs"] == 3 * 20 + 2 * 9
+    assert minfo["num_verified_pairs"] == info["num_verified_pairs"] > 3 * 20
+    assert finfo["keypoints_mean"] == info["keypoints_mean"] > 100
+
+
+def test_first_octave_reaches_sift(views, tmp_path):
+    """first_octave 0 starts SIFT at the image's own resolution (COLMAP's -1 doubles it
+    first): fewer keypoints, none finer than the image's own scale."""
+    paths, _ = views
+    some = dict(sorted(paths.items())[:2])
+    fine = viewdb.extract_view_features(some, tmp_path / "a.db", tmp_path / "a")
+    coarse = viewdb.extract_view_features(some, tmp_path / "b.db", tmp_path / "b",
+                                          first_octave=0)
+    assert fine["first_octave"] == -1 and coarse["first_octave"] == 0
+    assert 0 < coarse["keypoints_mean"] < 0.8 * fine["keypoints_mean"]
+    assert np.isfinite(coarse["features_s"])
