@@ -102,16 +102,18 @@ class SynthesisContext:
         return self.cameras[key]
 
     def image(self, key: str) -> np.ndarray:
+        """The captured view ``key`` (read once; the cache may be shared by the runs of
+        an experiment with other camera sets, so the size is checked on every call)."""
+        cam, view = key.split("/")
         if key not in self._images:
-            cam, view = key.split("/")
-            img = to_float(read_image(self.image_path(cam, view)))
-            c = self.camera(key)
-            if img.shape[:2] != (c.height, c.width):
-                raise ValueError(f"synthesis: {self.image_path(cam, view)} is "
-                                 f"{img.shape[1]}x{img.shape[0]}, its camera says "
-                                 f"{c.width}x{c.height}")
-            self._images[key] = img
-        return self._images[key]
+            self._images[key] = to_float(read_image(self.image_path(cam, view)))
+        img = self._images[key]
+        c = self.camera(key)
+        if img.shape[:2] != (c.height, c.width):
+            raise ValueError(f"synthesis: {self.image_path(cam, view)} is "
+                             f"{img.shape[1]}x{img.shape[0]}, its camera says "
+                             f"{c.width}x{c.height}")
+        return img
 
     def depth(self, key: str) -> np.ndarray:
         """The depth map of ``key``: the given one, else estimated with this calibration."""
@@ -317,10 +319,14 @@ def experiment_input_views(layout: ArrayLayout, exp: int, exp2_sets: str = "midd
 def run_experiment(exp: int, cameras: dict[str, PinholeCamera],
                    image_path: Callable[[str, str], str], layout: ArrayLayout, near: float,
                    far: float, config: dict,
-                   depths: dict[str, np.ndarray] | None = None) -> tuple[dict,
-                                                                        dict[str, np.ndarray]]:
-    """Experiment ``exp`` with one camera set and (optionally) given depth maps."""
-    ctx = SynthesisContext(cameras, image_path, layout, near, far, config, dict(depths or {}))
+                   depths: dict[str, np.ndarray] | None = None,
+                   images: dict[str, np.ndarray] | None = None) -> tuple[
+                       dict, dict[str, np.ndarray]]:
+    """Experiment ``exp`` with one camera set and (optionally) given depth maps.
+    ``images``: a cache of the captured views (``"<cam>/<view>"`` -> float image) shared
+    by the runs of one experiment, which read the same views."""
+    ctx = SynthesisContext(cameras, image_path, layout, near, far, config, dict(depths or {}),
+                           images if images is not None else {})
     if exp == 1:
         return experiment1(ctx)
     if exp == 2:

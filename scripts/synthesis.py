@@ -47,14 +47,14 @@ renderers = [cfg.get("renderer", "dibr")]
 if renderers[0] == "rvs" and cfg.get("rvs_compare_dibr", True):
     renderers.append("dibr")
 
-runs, kept_all = {}, {}
+runs, kept_all, images = {}, {}, {}
 for renderer in renderers:
     for dname, dmaps in depths.items():
         for cname, cams in cameras.items():
             t0 = time.perf_counter()
             res, kept = run_experiment(exp, cams, lambda c, v: str(views_dir / c / f"{v}.png"),
                                        layout, near, far, {**cfg, "renderer": renderer},
-                                       dict(dmaps))
+                                       dict(dmaps), images)
             res["seconds"] = round(time.perf_counter() - t0, 1)
             runs[(renderer, dname, cname)] = res
             log.info("%s, %s depth, %s cameras: experiment %d, %.1f s", renderer, dname, cname,
