@@ -1,6 +1,7 @@
 """Depth: the plane sweep recovers textured planes from synthetic pinhole renders;
 the colmap backend fails clearly without a GPU; the workspace it would run on is
-well formed; 16-bit disparity round trip; SGBM baseline runs."""
+well formed; 16-bit disparity round trip; SGBM baseline runs; the vectorised pieces of
+the sweep (best-k of the sources, winner-take-all) against their plain definitions."""
 
 import cv2  # (before pycolmap)
 import numpy as np
@@ -9,10 +10,17 @@ import pytest
 from plenocal.depth import DepthBackendError, estimate_depth, resolve_backend
 from plenocal.depth.colmap_mvs import colmap_available, prepare_workspace, read_colmap_array
 from plenocal.depth.inputs import nearest_sources
-from plenocal.depth.planesweep import PlaneSweepOptions, plane_homography, plane_sweep_depth
+from plenocal.depth.planesweep import (
+    PlaneSweepOptions,
+    plane_homographies,
+    plane_homography,
+    plane_sweep_depth,
+    smallest_first,
+    winner_take_all,
+)
 from plenocal.depth.quality import depth_quality
 from plenocal.depth.sgbm import sgbm_depth
-from plenocal.depth.sgm import SgmOptions, fill_background, sgm_depth
+from plenocal.depth.sgm import SgmOptions, _mean_of_seen_best, _wta, fill_background, sgm_depth
 from plenocal.depth.synthetic import camera_at, fronto_plane, photo_texture, render_plane
 
 W, H, F = 320, 240, 500.0
@@ -165,3 +173,78 @@ def test_background_fill_takes_the_far_side():
     np.testing.assert_allclose(fill_background(z), [[0.5, 0.8, 0.8, 0.8, 0.8]])
     z = np.array([[0.0, 0.6, 0.0]], dtype=np.float32)
     np.testing.assert_allclose(fill_background(z), [[0.6, 0.6, 0.6]])
+
+
+def _costs(shape, seed):
+    """Random float32 costs with ties, +inf (window outside a source) and pixels no
+    source sees."""
+    rng = np.random.default_rng(seed)
+    per = np.round(rng.random(shape), 2).astype(np.float32)
+    per[rng.random(shape) < 0.2] = np.inf
+    per[:, 0, :3] = np.inf
+    return per
+
+
+def test_smallest_first_gives_the_k_smallest_ascending():
+    per = _costs((7, 9, 11), 0)
+    ref = np.sort(per, axis=0)
+    for k in range(1, 7):
+        planes = smallest_first(per.copy(), k)
+        assert np.array_equal(np.stack(planes[:k]), ref[:k])
+        assert np.array_equal(np.sort(np.stack(planes), axis=0), ref)  # a permutation
+
+
+def test_sgm_source_mean_is_the_mean_of_the_best_seen():
+    per = _costs((8, 9, 11), 1)
+    S, fraction = per.shape[0], 0.5
+    k_of = np.maximum(1, np.ceil(np.arange(S + 1) * fraction)).astype(np.int64)
+    out = np.empty(per.shape[1:], np.float32)
+    _mean_of_seen_best(per.copy(), k_of, int(k_of[-1]), out)
+    for y, x in np.ndindex(out.shape):
+        seen = np.sort(per[:, y, x][np.isfinite(per[:, y, x])])
+        if len(seen) == 0:
+            assert out[y, x] == 1.0
+            continue
+        k = int(k_of[len(seen)])
+        assert out[y, x] == np.cumsum(seen, dtype=np.float32)[k - 1] / np.float32(k)
+
+
+def test_winner_take_all_is_the_first_minimum_and_the_second_outside_its_neighbours():
+    vol = _costs((6, 9, 11), 2)
+    v = np.where(np.isfinite(vol), vol, np.float32(1e6))
+    best, depth, c0, second = winner_take_all(vol.copy(), np.linspace(1.0, 2.0, 6))
+    assert np.array_equal(best, np.argmin(v, axis=0))
+    assert np.array_equal(c0, v.min(axis=0))
+    labels = np.arange(6)[:, None, None]
+    far = np.abs(labels - best[None]) > 1
+    assert np.array_equal(second, np.where(far, v, np.float32(1e6)).min(axis=0))
+
+
+def test_sgm_wta_matches_its_definition():
+    agg = _costs((9, 11, 7), 3).transpose(1, 2, 0).copy()
+    agg[~np.isfinite(agg)] = 5.0
+    near, far = 0.4, 0.9
+    depth, cont, ratio = _wta(agg, near, far)
+    D = agg.shape[2]
+    best = np.argmin(agg, axis=2)
+    for y, x in np.ndindex(best.shape):
+        a, b = agg[y, x], int(best[y, x])
+        off = np.float32(0.0)
+        if 1 <= b <= D - 2:
+            den = a[b - 1] - np.float32(2.0) * a[b] + a[b + 1]
+            if den > np.float32(1e-9):
+                off = np.clip(np.float32(0.5) * (a[b - 1] - a[b + 1]) / den, -0.5, 0.5)
+        assert cont[y, x] == b + np.float64(off)
+        inv = 1.0 / near + cont[y, x] * (1.0 / far - 1.0 / near) / (D - 1)
+        assert depth[y, x] == np.float32(1.0 / inv)
+        rest = [a[d] for d in range(D) if abs(d - b) > 1]
+        assert ratio[y, x] == (a[b] / min(rest) if rest else 0.0)
+
+
+def test_plane_homographies_match_the_single_plane_homography(texture):
+    ref, _, _, srcs, _ = _scene(texture, 0.0)
+    depths = np.array([0.4, 0.55, 0.9])
+    hs = plane_homographies(ref, srcs[2], depths)
+    for h, d in zip(hs, depths, strict=True):
+        np.testing.assert_allclose(h, plane_homography(ref, srcs[2], float(d)), rtol=1e-12,
+                                   atol=1e-12)
