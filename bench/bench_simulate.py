@@ -10,10 +10,13 @@ microlens map, traces and writes the PNG. The extrapolation uses the second.
 the Raytrix-like camera). ``--psnr-samples 12,8,6`` then measures, for each number of
 rays per pixel (``render.samples``), the PSNR of the converted views (convert settings
 of the config) against the ideal renders of their ground-truth cameras, on
-``--psnr-shots``: how few rays keep the views as good as the default's.
+``--psnr-shots`` of the scenes of ``--psnr-seeds``, with the converter's set-up decided per
+count as rule convert_setup does: the fewest rays per pixel whose PSNR stays within
+``--psnr-tolerance`` dB of the most rays' on every seed (issue 15: 0.2 dB).
 
 Usage: python bench/bench_simulate.py [--config config.yaml] [--dataset synthetic]
-       [--simulate FILE] [--psnr-samples 12,8,6,4] [--psnr-shots x03_y01,hand02]
+       [--simulate FILE] [--psnr-samples 4,8,12,32] [--psnr-seeds 0,1,2]
+       [--psnr-shots x03_y01,x00_y00,x06_y02,hand03]
 """
 
 from __future__ import annotations
@@ -46,49 +49,73 @@ render_shot(cfg["datasets"][sys.argv[2]]["simulate"], sys.argv[3], sys.argv[4], 
 
 
 def psnr_by_samples(cfg: dict, dataset: str, out: Path, shots: list[str],
-                    samples: list[int]) -> None:
-    """Converted views against ideal renders, per number of rays per pixel."""
+                    samples: list[int], seed: int) -> dict[int, float]:
+    """Converted views against ideal renders, per number of rays per pixel, on the
+    scene and shots of ``seed``; returns the central views' mean PSNR per count.
+
+    As the workflow does it: the converter's set-up (rule convert_setup: tile, grid) is
+    decided on the full-set shot's lenslet image of each count, the views' ground-truth
+    cameras (rule ground_truth_cam) follow that set-up, and the ideal renders (rule
+    ground_truth_render) are the references; the views are scored by
+    plenocal.convert.quality (rule convert_quality)."""
     import cv2  # noqa: F401, PLC0415  (before anything that may load pycolmap)
 
     from plenocal.camera import PinholeCamera  # noqa: PLC0415
     from plenocal.convert import ConvertSettings, convert_files  # noqa: PLC0415
     from plenocal.convert.quality import dataset_quality  # noqa: PLC0415
+    from plenocal.convert.setup import decide_setup, read_setup, write_setup  # noqa: PLC0415
+    from plenocal.convert.shot import load_calib, load_lenslet, read_sensor_size  # noqa: PLC0415
     from plenocal.groundtruth import ground_truth_shot  # noqa: PLC0415
     from plenocal.io import read_json, to_uint8, write_image  # noqa: PLC0415
     from plenocal.simulate.raytrace import render_pinhole  # noqa: PLC0415
     from plenocal.simulate.scene import scene_arrays  # noqa: PLC0415
     from plenocal.viewgeom import central_view  # noqa: PLC0415
 
-    sim, conv = cfg["datasets"][dataset]["simulate"], cfg["convert"]
-    n = cfg["datasets"][dataset]["views"]
-    scene = scene_arrays(read_json(out / "truth" / "scene.json"))
-    for cam in shots:
-        gt = out / "gt" / f"{cam}.json"
-        ground_truth_shot(out, cam, n, conv["tile_size"], conv.get("view_spacing_px"), gt,
-                          log=lambda m: None)
-        for key, d in read_json(gt)["cameras"].items():
-            c = PinholeCamera.from_dict(d)
-            img, _ = render_pinhole(scene, c.K, c.cam_to_world, c.width, c.height,
-                                    sim["render"]["ideal_supersample"])
-            write_image(out / "gt" / f"{key}.png", to_uint8(img))
+    ds, conv = cfg["datasets"][dataset], cfg["convert"]
+    n = ds["views"]
+    sim = copy.deepcopy(ds["simulate"])
+    sim["seed"] = seed
+    data = out / f"seed{seed}"
+    setup_dataset(sim, data)
+    scene = scene_arrays(read_json(data / "truth" / "scene.json"))
+    a = sim["array"]
+    full = f"x{(a['cols'] - 1) // 2:02d}_y{(a['rows'] - 1) // 2:02d}"
     settings = ConvertSettings.from_config(conv)
+    means = {}
     for k in samples:
         s2 = copy.deepcopy(sim)
         s2["render"]["samples"] = k
-        pairs = []
+        run = data / f"s{k}"
         t0 = time.perf_counter()
+        for cam in dict.fromkeys([full, *shots]):
+            render_shot(s2, data, cam, run / f"{cam}.png", log=lambda m: None)
+        setup, _ = decide_setup(load_lenslet(run / f"{full}.png",
+                                             read_sensor_size(data / "camera.yaml")),
+                                load_calib(data / "calib.xml"), n, settings, source=full)
+        write_setup(run / "convert_setup.json", setup)
+        tile = read_setup(run / "convert_setup.json").tile
+        pairs = []
         for cam in shots:
-            png = out / f"s{k}" / f"{cam}.png"
-            render_shot(s2, out, cam, png, log=lambda m: None)
-            shot = convert_files(png, out / "calib.xml", out / "camera.yaml", n, settings)
+            gt = run / "gt" / f"{cam}.json"
+            ground_truth_shot(data, cam, n, tile, conv.get("view_spacing_px"), gt,
+                              log=lambda m: None, even=bool(conv["even_size"]))
+            shot = convert_files(run / f"{cam}.png", data / "calib.xml", data / "camera.yaml",
+                                 n, settings, setup_json=run / "convert_setup.json")
             for name, img in shot.views():
-                write_image(out / f"s{k}" / cam / f"{name}.png", img)
-                pairs.append((cam, name, out / f"s{k}" / cam / f"{name}.png",
-                              out / "gt" / cam / f"{name}.png"))
-        q = dataset_quality(pairs, border=int(conv["tile_size"]), central=central_view(n))
-        print(f"render.samples {k:3d}: PSNR central views {q['mean_psnr_central_db']:.2f} dB, "
-              f"all views {q['mean_psnr_db']:.2f} dB, worst {q['min_psnr_db']:.2f} dB "
-              f"({q['worst_view']}); {time.perf_counter() - t0:.0f} s for {len(shots)} shots")
+                c = PinholeCamera.from_dict(read_json(gt)["cameras"][f"{cam}/{name}"])
+                ideal, _ = render_pinhole(scene, c.K, c.cam_to_world, c.width, c.height,
+                                          sim["render"]["ideal_supersample"])
+                write_image(run / "gt" / cam / f"{name}.png", to_uint8(ideal))
+                write_image(run / cam / f"{name}.png", img)
+                pairs.append((cam, name, run / cam / f"{name}.png",
+                              run / "gt" / cam / f"{name}.png"))
+        q = dataset_quality(pairs, border=tile, central=central_view(n))
+        means[k] = q["mean_psnr_central_db"]
+        print(f"seed {seed}, render.samples {k:3d}: PSNR central views "
+              f"{q['mean_psnr_central_db']:.3f} dB, all views {q['mean_psnr_db']:.3f} dB, "
+              f"worst {q['min_psnr_db']:.2f} dB ({q['worst_view']}); "
+              f"{time.perf_counter() - t0:.0f} s for {len(shots)} shots", flush=True)
+    return means
 
 
 def main() -> None:
@@ -97,7 +124,11 @@ def main() -> None:
     ap.add_argument("--dataset", default="synthetic")
     ap.add_argument("--simulate", help="YAML file with a `simulate:` block to use instead")
     ap.add_argument("--psnr-samples", help="comma-separated render.samples to compare")
-    ap.add_argument("--psnr-shots", default="x03_y01,hand02")
+    ap.add_argument("--psnr-shots", default="x03_y01,x00_y00,x06_y02,hand03")
+    ap.add_argument("--psnr-seeds", default="0,1,2",
+                    help="simulate.seed values (scenes and hand-held poses) to measure on")
+    ap.add_argument("--psnr-tolerance", type=float, default=0.2,
+                    help="dB below the most rays' PSNR that a count may lose")
     args = ap.parse_args()
     raw = yaml.safe_load(Path(args.config).read_text())
     if args.simulate:
@@ -120,8 +151,14 @@ def main() -> None:
         cold = time.perf_counter() - t0
         rss_job = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
         if args.psnr_samples:
-            psnr_by_samples(cfg, args.dataset, Path(tmp), args.psnr_shots.split(","),
-                            [int(k) for k in args.psnr_samples.split(",")])
+            counts = sorted(int(k) for k in args.psnr_samples.split(","))
+            per_seed = {seed: psnr_by_samples(cfg, args.dataset, Path(tmp) / "psnr",
+                                              args.psnr_shots.split(","), counts, seed)
+                        for seed in (int(x) for x in args.psnr_seeds.split(","))}
+            ok = [k for k in counts if all(m[k] >= m[counts[-1]] - args.psnr_tolerance
+                                           for m in per_seed.values())]
+            print(f"fewest rays per pixel within {args.psnr_tolerance} dB of {counts[-1]} on "
+                  f"every seed: {ok[0] if ok else 'none'}")
     n = len(shot_names(sim))
     w, h, k = sim["sensor"]["width"], sim["sensor"]["height"], sim["render"]["samples"]
     print(f"tracing one shot {w}x{h}, {k} rays/px (warm process): {warm:.2f} s "
