@@ -419,7 +419,7 @@ def test_views_reaching_the_rim_take_the_wide_blend():
     assert reaches_rim(6.0, 7.1, 20.0) is True  # 6 + 5.02 > 10
     assert reaches_rim(6.0, 5.6, 20.0) is False  # 6 + 3.96 < 10
     wide = RenderSettings().wide()
-    assert (wide.slots, wide.fade_radius, wide.centre_power) == (5, 1.5, 3.0)
+    assert (wide.slots, wide.fade_radius, wide.centre_power) == (4, 1.5, 3.0)
     opt = small_optics(480, 300)
     calib = calib_for_optics(opt)
     grid = MicrolensGrid(calib, 480, 300)
@@ -432,4 +432,4 @@ def test_views_reaching_the_rim_take_the_wide_blend():
             expect = reaches_rim(off, P, calib.safe_diameter)
             assert (shot.plan_for(r, c) is not shot.plan) == expect, (r, c)
     assert shot.plan_for(0, 0) is not shot.plan and shot.plan_for(2, 2) is shot.plan
-    assert shot.plan_for(0, 0).tile_weight.shape[0] == 5
+    assert shot.plan_for(0, 0).tile_weight.shape[0] == 4

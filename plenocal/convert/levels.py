@@ -37,5 +37,5 @@ def significant_bits(image: np.ndarray, setting: int | str = "auto") -> int:
 
 def to_unit_float(image: np.ndarray, bits: int) -> np.ndarray:
     """float32 in [0, 1] (contiguous) of an 8/16-bit image holding ``bits`` bits."""
-    f = image.astype(np.float32) * np.float32(1.0 / ((1 << bits) - 1))
+    f = np.multiply(image, np.float32(1.0 / ((1 << bits) - 1)), dtype=np.float32)  # one pass
     return np.ascontiguousarray(f)

@@ -98,10 +98,10 @@ def to_gray(image: np.ndarray) -> np.ndarray:
     if img.dtype == np.float32 and img.ndim == 2 and img.flags.c_contiguous:
         return img
     if img.dtype == np.uint8:
-        img = img.astype(np.float32) / 255.0
+        img = np.multiply(img, np.float32(1.0 / 255.0), dtype=np.float32)
     elif img.dtype == np.uint16:
-        img = img.astype(np.float32) / 65535.0
-    else:
+        img = np.multiply(img, np.float32(1.0 / 65535.0), dtype=np.float32)
+    elif img.dtype != np.float32:
         img = img.astype(np.float32)
     if img.ndim == 3:
         img = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)

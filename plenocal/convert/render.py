@@ -50,7 +50,7 @@ class RenderSettings:
     slots: int = 3  # candidate lenses blended per output pixel (a 4th is >= 0.87 tile away)
     centre_power: float = 1.0  # weight (1 - (rho / (D'/2))^2)^power: samples near the centre
     # views whose patches reach past the micro image (rim_reaching_views): a wider blend
-    wide_slots: int = 5
+    wide_slots: int = 4
     wide_fade_radius: float = 1.5
     wide_centre_power: float = 3.0
 
@@ -93,12 +93,22 @@ def make_plan(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
     """Precompute the per-shot geometry. ``patch``: (m,) patch size per used lens, in
     ``layout.lens_index`` order; ``focus``: (m,) focus weight per used lens (multi-focus
     MLAs: lenses that see their point blurred get less weight), None for all 1."""
-    settings = settings or RenderSettings()
+    return make_plans(layout, patch, safe_diameter, [settings or RenderSettings()], focus,
+                      profile)[0]
+
+
+def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
+               blends: list[RenderSettings], focus: np.ndarray | None = None,
+               profile: np.ndarray | None = None) -> list[RenderPlan]:
+    """One :class:`RenderPlan` per blend in ``blends``, sharing the geometry: the nearest
+    tiles and their sampling positions are computed once for the most slots, and a
+    blend of fewer slots takes the first (nearest) of them (views of the arrays, no
+    copy). See :func:`make_plan` for the arguments."""
     patch = np.asarray(patch, dtype=np.float64)
     if patch.shape != (len(layout.lens_index),):
         raise ValueError(f"need one patch size per used lens ({len(layout.lens_index)}), "
                          f"got {patch.shape}")
-    idx, dist2 = nearest_slots(layout, keep=settings.slots)
+    idx, dist2 = nearest_slots(layout, keep=max(b.slots for b in blends))
     K = idx.shape[0]
     have = idx >= 0
     lens = np.where(have, idx, 0)
@@ -121,22 +131,24 @@ def make_plan(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
         np.add(off_y[k], lcy.take(li), out=map_y[k])
         map_x[k][~have[k]] = -1e4
         map_y[k][~have[k]] = -1e4
-    R = settings.fade_radius
-    wt = 1.0 - dist2 * f(1.0 / (R * R))
-    np.maximum(wt, f(0.0), out=wt)
-    wt *= wt
-    if focus is not None:
-        wt *= np.asarray(focus, dtype=f).take(lens)
-    wt[~have] = 0.0
-    # the nearest lens always keeps a tiny weight (every pixel has a lens within 0.577)
-    np.maximum(wt[0], np.where(have[0], f(_FLOOR), f(0.0)), out=wt[0])
-
-    weight_table, gain_tab = radial_tables(safe_diameter, settings, profile)
-    return RenderPlan(
-        layout=layout, map_x=map_x, map_y=map_y, off_x=off_x, off_y=off_y,
-        tile_weight=wt,
-        weight_table=weight_table, gain_table=gain_tab,
-    )
+    focus_w = None if focus is None else np.asarray(focus, dtype=f).take(lens)
+    plans = []
+    for blend in blends:
+        k = min(blend.slots, K)
+        R = blend.fade_radius
+        wt = 1.0 - dist2[:k] * f(1.0 / (R * R))
+        np.maximum(wt, f(0.0), out=wt)
+        wt *= wt
+        if focus_w is not None:
+            wt *= focus_w[:k]
+        wt[~have[:k]] = 0.0
+        # the nearest lens always keeps a tiny weight (every pixel has a lens within 0.577)
+        np.maximum(wt[0], np.where(have[0], f(_FLOOR), f(0.0)), out=wt[0])
+        weight_table, gain_tab = radial_tables(safe_diameter, blend, profile)
+        plans.append(RenderPlan(
+            layout=layout, map_x=map_x[:k], map_y=map_y[:k], off_x=off_x[:k],
+            off_y=off_y[:k], tile_weight=wt, weight_table=weight_table, gain_table=gain_tab))
+    return plans
 
 
 def radial_tables(safe_diameter: float, settings: RenderSettings,
@@ -166,19 +178,25 @@ def _lookup(table: np.ndarray, x: np.ndarray, zeros: np.ndarray) -> np.ndarray:
                      borderMode=cv2.BORDER_REPLICATE)
 
 
-def view_weights(plan: RenderPlan, r: int, c: int, with_gain: bool = False) -> np.ndarray:
-    """(K, H, W) normalised blend weights of view (r, c); with ``with_gain`` each
-    multiplied by its sample's vignetting gain (1 / micro-image profile)."""
+BAND_ROWS = 32  # rows rendered at a time: every per-pixel array of a band stays in cache
+
+
+def view_weights(plan: RenderPlan, r: int, c: int, with_gain: bool = False,
+                 rows: slice = slice(None)) -> np.ndarray:
+    """(K, h, W) normalised blend weights of view (r, c) over output ``rows`` (all by
+    default); with ``with_gain`` each multiplied by its sample's vignetting gain
+    (1 / micro-image profile)."""
     o = plan.layout.offset_image(r, c)
-    K, H, W = plan.off_x.shape
+    off_x, off_y, tile_weight = plan.off_x[:, rows], plan.off_y[:, rows], plan.tile_weight[:, rows]
+    K, H, W = off_x.shape
     zeros = np.zeros((H, W), np.float32)
     w = np.empty((K, H, W), np.float32)
     gain = np.empty((K, H, W), np.float32) if with_gain else None
     total = np.zeros((H, W), np.float32)
     for k in range(K):
-        rad = cv2.magnitude(plan.off_x[k] + np.float32(o[0]), plan.off_y[k] + np.float32(o[1]))
+        rad = cv2.magnitude(off_x[k] + np.float32(o[0]), off_y[k] + np.float32(o[1]))
         rad *= np.float32(1.0 / LUT_STEP)  # fractional table entry
-        np.multiply(_lookup(plan.weight_table, rad, zeros), plan.tile_weight[k], out=w[k])
+        np.multiply(_lookup(plan.weight_table, rad, zeros), tile_weight[k], out=w[k])
         total += w[k]
         if gain is not None:
             gain[k] = _lookup(plan.gain_table, rad, zeros)
@@ -192,19 +210,23 @@ def view_weights(plan: RenderPlan, r: int, c: int, with_gain: bool = False) -> n
 
 def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int) -> np.ndarray:
     """View (r, c) as float32 (H, W, C) in the units of ``source`` (float32 image),
-    corrected for the micro images' vignetting where the plan has a profile."""
+    corrected for the micro images' vignetting where the plan has a profile. Rendered in
+    bands of :data:`BAND_ROWS` rows (the same numbers as whole; 1.3-1.5x faster)."""
     o = plan.layout.offset_image(r, c)
-    w = view_weights(plan, r, c, with_gain=True)
     ch = 1 if source.ndim == 2 else source.shape[2]
-    out = np.zeros((plan.layout.height, plan.layout.width) + ((ch,) if ch > 1 else ()),
-                   dtype=np.float32)
-    for k in range(w.shape[0]):
-        mx = plan.map_x[k] + np.float32(o[0])
-        my = plan.map_y[k] + np.float32(o[1])
-        s = cv2.remap(source, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        # out += s * w_k in one pass (numpy's broadcast over the channels takes 3x as long)
-        cv2.accumulateProduct(s.reshape(out.shape), w[k] if ch == 1 else cv2.merge([w[k]] * ch),
-                              out)
+    H, W = plan.layout.height, plan.layout.width
+    out = np.zeros((H, W) + ((ch,) if ch > 1 else ()), dtype=np.float32)
+    ox, oy = np.float32(o[0]), np.float32(o[1])
+    for y0 in range(0, H, BAND_ROWS):
+        rows = slice(y0, min(y0 + BAND_ROWS, H))
+        w = view_weights(plan, r, c, with_gain=True, rows=rows)
+        band = out[rows]
+        for k in range(w.shape[0]):
+            s = cv2.remap(source, plan.map_x[k, rows] + ox, plan.map_y[k, rows] + oy,
+                          cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            # band += s * w_k in one pass (numpy's broadcast over channels takes 3x as long)
+            cv2.accumulateProduct(s.reshape(band.shape),
+                                  w[k] if ch == 1 else cv2.merge([w[k]] * ch), band)
     return out if ch > 1 else out[..., None]
 
 

@@ -48,7 +48,7 @@ from plenocal.convert.patchsize import (
 from plenocal.convert.render import (
     RenderPlan,
     RenderSettings,
-    make_plan,
+    make_plans,
     reaches_rim,
     render_view,
 )
@@ -261,22 +261,26 @@ class ShotConversion:
             raise ConvertError(f"{source} with {calib.source}: {exc}") from None
         self.used_patch = self.patch.patch[self.layout.lens_index]
         self.profile = radial_profile(gray, self.grid) if st.devignette else None
-        self.plan: RenderPlan = make_plan(self.layout, self.used_patch, calib.safe_diameter,
-                                          st.render, self.patch.focus[self.layout.lens_index],
-                                          self.profile)
-        self._wide_plan: RenderPlan | None = None
+        # the tight blend, and the wide one where some view reaches the rim (the corners
+        # reach farthest); one geometry for both
+        corner = float(np.hypot(*self.layout.offset_image(0, 0)))
+        blends = [st.render]
+        if self._reaches_rim(corner):
+            blends.append(st.render.wide())
+        plans = make_plans(self.layout, self.used_patch, calib.safe_diameter, blends,
+                           self.patch.focus[self.layout.lens_index], self.profile)
+        self.plan: RenderPlan = plans[0]
+        self._wide_plan: RenderPlan | None = plans[1] if len(plans) > 1 else None
+
+    def _reaches_rim(self, offset: float) -> bool:
+        return reaches_rim(offset, float(np.median(self.used_patch)), self.calib.safe_diameter)
 
     def plan_for(self, r: int, c: int) -> RenderPlan:
         """The render plan of view (r, c): the tight blend, or the wide one where the
         view's patches reach past the micro image (:func:`reaches_rim`, median patch)."""
-        offset = float(np.hypot(*self.layout.offset_image(r, c)))
-        if not reaches_rim(offset, float(np.median(self.used_patch)),
-                           self.calib.safe_diameter):
+        if self._wide_plan is None or not self._reaches_rim(
+                float(np.hypot(*self.layout.offset_image(r, c)))):
             return self.plan
-        if self._wide_plan is None:
-            self._wide_plan = make_plan(self.layout, self.used_patch, self.calib.safe_diameter,
-                                        self.settings.render.wide(),
-                                        self.patch.focus[self.layout.lens_index], self.profile)
         return self._wide_plan
 
     def view_float(self, r: int, c: int) -> np.ndarray:
@@ -285,7 +289,8 @@ class ShotConversion:
     def view(self, r: int, c: int) -> np.ndarray:
         """View (r, c) as uint8 RGB (layout.height x layout.width x 3)."""
         v = self.view_float(r, c)
-        out = np.clip(v * np.float32(255.0) + np.float32(0.5), 0, 255).astype(np.uint8)
+        # round(255 v), saturated, in one pass (v >= 0: samples and weights are)
+        out = cv2.convertScaleAbs(v, alpha=255.0).reshape(v.shape)
         if out.shape[2] == 1:
             out = np.repeat(out, 3, axis=2)
         return out
