@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from plenocal.artifacts.scale import ScaleResult
+
 
 def valid_mask(depth: np.ndarray, low: float = 10.0, high: float = 90.0) -> np.ndarray:
     """Pixels > 0, finite and within the [low, high] percentile of the map's valid depths."""
@@ -80,6 +82,18 @@ def load_depth(path: str | Path) -> np.ndarray:
     if d.ndim != 2:
         raise ValueError(f"{path}: a depth map must be 2-D (got shape {d.shape})")
     return d
+
+
+def estimate_scale(pairs: Mapping[str, tuple[str | Path, str | Path]], low: float = 10.0,
+                   high: float = 90.0, estimator: str = "mean", log=None) -> ScaleResult:
+    """Eq. 5 from the depth files (:func:`scale_from_files`) as the typed result that
+    ``scale.json`` holds, ``estimator`` naming the r that the merge uses."""
+    out = scale_from_files(pairs, low, high, log=log)
+    return ScaleResult(
+        r=out["r"], r_median=out["r_median"], r_median_of_ratios=out["r_median_of_ratios"],
+        estimator=estimator, r_i=out["r_i"], r_i_median_of_ratios=out["r_i_median_of_ratios"],
+        n_pixels=out["n_pixels"], spread=out["spread"], percentiles=(low, high),
+        method=out["method"])
 
 
 def scale_from_files(pairs: Mapping[str, tuple[str | Path, str | Path]], low: float = 10.0,

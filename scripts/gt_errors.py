@@ -5,8 +5,9 @@ import logging
 
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
+from plenocal.artifacts.scale import read_scale
 from plenocal.camera import read_cameras
-from plenocal.io import read_json, write_json
+from plenocal.io import write_json
 from plenocal.merge import read_reg_a
 from plenocal.rig import read_rig
 from plenocal.verify.gt_errors import gt_errors
@@ -18,15 +19,13 @@ log = logging.getLogger("gt_errors")
 
 truth = read_cameras(snakemake.input.truth)
 log.info("ground truth: %d cameras from %s", len(truth), snakemake.input.truth)
-scale = read_json(snakemake.input.scale)
-r = float(scale.get("r_used", scale["r"]))
+scale = read_scale(snakemake.input.scale)
+r = scale.r_used
 out = gt_errors(truth, reg_a=read_reg_a(snakemake.input.reg_a),
                 rig=read_rig(snakemake.input.rig), r=r,
                 calib=read_cameras(snakemake.input.calibration))
-out["scale"]["r_mean_err_pct"] = 100.0 * (float(scale["r"]) / out["scale"]["r_truth"] - 1.0)
-if "r_median" in scale:
-    out["scale"]["r_median_err_pct"] = 100.0 * (float(scale["r_median"])
-                                                / out["scale"]["r_truth"] - 1.0)
+out["scale"]["r_mean_err_pct"] = 100.0 * (scale.r / out["scale"]["r_truth"] - 1.0)
+out["scale"]["r_median_err_pct"] = 100.0 * (scale.r_median / out["scale"]["r_truth"] - 1.0)
 for c in out["checks"]:
     v = "n/a" if c["value"] is None else f"{c['value']:.4g}"
     log.info("%-18s %10s %-10s target %-5g %s", c["name"], v, c["unit"], c["target"],

@@ -4,10 +4,10 @@ import logging
 
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
+from plenocal.artifacts.scale import read_scale
 from plenocal.export.colmap_model import write_colmap
 from plenocal.export.mpeg import write_mpeg
 from plenocal.export.plain import write_plain
-from plenocal.io import read_json
 from plenocal.merge import merge_cameras, read_reg_a
 from plenocal.rig import read_rig, rig_views
 
@@ -18,8 +18,7 @@ log = logging.getLogger("merge")
 
 reg_a = read_reg_a(snakemake.input.reg_a)
 rig = read_rig(snakemake.input.rig)
-scale = read_json(snakemake.input.scale)
-r = float(scale.get("r_used", scale["r"]))
+r = read_scale(snakemake.input.scale).r_used
 shots = list(snakemake.params.shots)
 missing = [c for c in shots if c not in reg_a["poses"]]
 if missing:

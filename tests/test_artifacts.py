@@ -58,3 +58,24 @@ def test_disparity_of_another_version_or_damaged_is_refused(tmp_path):
     with pytest.raises(FileNotFoundError, match="run the convert rule"):
         read_disparity(tmp_path / "absent.json")
     assert read_json(tmp_path / "cut.json")["format"] == FORMAT
+
+
+def test_scale_round_trip_and_estimator(tmp_path):
+    from plenocal.artifacts.scale import ScaleResult, read_scale, write_scale
+
+    res = ScaleResult(r=0.021, r_median=0.020, r_median_of_ratios=0.0205, estimator="median",
+                      r_i={"x00_y00": 0.021}, r_i_median_of_ratios={"x00_y00": 0.0205},
+                      n_pixels={"x00_y00": 100}, spread={"relative": 0.0, "n_shots": 1},
+                      percentiles=(10.0, 90.0))
+    assert res.r_used == 0.020
+    write_scale(tmp_path / "scale.json", res)
+    doc = read_json(tmp_path / "scale.json")
+    assert doc["format"] == "plenocal.scale" and doc["r_used"] == 0.020
+    assert read_scale(tmp_path / "scale.json") == res
+    with pytest.raises(ValueError, match="scale.estimator = 'mode'"):
+        ScaleResult(r=1.0, r_median=1.0, r_median_of_ratios=1.0, estimator="mode")
+    write_json(tmp_path / "old.json", {"r": 0.02, "r_used": 0.02})
+    with pytest.raises(ValueError, match=r"old\.json: not a scale.json of version 1.*rule scale"):
+        read_scale(tmp_path / "old.json")
+    with pytest.raises(FileNotFoundError, match="run rule scale"):
+        read_scale(tmp_path / "none.json")

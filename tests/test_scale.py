@@ -76,3 +76,20 @@ def test_files_and_errors(tmp_path):
         scale.shot_ratio(np.ones((3, 3)), np.zeros((3, 3)), name="x")
     with pytest.raises(FileNotFoundError, match="depth rule"):
         scale.load_depth(tmp_path / "missing.npy")
+
+
+def test_estimate_scale_is_the_typed_record_of_eq5(tmp_path):
+    from plenocal.artifacts.scale import ScaleResult
+
+    rng = np.random.default_rng(5)
+    pairs = {}
+    for i, r in enumerate((0.02, 0.021, 0.019)):
+        d1 = rng.uniform(20.0, 40.0, (30, 40))
+        np.save(tmp_path / f"a{i}.npy", d1)
+        np.save(tmp_path / f"b{i}.npy", d1 * r)
+        pairs[f"x{i:02d}_y00"] = (tmp_path / f"a{i}.npy", tmp_path / f"b{i}.npy")
+    res = scale.estimate_scale(pairs, 10, 90, estimator="median")
+    assert isinstance(res, ScaleResult)
+    assert res.r == pytest.approx(0.02) and res.r_median == pytest.approx(0.02)
+    assert res.r_used == res.r_median and res.percentiles == (10, 90)
+    assert sorted(res.r_i) == sorted(pairs)

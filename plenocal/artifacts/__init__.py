@@ -4,4 +4,5 @@ version (issue 16). Light modules (numpy and the standard library): any stage ma
 them without pulling in OpenCV or COLMAP.
 
 * :mod:`.disparity` - ``views/<shot>/disparity.json`` (convert -> registration B)
+* :mod:`.scale` - ``merge/scale.json`` (scale, Eq. 5 -> merge, Eq. 6, and gt_errors)
 """
