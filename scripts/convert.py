@@ -1,7 +1,6 @@
 """Rule convert: one lenslet image -> its N x N subaperture views, patch-size map and
 disparity range (plenocal.convert)."""
 
-import logging
 import time
 from pathlib import Path
 
@@ -9,11 +8,10 @@ import cv2
 
 from plenocal.convert import ConvertSettings, convert_files
 from plenocal.io import write_image, write_json, write_npy
+from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
-                    format="%(asctime)s %(levelname)s %(message)s")
-log = logging.getLogger("convert")
+log = rule_logger(snakemake, "convert")
 cv2.setNumThreads(max(1, int(snakemake.threads)))
 
 cam = snakemake.wildcards.cam

@@ -1,7 +1,6 @@
 """Rule convert_quality: PSNR/SSIM of every converted view against the simulator's ideal
 renders (synthetic datasets)."""
 
-import logging
 from pathlib import Path
 
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
@@ -9,11 +8,10 @@ import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 from plenocal.convert.quality import dataset_quality
 from plenocal.convert.setup import read_setup
 from plenocal.io import write_json
+from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
-                    format="%(asctime)s %(levelname)s %(message)s")
-log = logging.getLogger("convert_quality")
+log = rule_logger(snakemake, "convert_quality")
 
 pairs = []
 for truth in snakemake.input.truth:

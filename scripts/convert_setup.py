@@ -1,18 +1,15 @@
 """Rule convert_setup: the converter's per-camera decisions (MLA kind, tile size, grid),
 made once on the central array shot and shared by every shot (plenocal.convert.setup)."""
 
-import logging
-
 import cv2
 
 from plenocal.convert import ConvertSettings
 from plenocal.convert.setup import decide_setup, write_setup
 from plenocal.convert.shot import load_calib, load_lenslet, read_sensor_size
+from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
-                    format="%(asctime)s %(levelname)s %(message)s")
-log = logging.getLogger("convert_setup")
+log = rule_logger(snakemake, "convert_setup")
 cv2.setNumThreads(max(1, int(snakemake.threads)))
 
 image = load_lenslet(snakemake.input.lenslet, read_sensor_size(snakemake.input.camera))

@@ -2,7 +2,6 @@
 central views of the nearest shots, SfM units) or B (sources: views of its own set,
 metres). See plenocal.depth.inputs for the choices."""
 
-import logging
 import time
 from pathlib import Path
 
@@ -18,11 +17,10 @@ from plenocal.depth.inputs import (
     rig_cameras,
 )
 from plenocal.io import read_image, read_json, write_image, write_json, write_npy
+from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
-                    format="%(asctime)s %(levelname)s %(message)s")
-log = logging.getLogger("depth")
+log = rule_logger(snakemake, "depth")
 cv2.setNumThreads(max(1, int(snakemake.threads)))  # the job's cores only
 
 cfg = dict(snakemake.params.depth)

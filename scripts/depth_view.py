@@ -2,7 +2,6 @@
 view synthesis and the MPEG exports (SGM over the multi-view plane-sweep cost volume
 by default). See plenocal.depth.views."""
 
-import logging
 import time
 from pathlib import Path
 
@@ -12,11 +11,10 @@ from plenocal.camera import read_cameras
 from plenocal.depth.inputs import preview, rig_bounds
 from plenocal.depth.views import estimate_view_depth
 from plenocal.io import read_image, read_json, write_image, write_json, write_npy
+from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
-                    format="%(asctime)s %(levelname)s %(message)s")
-log = logging.getLogger("depth_view")
+log = rule_logger(snakemake, "depth_view")
 cv2.setNumThreads(max(1, int(snakemake.threads)))  # the job's cores only
 
 cfg = dict(snakemake.params.depth)

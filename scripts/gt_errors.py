@@ -1,8 +1,6 @@
 """Rule gt_errors: every calibration stage against the simulator's ground truth
 (synthetic datasets only; see plenocal.verify.gt_errors for what is compared)."""
 
-import logging
-
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
 from plenocal.artifacts.scale import read_scale
@@ -10,12 +8,11 @@ from plenocal.camera import read_cameras
 from plenocal.io import write_json
 from plenocal.merge import read_reg_a
 from plenocal.rig import read_rig
+from plenocal.rulelog import rule_logger
 from plenocal.verify.gt_errors import gt_errors
 
 snakemake = globals()["snakemake"]
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
-                    format="%(asctime)s %(levelname)s %(message)s")
-log = logging.getLogger("gt_errors")
+log = rule_logger(snakemake, "gt_errors")
 
 truth = read_cameras(snakemake.input.truth)
 log.info("ground truth: %d cameras from %s", len(truth), snakemake.input.truth)

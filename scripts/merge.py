@@ -1,7 +1,5 @@
 """Rule merge: Eq. 6 for every view of every shot, written in every export format."""
 
-import logging
-
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
 from plenocal.artifacts.scale import read_scale
@@ -10,11 +8,10 @@ from plenocal.export.mpeg import write_mpeg
 from plenocal.export.plain import write_plain
 from plenocal.merge import merge_cameras, read_reg_a
 from plenocal.rig import read_rig, rig_views
+from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
-                    format="%(asctime)s %(levelname)s %(message)s")
-log = logging.getLogger("merge")
+log = rule_logger(snakemake, "merge")
 
 reg_a = read_reg_a(snakemake.input.reg_a)
 rig = read_rig(snakemake.input.rig)

@@ -2,7 +2,6 @@
 the textures (YUV 4:2:0) and one RVS configuration per view-synthesis experiment
 beside calibration/mpeg/cameras.json. See plenocal.export.mpeg_views."""
 
-import logging
 from pathlib import Path
 
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
@@ -10,12 +9,11 @@ import numpy as np
 
 from plenocal.export.mpeg_views import export_views
 from plenocal.io import read_image
+from plenocal.rulelog import rule_logger
 from plenocal.synthesis import experiment_plan, layout_from_cams
 
 snakemake = globals()["snakemake"]
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
-                    format="%(asctime)s %(levelname)s %(message)s")
-log = logging.getLogger("mpeg_views")
+log = rule_logger(snakemake, "mpeg_views")
 
 verify = dict(snakemake.params.verify)
 layout = layout_from_cams(list(snakemake.params.array_cams), int(snakemake.params.n_views))

@@ -1,17 +1,15 @@
 """Rule report: results/<dataset>/report/index.html, a self-contained page (images
 embedded, no server, no network) built from whatever evaluation files exist."""
 
-import logging
 from pathlib import Path
 
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
 from plenocal.report.html import build_report
+from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
-                    format="%(asctime)s %(levelname)s %(message)s")
-log = logging.getLogger("report")
+log = rule_logger(snakemake, "report")
 
 out = Path(snakemake.output.html)
 info = build_report(Path(snakemake.params.results), out, snakemake.wildcards.dataset,

@@ -1,18 +1,15 @@
 """Rule rig_b: registration B (Section II-C) -> rig.json."""
 
-import logging
-
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
 from plenocal.artifacts.disparity import read_disparity
 from plenocal.io import write_json
 from plenocal.merge import read_reg_a
 from plenocal.rig import build_rig, read_datasheet
+from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
-                    format="%(asctime)s %(levelname)s %(message)s")
-log = logging.getLogger("rig_b")
+log = rule_logger(snakemake, "rig_b")
 
 params = snakemake.params
 ds = read_datasheet(snakemake.input.camera)

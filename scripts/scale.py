@@ -1,16 +1,13 @@
 """Rule scale: Eq. 5 on the central views' depth maps of registrations A and B."""
 
-import logging
-
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
 from plenocal.artifacts.scale import write_scale
+from plenocal.rulelog import rule_logger
 from plenocal.scale import estimate_scale
 
 snakemake = globals()["snakemake"]
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
-                    format="%(asctime)s %(levelname)s %(message)s")
-log = logging.getLogger("scale")
+log = rule_logger(snakemake, "scale")
 
 shots = list(snakemake.params.shots)
 pairs = dict(zip(shots, zip(snakemake.input.depth_a, snakemake.input.depth_b, strict=True),
