@@ -27,7 +27,7 @@ cfg = dict(snakemake.params.depth)
 reg = snakemake.wildcards.reg
 cam = snakemake.wildcards.cam
 centre = snakemake.params.centre
-margin = float(cfg.get("bounds_margin", 0.15))
+margin = float(cfg["bounds_margin"])
 views_dir = Path(snakemake.params.views_dir)
 
 if reg == "a":
@@ -37,7 +37,7 @@ if reg == "a":
         raise ValueError(f"depth: shot {cam} is not registered in {snakemake.input.reg_a}; "
                          "look at the registration A log for why")
     near, far = reg_a_bounds(reg_a, cam, snakemake.params.model_dir, margin)
-    srcs = nearest_sources(cam, cameras, int(cfg.get("sources_a", 6)))
+    srcs = nearest_sources(cam, cameras, int(cfg["sources_a"]))
     ref_cam, src_cams = cameras[cam], [cameras[s] for s in srcs]
     ref_path = views_dir / cam / f"{centre}.png"
     src_paths = [views_dir / s / f"{centre}.png" for s in srcs]
@@ -46,13 +46,13 @@ else:
     rig = read_json(snakemake.input.rig)
     cameras = rig_cameras(rig)
     near, far = rig_bounds(rig, margin)
-    srcs = nearest_sources(centre, cameras, cfg.get("sources_b", 8))
+    srcs = nearest_sources(centre, cameras, cfg["sources_b"])
     ref_cam, src_cams = cameras[centre], [cameras[s] for s in srcs]
     ref_path = views_dir / cam / f"{centre}.png"
     src_paths = [views_dir / cam / f"{s}.png" for s in srcs]
     units = "m"
 
-backend = resolve_backend(cfg.get("backend", "auto"))
+backend = resolve_backend(cfg["backend"])
 log.info("%s/%s: backend %s, bounds [%.6g, %.6g] %s, sources %s", reg, cam, backend, near,
          far, units, ", ".join(srcs))
 t0 = time.perf_counter()

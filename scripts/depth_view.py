@@ -11,6 +11,7 @@ from plenocal.camera import read_cameras
 from plenocal.depth.inputs import preview, rig_bounds
 from plenocal.depth.views import estimate_view_depth
 from plenocal.io import read_image, read_json, write_image, write_json, write_npy
+from plenocal.names import split_key
 from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]
@@ -22,27 +23,27 @@ verify = dict(snakemake.params.verify)
 key = f"{snakemake.wildcards.cam}/{snakemake.wildcards.view}"
 views_dir = Path(snakemake.params.views_dir)
 cameras = read_cameras(snakemake.input.calibration)
-near, far = rig_bounds(read_json(snakemake.input.rig), float(cfg.get("bounds_margin", 0.15)))
+near, far = rig_bounds(read_json(snakemake.input.rig), float(cfg["bounds_margin"]))
 images = {}
 
 
 def image(k):
     if k not in images:
-        cam, view = k.split("/")
+        cam, view = split_key(k)
         images[k] = read_image(views_dir / cam / f"{view}.png")
     return images[k]
 
 
 t0 = time.perf_counter()
 depth, srcs = estimate_view_depth(key, cameras, image, near, far, int(snakemake.params.n_views),
-                                  cfg, int(verify.get("depth_sources_shots", 4)),
-                                  int(verify.get("depth_sources_set", 4)))
+                                  cfg, int(verify["depth_sources_shots"]),
+                                  int(verify["depth_sources_set"]))
 valid = float((depth > 0).mean())
-log.info("%s: %s, %.1f s, %.1f %% valid, sources %s", key, cfg.get("synthesis_method", "sgm"),
+log.info("%s: %s, %.1f s, %.1f %% valid, sources %s", key, cfg["synthesis_method"],
          time.perf_counter() - t0, 100 * valid, ", ".join(srcs))
 write_npy(snakemake.output.depth, depth)
 write_image(snakemake.output.preview, preview(depth))
-write_json(snakemake.output.info, {"method": cfg.get("synthesis_method", "sgm"), "near": near,
+write_json(snakemake.output.info, {"method": cfg["synthesis_method"], "near": near,
                                    "far": far, "units": "m", "sources": srcs,
                                    "valid_share": valid, "view": key,
                                    "calibration": "complete"})
