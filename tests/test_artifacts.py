@@ -55,7 +55,7 @@ def test_disparity_of_another_version_or_damaged_is_refused(tmp_path):
     write_json(tmp_path / "mla.json", dict(doc, mla="plenoptic"))
     with pytest.raises(ValueError, match="'plenoptic' is not an MLA kind"):
         read_disparity(tmp_path / "mla.json")
-    with pytest.raises(FileNotFoundError, match="run the convert rule"):
+    with pytest.raises(FileNotFoundError, match="convert the shot"):
         read_disparity(tmp_path / "absent.json")
     assert read_json(tmp_path / "cut.json")["format"] == FORMAT
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from plenocal.io import read_json
+from plenocal.artifacts.versioned import decode
 from plenocal.raytrix import RayCalib
 from plenocal.viewgeom import MLA_KINDS, ViewLayout
 
@@ -99,25 +99,19 @@ def disparity_record(layout: ViewLayout, calib: RayCalib, patch: np.ndarray,
 
 def read_disparity(path: str | Path) -> Conversion:
     """Read one shot's ``disparity.json`` (this version only) into a :class:`Conversion`."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: disparity.json not found; run the convert rule first")
-    doc = read_json(path)
-    if doc.get("format") != FORMAT or doc.get("version") != VERSION:
-        raise ValueError(f"{path}: not a disparity.json of version {VERSION} (format "
-                         f"{doc.get('format')!r}, version {doc.get('version')!r}); convert "
-                         "the shot again (rule convert, or plenocal convert)")
-    try:
-        mla = str(doc["mla"])
-        if mla not in MLA_KINDS:
-            raise ValueError(f"{path}: mla = {mla!r} is not an MLA kind (one of "
-                             f"{', '.join(MLA_KINDS)}); convert the shot again")
-        a, b = float(doc["D_min"]), float(doc["D_max"])
-        return Conversion(
-            d_min=min(a, b), d_max=max(a, b), q=float(doc["q_px"]), tile=float(doc["tile"]),
-            pitch_px=float(doc["D_px"]), safe_diameter_px=float(doc["safe_diameter_px"]),
-            width=int(doc["width"]), height=int(doc["height"]), n_views=int(doc["n_views"]),
-            mla=mla)
-    except KeyError as err:
-        raise ValueError(f"{path}: disparity.json version {VERSION} without key {err}; "
-                         "the file is damaged: convert the shot again") from None
+    return decode(path, FORMAT, VERSION, "disparity.json",
+                  "convert the shot (rule convert, or plenocal convert)",
+                  lambda doc: _conversion(doc, path))
+
+
+def _conversion(doc: dict, path: str | Path) -> Conversion:
+    mla = str(doc["mla"])
+    if mla not in MLA_KINDS:
+        raise ValueError(f"{path}: mla = {mla!r} is not an MLA kind (one of "
+                         f"{', '.join(MLA_KINDS)}); convert the shot again")
+    a, b = float(doc["D_min"]), float(doc["D_max"])
+    return Conversion(
+        d_min=min(a, b), d_max=max(a, b), q=float(doc["q_px"]), tile=float(doc["tile"]),
+        pitch_px=float(doc["D_px"]), safe_diameter_px=float(doc["safe_diameter_px"]),
+        width=int(doc["width"]), height=int(doc["height"]), n_views=int(doc["n_views"]),
+        mla=mla)

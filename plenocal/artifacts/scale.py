@@ -11,7 +11,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from plenocal.io import read_json, write_json
+from plenocal.artifacts.versioned import decode
+from plenocal.io import write_json
 
 FORMAT = "plenocal.scale"
 VERSION = 1
@@ -55,22 +56,10 @@ def write_scale(path: str | Path, result: ScaleResult) -> None:
 
 def read_scale(path: str | Path) -> ScaleResult:
     """Read ``scale.json`` (this version only)."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: scale.json not found; run rule scale first")
-    doc = read_json(path)
-    if doc.get("format") != FORMAT or doc.get("version") != VERSION:
-        raise ValueError(f"{path}: not a scale.json of version {VERSION} (format "
-                         f"{doc.get('format')!r}, version {doc.get('version')!r}); rerun "
-                         "rule scale")
-    try:
-        return ScaleResult(
-            r=float(doc["r"]), r_median=float(doc["r_median"]),
-            r_median_of_ratios=float(doc["r_median_of_ratios"]), estimator=doc["estimator"],
-            r_i={k: float(v) for k, v in doc["r_i"].items()},
-            r_i_median_of_ratios={k: float(v) for k, v in doc["r_i_median_of_ratios"].items()},
-            n_pixels={k: int(v) for k, v in doc["n_pixels"].items()}, spread=dict(doc["spread"]),
-            percentiles=tuple(float(x) for x in doc["percentiles"]), method=str(doc["method"]))
-    except KeyError as err:
-        raise ValueError(f"{path}: scale.json version {VERSION} without key {err}; the file "
-                         "is damaged: rerun rule scale") from None
+    return decode(path, FORMAT, VERSION, "scale.json", "run rule scale", lambda doc: ScaleResult(
+        r=float(doc["r"]), r_median=float(doc["r_median"]),
+        r_median_of_ratios=float(doc["r_median_of_ratios"]), estimator=doc["estimator"],
+        r_i={k: float(v) for k, v in doc["r_i"].items()},
+        r_i_median_of_ratios={k: float(v) for k, v in doc["r_i_median_of_ratios"].items()},
+        n_pixels={k: int(v) for k, v in doc["n_pixels"].items()}, spread=dict(doc["spread"]),
+        percentiles=tuple(float(x) for x in doc["percentiles"]), method=str(doc["method"])))
