@@ -72,6 +72,8 @@ def triangulation_options(max_error_px: float, min_angle_deg: float, seed: int,
     o.ba_refine_focal_length = False
     o.ba_refine_principal_point = False
     o.ba_refine_extra_params = False
+    o.fix_existing_frames = True  # as pycolmap.triangulate_points sets them
+    o.load_all_images = True
     o.mapper.filter_max_reproj_error = max_error_px
     o.mapper.filter_min_tri_angle = min_angle_deg
     o.mapper.random_seed = seed
@@ -149,12 +151,11 @@ def triangulate(rec, database: str | Path, options, seed: int) -> None:
     """COLMAP's point triangulator with poses and intrinsics fixed
     (``TriangulateReconstruction`` as ``pycolmap.triangulate_points`` runs it, step by
     step), each new track completed as soon as it is created (module docstring).
-    ``rec``: a reconstruction of the database's images (their ids), those with a pose
-    registered; its points are replaced."""
+    ``options``: :func:`triangulation_options`. ``rec``: a reconstruction of the
+    database's images (their ids), those with a pose registered; its points are
+    replaced."""
     import pycolmap  # noqa: PLC0415
 
-    options.fix_existing_frames = True
-    options.load_all_images = True
     tri = options.get_triangulation()
     mapper_options = options.get_mapper()
     pycolmap.set_random_seed(seed)
