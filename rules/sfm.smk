@@ -1,8 +1,8 @@
 """Registration A (Section II-B of the paper): structure-from-motion of the central
 view of every shot (array + hand-held), the matches of all views that the verification
-shares (SIFT in view_features, which needs no calibration and runs alongside A; the
-matching of A's neighbouring shots in view_matches), and the naive baselines of Table I
-(A+SfM; SfM of all views from scratch)."""
+shares (SIFT per shot in view_features, which needs no calibration and runs alongside
+the conversion and A; the matching of A's neighbouring shots in view_matches), and the
+naive baselines of Table I (A+SfM; SfM of all views from scratch)."""
 
 
 rule features_a:
@@ -75,20 +75,21 @@ rule map_a:
 
 rule view_features:
     input:
-        views=all_views,
+        views=lambda wc: [
+            res(wc.dataset, "views", wc.cam, f"{v}.png") for v in views(wc.dataset)
+        ],
     output:
-        db="results/{dataset}/matches/features.db",
-        info="results/{dataset}/matches/features.json",
+        "results/{dataset}/matches/features/{cam}.db",
     log:
-        log_path("view_features"),
+        log_path("view_features", "{dataset}_{cam}"),
     benchmark:
-        bench_path("view_features")
+        bench_path("view_features", "{dataset}_{cam}")
     conda:
         "../envs/plenocal.yaml"
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
-        mem_mb=4000,
-        runtime=60,
+        mem_mb=1000,
+        runtime=10,
     params:
         sfm=lambda wc: sfm_params(),
     script:
@@ -97,8 +98,9 @@ rule view_features:
 
 rule view_matches:
     input:
-        features="results/{dataset}/matches/features.db",
-        features_info="results/{dataset}/matches/features.json",
+        features=lambda wc: [
+            res(wc.dataset, "matches", "features", f"{c}.db") for c in cams(wc.dataset)
+        ],
         reg_a="results/{dataset}/reg_a/reg_a.json",
     output:
         database="results/{dataset}/matches/database.db",

@@ -1,27 +1,26 @@
-"""Rule view_features: SIFT of every subaperture view into the view database's
-features (plenocal.sfm.viewdb); runs alongside registration A."""
+"""Rule view_features: SIFT of the subaperture views of one shot, a part of the view
+database (plenocal.sfm.viewdb); needs no calibration."""
 import shutil
 from pathlib import Path
 
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
-from plenocal.io import make_temp_dir, write_json
+from plenocal.io import make_temp_dir
 from plenocal.sfm import log_to_file, viewdb
 
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821
 cfg = sm.params.sfm
 views = {f"{Path(p).parent.name}/{Path(p).stem}": p for p in sm.input.views}
-out_db = Path(sm.output.db)
+out_db = Path(sm.output[0])
 out_db.parent.mkdir(parents=True, exist_ok=True)
 # the database moves into place only once complete; a killed job's temporary folder is
 # removed by the next run (make_temp_dir)
-work = make_temp_dir(out_db.parent, ".view_features.")
+work = make_temp_dir(out_db.parent, f".{out_db.stem}.")
 try:
-    info = viewdb.extract_view_features(
-        views, work / "features.db", work, max_num_features=cfg["max_num_features"],
-        seed=cfg["seed"], num_threads=sm.threads)
+    viewdb.extract_view_features(views, work / "features.db", work,
+                                 max_num_features=cfg["max_num_features"], seed=cfg["seed"],
+                                 num_threads=sm.threads)
     (work / "features.db").replace(out_db)
 finally:
     shutil.rmtree(work, ignore_errors=True)
-write_json(sm.output.info, info)

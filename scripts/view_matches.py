@@ -1,5 +1,5 @@
-"""Rule view_matches: the matching of the pairs that Table I and the baseline share,
-added to a copy of the SIFT features of every view (plenocal.sfm.viewdb)."""
+"""Rule view_matches: the shots' SIFT features merged into one database and the
+matching of the pairs that Table I and the baseline share (plenocal.sfm.viewdb)."""
 import shutil
 from pathlib import Path
 
@@ -21,13 +21,12 @@ out_db.parent.mkdir(parents=True, exist_ok=True)
 # removed by the next run (make_temp_dir)
 work = make_temp_dir(out_db.parent, ".view_matches.")
 try:
-    info = viewdb.match_view_database(sm.input.features, work / "database.db",
-                                      shot_centres=centres,
-                                      shot_neighbours=cfg["view_matching"]["shot_neighbours"],
-                                      view_radius=cfg["view_matching"]["view_radius"],
-                                      seed=cfg["seed"], num_threads=sm.threads, work_dir=work)
+    info = viewdb.merge_view_features(sm.input.features, work / "database.db")
+    info.update(viewdb.match_views(work / "database.db", shot_centres=centres,
+                                   shot_neighbours=cfg["view_matching"]["shot_neighbours"],
+                                   view_radius=cfg["view_matching"]["view_radius"],
+                                   seed=cfg["seed"], num_threads=sm.threads, work_dir=work))
     (work / "database.db").replace(out_db)
 finally:
     shutil.rmtree(work, ignore_errors=True)
-info.update({k: v for k, v in read_json(sm.input.features_info).items() if k != "num_images"})
 write_json(sm.output.info, info)

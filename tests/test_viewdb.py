@@ -60,3 +60,37 @@ def test_first_octave_reaches_sift(views, tmp_path):
     assert fine["first_octave"] == -1 and coarse["first_octave"] == 0
     assert 0 < coarse["keypoints_mean"] < 0.8 * fine["keypoints_mean"]
     assert np.isfinite(coarse["features_s"])
+
+
+def _dump(db):
+    """Every row of every table, in a fixed order."""
+    import sqlite3
+
+    con = sqlite3.connect(db)
+    try:
+        tables = [r[0] for r in con.execute(
+            "SELECT name FROM sqlite_master WHERE type='table' ORDER BY name")]
+        return {t: sorted(con.execute(f"SELECT * FROM {t}").fetchall()) for t in tables}
+    finally:
+        con.close()
+
+
+def test_features_per_shot_merge_into_one_extraction(views, tmp_path):
+    """SIFT per shot (28 small jobs instead of one long one) merged: the same rows in
+    every table as one extraction of all views; the parts stay untouched."""
+    paths, _ = views
+    one = tmp_path / "one.db"
+    viewdb.extract_view_features(paths, one, tmp_path / "w", max_num_features=1000)
+    parts = []
+    for shot in sorted({n.split("/")[0] for n in paths}):
+        parts.append(tmp_path / f"{shot}.db")
+        viewdb.extract_view_features({k: v for k, v in paths.items() if k.startswith(shot)},
+                                     parts[-1], tmp_path / shot, max_num_features=1000)
+        os.utime(parts[-1], ns=(10**18, 10**18))
+    merged = tmp_path / "merged.db"
+    info = viewdb.merge_view_features(reversed(parts), merged)
+    assert info["num_images"] == len(paths)
+    assert _dump(merged) == _dump(one)
+    assert all(p.stat().st_mtime_ns == 10**18 for p in parts)
+    with pytest.raises(ValueError, match="more than one"):
+        viewdb.merge_view_features([parts[0], parts[0]], tmp_path / "twice.db")

@@ -13,10 +13,12 @@ of one calibration, each with its own camera set to that calibration's intrinsic
 all of them sharing one camera (the baselines). Descriptors and raw matches are not
 copied: triangulation and mapping read keypoints and verified matches only.
 
-SIFT needs no calibration and runs as soon as the views exist
-(:func:`extract_view_features`, rule ``view_features``, alongside registration A);
-the matching, whose pairs follow A's camera centres, copies that database and adds
-the verified matches (:func:`match_view_database`, rule ``view_matches``).
+SIFT needs no calibration and runs per shot as soon as its views exist
+(:func:`extract_view_features`, rule ``view_features``: 28 short jobs that the
+scheduler spreads over the cores alongside the conversion and registration A); the
+matching, whose pairs follow A's camera centres, merges the shots' features into one
+database (:func:`merge_view_features`, as one extraction of all views would lay it
+out) and adds the verified matches (:func:`match_views`, rule ``view_matches``).
 
 Which pairs are matched (:func:`view_pairs`): within a shot, the views at most
 ``view_radius`` apart on the N x N grid; across shots, the same view of each shot and
@@ -135,18 +137,78 @@ def extract_view_features(images: Mapping[str, str | Path], database: str | Path
             "features_s": seconds}
 
 
-def match_view_database(features: str | Path, database: str | Path, *,
-                        shot_centres: Mapping[str, np.ndarray] | None = None,
-                        shot_neighbours: int | None = 4, view_radius: int | None = 1,
-                        seed: int = 0, num_threads: int = 1,
-                        work_dir: str | Path | None = None) -> dict:
-    """Copy the SIFT ``features`` database (:func:`extract_view_features`; left
-    untouched) to ``database`` and match and verify there the pairs of
+def merge_view_features(parts: Iterable[str | Path], database: str | Path) -> dict:
+    """Merge SIFT databases of disjoint sets of views (:func:`extract_view_features`
+    per shot, rule ``view_features``) into a new ``database`` laid out as one
+    extraction of all of them: one shared camera, one rig, a frame per image, image
+    ids in sorted name order. The parts are read from private copies (pycolmap writes
+    to any database it opens) and stay untouched. Returns the keypoint counts."""
+    import pycolmap  # noqa: PLC0415
+
+    database = Path(database)
+    if database.exists():
+        database.unlink()
+    entries = []  # (name, camera, keypoints, descriptors)
+    for part in sorted(Path(p) for p in parts):
+        copy = database.with_name(f".{database.stem}.part.db")
+        shutil.copyfile(part, copy)
+        try:
+            with pycolmap.Database.open(str(copy)) as db:
+                cams = {c.camera_id: c for c in db.read_all_cameras()}
+                for im in db.read_all_images():
+                    entries.append((im.name, cams[im.camera_id], part,
+                                    db.read_keypoints(im.image_id),
+                                    db.read_descriptors(im.image_id)))
+        finally:
+            copy.unlink()
+    entries.sort(key=lambda e: e[0])
+    names = [e[0] for e in entries]
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise ValueError(f"views in more than one features database: {', '.join(dup[:10])}")
+    if not entries:
+        raise ValueError("no features databases to merge")
+    first = entries[0][1]
+    for name, cam, part, _, _ in entries:
+        if (cam.model_name, int(cam.width), int(cam.height), list(cam.params)) != (
+                first.model_name, int(first.width), int(first.height), list(first.params)):
+            raise ValueError(f"{part}: view {name} is {cam.width}x{cam.height} "
+                             f"({cam.model_name} {list(cam.params)}), the others "
+                             f"{first.width}x{first.height}; convert every shot with the "
+                             "same settings")
+    with pycolmap.Database.open(str(database)) as d:
+        camera = pycolmap.Camera.create_from_model_name(0, first.model_name, 1.0,
+                                                        int(first.width), int(first.height))
+        camera.params = list(first.params)
+        camera.has_prior_focal_length = first.has_prior_focal_length
+        cam_id = d.write_camera(camera)
+        rig = pycolmap.Rig()
+        rig.add_ref_sensor(pycolmap.sensor_t(pycolmap.SensorType.CAMERA, cam_id))
+        rig_id = d.write_rig(rig)
+        for image_id, (name, _, _, kp, desc) in enumerate(entries, start=1):
+            frame = pycolmap.Frame()
+            frame.rig_id = rig_id
+            frame.add_data_id(pycolmap.data_t(
+                pycolmap.sensor_t(pycolmap.SensorType.CAMERA, cam_id), image_id))
+            frame_id = d.write_frame(frame)
+            d.write_image(pycolmap.Image(name=name, camera_id=cam_id, image_id=image_id,
+                                         frame_id=frame_id), use_image_id=True)
+            d.write_keypoints(image_id, kp)
+            d.write_descriptors(image_id, desc)
+    kp = [e[3].shape[0] for e in entries]
+    return {"num_images": len(entries), "keypoints_mean": float(np.mean(kp)),
+            "keypoints_min": int(min(kp))}
+
+
+def match_views(database: str | Path, *,
+                shot_centres: Mapping[str, np.ndarray] | None = None,
+                shot_neighbours: int | None = 4, view_radius: int | None = 1,
+                seed: int = 0, num_threads: int = 1,
+                work_dir: str | Path | None = None) -> dict:
+    """Match and verify, in the SIFT ``database`` itself, the pairs of
     :func:`view_pairs`. Returns counts and the time taken."""
     t0 = time.perf_counter()
-    names = [f"{n}.png" for n in database_names(features)]
-    database = Path(database)
-    shutil.copyfile(features, database)
+    names = [f"{n}.png" for n in database_names(database)]
     pairs = view_pairs(names, shot_centres, shot_neighbours=shot_neighbours,
                        view_radius=view_radius)
     n_verified = cm.match(database, pairs, seed=seed, num_threads=num_threads,
@@ -157,6 +219,13 @@ def match_view_database(features: str | Path, database: str | Path, *,
     return {"num_images": len(names), "num_pairs": len(pairs),
             "num_verified_pairs": int(n_verified), "shot_neighbours": shot_neighbours,
             "view_radius": view_radius, "matching_s": seconds}
+
+
+def match_view_database(features: str | Path, database: str | Path, **kwargs) -> dict:
+    """Copy the SIFT ``features`` database (left untouched) to ``database`` and
+    :func:`match_views` there (``kwargs``: its options)."""
+    shutil.copyfile(features, database)
+    return match_views(database, **kwargs)
 
 
 def build_view_database(images: Mapping[str, str | Path], database: str | Path,
