@@ -28,16 +28,21 @@ def workflow_copy(dest: Path) -> Path:
     return dest
 
 
+def array_shots(work: Path) -> list[str]:
+    a = yaml.safe_load((work / "config.yaml").read_text())["datasets"]["tiny"]["simulate"]["array"]
+    return [f"x{c:02d}_y{r:02d}" for r in range(a["rows"]) for c in range(a["cols"])]
+
+
 def targets(work: Path) -> list[str]:
     cfg = yaml.safe_load((work / "config.yaml").read_text())
     sim = cfg["datasets"]["tiny"]["simulate"]
-    a = sim["array"]
-    cams = [f"x{c:02d}_y{r:02d}" for r in range(a["rows"]) for c in range(a["cols"])]
-    cams += [f"hand{k:02d}" for k in range(sim["handheld"]["count"])]
+    cams = array_shots(work) + [f"hand{k:02d}" for k in range(sim["handheld"]["count"])]
+    full = array_shots(work)[len(array_shots(work)) // 2]  # the full-set shot
     out = [f"data/tiny/lenslet/{c}.png" for c in cams]
     out += ["results/tiny/ground_truth/cameras.json",
             "results/tiny/ground_truth/renders/x01_y00/0_0.png",
-            "results/tiny/ground_truth/renders/hand00/1_1.png"]
+            "results/tiny/ground_truth/renders/hand00/1_1.png",
+            f"results/tiny/ground_truth/renders/{full}/0_0.png"]
     return out
 
 
@@ -70,6 +75,12 @@ def test_simulate_from_clean_directory_is_reproducible(tmp_path: Path):
     # the log of a long step says what it did
     log = (a / "results/tiny/logs/simulate/x00_y00.log").read_text()
     assert "x00_y00: tracing" in log and "done" in log
+    # the full-set shot's other views come from one job (rule ground_truth_render_set),
+    # single views from rule ground_truth_render
+    full = array_shots(a)[len(array_shots(a)) // 2]
+    log = (a / f"results/tiny/logs/ground_truth_render_set/{full}.log").read_text()
+    assert f"{full}/0_0:" in log and f"{full}/2_2:" in log and f"{full}/1_1:" not in log
+    assert (a / "results/tiny/logs/ground_truth_render/x01_y00_0_0.log").exists()
     # and nothing is left to do
     proc = run(a, "-n", *targets(a))
     assert "Nothing to be done" in proc.stdout + proc.stderr
