@@ -28,14 +28,12 @@ dozens of fragments - each image creates a point from its still untriangulated m
 and merging them cost three quarters of each 700-view job (every merge re-links whole
 tracks, and tracks here run to hundreds of views). Completed at once, the tracks need few
 merges: a 700-view job took 233 CPU s, now 43 (BENCHMARKS.md). On the default data (the
-same matches):
-the same observations to within 15 of 949 000, fewer 3-D points (19 192 against 20 458 with
-the complete calibration: fragments that had failed the all-inliers merge test), and
-Table I's mean / median px: complete 0.4150 / 0.2022 -> 0.3975 / 0.2019, A+SfM
-0.4299 / 0.2235 -> 0.4101 / 0.2230 (proposed / naive 0.965 / 0.905 -> 0.969 / 0.906),
-true cameras 0.4126 / 0.2009 -> 0.3962 / 0.2007,
-registration A 0.2501 / 0.1174 -> 0.2611 / 0.1179, registration B 0.2673 / 0.1627 ->
-0.2676 / 0.1628.
+same matches): the same observations to within 15 of 949 000, fewer 3-D points (19 192
+against 20 458 with the complete calibration: fragments that had failed the all-inliers
+merge test), and Table I's mean / median px: complete 0.4150 / 0.2022 -> 0.3975 / 0.2019,
+A+SfM 0.4299 / 0.2235 -> 0.4101 / 0.2230 (proposed / naive 0.965 / 0.905 -> 0.969 /
+0.906), true cameras 0.4126 / 0.2009 -> 0.3962 / 0.2007, registration A 0.2501 / 0.1174
+-> 0.2611 / 0.1179, registration B 0.2673 / 0.1627 -> 0.2676 / 0.1628.
 
 Reported: the per-observation mean and median (and RMS, 90th percentile), COLMAP's own
 mean (``compute_mean_reprojection_error``: a mean of per-track means, weighted
