@@ -202,7 +202,12 @@ def _splat(depth, Kinv_s, R_s, C_s, K_t, R_t, t_t, zbuf):  # pragma: no cover - 
     """Forward warp of every input pixel with depth > 0 (unproject with the input
     camera, project into the target) as a 2x2 splat into the target z-buffer ``zbuf``
     (min; +inf = none). The order of the points does not matter (min), so the result
-    is deterministic."""
+    is deterministic. The products are summed term by term in this order, not by BLAS:
+    where a point projects exactly onto a pixel boundary - with the ground-truth cameras
+    of an array one image coordinate is an integer for half the points - the last bit
+    decides which pixels the splat covers, so such renders differ from the earlier numpy
+    version (Exp. 1 with true depth and ground-truth cameras -0.026 dB, elsewhere at most
+    0.003 dB; with the calibration's cameras the same to 1e-7 dB)."""
     H, W = depth.shape
     Ht, Wt = zbuf.shape
     for y in range(H):
