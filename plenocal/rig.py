@@ -64,9 +64,9 @@ import numpy as np
 
 from plenocal import optics as o
 from plenocal.artifacts.disparity import Conversion
+from plenocal.artifacts.rig import RigB
 from plenocal.camera import PinholeCamera, intrinsics, invert_pose, rotation_angle_deg
 from plenocal.datasheet import load_datasheet
-from plenocal.io import read_json
 from plenocal.names import central_view, parse_view, view_names
 from plenocal.viewgeom import MLA_KINDS, view_position
 
@@ -447,19 +447,6 @@ def build_rig(ds: Datasheet, convs: Sequence[Conversion], F_m: float, n_views: i
     }
 
 
-def read_rig(path: str | Path) -> dict:
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: rig.json not found; run the rig_b rule first")
-    return read_json(path)
-
-
-def rig_views(rig: Mapping) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """(K, cam_to_central) of every view of a ``rig.json`` document."""
-    return {k: (np.asarray(v["K"], dtype=float), np.asarray(v["cam_to_central"], dtype=float))
-            for k, v in rig["views"].items()}
-
-
 def model_views(rig: Mapping, model: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """(K, cam_to_central) of either view model from a ``rig.json`` document, whichever
     model its ``views`` hold (both models' numbers are stored)."""
@@ -526,7 +513,7 @@ def compare_with_truth(rig: Mapping, truth: Mapping[str, PinholeCamera]) -> dict
         raise ValueError(f"ground truth lacks views {', '.join(missing)} of the {n}x{n} set")
     to_c = invert_pose(truth[centre].cam_to_world)
     gt = {k: (truth[k].K, to_c @ truth[k].cam_to_world) for k in view_names(n)}
-    est = rig_views(rig)
+    est = RigB(rig).view_poses()
     g_gt = set_geometry(gt, n, W, H)
     g_est = set_geometry(est, n, W, H)
     d_c = np.array([est[k][1][:3, 3] - gt[k][1][:3, 3] for k in view_names(n)])

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import cv2  # (first: see DESIGN.md on cv2/pycolmap)
 
+from plenocal.artifacts.rig import read_rig
 from plenocal.depth import estimate_depth, resolve_backend
 from plenocal.depth.inputs import (
     nearest_sources,
@@ -14,7 +15,6 @@ from plenocal.depth.inputs import (
     reg_a_bounds,
     reg_a_cameras,
     rig_bounds,
-    rig_cameras,
 )
 from plenocal.io import read_image, read_json, write_image, write_json, write_npy
 from plenocal.rulelog import rule_logger
@@ -43,8 +43,8 @@ if reg == "a":
     src_paths = [views_dir / s / f"{centre}.png" for s in srcs]
     units = "sfm"
 else:
-    rig = read_json(snakemake.input.rig)
-    cameras = rig_cameras(rig)
+    rig = read_rig(snakemake.input.rig)
+    cameras = rig.cameras()
     near, far = rig_bounds(rig, margin)
     srcs = nearest_sources(centre, cameras, cfg["sources_b"])
     ref_cam, src_cams = cameras[centre], [cameras[s] for s in srcs]

@@ -7,10 +7,11 @@ from pathlib import Path
 
 import cv2  # (first: see DESIGN.md on cv2/pycolmap)
 
+from plenocal.artifacts.rig import read_rig
 from plenocal.camera import read_cameras
 from plenocal.depth.inputs import preview, rig_bounds
 from plenocal.depth.views import estimate_view_depth
-from plenocal.io import read_image, read_json, write_image, write_json, write_npy
+from plenocal.io import read_image, write_image, write_json, write_npy
 from plenocal.names import split_key
 from plenocal.rulelog import rule_logger
 
@@ -23,7 +24,7 @@ verify = dict(snakemake.params.verify)
 key = f"{snakemake.wildcards.cam}/{snakemake.wildcards.view}"
 views_dir = Path(snakemake.params.views_dir)
 cameras = read_cameras(snakemake.input.calibration)
-near, far = rig_bounds(read_json(snakemake.input.rig), float(cfg["bounds_margin"]))
+near, far = rig_bounds(read_rig(snakemake.input.rig), float(cfg["bounds_margin"]))
 images = {}
 
 

@@ -3,11 +3,11 @@
 
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
+from plenocal.artifacts.rig import read_rig
 from plenocal.artifacts.scale import read_scale
 from plenocal.camera import read_cameras
 from plenocal.io import write_json
 from plenocal.merge import read_reg_a
-from plenocal.rig import read_rig
 from plenocal.rulelog import rule_logger
 from plenocal.verify.gt_errors import gt_errors
 
@@ -19,7 +19,7 @@ log.info("ground truth: %d cameras from %s", len(truth), snakemake.input.truth)
 scale = read_scale(snakemake.input.scale)
 r = scale.r_used
 out = gt_errors(truth, reg_a=read_reg_a(snakemake.input.reg_a),
-                rig=read_rig(snakemake.input.rig), r=r,
+                rig=read_rig(snakemake.input.rig).doc, r=r,
                 calib=read_cameras(snakemake.input.calibration))
 out["scale"]["r_mean_err_pct"] = 100.0 * (scale.r / out["scale"]["r_truth"] - 1.0)
 out["scale"]["r_median_err_pct"] = 100.0 * (scale.r_median / out["scale"]["r_truth"] - 1.0)

@@ -4,6 +4,7 @@ import logging
 
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
+from plenocal.artifacts.rig import read_rig
 from plenocal.camera import read_cameras
 from plenocal.io import read_json, write_json
 from plenocal.sfm import log_to_file
@@ -39,7 +40,7 @@ else:
         out = rp.evaluate(rp.reg_a_views(read_json(sm.input.calib), sm.params.central), db,
                           **opts)
     elif calib == "reg_b":
-        out = rp.evaluate_sets(read_json(sm.input.calib), db, **opts)
+        out = rp.evaluate_sets(read_rig(sm.input.calib), db, **opts)
     else:
         out = rp.evaluate(read_cameras(sm.input.calib), db, **opts)
     out["calibration"] = calib

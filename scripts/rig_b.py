@@ -3,7 +3,7 @@
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
 from plenocal.artifacts.disparity import read_disparity
-from plenocal.io import write_json
+from plenocal.artifacts.rig import write_rig
 from plenocal.merge import read_reg_a
 from plenocal.rig import build_rig, read_datasheet
 from plenocal.rulelog import rule_logger
@@ -34,5 +34,5 @@ for name in ("paper", "exact"):
     ck = doc[name]["check"]
     log.info("Eqs. 2-3 check of the %s model: %s %s", name, ck.get("verdict"),
              {k: ck[k] for k in ("rel_diff_B", "rel_diff_alpha") if k in ck})
-write_json(snakemake.output.rig, doc)
+write_rig(snakemake.output.rig, doc)
 log.info("wrote %s (model %s)", snakemake.output.rig, doc["model"])

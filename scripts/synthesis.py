@@ -12,10 +12,11 @@ from pathlib import Path
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 import numpy as np
 
+from plenocal.artifacts.rig import read_rig
 from plenocal.camera import read_cameras
 from plenocal.depth.inputs import rig_bounds
 from plenocal.depth.quality import depth_quality
-from plenocal.io import read_json, to_uint8, write_image, write_json
+from plenocal.io import to_uint8, write_image, write_json
 from plenocal.synthesis import layout_from_cams, run_experiment, synthesis_summary
 
 snakemake = globals()["snakemake"]
@@ -28,8 +29,7 @@ cfg = dict(snakemake.params.verify)
 cfg["depth"] = dict(snakemake.params.depth)
 views_dir = Path(snakemake.params.views_dir)
 layout = layout_from_cams(list(snakemake.params.array_cams), int(snakemake.params.n_views))
-near, far = rig_bounds(read_json(snakemake.input.rig), float(cfg["depth"].get("bounds_margin",
-                                                                              0.15)))
+near, far = rig_bounds(read_rig(snakemake.input.rig), float(cfg["depth"]["bounds_margin"]))
 
 
 def load_depths(paths):

@@ -79,3 +79,31 @@ def test_scale_round_trip_and_estimator(tmp_path):
         read_scale(tmp_path / "old.json")
     with pytest.raises(FileNotFoundError, match="run rule scale"):
         read_scale(tmp_path / "none.json")
+
+
+def test_rig_round_trip_and_checks(tmp_path):
+    import numpy as np
+
+    from plenocal.artifacts.rig import RigB, read_rig, write_rig
+
+    K = np.array([[100.0, 0, 50], [0, 100.0, 40], [0, 0, 1]])
+    views = {f"{r}_{c}": {"K": K, "cam_to_central": np.eye(4)} for r in range(3) for c in range(3)}
+    doc = {"model": "exact", "n_views": 3, "width": 101, "height": 81, "focal_px": 100.0,
+           "depth_range_m": [0.4, 0.8], "symbols": {"X_n": 470.0, "X_f": 740.0},
+           "views": views}
+    write_rig(tmp_path / "rig.json", doc)
+    rig = read_rig(tmp_path / "rig.json")
+    assert isinstance(rig, RigB) and rig.depth_range_m == (0.4, 0.8) and rig.focal_px == 100.0
+    cams = rig.set_cameras("hand01")
+    assert sorted(cams)[0] == "hand01/0_0" and cams["hand01/1_1"].width == 101
+    write_json(tmp_path / "few.json", {**read_json(tmp_path / "rig.json"),
+                                       "views": {"0_0": views["0_0"]}})
+    with pytest.raises(ValueError, match="1 views for n_views = 3"):
+        read_rig(tmp_path / "few.json")
+    write_json(tmp_path / "old.json", doc)
+    with pytest.raises(ValueError, match=r"old\.json: not a rig.json of version 1.*rule rig_b"):
+        read_rig(tmp_path / "old.json")
+    cut = {k: v for k, v in read_json(tmp_path / "rig.json").items() if k != "symbols"}
+    write_json(tmp_path / "cut.json", cut)
+    with pytest.raises(ValueError, match="without key 'symbols'"):
+        read_rig(tmp_path / "cut.json")

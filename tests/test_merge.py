@@ -9,6 +9,7 @@ import pytest
 
 from plenocal import merge, rig
 from plenocal import optics as o
+from plenocal.artifacts.rig import RigB
 from plenocal.camera import intrinsics
 from plenocal.io import write_json
 
@@ -89,7 +90,7 @@ def test_merge_with_a_rig_document():
                        740.0)
     conv = rig.Conversion(-4.5, -3.0, 3.0971, 6.0, 23.92, 21.92, 301, 225, 5)
     doc = rig.build_rig(ds, [conv], 1799.5, 5, model="exact")
-    views = rig.rig_views(doc)
+    views = RigB(doc).view_poses()
     cams = merge.merge_cameras({"x00_y00": np.eye(4), "x01_y00": np.eye(4)}, views, 1.0,
                                doc["width"], doc["height"])
     assert len(cams) == 50

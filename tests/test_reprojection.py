@@ -7,6 +7,7 @@ import cv2  # noqa: F401  (before pycolmap)
 import numpy as np
 import pytest
 
+from plenocal.artifacts.rig import RigB
 from plenocal.camera import PinholeCamera, invert_pose, pose
 from plenocal.io import write_image
 from plenocal.sfm import colmap as cm
@@ -125,7 +126,7 @@ def sets(shots, tmp_path_factory):
 
 def test_rig_sets(sets, tmp_path):
     sub, vs, paths = sets
-    rig = {"width": W, "height": H, "views": {}}
+    rig = {"width": W, "height": H, "n_views": 3, "views": {}}
     for k in ("x00_y00", "hand00"):
         central = vs[f"{k}/1_1"].cam_to_world
         for name, cam in vs.items():
@@ -136,7 +137,7 @@ def test_rig_sets(sets, tmp_path):
     db = tmp_path / "views.db"
     info = viewdb.build_view_database(imgs, db, tmp_path, max_num_features=2000)
     assert info["num_images"] == 18 and info["num_pairs"] == 2 * 20 + 9
-    out = evaluate_sets(rig, db)
+    out = evaluate_sets(RigB(rig), db)
     assert sorted(out["sets"]) == ["hand00", "x00_y00"]
     assert out["sets"]["hand00"]["num_images"] == 9
     assert out["median_px"] < 0.2

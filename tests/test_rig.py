@@ -14,6 +14,7 @@ import yaml
 from plenocal import optics as o
 from plenocal import rig
 from plenocal.artifacts.disparity import Conversion, read_disparity
+from plenocal.artifacts.rig import RigB
 from plenocal.camera import PinholeCamera
 from plenocal.io import write_json
 
@@ -137,7 +138,7 @@ def test_exact_views_reproduce_the_chief_rays(hv, kind, focus):
     doc = rig.build_rig(ds, [conv], F_m, N, model="exact")
     h, v = hv
     name = f"{v + 2}_{h + 2}"
-    K, M = rig.rig_views(doc)[name]
+    K, M = RigB(doc).view_poses()[name]
     cam = PinholeCamera(K, M, conv.width, conv.height)
     D_px = conv.pitch_px
     centre = np.array([(opt.width - 1) / 2, (opt.height - 1) / 2])
@@ -260,7 +261,8 @@ def test_compare_with_truth_finds_the_paper_errors():
     opt = optics()
     ds, conv, F_m = true_inputs(opt)
     exact = rig.build_rig(ds, [conv], F_m, 5, model="exact")
-    truth = {k: PinholeCamera(K, M, 301, 225) for k, (K, M) in rig.rig_views(exact).items()}
+    truth = {k: PinholeCamera(K, M, 301, 225)
+             for k, (K, M) in RigB(exact).view_poses().items()}
     # move the truth into some world frame: the comparison works relative to the centre
     W = np.eye(4)
     W[:3, :3] = o.rotation_matrix(0.2, -0.1)
@@ -303,7 +305,7 @@ def test_rig_json_from_files(tmp_path):
     doc = rig.build_rig(read, shots, F_m, 5, model="paper", shot_names=["a", "b", "c"])
     assert doc["symbols"]["D_min_px"] == pytest.approx(conv.d_min)  # median across shots
     assert doc["model"] == "paper" and len(doc["views"]) == 25
-    K, M = rig.rig_views(doc)["2_2"]
+    K, M = RigB(doc).view_poses()["2_2"]
     np.testing.assert_allclose(M, np.eye(4))
     np.testing.assert_allclose(K[:2, 2], [150.0, 112.0])
     for model in ("paper", "exact"):  # both models can be rebuilt from the document

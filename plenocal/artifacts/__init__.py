@@ -3,6 +3,8 @@ writing, its reading, a format name and version, and a clear error for a file of
 version (issue 16). Light modules (numpy and the standard library): any stage may import
 them without pulling in OpenCV or COLMAP.
 
+* :mod:`.reg_a` - ``reg_a/reg_a.json`` (registration A -> B, depth, merge, baseline, Table I)
 * :mod:`.disparity` - ``views/<shot>/disparity.json`` (convert -> registration B)
+* :mod:`.rig` - ``reg_b/rig.json`` (registration B -> depth, merge, Table I, synthesis)
 * :mod:`.scale` - ``merge/scale.json`` (scale, Eq. 5 -> merge, Eq. 6, and gt_errors)
 """

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from plenocal.artifacts.rig import RigB
 from plenocal.camera import PinholeCamera, transform
-from plenocal.io import read_json
 
 
 def widen(near: float, far: float, margin: float) -> tuple[float, float]:
@@ -47,21 +47,10 @@ def reg_a_cameras(reg_a: dict) -> dict[str, PinholeCamera]:
     return out
 
 
-def rig_cameras(rig: dict) -> dict[str, PinholeCamera]:
-    """Views of one N x N set in the central view's frame."""
-    W, H = int(rig["width"]), int(rig["height"])
-    return {v: PinholeCamera(np.asarray(d["K"], float), np.asarray(d["cam_to_central"], float),
-                             int(d.get("width", W)), int(d.get("height", H)))
-            for v, d in rig["views"].items()}
-
-
-def rig_bounds(rig: dict, margin: float) -> tuple[float, float]:
-    """Scene bounds (metres) from rig.json's X_n / X_f (mm), widened."""
-    sym = rig.get("symbols", {})
-    if "X_n" not in sym or "X_f" not in sym:
-        raise ValueError("rig.json: symbols.X_n / symbols.X_f (mm) are needed for the depth "
-                         "bounds of registration B")
-    return widen(float(sym["X_n"]) / 1000.0, float(sym["X_f"]) / 1000.0, margin)
+def rig_bounds(rig: RigB, margin: float) -> tuple[float, float]:
+    """Scene bounds (metres) from rig.json's X_n / X_f (mm, Eq. 1 at the disparity
+    range), widened."""
+    return widen(float(rig.symbols["X_n"]) / 1000.0, float(rig.symbols["X_f"]) / 1000.0, margin)
 
 
 def _model_points_depths(model_dir: Path, cam: str, cam_to_world: np.ndarray) -> np.ndarray:
@@ -104,10 +93,6 @@ def reg_a_bounds(reg_a: dict, cam: str, model_dir: str | Path | None,
                          f"points in front of it in {model_dir}")
     near, far = np.percentile(z, [2.0, 98.0])
     return widen(float(near), float(far), margin)
-
-
-def load_rig(path: str | Path) -> dict:
-    return read_json(path)
 
 
 def preview(depth: np.ndarray) -> np.ndarray:

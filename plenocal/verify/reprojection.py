@@ -51,7 +51,9 @@ from pathlib import Path
 
 import numpy as np
 
+from plenocal.artifacts.rig import RigB
 from plenocal.camera import PinholeCamera
+from plenocal.names import key_shot
 from plenocal.sfm import colmap as cm
 from plenocal.sfm import viewdb
 
@@ -279,15 +281,6 @@ def reg_a_views(reg_a: Mapping, central: str) -> dict[str, PinholeCamera]:
         for cam, d in reg_a["cameras"].items()}
 
 
-def rig_views(rig: Mapping, cam: str) -> dict[str, PinholeCamera]:
-    """rig.json (registration B) -> the N x N set of shot ``cam`` in its central view's
-    frame: ``{"<cam>/<r_c>": PinholeCamera}`` with cam_to_world = cam_to_central."""
-    return {f"{cam}/{view}": PinholeCamera(np.asarray(d["K"], dtype=float),
-                                           np.asarray(d["cam_to_central"], dtype=float),
-                                           int(rig["width"]), int(rig["height"]))
-            for view, d in rig["views"].items()}
-
-
 def shot_counts(names) -> dict:
     """Array and hand-held shot counts of ``<cam>/<view>`` names (Table I writes
     "21 + 7")."""
@@ -312,16 +305,16 @@ def evaluate(cameras: Mapping[str, PinholeCamera], database: str | Path, **kwarg
     return stats
 
 
-def evaluate_sets(rig: Mapping, database: str | Path, **kwargs) -> dict:
+def evaluate_sets(rig: RigB, database: str | Path, **kwargs) -> dict:
     """Registration B: every shot's N x N set of the view ``database`` on its own, and
     the mean over the sets."""
     by_shot: dict[str, list[str]] = {}
     for name in viewdb.database_names(database):
-        by_shot.setdefault(name.split("/", 1)[0], []).append(name)
+        by_shot.setdefault(key_shot(name), []).append(name)
     sets = {}
     for cam in sorted(by_shot):
         log.info("registration B: set %s", cam)
-        cams = rig_views(rig, cam)
+        cams = rig.set_cameras(cam)
         sets[cam] = triangulated_stats({k: cams[k] for k in by_shot[cam]}, database,
                                        **kwargs)
         sets[cam].update(shot_counts(by_shot[cam]))
