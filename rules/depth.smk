@@ -11,7 +11,12 @@ rule depth:
         unpack(depth_inputs),
     output:
         depth="results/{dataset}/depth/{reg}/{cam}.npy",
-        preview="results/{dataset}/depth/{reg}/{cam}.png",
+        preview=report(
+            "results/{dataset}/depth/{reg}/{cam}.png",
+            caption="../report/depth.rst",
+            category="Depth",
+            subcategory="registration {reg}",
+        ),
         info="results/{dataset}/depth/{reg}/{cam}.json",
     log:
         log_path("depth", "{reg}_{cam}"),

@@ -37,7 +37,11 @@ rule reprojection:
         baseline="results/{dataset}/baseline/baseline.json",
         scratch=scratch_sfm_input,
     output:
-        "results/{dataset}/eval/reprojection.json",
+        report(
+            "results/{dataset}/eval/reprojection.json",
+            caption="../report/reprojection.rst",
+            category="Table I",
+        ),
     log:
         log_path("reprojection"),
     benchmark:

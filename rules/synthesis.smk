@@ -14,7 +14,11 @@ for _exp in (1, 2, 3):
         input:
             unpack(partial(synthesis_exp_inputs, exp=_exp)),
         output:
-            json=f"results/{{dataset}}/eval/synthesis_exp{_exp}.json",
+            json=report(
+                f"results/{{dataset}}/eval/synthesis_exp{_exp}.json",
+                caption="../report/synthesis.rst",
+                category="View synthesis",
+            ),
             synth=directory(f"results/{{dataset}}/eval/synth/exp{_exp}"),
         log:
             log_path(f"synthesis_exp{_exp}"),
