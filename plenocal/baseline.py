@@ -24,21 +24,16 @@ import logging
 import shutil
 import tempfile
 import time
-from collections.abc import Mapping
 from pathlib import Path
 
+from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.camera import PinholeCamera
+from plenocal.names import view_key
 from plenocal.sfm import colmap as cm
 from plenocal.sfm import viewdb
 from plenocal.sfm.registration import incremental_options
 
 log = logging.getLogger(__name__)
-
-
-def reg_a_cameras(reg_a: Mapping) -> dict[str, PinholeCamera]:
-    """reg_a.json document -> {cam: PinholeCamera} (SfM units)."""
-    return {cam: PinholeCamera.from_dict({**d, "width": reg_a["width"], "height": reg_a["height"]})
-            for cam, d in reg_a["cameras"].items()}
 
 
 def _large_scene_options(seed: int, num_threads: int):
@@ -74,18 +69,18 @@ def _continue_options(seed: int, num_threads: int, camera_ids: set[int]):
     return o
 
 
-def baseline_sfm(reg_a: Mapping, database: str | Path, central: str, *, seed: int = 0,
+def baseline_sfm(reg_a: RegistrationA, database: str | Path, central: str, *, seed: int = 0,
                  num_threads: int = 1, work_dir: str | Path | None = None
                  ) -> tuple[dict[str, PinholeCamera], dict]:
     """Register the views of the view ``database`` (:mod:`plenocal.sfm.viewdb`: SIFT
     and verified matches of every ``"<cam>/<view>"``) onto registration A (``reg_a``:
-    the reg_a.json document; ``central``: the central view name). Returns the cameras
+    :mod:`plenocal.artifacts.reg_a`; ``central``: the central view name). Returns the cameras
     of the registered views (SfM units) and a summary (counts, unregistered views,
     wall times of the mapping; the features and matching are timed by their rule)."""
     import pycolmap  # noqa: PLC0415
 
-    a_cams = reg_a_cameras(reg_a)
-    known = {f"{cam}/{central}": c for cam, c in a_cams.items()}
+    a_cams = reg_a.cameras
+    known = {view_key(cam, central): c for cam, c in a_cams.items()}
     views = viewdb.database_names(database)
     absent = sorted(set(known) - set(views))
     if absent:

@@ -13,42 +13,10 @@ registration A, principal point per view model).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from pathlib import Path
 
 import numpy as np
 
 from plenocal.camera import PinholeCamera
-from plenocal.io import read_json
-
-CAM_KEYS = ("poses", "cam_to_world", "shots")
-
-
-def read_reg_a(path: str | Path) -> dict:
-    """``reg_a.json``: ``focal_px`` and every shot's camera-to-world pose (SfM units).
-
-    Poses are read from ``poses``/``cam_to_world``/``shots`` ({cam: 4x4}) or from
-    ``cameras`` ({cam: {"cam_to_world": 4x4}}), whichever is present."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: reg_a.json not found; run registration A (map_a)")
-    doc = read_json(path)
-    if "focal_px" not in doc:
-        raise ValueError(f"{path}: no 'focal_px' (registration A's focal length in pixels)")
-    poses = None
-    for key in CAM_KEYS:
-        if isinstance(doc.get(key), Mapping):
-            poses = {k: np.asarray(v["cam_to_world"] if isinstance(v, Mapping) else v,
-                                   dtype=float) for k, v in doc[key].items()}
-            break
-    if poses is None and isinstance(doc.get("cameras"), Mapping):
-        poses = {k: np.asarray(v["cam_to_world"], dtype=float)
-                 for k, v in doc["cameras"].items()}
-    if not poses:
-        raise ValueError(f"{path}: no shot poses (expected 'poses': {{cam: 4x4 cam_to_world}})")
-    for k, M in poses.items():
-        if M.shape != (4, 4):
-            raise ValueError(f"{path}: pose of {k} is not 4x4")
-    return {"focal_px": float(doc["focal_px"]), "poses": poses}
 
 
 def scaled_pose(M: np.ndarray, r: float) -> np.ndarray:

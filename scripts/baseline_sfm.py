@@ -2,15 +2,16 @@
 
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
+from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.baseline import baseline_sfm
 from plenocal.camera import write_cameras
-from plenocal.io import read_json, write_json
+from plenocal.io import write_json
 from plenocal.sfm import log_to_file
 
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821
 cfg = sm.params.sfm
-cameras, info = baseline_sfm(read_json(sm.input.reg_a), sm.input.database,
+cameras, info = baseline_sfm(read_reg_a(sm.input.reg_a), sm.input.database,
                              sm.params.central, seed=cfg["seed"], num_threads=sm.threads)
 write_cameras(sm.output.cameras, cameras, units="sfm")
 write_json(sm.output.info, info)

@@ -7,16 +7,16 @@ from pathlib import Path
 
 import cv2  # (first: see DESIGN.md on cv2/pycolmap)
 
+from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.artifacts.rig import read_rig
 from plenocal.depth import estimate_depth, resolve_backend
 from plenocal.depth.inputs import (
     nearest_sources,
     preview,
     reg_a_bounds,
-    reg_a_cameras,
     rig_bounds,
 )
-from plenocal.io import read_image, read_json, write_image, write_json, write_npy
+from plenocal.io import read_image, write_image, write_json, write_npy
 from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]
@@ -31,8 +31,8 @@ margin = float(cfg["bounds_margin"])
 views_dir = Path(snakemake.params.views_dir)
 
 if reg == "a":
-    reg_a = read_json(snakemake.input.reg_a)
-    cameras = reg_a_cameras(reg_a)
+    reg_a = read_reg_a(snakemake.input.reg_a)
+    cameras = reg_a.cameras
     if cam not in cameras:
         raise ValueError(f"depth: shot {cam} is not registered in {snakemake.input.reg_a}; "
                          "look at the registration A log for why")

@@ -2,13 +2,13 @@
 model and reg_a.json."""
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
-from plenocal.io import write_json
+from plenocal.artifacts.reg_a import write_reg_a
 from plenocal.sfm import log_to_file
 from plenocal.sfm.registration import map_a
 
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821
 cfg = sm.params.sfm
-doc = map_a(sm.input.db, sm.input.images, sm.output.model, mapper=cfg["mapper"],
+reg = map_a(sm.input.db, sm.input.images, sm.output.model, mapper=cfg["mapper"],
             seed=cfg["seed"], num_threads=sm.threads)
-write_json(sm.output.reg_a, doc)
+write_reg_a(sm.output.reg_a, reg)

@@ -4,6 +4,7 @@ import logging
 
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
+from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.artifacts.rig import read_rig
 from plenocal.camera import read_cameras
 from plenocal.io import read_json, write_json
@@ -37,7 +38,7 @@ else:
     calib = sm.wildcards.calib
     logging.info("reprojection of %s on the view database %s", calib, db)
     if calib == "reg_a":
-        out = rp.evaluate(rp.reg_a_views(read_json(sm.input.calib), sm.params.central), db,
+        out = rp.evaluate(rp.reg_a_views(read_reg_a(sm.input.calib), sm.params.central), db,
                           **opts)
     elif calib == "reg_b":
         out = rp.evaluate_sets(read_rig(sm.input.calib), db, **opts)

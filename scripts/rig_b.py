@@ -3,8 +3,8 @@
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
 from plenocal.artifacts.disparity import read_disparity
+from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.artifacts.rig import write_rig
-from plenocal.merge import read_reg_a
 from plenocal.rig import build_rig, read_datasheet
 from plenocal.rulelog import rule_logger
 
@@ -19,7 +19,7 @@ for cam, path in zip(shots, snakemake.input.disparity, strict=True):
     c = read_disparity(path)
     log.info("%s: D_min %.4f, D_max %.4f px (paper sign), q %.4f px", cam, c.d_min, c.d_max, c.q)
     convs.append(c)
-F_m = read_reg_a(snakemake.input.reg_a)["focal_px"]
+F_m = read_reg_a(snakemake.input.reg_a).focal_px
 log.info("registration A focal length F_m = %.4f px", F_m)
 rig = params.rig
 doc = build_rig(ds, convs, F_m, int(params.views), model=rig["model"],

@@ -4,17 +4,15 @@ import shutil
 from pathlib import Path
 
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
-import numpy as np
 
-from plenocal.io import make_temp_dir, read_json, write_json
+from plenocal.artifacts.reg_a import read_reg_a
+from plenocal.io import make_temp_dir, write_json
 from plenocal.sfm import log_to_file, viewdb
 
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821
 cfg = sm.params.sfm
-reg_a = read_json(sm.input.reg_a)
-centres = {cam: np.asarray(d["cam_to_world"], dtype=float)[:3, 3]
-           for cam, d in reg_a["cameras"].items()}
+centres = {cam: c.centre for cam, c in read_reg_a(sm.input.reg_a).cameras.items()}
 out_db = Path(sm.output.database)
 out_db.parent.mkdir(parents=True, exist_ok=True)
 # the database moves into place only once complete; a killed job's temporary folder is

@@ -107,3 +107,30 @@ def test_rig_round_trip_and_checks(tmp_path):
     write_json(tmp_path / "cut.json", cut)
     with pytest.raises(ValueError, match="without key 'symbols'"):
         read_rig(tmp_path / "cut.json")
+
+
+def test_reg_a_round_trip(tmp_path):
+    import numpy as np
+
+    from plenocal.artifacts.reg_a import RegistrationA, read_reg_a, write_reg_a
+    from plenocal.camera import PinholeCamera
+
+    K = np.array([[900.0, 0, 249.5], [0, 900.0, 187.5], [0, 0, 1]])
+    M = np.eye(4)
+    M[:3, 3] = (0.5, 0.0, 0.0)
+    reg = RegistrationA(focal_px=900.0, width=500, height=376, mapper="global",
+                        cameras={"x01_y00": PinholeCamera(K, M, 500, 376)},
+                        stats={"num_points3D": 12})
+    write_reg_a(tmp_path / "reg_a.json", reg)
+    back = read_reg_a(tmp_path / "reg_a.json")
+    assert (back.focal_px, back.width, back.mapper, back.stats) == (900.0, 500, "global",
+                                                                   {"num_points3D": 12})
+    np.testing.assert_array_equal(back.poses["x01_y00"], M)
+    write_json(tmp_path / "old.json", {"focal_px": 900.0, "poses": {"x01_y00": M}})
+    with pytest.raises(ValueError, match=r"old\.json: not a reg_a.json of version 1.*map_a"):
+        read_reg_a(tmp_path / "old.json")
+    doc = read_json(tmp_path / "reg_a.json")
+    doc["cameras"]["x01_y00"]["K"] = [[1.0]]
+    write_json(tmp_path / "bad.json", doc)
+    with pytest.raises(ValueError, match="camera x01_y00: K must be 3x3"):
+        read_reg_a(tmp_path / "bad.json")

@@ -11,7 +11,6 @@ from plenocal import merge, rig
 from plenocal import optics as o
 from plenocal.artifacts.rig import RigB
 from plenocal.camera import intrinsics
-from plenocal.io import write_json
 
 
 def rot_z(a):
@@ -67,22 +66,6 @@ def test_points_seen_by_a_merged_view_agree_with_the_scene():
     uv, z = cam.project(X)
     np.testing.assert_allclose(uv, (K @ X_cam)[:2] / X_cam[2], atol=1e-9)
     assert z == pytest.approx(0.6)
-
-
-def test_read_reg_a(tmp_path):
-    M = np.eye(4)
-    write_json(tmp_path / "a.json", {"focal_px": 1800.0, "poses": {"x00_y00": M}})
-    write_json(tmp_path / "b.json", {"focal_px": 1800.0,
-                                     "cameras": {"x00_y00": {"cam_to_world": M}}})
-    for name in ("a.json", "b.json"):
-        got = merge.read_reg_a(tmp_path / name)
-        assert got["focal_px"] == 1800.0
-        np.testing.assert_allclose(got["poses"]["x00_y00"], M)
-    write_json(tmp_path / "c.json", {"poses": {"x00_y00": M}})
-    with pytest.raises(ValueError, match="focal_px"):
-        merge.read_reg_a(tmp_path / "c.json")
-    with pytest.raises(FileNotFoundError, match="map_a"):
-        merge.read_reg_a(tmp_path / "none.json")
 
 
 def test_merge_with_a_rig_document():

@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 import yaml
 
+from plenocal.artifacts.reg_a import RegistrationA, write_reg_a
+from plenocal.camera import PinholeCamera
 from plenocal.io import write_json
 
 REPO = Path(__file__).resolve().parent.parent
@@ -62,7 +64,9 @@ def test_rig_scale_merge_rules(tmp_path):
             (res / "depth/b").mkdir(parents=True, exist_ok=True)
             np.save(res / f"depth/a/{c}.npy", d / 0.02)
             np.save(res / f"depth/b/{c}.npy", d)
-    write_json(res / "reg_a/reg_a.json", {"focal_px": F_m, "poses": poses})
+    write_reg_a(res / "reg_a/reg_a.json", RegistrationA(
+        focal_px=F_m, width=301, height=225, mapper="incremental",
+        cameras={c: PinholeCamera(np.eye(3), M, 301, 225) for c, M in poses.items()}))
     env = dict(os.environ, PYTHONPATH=f"{REPO}{os.pathsep}{os.environ.get('PYTHONPATH', '')}")
     out = subprocess.run(
         [sys.executable, "-m", "snakemake", "--workflow-profile", "none", "-s",

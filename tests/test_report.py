@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 import pytest
 
+from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.camera import PinholeCamera, intrinsics, pose, write_cameras
 from plenocal.io import write_image, write_json
 from plenocal.report.html import build_report
@@ -94,7 +95,10 @@ def make_results(root: Path) -> Path:
                                               "estimator": "mean",
                                               "spread": {"relative": 0.004, "n_shots": 7}})
     write_json(res / "eval" / "gt_errors.json", gt_errors(
-        truth, reg_a={"focal_px": 120.3, "poses": sfm}, rig=rig, r=0.0201, calib=calib))
+        truth, reg_a=RegistrationA(focal_px=120.3, width=W, height=H, mapper="incremental",
+                                   cameras={c: PinholeCamera(np.eye(3), M, W, H)
+                                            for c, M in sfm.items()}),
+        rig=rig, r=0.0201, calib=calib))
     # as scripts/synthesis.py writes them (plenocal.synthesis.experiment1..3)
     corners = ["x00_y00", "x02_y00", "x00_y01", "x02_y01"]
     array = [c for c in CAMS if c.startswith("x")]

@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
+from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.camera import PinholeCamera, intrinsics, pose, rotation_angle_deg, umeyama
 from plenocal.verify.gt_errors import array_step_m, gt_errors, pose_similarity
 
@@ -79,7 +80,8 @@ def reg_a(focal=F, turn=None):
     if turn is not None:
         poses["x01_y00"] = poses["x01_y00"].copy()
         poses["x01_y00"][:3, :3] = poses["x01_y00"][:3, :3] @ rot([0, 0, 1], turn)
-    return {"focal_px": focal, "poses": poses}
+    return RegistrationA(focal_px=focal, width=W, height=H, mapper="incremental",
+                         cameras={s: PinholeCamera(np.eye(3), M, W, H) for s, M in poses.items()})
 
 
 def calib(global_scale=1.0):

@@ -7,6 +7,7 @@ import cv2  # noqa: F401  (before pycolmap)
 import numpy as np
 import pytest
 
+from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.artifacts.rig import RigB
 from plenocal.camera import PinholeCamera, invert_pose, pose
 from plenocal.io import write_image
@@ -75,9 +76,9 @@ def test_pixel_centre_convention(shots):
 def test_reg_a_and_rig_documents():
     K = np.array([[600.0, 0, 239.5], [0, 600.0, 179.5], [0, 0, 1]])
     M = pose(np.eye(3), np.array([0.1, 0.2, 0.3]))
-    views = reg_a_views({"width": W, "height": H, "cameras": {"x00_y00": {"K": K.tolist(),
-                                                                          "cam_to_world": M}}},
-                        "2_2")
+    reg = RegistrationA(focal_px=600.0, width=W, height=H, mapper="incremental",
+                        cameras={"x00_y00": PinholeCamera(K, M, W, H)})
+    views = reg_a_views(reg, "2_2")
     assert list(views) == ["x00_y00/2_2"]
     np.testing.assert_allclose(views["x00_y00/2_2"].cam_to_world, M)
     assert views["x00_y00/2_2"].width == W

@@ -31,7 +31,7 @@ def registered(capture):
     ra = root / "reg_a"
     features_a(views, ra / "images", ra / "database.db")
     match_a(ra / "database.db")
-    doc = map_a(ra / "database.db", ra / "images", ra / "model")
+    doc = map_a(ra / "database.db", ra / "images", ra / "model").to_dict()
     return ra, doc
 
 
@@ -67,7 +67,7 @@ def test_registration_a_is_deterministic(capture, registered, tmp_path):
     ra, doc = registered
     features_a(views, tmp_path / "images", tmp_path / "database.db")
     match_a(tmp_path / "database.db")
-    again = map_a(tmp_path / "database.db", tmp_path / "images", tmp_path / "model")
+    again = map_a(tmp_path / "database.db", tmp_path / "images", tmp_path / "model").to_dict()
     assert dumps_json(again) == dumps_json(doc)
     assert (tmp_path / "model" / "points3D.bin").read_bytes() == \
         (ra / "model" / "points3D.bin").read_bytes()
@@ -76,7 +76,7 @@ def test_registration_a_is_deterministic(capture, registered, tmp_path):
 def test_global_mapper(capture, registered, tmp_path):
     _, cams, _ = capture
     ra, _ = registered
-    doc = map_a(ra / "database.db", ra / "images", tmp_path / "model", mapper="global")
+    doc = map_a(ra / "database.db", ra / "images", tmp_path / "model", mapper="global").to_dict()
     assert doc["mapper"] == "global" and sorted(doc["cameras"]) == sorted(cams)
     assert abs(doc["focal_px"] / F - 1) < 0.01
     rmse, rot = _align(doc, cams)
@@ -129,7 +129,7 @@ def test_model_folder_is_readable_and_stale_temps_are_removed(capture, registere
         keep.write_text("x")
         db = out / "database.db"
         db.write_bytes((ra / "database.db").read_bytes())
-        doc = map_a(db, ra / "images", out / "model")
+        doc = map_a(db, ra / "images", out / "model").to_dict()
     finally:
         os.umask(old)
     assert len(doc["cameras"]) == len(list((ra / "images").glob("*.png")))

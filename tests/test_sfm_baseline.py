@@ -6,7 +6,9 @@ import cv2  # noqa: F401  (before pycolmap)
 import numpy as np
 import pytest
 
+from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.baseline import baseline_sfm, scratch_sfm
+from plenocal.camera import PinholeCamera
 from plenocal.io import write_image
 from plenocal.sfm import viewdb
 from plenocal.sfm.synthetic import default_scene, render, rig_cameras, view_sets
@@ -31,9 +33,9 @@ def sets(tmp_path_factory):
 
 def test_baseline_registers_remaining_views(sets, tmp_path):
     sub, vs, paths = sets
-    reg_a = {"width": W, "height": H, "units": "sfm",
-             "cameras": {k: {"K": c.K, "cam_to_world": vs[f"{k}/1_1"].cam_to_world}
-                         for k, c in sub.items()}}
+    reg_a = RegistrationA(focal_px=F, width=W, height=H, mapper="incremental",
+                          cameras={k: PinholeCamera(c.K, vs[f"{k}/1_1"].cam_to_world, W, H)
+                                   for k, c in sub.items()})
     db = tmp_path / "views.db"
     viewdb.build_view_database(paths, db, tmp_path, shot_neighbours=None, view_radius=None,
                                max_num_features=2000)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.artifacts.rig import RigB
 from plenocal.camera import PinholeCamera, transform
 
@@ -36,15 +37,6 @@ def nearest_sources(ref_key: str, cameras: dict[str, PinholeCamera], k: int | No
     order = sorted(cand, key=lambda c: (round(float(np.linalg.norm(cameras[c].centre - c0)),
                                               12), c))
     return order if k is None else order[:k]
-
-
-def reg_a_cameras(reg_a: dict) -> dict[str, PinholeCamera]:
-    W, H = int(reg_a["width"]), int(reg_a["height"])
-    out = {}
-    for cam, d in reg_a["cameras"].items():
-        out[cam] = PinholeCamera(np.asarray(d["K"], float), np.asarray(d["cam_to_world"], float),
-                                 int(d.get("width", W)), int(d.get("height", H)))
-    return out
 
 
 def rig_bounds(rig: RigB, margin: float) -> tuple[float, float]:
@@ -76,18 +68,14 @@ def _model_points_depths(model_dir: Path, cam: str, cam_to_world: np.ndarray) ->
     return Xc[:, 2][Xc[:, 2] > 0]
 
 
-def reg_a_bounds(reg_a: dict, cam: str, model_dir: str | Path | None,
+def reg_a_bounds(reg_a: RegistrationA, cam: str, model_dir: str | Path | None,
                  margin: float) -> tuple[float, float]:
-    """Scene bounds of shot ``cam`` in SfM units, widened."""
-    dr = reg_a.get("depth_range", {})
-    if cam in dr:
-        near, far = dr[cam]
-        return widen(float(near), float(far), margin)
+    """Scene bounds of shot ``cam`` in SfM units (the 2nd-98th percentile depth of the
+    sparse points it sees in registration A's COLMAP model), widened."""
     if model_dir is None or not Path(model_dir).is_dir():
-        raise FileNotFoundError(f"depth bounds of {cam} in registration A: reg_a.json has no "
-                                f"depth_range and the COLMAP model {model_dir} is missing")
-    z = _model_points_depths(Path(model_dir), cam,
-                             np.asarray(reg_a["cameras"][cam]["cam_to_world"], float))
+        raise FileNotFoundError(f"depth bounds of {cam} in registration A: the COLMAP model "
+                                f"{model_dir} is missing; rerun rule map_a")
+    z = _model_points_depths(Path(model_dir), cam, reg_a.cameras[cam].cam_to_world)
     if len(z) < 10:
         raise ValueError(f"depth bounds of {cam} in registration A: only {len(z)} sparse "
                          f"points in front of it in {model_dir}")

@@ -13,10 +13,11 @@ undetermined (it trades off against depth at a tiny reprojection error, [27] of 
 paper). A view that does not register, or a scene split into several models, stops
 the stage with an error naming the views.
 
-Output ``reg_a.json`` (SfM units, internal convention)::
+Output: :class:`plenocal.artifacts.reg_a.RegistrationA`, written as ``reg_a.json`` (SfM
+units, internal convention)::
 
-    {"units": "sfm", "focal_px": f, "width": W, "height": H, "mapper": ...,
-     "cameras": {"<cam>": {"K": 3x3, "cam_to_world": 4x4}},
+    {"format": "plenocal.reg_a", "version": 1, "units": "sfm", "focal_px": f, "width": W,
+     "height": H, "mapper": ..., "cameras": {"<cam>": {"K": 3x3, "cam_to_world": 4x4}},
      "mean_reprojection_error_px": ..., "num_points3D": ..., ...}
 """
 
@@ -30,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.io import atomic_write_dir, make_temp_dir
 from plenocal.sfm import colmap as cm
 
@@ -204,15 +206,16 @@ def check_models(recs: dict, all_names: list[str], mapper: str) -> object:
     return rec
 
 
-def reg_a_dict(rec, mapper: str) -> dict:
-    """The reg_a.json document of a single-camera reconstruction (internal convention)."""
+def reg_a_dict(rec, mapper: str) -> RegistrationA:
+    """Registration A of a single-camera reconstruction (``reg_a.json``, internal
+    convention; :mod:`plenocal.artifacts.reg_a`)."""
     cams = {}
     camera = None
     for image_id in sorted(rec.reg_image_ids()):
         image = rec.image(image_id)
         camera = rec.camera(image.camera_id)
         pc = cm.pinhole_from_colmap(image, camera)
-        cams[image.name[:-4]] = {"K": pc.K, "cam_to_world": pc.cam_to_world}
+        cams[image.name[:-4]] = pc
     if camera is None:
         raise RegistrationError("registration A: the model has no registered image")
     errs = []
@@ -223,14 +226,8 @@ def reg_a_dict(rec, mapper: str) -> dict:
             if proj is not None:
                 errs.append(np.linalg.norm(np.asarray(proj) - image.points2D[el.point2D_idx].xy))
     errs = np.asarray(errs)
-    return {
-        "units": "sfm",
-        "mapper": mapper,
+    stats = {
         "camera_model": camera.model_name,
-        "focal_px": float(camera.params[0]),
-        "width": int(camera.width),
-        "height": int(camera.height),
-        "cameras": cams,
         "num_images": len(cams),
         "num_points3D": int(rec.num_points3D()),
         "num_observations": int(errs.size),
@@ -239,6 +236,8 @@ def reg_a_dict(rec, mapper: str) -> dict:
         "median_reprojection_error_px": float(np.median(errs)) if errs.size else None,
         "colmap_mean_reprojection_error_px": float(rec.compute_mean_reprojection_error()),
     }
+    return RegistrationA(focal_px=float(camera.params[0]), width=int(camera.width),
+                         height=int(camera.height), mapper=mapper, cameras=cams, stats=stats)
 
 
 def write_model(rec, folder: str | Path) -> None:
@@ -249,7 +248,7 @@ def write_model(rec, folder: str | Path) -> None:
 def map_a(database: str | Path, image_dir: str | Path, model_dir: str | Path, *,
           mapper: str = "incremental", seed: int = 0, num_threads: int = 1) -> dict:
     """Map, check that every view registered into one model, write the model; returns
-    the reg_a.json document."""
+    registration A (what ``reg_a.json`` holds)."""
     import pycolmap  # noqa: PLC0415
 
     with pycolmap.Database.open(str(database)) as db:
@@ -270,5 +269,4 @@ def map_a(database: str | Path, image_dir: str | Path, model_dir: str | Path, *,
     log.info("map_a (%s): %d images, %d points, %.1f s", mapper, rec.num_reg_images(),
              rec.num_points3D(), seconds)
     write_model(rec, model_dir)
-    doc = reg_a_dict(rec, mapper)
-    return doc
+    return reg_a_dict(rec, mapper)

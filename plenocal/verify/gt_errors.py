@@ -42,6 +42,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.camera import PinholeCamera, rotation_angle_deg, umeyama
 from plenocal.names import array_position, central_view, key_shot, key_view, parse_view, split_key
 
@@ -274,19 +275,18 @@ def checks(result: Mapping) -> list[dict]:
     return out
 
 
-def gt_errors(truth: Mapping[str, PinholeCamera], reg_a: Mapping | None = None,
+def gt_errors(truth: Mapping[str, PinholeCamera], reg_a: RegistrationA | None = None,
               rig: Mapping | None = None, r: float | None = None,
               calib: Mapping[str, PinholeCamera] | None = None) -> dict:
-    """Every comparison whose inputs are given; ``reg_a`` as read by
-    :func:`plenocal.merge.read_reg_a` (``focal_px``, ``poses``), ``rig`` a ``rig.json``
+    """Every comparison whose inputs are given; ``reg_a`` registration A
+    (:mod:`plenocal.artifacts.reg_a`), ``rig`` a ``rig.json``
     document, ``r`` the scale of ``scale.json``, ``calib`` the complete calibration."""
     if not truth:
         raise ValueError("the ground truth holds no camera")
     n = int(rig["n_views"]) if rig is not None else n_views_of(truth)
     out: dict = {"n_views": n}
     if reg_a is not None:
-        out["registration_a"] = registration_a_errors(truth, reg_a["focal_px"],
-                                                      reg_a["poses"], n)
+        out["registration_a"] = registration_a_errors(truth, reg_a.focal_px, reg_a.poses, n)
     if rig is not None:
         out["registration_b"] = registration_b_errors(rig, truth)
     if r is not None and "registration_a" in out:

@@ -51,9 +51,10 @@ from pathlib import Path
 
 import numpy as np
 
+from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.artifacts.rig import RigB
 from plenocal.camera import PinholeCamera
-from plenocal.names import key_shot
+from plenocal.names import key_shot, view_key
 from plenocal.sfm import colmap as cm
 from plenocal.sfm import viewdb
 
@@ -274,11 +275,9 @@ def reprojection_stats(cameras: Mapping[str, PinholeCamera], images: Mapping[str
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def reg_a_views(reg_a: Mapping, central: str) -> dict[str, PinholeCamera]:
-    """reg_a.json -> ``{"<cam>/<central>": PinholeCamera}`` (SfM units)."""
-    return {f"{cam}/{central}": PinholeCamera.from_dict(
-        {**d, "width": reg_a["width"], "height": reg_a["height"]})
-        for cam, d in reg_a["cameras"].items()}
+def reg_a_views(reg_a: RegistrationA, central: str) -> dict[str, PinholeCamera]:
+    """Registration A -> ``{"<cam>/<central>": PinholeCamera}`` (SfM units)."""
+    return {view_key(cam, central): c for cam, c in reg_a.cameras.items()}
 
 
 def shot_counts(names) -> dict:
