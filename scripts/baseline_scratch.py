@@ -4,7 +4,7 @@ import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.baseline import scratch_sfm
 from plenocal.io import write_json
-from plenocal.sfm import log_to_file
+from plenocal.rulelog import log_to_file
 
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821

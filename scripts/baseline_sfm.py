@@ -6,7 +6,7 @@ from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.baseline import baseline_sfm
 from plenocal.camera import write_cameras
 from plenocal.io import write_json
-from plenocal.sfm import log_to_file
+from plenocal.rulelog import log_to_file
 
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821

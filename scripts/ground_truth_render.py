@@ -1,16 +1,15 @@
 """Rules ground_truth_render (one view) and ground_truth_render_set (the other views of
 the full-set shot, in one job): ideal pinhole renders and z-depth maps."""
 
-import logging
 from pathlib import Path
 
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
 from plenocal.groundtruth import render_views
+from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
-                    format="%(asctime)s %(levelname)s %(message)s")
+log = rule_logger(snakemake, "ground_truth_render")
 
 
 def paths(x) -> list[str]:
@@ -22,4 +21,4 @@ images = paths(snakemake.output.image)
 render_views([p for p in snakemake.input if p.endswith("scene.json")][0], snakemake.input.cams,
              snakemake.wildcards.cam, [Path(p).stem for p in images],
              int(snakemake.params.supersample), images, paths(snakemake.output.depth),
-             log=logging.info)
+             log=log.info)

@@ -3,7 +3,7 @@ model and reg_a.json."""
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.artifacts.reg_a import write_reg_a
-from plenocal.sfm import log_to_file
+from plenocal.rulelog import log_to_file
 from plenocal.sfm.registration import map_a
 
 log_to_file(snakemake.log[0])  # noqa: F821

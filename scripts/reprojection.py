@@ -8,7 +8,7 @@ from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.artifacts.rig import read_rig
 from plenocal.camera import read_cameras
 from plenocal.io import read_json, write_json
-from plenocal.sfm import log_to_file
+from plenocal.rulelog import log_to_file
 from plenocal.verify import reprojection as rp
 
 log_to_file(snakemake.log[0])  # noqa: F821

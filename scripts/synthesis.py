@@ -5,7 +5,6 @@ same depth for both, so their difference is the dB lost to calibration - and aga
 with the true depth (the dB lost to depth). Renderer: verify.renderer (the project's
 DIBR, or RVS with the DIBR beside it). See plenocal.synthesis."""
 
-import logging
 import time
 from pathlib import Path
 
@@ -17,12 +16,11 @@ from plenocal.camera import read_cameras
 from plenocal.depth.inputs import rig_bounds
 from plenocal.depth.quality import depth_quality
 from plenocal.io import to_uint8, write_image, write_json
+from plenocal.rulelog import rule_logger
 from plenocal.synthesis import layout_from_cams, run_experiment, synthesis_summary
 
 snakemake = globals()["snakemake"]
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO, force=True,
-                    format="%(asctime)s %(levelname)s %(message)s")
-log = logging.getLogger("synthesis")
+log = rule_logger(snakemake, "synthesis")
 
 exp = int(snakemake.params.experiment)
 cfg = dict(snakemake.params.verify)

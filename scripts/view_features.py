@@ -6,7 +6,8 @@ from pathlib import Path
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.io import make_temp_dir
-from plenocal.sfm import log_to_file, viewdb
+from plenocal.rulelog import log_to_file
+from plenocal.sfm import viewdb
 
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821

@@ -7,7 +7,8 @@ import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.io import make_temp_dir, write_json
-from plenocal.sfm import log_to_file, viewdb
+from plenocal.rulelog import log_to_file
+from plenocal.sfm import viewdb
 
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821
