@@ -4,7 +4,7 @@
 
 Without ``--lenslet`` a 2048 x 2048 lenslet image is made on the grid of the given
 Raytrix calibration (Fujita2 by default: D = 23.2 px, ~9000 lenses) with two textured
-planes (patch sizes 4.5 and 7.5 px; plenocal.convert.synthetic). Everything runs on
+planes (patch sizes 4.5 and 7.5 px; synth.lenslets). Everything runs on
 one thread (OpenCV, OpenMP, numba). Prints the time of each step, the total for all
 N x N views (without and with PNG encoding) and the throughput in megapixels of
 lenslet image per second, and the accuracy of the patch sizes against the truth.
@@ -26,11 +26,12 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))  # synth: test inputs
 
 from benchmd import Lines, update_sections  # noqa: E402
+from synth.lenslets import lenslet_from_patch_size, random_texture  # noqa: E402
 
 from plenocal.convert import ShotConversion  # noqa: E402
-from plenocal.convert.synthetic import lenslet_from_patch_size, random_texture  # noqa: E402
 from plenocal.grid import MicrolensGrid  # noqa: E402
 from plenocal.io import read_image  # noqa: E402
 from plenocal.raytrix import read_calib  # noqa: E402

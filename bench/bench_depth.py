@@ -8,7 +8,7 @@ depth/<cam>/<view>.npy) the reference is the central view of ``cam`` with the
 ground-truth cameras: plane sweep from the other views of its set (as registration B)
 and from the central views of the neighbouring shots (as registration A), and SGBM
 on the rectified pair (central view, next central view to the right). Without one,
-a textured slanted plane rendered by plenocal.depth.synthetic is used. Prints the
+a textured slanted plane rendered by synth.planes is used. Prints the
 share of valid pixels, the share within 1 % of the true depth, and the throughput in
 megapixels x depth labels per second.
 
@@ -29,8 +29,15 @@ import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))  # synth: test inputs
 
 from benchmd import Lines, update_sections  # noqa: E402
+from synth.planes import (  # noqa: E402
+    camera_at,
+    fronto_plane,
+    photo_texture,
+    render_plane,
+)
 
 from plenocal.camera import read_cameras  # noqa: E402
 from plenocal.depth.inputs import nearest_sources  # noqa: E402
@@ -42,12 +49,6 @@ from plenocal.depth.planesweep import (  # noqa: E402
 from plenocal.depth.quality import depth_quality  # noqa: E402
 from plenocal.depth.sgbm import sgbm_depth  # noqa: E402
 from plenocal.depth.sgm import SgmOptions, sgm_depth  # noqa: E402
-from plenocal.depth.synthetic import (  # noqa: E402
-    camera_at,
-    fronto_plane,
-    photo_texture,
-    render_plane,
-)
 from plenocal.io import read_image, read_json  # noqa: E402
 
 

@@ -35,7 +35,15 @@ from plenocal.depth.views import estimate_view_depth
 from plenocal.dibr import DibrOptions, PreparedView, View, prepare_view, psnr, synthesize
 from plenocal.export.mpeg import mpeg_name
 from plenocal.io import read_image, to_float
-from plenocal.viewgeom import central_view, parse_view, view_name
+from plenocal.names import (
+    array_position,
+    array_shot,
+    central_view,
+    is_array_shot,
+    parse_view,
+    split_key,
+    view_name,
+)
 
 log = logging.getLogger(__name__)
 
@@ -47,7 +55,7 @@ class ArrayLayout:
     n_views: int
 
     def cam(self, col: int, row: int) -> str:
-        return f"x{col:02d}_y{row:02d}"
+        return array_shot(col, row)
 
     @property
     def cams(self) -> list[str]:
@@ -74,11 +82,11 @@ class ArrayLayout:
 
 
 def layout_from_cams(cams: list[str], n_views: int) -> ArrayLayout:
-    arr = [c for c in cams if c.startswith("x")]
-    if not arr:
+    pos = [array_position(c) for c in cams if is_array_shot(c)]
+    if not pos:
         raise ValueError("synthesis: no array shot (x<col>_y<row>) among the cameras")
-    cols = max(int(c[1:3]) for c in arr) + 1
-    rows = max(int(c[5:7]) for c in arr) + 1
+    cols = max(c for c, _ in pos) + 1
+    rows = max(r for _, r in pos) + 1
     return ArrayLayout(cols, rows, n_views)
 
 
@@ -104,7 +112,7 @@ class SynthesisContext:
     def image(self, key: str) -> np.ndarray:
         """The captured view ``key`` (read once; the cache may be shared by the runs of
         an experiment with other camera sets, so the size is checked on every call)."""
-        cam, view = key.split("/")
+        cam, view = split_key(key)
         if key not in self._images:
             self._images[key] = to_float(read_image(self.image_path(cam, view)))
         img = self._images[key]
@@ -284,9 +292,10 @@ def experiment3(ctx: SynthesisContext, stride: int = 1) -> tuple[dict, dict[str,
         kept.update({f"{variant}:{key}": img for key, img in k.items()})
         grid = [[None] * (L.cols * n) for _ in range(L.rows * n)]
         for key, val in scores.items():
-            cam, view = key.split("/")
+            cam, view = split_key(key)
             r, c = parse_view(view)
-            grid[int(cam[5:7]) * n + r][int(cam[1:3]) * n + c] = val
+            col, row = array_position(cam)
+            grid[row * n + r][col * n + c] = val
         result[variant] = {"inputs": inputs, "psnr": scores, "grid": grid, **_summary(scores)}
     result["view_stride"] = stride
     return result, kept
@@ -304,7 +313,7 @@ def inner_corner_view(layout: ArrayLayout, cam: str) -> str:
     shot numbering (view row/column grow with the shot row/column): what
     :func:`lateral_view` finds with a calibration, known before any calibration."""
     n = layout.n_views - 1
-    col, row = int(cam[1:3]), int(cam[5:7])
+    col, row = array_position(cam)
     return view_name(n if 2 * row < layout.rows - 1 else 0, n if 2 * col < layout.cols - 1 else 0)
 
 

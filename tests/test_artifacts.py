@@ -4,10 +4,10 @@ read by one definition, with a format version that a reader checks."""
 from __future__ import annotations
 
 import pytest
+from synth.lenslets import calib_for_optics, lenslet_from_patch_size, random_texture
 
 from plenocal.artifacts.disparity import FORMAT, VERSION, disparity_record, read_disparity
 from plenocal.convert import ConvertSettings, ShotConversion
-from plenocal.convert.synthetic import calib_for_optics, lenslet_from_patch_size, random_texture
 from plenocal.grid import MicrolensGrid
 from plenocal.io import read_json, write_json
 from plenocal.optics import PlenopticOptics

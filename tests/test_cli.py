@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from synth.lenslets import lenslet_from_patch_size, random_texture
 
 from plenocal.cli import build_parser, convert_config, main
-from plenocal.convert.synthetic import lenslet_from_patch_size, random_texture
 from plenocal.grid import MicrolensGrid
 from plenocal.io import read_image, write_image
 from plenocal.names import view_names

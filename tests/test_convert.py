@@ -8,16 +8,16 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-
-from plenocal.convert import ConvertError, ConvertSettings, ShotConversion, convert_files
-from plenocal.convert.patchsize import estimate_patch_size, weighted_median
-from plenocal.convert.quality import summarise, view_quality
-from plenocal.convert.synthetic import (
+from synth.lenslets import (
     calib_for_optics,
     lenslet_from_optics,
     lenslet_from_patch_size,
     random_texture,
 )
+
+from plenocal.convert import ConvertError, ConvertSettings, ShotConversion, convert_files
+from plenocal.convert.patchsize import estimate_patch_size, weighted_median
+from plenocal.convert.quality import summarise, view_quality
 from plenocal.grid import MicrolensGrid
 from plenocal.io import write_image
 from plenocal.optics import PlenopticOptics

@@ -6,6 +6,7 @@ the sweep (best-k of the sources, winner-take-all) against their plain definitio
 import cv2  # (before pycolmap)
 import numpy as np
 import pytest
+from synth.planes import camera_at, fronto_plane, photo_texture, render_plane
 
 from plenocal.depth import DepthBackendError, estimate_depth, resolve_backend
 from plenocal.depth.colmap_mvs import colmap_available, prepare_workspace, read_colmap_array
@@ -21,7 +22,6 @@ from plenocal.depth.planesweep import (
 from plenocal.depth.quality import depth_quality
 from plenocal.depth.sgbm import sgbm_depth
 from plenocal.depth.sgm import SgmOptions, _mean_of_seen_best, _wta, fill_background, sgm_depth
-from plenocal.depth.synthetic import camera_at, fronto_plane, photo_texture, render_plane
 
 W, H, F = 320, 240, 500.0
 

@@ -11,6 +11,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from synth.lenslets import lenslet_from_patch_size, random_texture
 
 from plenocal.convert.gridcheck import (
     AUTO_DRIFT_PX,
@@ -19,7 +20,6 @@ from plenocal.convert.gridcheck import (
     refine_calib,
     refine_grid,
 )
-from plenocal.convert.synthetic import lenslet_from_patch_size, random_texture
 from plenocal.grid import MicrolensGrid
 from plenocal.io import dumps_json
 from plenocal.raytrix import LensType, RayCalib

@@ -6,6 +6,7 @@ import os
 import cv2  # noqa: F401  (before pycolmap)
 import numpy as np
 import pytest
+from synth.scenes import default_scene, render, rig_cameras, view_sets
 
 from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.artifacts.rig import RigB
@@ -13,7 +14,6 @@ from plenocal.camera import PinholeCamera, invert_pose, pose
 from plenocal.io import write_image
 from plenocal.sfm import colmap as cm
 from plenocal.sfm import viewdb
-from plenocal.sfm.synthetic import default_scene, render, rig_cameras, view_sets
 from plenocal.verify.reprojection import (
     evaluate_sets,
     observation_errors,

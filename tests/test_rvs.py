@@ -16,8 +16,8 @@ from pathlib import Path
 import cv2  # noqa: F401  (before pycolmap)
 import numpy as np
 import pytest
+from synth.planes import camera_at, fronto_plane, photo_texture, render_plane
 
-from plenocal.depth.synthetic import camera_at, fronto_plane, photo_texture, render_plane
 from plenocal.dibr import View, psnr, synthesize
 from plenocal.export.mpeg import write_mpeg
 from plenocal.export.mpeg_views import export_views

@@ -1,14 +1,14 @@
 """Registration A on a synthetic capture: a 3 x 2 parallel array plus 3 rotated
-hand-held shots of textured planes (plenocal.sfm.synthetic), f = 600 px, 480 x 360."""
+hand-held shots of textured planes (synth.scenes), f = 600 px, 480 x 360."""
 
 import cv2  # noqa: F401  (before pycolmap)
 import numpy as np
 import pytest
+from synth.scenes import default_scene, render, rig_cameras
 
 from plenocal.camera import rotation_angle_deg, umeyama
 from plenocal.io import dumps_json, write_image
 from plenocal.sfm.registration import RegistrationError, check_shots, features_a, map_a, match_a
-from plenocal.sfm.synthetic import default_scene, render, rig_cameras
 
 F, W, H, STEP = 600.0, 480, 360, 0.03
 

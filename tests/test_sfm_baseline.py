@@ -5,13 +5,13 @@ centres, and SfM from scratch reports its registered count."""
 import cv2  # noqa: F401  (before pycolmap)
 import numpy as np
 import pytest
+from synth.scenes import default_scene, render, rig_cameras, view_sets
 
 from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.baseline import baseline_sfm, scratch_sfm
 from plenocal.camera import PinholeCamera
 from plenocal.io import write_image
 from plenocal.sfm import viewdb
-from plenocal.sfm.synthetic import default_scene, render, rig_cameras, view_sets
 from plenocal.verify.reprojection import evaluate
 
 F, W, H = 600.0, 480, 360

@@ -3,9 +3,9 @@ cameras give high PSNR, a mis-calibrated view loses dB, layouts match Figs. 7-9.
 
 import numpy as np
 import pytest
+from synth.planes import camera_at, fronto_plane, photo_texture, render_plane
 
 from plenocal.camera import PinholeCamera
-from plenocal.depth.synthetic import camera_at, fronto_plane, photo_texture, render_plane
 from plenocal.io import to_uint8, write_image
 from plenocal.synthesis import (
     SynthesisContext,

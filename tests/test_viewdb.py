@@ -7,10 +7,10 @@ import os
 import cv2  # noqa: F401  (before pycolmap)
 import numpy as np
 import pytest
+from synth.scenes import default_scene, render, rig_cameras, view_sets
 
 from plenocal.io import write_image
 from plenocal.sfm import viewdb
-from plenocal.sfm.synthetic import default_scene, render, rig_cameras, view_sets
 
 
 @pytest.fixture(scope="module")

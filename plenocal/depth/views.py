@@ -21,7 +21,7 @@ from plenocal.depth import planesweep_options
 from plenocal.depth.inputs import nearest_sources
 from plenocal.depth.planesweep import plane_sweep_depth
 from plenocal.depth.sgm import sgm_depth, sgm_options
-from plenocal.viewgeom import view_name
+from plenocal.names import is_array_shot, key_shot, split_key, view_name
 
 METHODS = ("sgm", "planesweep")
 
@@ -30,8 +30,8 @@ def view_depth_sources(key: str, cameras: dict[str, PinholeCamera], n_views: int
                        k_shots: int = 4, k_set: int = 4) -> list[str]:
     """Source views of ``key``: the same view of the nearest array shots, then the
     nearest views of its own set (each sorted by camera-centre distance, then name)."""
-    cam, view = key.split("/")
-    shots = sorted({k.split("/")[0] for k in cameras if k.startswith("x")})
+    cam, view = split_key(key)
+    shots = sorted({key_shot(k) for k in cameras if is_array_shot(key_shot(k))})
     same_view = [f"{c}/{view}" for c in shots if f"{c}/{view}" in cameras]
     own_set = [f"{cam}/{view_name(r, c)}" for r in range(n_views) for c in range(n_views)
                if f"{cam}/{view_name(r, c)}" in cameras]

@@ -33,6 +33,7 @@ import numpy as np
 
 from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.io import atomic_write_dir, make_temp_dir
+from plenocal.names import is_handheld_shot
 from plenocal.sfm import colmap as cm
 
 log = logging.getLogger(__name__)
@@ -44,8 +45,8 @@ class RegistrationError(RuntimeError):
 
 def check_shots(cams: list[str]) -> None:
     """Registration A needs hand-held shots besides the array (Section II-B)."""
-    hand = [c for c in cams if c.startswith("hand")]
-    array = [c for c in cams if not c.startswith("hand")]
+    hand = [c for c in cams if is_handheld_shot(c)]
+    array = [c for c in cams if not is_handheld_shot(c)]
     if not hand:
         raise RegistrationError(
             "registration A needs hand-held shots (hand00.png, ...): with the parallel "

@@ -12,6 +12,7 @@ import yaml
 from plenocal.camera import pose
 from plenocal.grid import MicrolensGrid
 from plenocal.io import atomic_write_text, read_json, write_image, write_json
+from plenocal.names import array_shot, array_shots, handheld_shot, handheld_shots
 from plenocal.optics import PlenopticOptics
 from plenocal.raytrix import read_calib, write_calib
 from plenocal.simulate.mla import lens_type_map, make_calib
@@ -23,8 +24,7 @@ from plenocal.simulate.sensor import natural_vignetting, read_out
 
 def shot_names(sim: dict) -> list[str]:
     a = sim["array"]
-    names = [f"x{c:02d}_y{r:02d}" for r in range(a["rows"]) for c in range(a["cols"])]
-    return names + [f"hand{k:02d}" for k in range(sim["handheld"]["count"])]
+    return array_shots(a["cols"], a["rows"]) + handheld_shots(sim["handheld"]["count"])
 
 
 def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
@@ -46,7 +46,7 @@ def make_shots(sim: dict, scene_centre: np.ndarray) -> dict[str, np.ndarray]:
     shots = {}
     for r in range(a["rows"]):
         for c in range(a["cols"]):
-            shots[f"x{c:02d}_y{r:02d}"] = pose(np.eye(3), np.array([c * step, r * step, 0.0]))
+            shots[array_shot(c, r)] = pose(np.eye(3), np.array([c * step, r * step, 0.0]))
     hh = sim["handheld"]
     rng = np.random.default_rng([sim["seed"], 3])
     centre_array = np.array([(a["cols"] - 1) * step / 2, (a["rows"] - 1) * step / 2, 0.0])
@@ -57,7 +57,7 @@ def make_shots(sim: dict, scene_centre: np.ndarray) -> dict[str, np.ndarray]:
         R = _axis_angle(axis, angle)
         offset = rng.uniform(-1, 1, size=3) * hh["max_offset_m"]
         C = scene_centre - R @ np.array([0.0, 0.0, dist]) + offset
-        shots[f"hand{k:02d}"] = pose(R, C)
+        shots[handheld_shot(k)] = pose(R, C)
     return shots
 
 

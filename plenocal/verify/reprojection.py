@@ -54,7 +54,7 @@ import numpy as np
 from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.artifacts.rig import RigB
 from plenocal.camera import PinholeCamera
-from plenocal.names import key_shot, view_key
+from plenocal.names import is_handheld_shot, key_shot, view_key
 from plenocal.sfm import colmap as cm
 from plenocal.sfm import viewdb
 
@@ -283,12 +283,13 @@ def reg_a_views(reg_a: RegistrationA, central: str) -> dict[str, PinholeCamera]:
 def shot_counts(names) -> dict:
     """Array and hand-held shot counts of ``<cam>/<view>`` names (Table I writes
     "21 + 7")."""
-    shots = {n.split("/", 1)[0] for n in names}
-    hand = sum(1 for s in shots if s.startswith("hand"))
-    views = len(list(names))
+    names = list(names)
+    shots = {key_shot(n) for n in names}
+    hand = sum(1 for s in shots if is_handheld_shot(s))
+    views = len(names)
+    in_hand = sum(1 for n in names if is_handheld_shot(key_shot(n)))
     return {"num_shots": len(shots), "num_handheld_shots": hand,
-            "num_array_images": sum(1 for n in names if not n.startswith("hand")),
-            "num_handheld_images": sum(1 for n in names if n.startswith("hand")),
+            "num_array_images": views - in_hand, "num_handheld_images": in_hand,
             "num_views": views}
 
 
