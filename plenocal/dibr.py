@@ -197,6 +197,24 @@ def _geometry(cam: PinholeCamera) -> tuple[np.ndarray, ...]:
             c(w2c[:3, 3]))
 
 
+@numba.njit(cache=True, inline="always")
+def _pixel_into(Kinv, R, C, R2, t2, x, y, z):  # pragma: no cover - numba
+    """Pixel (x, y) of a camera (``Kinv``, camera-to-world rotation ``R``, centre ``C``)
+    at z-depth ``z``, in the frame of another camera (world-to-camera ``R2``, ``t2``):
+    (a, b, c), c its z-depth there. Term by term as numpy's matrix products order them."""
+    # ray through the pixel (z_cam = 1), world point at z-depth z
+    cx = Kinv[0, 0] * x + Kinv[0, 1] * y + Kinv[0, 2]
+    cy = Kinv[1, 0] * x + Kinv[1, 1] * y + Kinv[1, 2]
+    cz = Kinv[2, 0] * x + Kinv[2, 1] * y + Kinv[2, 2]
+    X0 = C[0] + (R[0, 0] * cx + R[0, 1] * cy + R[0, 2] * cz) * z
+    X1 = C[1] + (R[1, 0] * cx + R[1, 1] * cy + R[1, 2] * cz) * z
+    X2 = C[2] + (R[2, 0] * cx + R[2, 1] * cy + R[2, 2] * cz) * z
+    a = R2[0, 0] * X0 + R2[0, 1] * X1 + R2[0, 2] * X2 + t2[0]
+    b = R2[1, 0] * X0 + R2[1, 1] * X1 + R2[1, 2] * X2 + t2[1]
+    c = R2[2, 0] * X0 + R2[2, 1] * X1 + R2[2, 2] * X2 + t2[2]
+    return a, b, c
+
+
 @numba.njit(cache=True)
 def _splat(depth, Kinv_s, R_s, C_s, K_t, R_t, t_t, zbuf):  # pragma: no cover - numba
     """Forward warp of every input pixel with depth > 0 (unproject with the input
@@ -215,17 +233,7 @@ def _splat(depth, Kinv_s, R_s, C_s, K_t, R_t, t_t, zbuf):  # pragma: no cover - 
             z = depth[y, x]
             if not z > 0:
                 continue
-            # ray through the pixel (z_cam = 1), world point at z-depth z
-            cx = Kinv_s[0, 0] * x + Kinv_s[0, 1] * y + Kinv_s[0, 2]
-            cy = Kinv_s[1, 0] * x + Kinv_s[1, 1] * y + Kinv_s[1, 2]
-            cz = Kinv_s[2, 0] * x + Kinv_s[2, 1] * y + Kinv_s[2, 2]
-            X0 = C_s[0] + (R_s[0, 0] * cx + R_s[0, 1] * cy + R_s[0, 2] * cz) * z
-            X1 = C_s[1] + (R_s[1, 0] * cx + R_s[1, 1] * cy + R_s[1, 2] * cz) * z
-            X2 = C_s[2] + (R_s[2, 0] * cx + R_s[2, 1] * cy + R_s[2, 2] * cz) * z
-            # into the target camera
-            a = R_t[0, 0] * X0 + R_t[0, 1] * X1 + R_t[0, 2] * X2 + t_t[0]
-            b = R_t[1, 0] * X0 + R_t[1, 1] * X1 + R_t[1, 2] * X2 + t_t[1]
-            zt = R_t[2, 0] * X0 + R_t[2, 1] * X1 + R_t[2, 2] * X2 + t_t[2]
+            a, b, zt = _pixel_into(Kinv_s, R_s, C_s, R_t, t_t, x, y, z)
             if not zt > 0:
                 continue
             w = K_t[2, 0] * a + K_t[2, 1] * b + K_t[2, 2] * zt
@@ -258,15 +266,7 @@ def _backward(zt, Kinv_t, R_t, C_t, K_s, R_s, t_s, mx, my, zs):  # pragma: no co
     for y in range(H):
         for x in range(W):
             z = zt[y, x]
-            cx = Kinv_t[0, 0] * x + Kinv_t[0, 1] * y + Kinv_t[0, 2]
-            cy = Kinv_t[1, 0] * x + Kinv_t[1, 1] * y + Kinv_t[1, 2]
-            cz = Kinv_t[2, 0] * x + Kinv_t[2, 1] * y + Kinv_t[2, 2]
-            X0 = C_t[0] + (R_t[0, 0] * cx + R_t[0, 1] * cy + R_t[0, 2] * cz) * z
-            X1 = C_t[1] + (R_t[1, 0] * cx + R_t[1, 1] * cy + R_t[1, 2] * cz) * z
-            X2 = C_t[2] + (R_t[2, 0] * cx + R_t[2, 1] * cy + R_t[2, 2] * cz) * z
-            a = R_s[0, 0] * X0 + R_s[0, 1] * X1 + R_s[0, 2] * X2 + t_s[0]
-            b = R_s[1, 0] * X0 + R_s[1, 1] * X1 + R_s[1, 2] * X2 + t_s[1]
-            c = R_s[2, 0] * X0 + R_s[2, 1] * X1 + R_s[2, 2] * X2 + t_s[2]
+            a, b, c = _pixel_into(Kinv_t, R_t, C_t, R_s, t_s, x, y, z)
             zs[y, x] = c
             if z > 0:
                 w = K_s[2, 0] * a + K_s[2, 1] * b + K_s[2, 2] * c
