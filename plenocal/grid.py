@@ -94,7 +94,9 @@ class MicrolensGrid:
         ii, jj = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1),
                              indexing="ij")
         ij = np.stack([ii.ravel(), jj.ravel()], axis=1)
-        centres = self.origin + ij @ self.A.T
+        # products written out, not BLAS: OpenBLAS's kernels round differently with the
+        # thread count, and the centres must be the same bit for bit on every machine
+        centres = self.origin + ij[:, :1] * self.A[:, 0] + ij[:, 1:] * self.A[:, 1]
         on = ((centres[:, 0] >= 0) & (centres[:, 0] <= self.width - 1)
               & (centres[:, 1] >= 0) & (centres[:, 1] <= self.height - 1))
         # row-major order of the image: sort by y then x, for stable, readable output
@@ -104,10 +106,13 @@ class MicrolensGrid:
         self.ij = ij[idx]
         self.centres = centres[idx]
         rel = self.centres - self.origin
-        self.lattice_xy = np.stack([rel @ self.e1, rel @ self.e2], axis=1) / D
+        self.lattice_xy = np.stack([rel[:, 0] * self.e1[0] + rel[:, 1] * self.e1[1],
+                                    rel[:, 0] * self.e2[0] + rel[:, 1] * self.e2[1]],
+                                   axis=1) / D
         # lens types from the lattice indices on the file's lattice (the same lenses for a
         # measured lattice as for the file's)
-        self.types = self._lens_types(self.ij @ A_file.T / D)
+        self.types = self._lens_types(
+            (self.ij[:, :1] * A_file[:, 0] + self.ij[:, 1:] * A_file[:, 1]) / D)
         self.neighbours = self._neighbours()
 
     # ------------------------------------------------------------------

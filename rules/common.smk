@@ -14,7 +14,7 @@ try:
     validate_config(config, Path(workflow.basedir) / "config.schema.yaml")
 except ConfigError as err:
     raise ValueError(str(err)) from None
-# every slice handed to a rule as params in one key order: reordering config.yaml reruns nothing
+# every config slice the rules get as params in one key order (reordering config.yaml reruns nothing)
 canonicalize(config)
 
 DATASETS = sorted(config["datasets"])
@@ -72,10 +72,10 @@ def real_cams(dataset):
             f"x<col>_y<row>.png or hand<k>.png (two-digit numbers, lower-case .png); "
             f"move or rename {', '.join(bad)}"
         )
-    names = [p.stem for p in entries]
-    if not names:
+    shots = [p.stem for p in entries]
+    if not shots:
         raise ValueError(f"dataset {dataset!r}: {folder}/ holds no lenslet image")
-    return names
+    return shots
 
 
 def check_real_dataset(dataset):

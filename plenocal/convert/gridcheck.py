@@ -352,7 +352,15 @@ def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
         raise ValueError(f"grid is for {grid.width}x{grid.height}, image is {W}x{H}")
     D = grid.diameter
     c_file = grid.centres
-    d, ok = _measure(image, grid.origin, grid.A, c_file)
+    # OpenCV's box filters sum along stripes cut by its thread count: one thread keeps the
+    # figures (written into convert_setup.json and disparity.json) the same bit for bit
+    # whatever the job's cores (a SLURM job of 1 core against a workstation's 16)
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        d, ok = _measure(image, grid.origin, grid.A, c_file)
+    finally:
+        cv2.setNumThreads(threads)
     ij = grid.ij.astype(float)
     centre = np.array([(W - 1) / 2, (H - 1) / 2])
     warnings: list[str] = []
