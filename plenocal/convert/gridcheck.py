@@ -106,6 +106,21 @@ GRID_MODES = ("file", "refine", "auto")
 REGIONS = ("top_left", "top_right", "centre", "bottom_left", "bottom_right")
 
 
+REPORT_DIGITS = 7  # significant digits of the grid check's figures in the JSON files
+
+
+def round_floats(value, digits: int):
+    """``value`` with every float (in nested dicts, lists and tuples) rounded to
+    ``digits`` significant digits; other values unchanged."""
+    if isinstance(value, float):
+        return float(f"{value:.{digits}g}") if math.isfinite(value) else value
+    if isinstance(value, dict):
+        return {k: round_floats(v, digits) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return type(value)(round_floats(v, digits) for v in value)
+    return value
+
+
 @dataclass
 class GridCheck:
     """The file's grid against the micro-image centres measured in the frame (pixels)."""
@@ -140,8 +155,10 @@ class GridCheck:
 
     def to_dict(self) -> dict:
         """For disparity.json (plain floats and lists; without the time it took, which would
-        make the file differ from run to run)."""
-        d = asdict(self)
+        make the file differ from run to run). Floats to :data:`REPORT_DIGITS` significant
+        digits: the last digits of the fit move with the machine's floating-point paths
+        (a SLURM job's single core against a workstation's threads gave 1e-9 relative)."""
+        d = round_floats(asdict(self), REPORT_DIGITS)
         del d["seconds"]
         d["rule"] = (f"convert.grid auto refines when drift_max_px > {AUTO_DRIFT_PX} and "
                      f"> {AUTO_DRIFT_SIGMAS:g} x drift_stderr_px, verified and not foreign")

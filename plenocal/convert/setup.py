@@ -29,13 +29,14 @@ from pathlib import Path
 import numpy as np
 
 from plenocal.convert.errors import ConvertError
-from plenocal.convert.gridcheck import GRID_MODES, GridCheck, grid_for_mode
+from plenocal.convert.gridcheck import GRID_MODES, GridCheck, grid_for_mode, round_floats
 from plenocal.convert.shot import ConvertSettings, ShotConversion, build_grid
 from plenocal.grid import MicrolensGrid
 from plenocal.io import read_json, write_json
 from plenocal.raytrix import RayCalib
 
 FORMAT_VERSION = 1
+LATTICE_DIGITS = 8
 log = logging.getLogger("plenocal.convert")
 
 
@@ -112,8 +113,12 @@ def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: Con
     shot = ShotConversion(image, calib, n_views, settings, source=source, grid=grid)
     lattice = None
     if check.refined:
-        lattice = (tuple(float(x) for x in grid.origin),
-                   tuple(tuple(float(x) for x in row) for row in grid.A))
+        # to LATTICE_DIGITS significant digits (1e-4 px on a 4000-px sensor): the fit's
+        # last digits move with the machine's floating-point paths, and every shot is
+        # converted with the lattice as written
+        lattice = round_floats((tuple(float(x) for x in grid.origin),
+                                tuple(tuple(float(x) for x in row) for row in grid.A)),
+                               LATTICE_DIGITS)
     warnings = [f"{source}: {w}" for w in check.warnings] + shot.warnings
     setup = ConverterSetup(
         mla=shot.mla, tile=int(shot.layout.tile), grid_mode=settings.grid,
