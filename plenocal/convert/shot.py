@@ -263,6 +263,7 @@ class ShotConversion:
         self.profile = radial_profile(gray, self.grid) if st.devignette else None
         # the tight blend, and the wide one where some view reaches the rim (the corners
         # reach farthest); one geometry for both
+        self._median_patch = float(np.median(self.used_patch))
         corner = float(np.hypot(*self.layout.offset_image(0, 0)))
         blends = [st.render]
         if self._reaches_rim(corner):
@@ -273,7 +274,7 @@ class ShotConversion:
         self._wide_plan: RenderPlan | None = plans[1] if len(plans) > 1 else None
 
     def _reaches_rim(self, offset: float) -> bool:
-        return reaches_rim(offset, float(np.median(self.used_patch)), self.calib.safe_diameter)
+        return reaches_rim(offset, self._median_patch, self.calib.safe_diameter)
 
     def plan_for(self, r: int, c: int) -> RenderPlan:
         """The render plan of view (r, c): the tight blend, or the wide one where the
