@@ -106,18 +106,26 @@ GRID_MODES = ("file", "refine", "auto")
 REGIONS = ("top_left", "top_right", "centre", "bottom_left", "bottom_right")
 
 
-REPORT_DIGITS = 7  # significant digits of the grid check's figures in the JSON files
+# decimals of the grid check's figures in the JSON files: pixels to 1e-4 px (the check's
+# standard error is about 0.1 px), the lattice's shape (affine, pitch ratio, vectors) to
+# 1e-9; see GridCheck.to_dict
+REPORT_DECIMALS = 4
+SHAPE_DECIMALS = 9
+SHAPE_FIELDS = ("affine", "A", "pitch_ratio", "rotation_deg")
 
 
-def round_floats(value, digits: int):
+def round_floats(value, digits: int, decimals: bool = False):
     """``value`` with every float (in nested dicts, lists and tuples) rounded to
-    ``digits`` significant digits; other values unchanged."""
+    ``digits`` significant digits, or to ``digits`` decimals where ``decimals``; other
+    values unchanged (-0.0 written as 0.0)."""
     if isinstance(value, float):
-        return float(f"{value:.{digits}g}") if math.isfinite(value) else value
+        if not math.isfinite(value):
+            return value
+        return (round(value, digits) if decimals else float(f"{value:.{digits}g}")) + 0.0
     if isinstance(value, dict):
-        return {k: round_floats(v, digits) for k, v in value.items()}
+        return {k: round_floats(v, digits, decimals) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return type(value)(round_floats(v, digits) for v in value)
+        return type(value)(round_floats(v, digits, decimals) for v in value)
     return value
 
 
@@ -155,10 +163,14 @@ class GridCheck:
 
     def to_dict(self) -> dict:
         """For disparity.json (plain floats and lists; without the time it took, which would
-        make the file differ from run to run). Floats to :data:`REPORT_DIGITS` significant
-        digits: the last digits of the fit move with the machine's floating-point paths
-        (a SLURM job's single core against a workstation's threads gave 1e-9 relative)."""
-        d = round_floats(asdict(self), REPORT_DIGITS)
+        make the file differ from run to run). Floats to :data:`REPORT_DECIMALS` decimals,
+        the lattice's shape to :data:`SHAPE_DECIMALS`: a cluster job's figures have differed
+        from a local run's by up to 1e-8 px (cause not found: the same job repeated, pinned
+        to either core or under any thread setting, gives identical bits here), and a
+        fixed grid far coarser than that keeps the files identical in all but rare ties."""
+        d = {k: round_floats(v, SHAPE_DECIMALS if k in SHAPE_FIELDS else REPORT_DECIMALS,
+                             decimals=True)
+             for k, v in asdict(self).items()}
         del d["seconds"]
         d["rule"] = (f"convert.grid auto refines when drift_max_px > {AUTO_DRIFT_PX} and "
                      f"> {AUTO_DRIFT_SIGMAS:g} x drift_stderr_px, verified and not foreign")
