@@ -411,25 +411,32 @@ def test_schema_defaults_are_the_settings_defaults():
 
 
 def test_views_reaching_the_rim_take_the_wide_blend():
-    """reaches_rim: |q_rc| + P / sqrt(2) beyond D'/2 (hand-computed), and the shot renders
-    exactly those views with the wider blend (more lenses, wider fade, stronger centre
-    weight), the others with the tight one."""
-    from plenocal.convert.render import RenderSettings, reaches_rim
+    """rim_reach: 1 where |q_rc| + P / sqrt(2) passes D'/2, 2 where |q_rc| + P / 2 does too
+    (hand-computed), and the shot renders each view with the blend of its reach (more
+    lenses, wider fade, stronger centre weight the farther it reaches)."""
+    from plenocal.convert.render import RenderSettings, reaches_rim, rim_reach
 
-    assert reaches_rim(6.0, 7.1, 20.0) is True  # 6 + 5.02 > 10
-    assert reaches_rim(6.0, 5.6, 20.0) is False  # 6 + 3.96 < 10
-    wide = RenderSettings().wide()
+    assert rim_reach(6.0, 7.1, 20.0) == 1  # corner 6 + 5.02 > 10, side 6 + 3.55 < 10
+    assert rim_reach(6.0, 5.6, 20.0) == 0  # 6 + 3.96 < 10
+    assert rim_reach(8.0, 5.0, 20.0) == 2  # side 8 + 2.5 > 10
+    assert reaches_rim(6.0, 7.1, 20.0) is True and reaches_rim(6.0, 5.6, 20.0) is False
+    wide, wider = RenderSettings().wide(), RenderSettings().wider()
     assert (wide.slots, wide.fade_radius, wide.centre_power) == (4, 1.5, 3.0)
+    assert (wider.slots, wider.fade_radius, wider.centre_power) == (5, 2.0, 4.0)
+    assert RenderSettings().for_reach(0) == RenderSettings()
     opt = small_optics(480, 300)
     calib = calib_for_optics(opt)
     grid = MicrolensGrid(calib, 480, 300)
     shot = ShotConversion(lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 4)),
                           calib, 5, FIXED_TILE)
     P = float(np.median(shot.used_patch))
+    slots = (3, 4, 5)
+    reaches = set()
     for r in range(5):
         for c in range(5):
             off = float(np.hypot(*shot.layout.offset_image(r, c)))
-            expect = reaches_rim(off, P, calib.safe_diameter)
-            assert (shot.plan_for(r, c) is not shot.plan) == expect, (r, c)
-    assert shot.plan_for(0, 0) is not shot.plan and shot.plan_for(2, 2) is shot.plan
-    assert shot.plan_for(0, 0).tile_weight.shape[0] == 4
+            reach = rim_reach(off, P, calib.safe_diameter)
+            reaches.add(reach)
+            assert (shot.plan_for(r, c) is not shot.plan) == (reach > 0), (r, c)
+            assert shot.plan_for(r, c).tile_weight.shape[0] == slots[reach], (r, c)
+    assert shot.plan_for(2, 2) is shot.plan and {0, 1} <= reaches

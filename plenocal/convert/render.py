@@ -49,10 +49,14 @@ class RenderSettings:
     rim_ramp_px: float = 1.5  # width of the rim ramp
     slots: int = 3  # candidate lenses blended per output pixel (a 4th is >= 0.87 tile away)
     centre_power: float = 1.0  # weight (1 - (rho / (D'/2))^2)^power: samples near the centre
-    # views whose patches reach past the micro image (rim_reaching_views): a wider blend
+    # views whose patches reach past the micro image (rim_reach 1): a wide blend
     wide_slots: int = 4
     wide_fade_radius: float = 1.5
     wide_centre_power: float = 3.0
+    # views whose patches' sides pass the micro image (rim_reach 2): a wider one
+    wider_slots: int = 5
+    wider_fade_radius: float = 2.0
+    wider_centre_power: float = 4.0
 
     def wide(self) -> RenderSettings:
         """The blend of the views whose patches reach past the micro image."""
@@ -60,19 +64,41 @@ class RenderSettings:
                        fade_radius=max(self.fade_radius, self.wide_fade_radius),
                        centre_power=max(self.centre_power, self.wide_centre_power))
 
+    def wider(self) -> RenderSettings:
+        """The blend of the views whose patches' sides pass the micro image."""
+        wide = self.wide()
+        return replace(self, slots=max(wide.slots, self.wider_slots),
+                       fade_radius=max(wide.fade_radius, self.wider_fade_radius),
+                       centre_power=max(wide.centre_power, self.wider_centre_power))
+
+    def for_reach(self, reach: int) -> RenderSettings:
+        """The blend of a view of :func:`rim_reach` ``reach``."""
+        return (self, self.wide(), self.wider())[reach]
+
+
+def rim_reach(offset_px: float, patch_px: float, safe_diameter: float) -> int:
+    """How far the patches of a view centred ``offset_px`` from the micro-image centre
+    (``|q_rc|``) reach with a typical patch of ``patch_px`` (P): 0 - inside the micro
+    image; 1 - the patch's far corner, ``|q_rc| + P / sqrt(2)``, past ``D'/2``; 2 - the
+    middle of its far side, ``|q_rc| + P / 2``, past it too (a whole side of the patch
+    outside: the corner views of frames with large patches).
+
+    Past the rim every lens blended into an output pixel by the tight blend (the three
+    nearest tiles) may sample its blurred, vignetted rim, and the views show the lens
+    lattice (TSPC frames' corner views at 1, a faint mottling of flat areas at 2); a
+    wider blend (more lenses, a wider fade, a stronger centre weight) lets each point come
+    from a lens that sees it nearer its centre. It costs sharpness where no lens is at
+    the rim (-0.45 dB on the simulator's central view) and a third of a view's time per
+    extra lens, so each view takes the narrowest blend its reach allows."""
+    half = safe_diameter / 2.0
+    if offset_px + patch_px / 2.0 > half:
+        return 2
+    return int(offset_px + patch_px / math.sqrt(2.0) > half)
+
 
 def reaches_rim(offset_px: float, patch_px: float, safe_diameter: float) -> bool:
-    """Whether a view whose patches are centred ``offset_px`` from the micro-image centre
-    (``|q_rc|``) reaches past the micro image with a typical patch of ``patch_px``: the
-    patch's far corner, ``|q_rc| + P / sqrt(2)``, beyond ``D'/2``.
-
-    There every lens blended into an output pixel by the tight blend (the three nearest
-    tiles) may sample its blurred, vignetted rim, and the views show the lens lattice
-    (TSPC frames' corner views); the wide blend (more lenses, a wider fade) lets the
-    centre weight take each point from a lens that sees it nearer its centre. It costs
-    sharpness where no lens is at the rim (-0.45 dB on the simulator's central view),
-    so only these views take it (the simulator's corner views: +0.7 dB)."""
-    return offset_px + patch_px / math.sqrt(2.0) > safe_diameter / 2.0
+    """Whether the view's patches reach past the micro image (:func:`rim_reach` >= 1)."""
+    return rim_reach(offset_px, patch_px, safe_diameter) >= 1
 
 
 @dataclass
@@ -208,10 +234,25 @@ def view_weights(plan: RenderPlan, r: int, c: int, with_gain: bool = False,
     return w
 
 
-def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int) -> np.ndarray:
-    """View (r, c) as float32 (H, W, C) in the units of ``source`` (float32 image),
-    corrected for the micro images' vignetting where the plan has a profile. Rendered in
-    bands of :data:`BAND_ROWS` rows (the same numbers as whole; 1.3-1.5x faster)."""
+def render_source(image: np.ndarray) -> np.ndarray:
+    """``image`` (float32, (H, W) or (H, W, C)) in the layout :func:`render_view` samples
+    fastest: three channels padded to four (OpenCV's bilinear remap has a vector path for
+    four channels: 2.7x faster per sample than three, for 4/3 of the memory); other
+    channel counts unchanged."""
+    if image.ndim == 3 and image.shape[2] == 3:
+        out = np.zeros(image.shape[:2] + (4,), np.float32)
+        out[..., :3] = image
+        return out
+    return np.ascontiguousarray(image, dtype=np.float32)
+
+
+def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int,
+                channels: int | None = None) -> np.ndarray:
+    """View (r, c) as float32 (H, W, C) in the units of ``source`` (float32 image, best
+    through :func:`render_source`; ``channels``: the first C channels returned, all by
+    default), corrected for the micro images' vignetting where the plan has a profile.
+    Rendered in bands of :data:`BAND_ROWS` rows (the same numbers as whole; 1.3-1.5x
+    faster)."""
     o = plan.layout.offset_image(r, c)
     ch = 1 if source.ndim == 2 else source.shape[2]
     H, W = plan.layout.height, plan.layout.width
@@ -227,7 +268,9 @@ def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int) -> np.ndar
             # band += s * w_k in one pass (numpy's broadcast over channels takes 3x as long)
             cv2.accumulateProduct(s.reshape(band.shape),
                                   w[k] if ch == 1 else cv2.merge([w[k]] * ch), band)
-    return out if ch > 1 else out[..., None]
+    if ch == 1:
+        return out[..., None]
+    return out if channels is None or channels == ch else out[..., :channels]
 
 
 def blend_disagreement(plan: RenderPlan, source: np.ndarray, r: int, c: int) -> float:

@@ -49,8 +49,9 @@ from plenocal.convert.render import (
     RenderPlan,
     RenderSettings,
     make_plans,
-    reaches_rim,
+    render_source,
     render_view,
+    rim_reach,
 )
 from plenocal.convert.vignetting import radial_profile
 from plenocal.grid import MicrolensGrid
@@ -231,6 +232,7 @@ class ShotConversion:
             log.info("%s: 16-bit image with %d significant bits (max %d)", source, self.bits,
                      int(image.max()))
         self._source = to_unit_float(image, self.bits)
+        self._render_source: np.ndarray | None = None  # render_source(_source), on demand
         q = st.view_spacing_px if st.view_spacing_px is not None else view_spacing(
             calib.safe_diameter, n_views)
         max_q = math.hypot(1, 1) * (n_views - 1) / 2 * q
@@ -261,31 +263,31 @@ class ShotConversion:
             raise ConvertError(f"{source} with {calib.source}: {exc}") from None
         self.used_patch = self.patch.patch[self.layout.lens_index]
         self.profile = radial_profile(gray, self.grid) if st.devignette else None
-        # the tight blend, and the wide one where some view reaches the rim (the corners
-        # reach farthest); one geometry for both
+        # the tight blend, and the wider ones where some view reaches the rim (the corners
+        # reach farthest); one geometry for all
         self._median_patch = float(np.median(self.used_patch))
         corner = float(np.hypot(*self.layout.offset_image(0, 0)))
-        blends = [st.render]
-        if self._reaches_rim(corner):
-            blends.append(st.render.wide())
-        plans = make_plans(self.layout, self.used_patch, calib.safe_diameter, blends,
+        reaches = range(self._rim_reach(corner) + 1)
+        plans = make_plans(self.layout, self.used_patch, calib.safe_diameter,
+                           [st.render.for_reach(k) for k in reaches],
                            self.patch.focus[self.layout.lens_index], self.profile)
         self.plan: RenderPlan = plans[0]
-        self._wide_plan: RenderPlan | None = plans[1] if len(plans) > 1 else None
+        self._plans: list[RenderPlan] = plans
 
-    def _reaches_rim(self, offset: float) -> bool:
-        return reaches_rim(offset, self._median_patch, self.calib.safe_diameter)
+    def _rim_reach(self, offset: float) -> int:
+        return rim_reach(offset, self._median_patch, self.calib.safe_diameter)
 
     def plan_for(self, r: int, c: int) -> RenderPlan:
-        """The render plan of view (r, c): the tight blend, or the wide one where the
-        view's patches reach past the micro image (:func:`reaches_rim`, median patch)."""
-        if self._wide_plan is None or not self._reaches_rim(
-                float(np.hypot(*self.layout.offset_image(r, c)))):
-            return self.plan
-        return self._wide_plan
+        """The render plan of view (r, c): the tight blend, or a wider one where the view's
+        patches reach past the micro image (:func:`rim_reach`, median patch)."""
+        reach = self._rim_reach(float(np.hypot(*self.layout.offset_image(r, c))))
+        return self._plans[min(reach, len(self._plans) - 1)]
 
     def view_float(self, r: int, c: int) -> np.ndarray:
-        return render_view(self.plan_for(r, c), self._source, r, c)
+        if self._render_source is None:
+            self._render_source = render_source(self._source)
+        return render_view(self.plan_for(r, c), self._render_source, r, c,
+                           channels=1 if self._source.ndim == 2 else self._source.shape[2])
 
     def view(self, r: int, c: int) -> np.ndarray:
         """View (r, c) as uint8 RGB (layout.height x layout.width x 3)."""
