@@ -440,3 +440,44 @@ def test_views_reaching_the_rim_take_the_wide_blend():
             assert (shot.plan_for(r, c) is not shot.plan) == (reach > 0), (r, c)
             assert shot.plan_for(r, c).tile_weight.shape[0] == slots[reach], (r, c)
     assert shot.plan_for(2, 2) is shot.plan and {0, 1} <= reaches
+
+
+def test_each_slot_is_devignetted_with_its_lens_types_profile():
+    """A profile per lens type: every slot of the plan looks its gain up in its own lens's
+    row, so a flat grey frame whose two halves of lenses vignette differently (type 0
+    falls to 0.5 at the rim, type 1 stays flat) renders flat once each type has its
+    profile, and not with one profile for both."""
+    from plenocal.convert.render import make_plans, render_view
+    from plenocal.convert.vignetting import BIN_PX
+
+    opt = small_optics(480, 300)
+    calib = calib_for_optics(opt)
+    grid = MicrolensGrid(calib, 480, 300)
+    shot = ShotConversion(lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 4)),
+                          calib, 5, FIXED_TILE)
+    layout = shot.layout
+    lens_type = (np.arange(len(grid.centres)) % 2).astype(np.int64)
+    half = calib.safe_diameter / 2
+    radii = np.arange(0.0, half + 1.5, BIN_PX)
+    fall = np.clip(1.0 - 0.5 * (radii / half) ** 2, 0.5, 1.0)
+    profiles = np.stack([fall, np.ones_like(fall)]).astype(np.float32)
+    # the frame: grey 0.6 times each pixel's own lens type's profile at its radius
+    yy, xx = np.mgrid[0:300, 0:480].astype(np.float64)
+    d2 = ((xx[None] - grid.centres[:, 0, None, None]) ** 2
+          + (yy[None] - grid.centres[:, 1, None, None]) ** 2)
+    owner = np.argmin(d2, axis=0)
+    rho = np.sqrt(np.take_along_axis(d2, owner[None], 0)[0])
+    prof = np.where(lens_type[owner] == 0, np.interp(rho, radii, fall), 1.0)
+    frame = np.repeat((0.6 * prof).astype(np.float32)[..., None], 3, axis=2)
+    used = layout.lens_index
+    plan, = make_plans(layout, shot.used_patch, calib.safe_diameter, [shot.settings.render],
+                       profile=profiles, profile_row=lens_type[used])
+    assert plan.gain_table.shape[0] == 2 and plan.gain_row is not None
+    one, = make_plans(layout, shot.used_patch, calib.safe_diameter, [shot.settings.render],
+                      profile=profiles[:1])
+    b = layout.tile
+    for r, c in [(0, 0), (4, 4)]:
+        typed = render_view(plan, frame, r, c)[b:-b, b:-b, 0]
+        common = render_view(one, frame, r, c)[b:-b, b:-b, 0]
+        assert np.abs(typed - 0.6).max() < 0.01, (r, c, np.abs(typed - 0.6).max())
+        assert np.abs(common - 0.6).max() > 0.05, (r, c)

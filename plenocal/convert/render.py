@@ -110,22 +110,28 @@ class RenderPlan:
     off_y: np.ndarray
     tile_weight: np.ndarray  # (K, H, W) float32
     weight_table: np.ndarray  # radial weight (rim x centre + floor), every LUT_STEP px
-    gain_table: np.ndarray  # 1 / vignetting profile, same radii (ones without a profile)
+    gain_table: np.ndarray  # (T, n) 1 / vignetting profile per lens type, same radii
+    gain_row: np.ndarray | None = None  # (K, H, W) float32 gain_table row of each slot's lens
 
 
 def make_plan(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
               settings: RenderSettings | None = None, focus: np.ndarray | None = None,
-              profile: np.ndarray | None = None) -> RenderPlan:
+              profile: np.ndarray | None = None,
+              profile_row: np.ndarray | None = None) -> RenderPlan:
     """Precompute the per-shot geometry. ``patch``: (m,) patch size per used lens, in
     ``layout.lens_index`` order; ``focus``: (m,) focus weight per used lens (multi-focus
-    MLAs: lenses that see their point blurred get less weight), None for all 1."""
+    MLAs: lenses that see their point blurred get less weight), None for all 1;
+    ``profile``: the micro images' vignetting profile, (n,) or one row per lens type
+    (T, n) with ``profile_row`` (m,) the row of each used lens
+    (:func:`plenocal.convert.vignetting.lens_type_profiles`); None for no correction."""
     return make_plans(layout, patch, safe_diameter, [settings or RenderSettings()], focus,
-                      profile)[0]
+                      profile, profile_row)[0]
 
 
 def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
                blends: list[RenderSettings], focus: np.ndarray | None = None,
-               profile: np.ndarray | None = None) -> list[RenderPlan]:
+               profile: np.ndarray | None = None,
+               profile_row: np.ndarray | None = None) -> list[RenderPlan]:
     """One :class:`RenderPlan` per blend in ``blends``, sharing the geometry: the nearest
     tiles and their sampling positions are computed once for the most slots, and a
     blend of fewer slots takes the first (nearest) of them (views of the arrays, no
@@ -158,6 +164,11 @@ def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
         map_x[k][~have[k]] = -1e4
         map_y[k][~have[k]] = -1e4
     focus_w = None if focus is None else np.asarray(focus, dtype=f).take(lens)
+    gain_row = None
+    if profile is not None and np.ndim(profile) == 2 and len(profile) > 1:
+        if profile_row is None or np.shape(profile_row) != patch.shape:
+            raise ValueError("a profile per lens type needs profile_row, one row per used lens")
+        gain_row = np.asarray(profile_row, dtype=f).take(lens)
     plans = []
     for blend in blends:
         k = min(blend.slots, K)
@@ -173,7 +184,8 @@ def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
         weight_table, gain_tab = radial_tables(safe_diameter, blend, profile)
         plans.append(RenderPlan(
             layout=layout, map_x=map_x[:k], map_y=map_y[:k], off_x=off_x[:k],
-            off_y=off_y[:k], tile_weight=wt, weight_table=weight_table, gain_table=gain_tab))
+            off_y=off_y[:k], tile_weight=wt, weight_table=weight_table, gain_table=gain_tab,
+            gain_row=None if gain_row is None else gain_row[:k]))
     return plans
 
 
@@ -181,7 +193,7 @@ def radial_tables(safe_diameter: float, settings: RenderSettings,
                   profile: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """Per radius from the micro-image centre (every ``LUT_STEP`` px, the last entry for
     everything beyond): the sample's weight ``rim x (1 - (rho / (D'/2))^2)^centre_power
-    + floor`` and its vignetting gain."""
+    + floor`` (n,) and its vignetting gain (T, n), one row per row of ``profile``."""
     rim_radius = safe_diameter / 2.0 - settings.rim_px
     r = np.arange(0.0, max(rim_radius, 0.0) + settings.rim_ramp_px + 3.0, LUT_STEP)
     w = np.clip((rim_radius - r) / settings.rim_ramp_px, 0.0, 1.0)
@@ -190,17 +202,19 @@ def radial_tables(safe_diameter: float, settings: RenderSettings,
         w = w * np.clip(1.0 - (r / half) ** 2, 0.0, 1.0) ** settings.centre_power
     w = w + _FLOOR
     if profile is None:
-        g = np.ones_like(r)
+        g = np.ones((1, len(r)))
     else:
-        g = 1.0 / np.interp(r, np.arange(len(profile)) * BIN_PX, profile)
+        rows = np.atleast_2d(profile)
+        g = np.stack([1.0 / np.interp(r, np.arange(rows.shape[1]) * BIN_PX, p) for p in rows])
     return w.astype(np.float32), g.astype(np.float32)
 
 
-def _lookup(table: np.ndarray, x: np.ndarray, zeros: np.ndarray) -> np.ndarray:
-    """``table`` at the entries nearest to ``x`` (float32, the shape of ``zeros``),
-    clamped to its ends: ``cv2.remap`` on a one-row image (rounds, replicates the last
-    entry; 2-3x faster than computing integer indices and gathering with numpy)."""
-    return cv2.remap(table[None, :], x, zeros, cv2.INTER_NEAREST,
+def _lookup(table: np.ndarray, x: np.ndarray, row: np.ndarray) -> np.ndarray:
+    """``table`` ((n,) or (T, n)) at the entries nearest to ``x`` in rows ``row`` (float32
+    arrays of one shape; zeros for a 1-D table), clamped to its ends: ``cv2.remap`` on the
+    table as an image (rounds, replicates the last entry; 2-3x faster than computing
+    integer indices and gathering with numpy)."""
+    return cv2.remap(np.atleast_2d(table), x, row, cv2.INTER_NEAREST,
                      borderMode=cv2.BORDER_REPLICATE)
 
 
@@ -225,7 +239,8 @@ def view_weights(plan: RenderPlan, r: int, c: int, with_gain: bool = False,
         np.multiply(_lookup(plan.weight_table, rad, zeros), tile_weight[k], out=w[k])
         total += w[k]
         if gain is not None:
-            gain[k] = _lookup(plan.gain_table, rad, zeros)
+            gain[k] = _lookup(plan.gain_table, rad,
+                              zeros if plan.gain_row is None else plan.gain_row[k, rows])
     np.maximum(total, np.float32(1e-12), out=total)
     np.divide(np.float32(1.0), total, out=total)
     w *= total

@@ -53,7 +53,7 @@ from plenocal.convert.render import (
     render_view,
     rim_reach,
 )
-from plenocal.convert.vignetting import radial_profile
+from plenocal.convert.vignetting import lens_type_profiles
 from plenocal.grid import MicrolensGrid
 from plenocal.io import read_image
 from plenocal.names import parse_view, view_names
@@ -262,7 +262,9 @@ class ShotConversion:
         except ValueError as exc:
             raise ConvertError(f"{source} with {calib.source}: {exc}") from None
         self.used_patch = self.patch.patch[self.layout.lens_index]
-        self.profile = radial_profile(gray, self.grid) if st.devignette else None
+        # the micro images' vignetting, one profile per lens type (rows of self.profile)
+        self.profile, profile_row = (lens_type_profiles(gray, self.grid) if st.devignette
+                                     else (None, None))
         # the tight blend, and the wider ones where some view reaches the rim (the corners
         # reach farthest); one geometry for all
         self._median_patch = float(np.median(self.used_patch))
@@ -270,7 +272,9 @@ class ShotConversion:
         reaches = range(self._rim_reach(corner) + 1)
         plans = make_plans(self.layout, self.used_patch, calib.safe_diameter,
                            [st.render.for_reach(k) for k in reaches],
-                           self.patch.focus[self.layout.lens_index], self.profile)
+                           self.patch.focus[self.layout.lens_index], self.profile,
+                           None if profile_row is None
+                           else profile_row[self.layout.lens_index])
         self.plan: RenderPlan = plans[0]
         self._plans: list[RenderPlan] = plans
 
