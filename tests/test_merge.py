@@ -7,9 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from plenocal import merge, rig
 from plenocal import optics as o
 from plenocal.artifacts.rig import RigB
+from plenocal.calib import merge
+from plenocal.calib.reg_b import rig
 from plenocal.camera import intrinsics
 
 

@@ -12,11 +12,11 @@ import pytest
 import yaml
 
 from plenocal import optics as o
-from plenocal import rig
 from plenocal.artifacts.disparity import Conversion, read_disparity
 from plenocal.artifacts.rig import RigB
+from plenocal.calib.reg_b import rig
 from plenocal.camera import PinholeCamera
-from plenocal.io import write_json
+from plenocal.io.files import write_json
 
 SIN45 = math.sqrt(0.5)
 
@@ -321,15 +321,15 @@ def test_rig_json_from_files(tmp_path):
 
 def _traced_set(kind: str, focus: float, tmp_path, sensor_distance: bool):
     """A small simulated camera of either MLA kind: the traced ground-truth cameras of
-    its 5 x 5 views (plenocal.groundtruth), its camera.yaml as the simulator writes it
+    its 5 x 5 views (plenocal.simulate.groundtruth), its camera.yaml as the simulator writes it
     (with or without mla.sensor_distance_mm) and the disparity.json the converter
     writes for patch sizes of the true scene range 0.47-0.74 m."""
     from plenocal.artifacts.disparity import disparity_record
     from plenocal.config import validate_config
     from plenocal.grid import MicrolensGrid
-    from plenocal.groundtruth import shot_cameras
     from plenocal.simulate.dataset import datasheet as sim_datasheet
     from plenocal.simulate.dataset import make_calib
+    from plenocal.simulate.groundtruth import shot_cameras
     from plenocal.simulate.optics_setup import optics_from_config
     from plenocal.viewgeom import make_layout
 

@@ -17,7 +17,7 @@ Registration A (SfM units, arbitrary frame)
     focal 0.5 %, centres 2 % of the step, rotations 0.05 deg.
 
 Registration B (one N x N set, metres, relative to the central view)
-    :func:`plenocal.rig.compare_with_truth` against the true set of every shot:
+    :func:`plenocal.calib.reg_b.rig.compare_with_truth` against the true set of every shot:
     baseline per view step, alpha-equivalent (the rotation per step that the
     principal-point shift is equivalent to), principal-point shift per step.
     Targets: baseline 1 %, alpha 2 %, principal-point shift 0.5 px.
@@ -169,7 +169,7 @@ def registration_a_errors(truth: Mapping[str, PinholeCamera], focal_px: float,
 
 def registration_b_errors(rig: Mapping, truth: Mapping[str, PinholeCamera]) -> dict:
     """Registration B (one rig) against the true N x N set of every shot."""
-    from plenocal.rig import compare_with_truth  # noqa: PLC0415  (rig imports yaml)
+    from plenocal.calib.reg_b.rig import compare_with_truth  # noqa: PLC0415  (rig imports yaml)
 
     n = int(rig["n_views"])
     shots = sorted({key_shot(k) for k in truth})

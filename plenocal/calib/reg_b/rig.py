@@ -65,8 +65,8 @@ import numpy as np
 from plenocal import optics as o
 from plenocal.artifacts.disparity import Conversion
 from plenocal.artifacts.rig import RigB
+from plenocal.calib.reg_b.datasheet import load_datasheet
 from plenocal.camera import PinholeCamera, intrinsics, invert_pose, rotation_angle_deg
-from plenocal.datasheet import load_datasheet
 from plenocal.names import central_view, parse_view, view_names
 from plenocal.viewgeom import MLA_KINDS, view_position
 
@@ -101,7 +101,8 @@ def _need(doc: Mapping, path: str, source: str | Path):
     for part in path.split("."):
         if not isinstance(cur, Mapping) or part not in cur:
             raise ValueError(f"{source}: missing key {path!r} (the datasheet must give it; "
-                             "see plenocal/rig.py read_datasheet for the expected keys)")
+                             "see plenocal/calib/reg_b/rig.py read_datasheet for the expected "
+                             "keys)")
         cur = cur[part]
     return cur
 
@@ -122,8 +123,8 @@ def read_datasheet(path: str | Path) -> Datasheet:
     sensor_distance_mm, ``s`` follows from ``k`` by the MLA kind of the converter's
     disparity.json (:func:`sensor_distance`).
 
-    Validated against :data:`plenocal.datasheet.SCHEMA` first: a bad value raises
-    :class:`plenocal.datasheet.DatasheetError` naming the file and the key."""
+    Validated against :data:`plenocal.calib.reg_b.datasheet.SCHEMA` first: a bad value raises
+    :class:`plenocal.calib.reg_b.datasheet.DatasheetError` naming the file and the key."""
     path = Path(path)
     doc = load_datasheet(path)
     fn = _need(doc, "mla.f_numbers", path)

@@ -165,8 +165,9 @@ def _check_ranges(doc: Any, schema: Mapping, path: tuple, source: str | Path) ->
             guess = ""
             if key.endswith("_mm") and doc > hi and lo <= doc / 1000.0 <= hi:
                 guess = f"; {doc} looks like micrometres: {doc / 1000.0:g} mm is plausible"
+            what = schema.get("description", "see plenocal/calib/reg_b/datasheet.py")
             raise _fail(source, key, doc, f"outside the plausible range {lo:g}-{hi:g}{unit} "
-                        f"({schema.get('description', 'see plenocal/datasheet.py')}){guess}")
+                        f"({what}){guess}")
     if isinstance(doc, Mapping):
         for k, sub in schema.get("properties", {}).items():
             if k in doc:
@@ -196,7 +197,7 @@ def check_datasheet(doc: Any, source: str | Path = "camera.yaml") -> dict:
         err = max(errors, key=lambda e: len(e.absolute_path))
         if err.validator == "required":
             raise DatasheetError(f"{source}: {_schema_message(err)} (the datasheet must give "
-                                 "it; see plenocal/datasheet.py SCHEMA for every key)")
+                                 "it; see plenocal/calib/reg_b/datasheet.py SCHEMA for every key)")
         shown = err.instance if not isinstance(err.instance, Mapping) else "{...}"
         raise _fail(source, _dotted(err.absolute_path), shown, _schema_message(err))
     _check_ranges(doc, SCHEMA, (), source)
