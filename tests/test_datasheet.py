@@ -11,8 +11,12 @@ from pathlib import Path
 import pytest
 import yaml
 
-from plenocal.calib.reg_b.datasheet import DatasheetError, check_datasheet, load_datasheet
-from plenocal.calib.reg_b.rig import read_datasheet
+from plenocal.calib.reg_b.datasheet import (
+    DatasheetError,
+    check_datasheet,
+    load_datasheet,
+    read_datasheet,
+)
 
 # what the simulator writes for the tiny config (plenocal.simulate.dataset.datasheet)
 GOOD = {
