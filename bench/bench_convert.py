@@ -33,8 +33,8 @@ from synth.lenslets import lenslet_from_patch_size, random_texture  # noqa: E402
 
 from plenocal.convert import ShotConversion  # noqa: E402
 from plenocal.grid import MicrolensGrid  # noqa: E402
-from plenocal.io import read_image  # noqa: E402
-from plenocal.raytrix import read_calib  # noqa: E402
+from plenocal.io.files import read_image  # noqa: E402
+from plenocal.io.raytrix import read_calib  # noqa: E402
 
 FIXTURES = Path("/work/shared/fixtures/raytrix-calib")
 

@@ -49,7 +49,7 @@ from plenocal.depth.planesweep import (  # noqa: E402
 from plenocal.depth.quality import depth_quality  # noqa: E402
 from plenocal.depth.sgbm import sgbm_depth  # noqa: E402
 from plenocal.depth.sgm import SgmOptions, sgm_depth  # noqa: E402
-from plenocal.io import read_image, read_json  # noqa: E402
+from plenocal.io.files import read_image, read_json  # noqa: E402
 
 
 def run_sweep(out, label, ref, img, srcs, simgs, near, far, gt, opt):

@@ -55,7 +55,7 @@ from plenocal.cli import with_defaults  # noqa: E402
 from plenocal.convert import ConvertSettings, ShotConversion  # noqa: E402
 from plenocal.convert.gridcheck import grid_for_mode, refine_grid  # noqa: E402
 from plenocal.convert.shot import build_grid, load_calib, load_lenslet  # noqa: E402
-from plenocal.io import read_image, write_image  # noqa: E402
+from plenocal.io.files import read_image, write_image  # noqa: E402
 from plenocal.names import central_view  # noqa: E402
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "real"

@@ -65,8 +65,8 @@ def psnr_by_samples(cfg: dict, dataset: str, out: Path, shots: list[str],
     from plenocal.convert.quality import dataset_quality  # noqa: PLC0415
     from plenocal.convert.setup import decide_setup, read_setup, write_setup  # noqa: PLC0415
     from plenocal.convert.shot import load_calib, load_lenslet, read_sensor_size  # noqa: PLC0415
-    from plenocal.groundtruth import ground_truth_shot  # noqa: PLC0415
-    from plenocal.io import read_json, to_uint8, write_image  # noqa: PLC0415
+    from plenocal.io.files import read_json, to_uint8, write_image  # noqa: PLC0415
+    from plenocal.simulate.groundtruth import ground_truth_shot  # noqa: PLC0415
     from plenocal.simulate.raytrace import render_pinhole  # noqa: PLC0415
     from plenocal.simulate.scene import scene_arrays  # noqa: PLC0415
     from plenocal.viewgeom import central_view  # noqa: PLC0415

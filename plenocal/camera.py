@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from plenocal.io import read_json, write_json
+from plenocal.io.files import read_json, write_json
 
 
 @dataclass(frozen=True)

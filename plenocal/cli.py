@@ -162,7 +162,7 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     import cv2  # noqa: F401, PLC0415  (cv2 before anything that may import pycolmap)
 
     from plenocal.convert import ConvertSettings, convert_files  # noqa: PLC0415
-    from plenocal.io import write_image, write_json, write_npy  # noqa: PLC0415
+    from plenocal.io.files import write_image, write_json, write_npy  # noqa: PLC0415
 
     t0 = time.perf_counter()
     if args.views < 1:
@@ -200,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
                         format="plenocal: %(message)s", force=True)
     log = logging.getLogger("plenocal.cli")
     from plenocal.config import ConfigError  # noqa: PLC0415
-    from plenocal.raytrix import CalibError  # noqa: PLC0415
+    from plenocal.io.raytrix import CalibError  # noqa: PLC0415
 
     try:
         if args.command == "convert":

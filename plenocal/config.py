@@ -16,7 +16,7 @@ from typing import Any
 import jsonschema
 import yaml
 
-from plenocal.datasheet import virtual_depth_problem
+from plenocal.calib.reg_b.datasheet import virtual_depth_problem
 
 SCHEMA_PATH = Path(__file__).resolve().parent.parent / "config.schema.yaml"
 

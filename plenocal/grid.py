@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from plenocal.raytrix import CalibError, RayCalib
+from plenocal.io.raytrix import CalibError, RayCalib
 
 HEX_STEPS = np.array([(1, 0), (0, 1), (-1, 1), (-1, 0), (0, -1), (1, -1)], dtype=np.int64)
 

@@ -6,7 +6,7 @@ import re
 from pathlib import Path
 
 from plenocal.config import ConfigError, canonicalize, validate_config
-from plenocal.datasheet import DatasheetError, load_datasheet
+from plenocal.calib.reg_b.datasheet import DatasheetError, load_datasheet
 from plenocal import names
 from plenocal.names import central_view, view_names
 
@@ -80,7 +80,7 @@ def real_cams(dataset):
 
 def check_real_dataset(dataset):
     """A real capture's files, checked before any job: the lenslet folder, calib.xml,
-    and camera.yaml against its schema (plenocal.datasheet)."""
+    and camera.yaml against its schema (plenocal.calib.reg_b.datasheet)."""
     real_cams(dataset)
     calib = Path("data") / dataset / "calib.xml"
     if not calib.is_file():
@@ -255,14 +255,14 @@ def synthesis_depth_config():
 
 
 def synthesis_layout(dataset):
-    from plenocal.synthesis import layout_from_cams
+    from plenocal.verify.synthesis import layout_from_cams
 
     return layout_from_cams(array_cams(dataset), n_views(dataset))
 
 
 def experiment_views(dataset, exp):
     """The views whose depth maps experiment ``exp`` reads."""
-    from plenocal.synthesis import experiment_input_views
+    from plenocal.verify.synthesis import experiment_input_views
 
     return experiment_input_views(
         synthesis_layout(dataset), exp, stage_config("verify")["exp2_sets"]

@@ -2,9 +2,9 @@
 it fails or registers only part of the views)."""
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
-from plenocal.baseline import scratch_sfm
-from plenocal.io import write_json
+from plenocal.io.files import write_json
 from plenocal.rulelog import log_to_file
+from plenocal.verify.sfm_baselines import scratch_sfm
 
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821

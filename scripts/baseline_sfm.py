@@ -3,10 +3,10 @@
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.artifacts.reg_a import read_reg_a
-from plenocal.baseline import baseline_sfm
 from plenocal.camera import write_cameras
-from plenocal.io import write_json
+from plenocal.io.files import write_json
 from plenocal.rulelog import log_to_file
+from plenocal.verify.sfm_baselines import baseline_sfm
 
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821

@@ -7,7 +7,7 @@ from pathlib import Path
 import cv2
 
 from plenocal.convert import ConvertSettings, convert_files
-from plenocal.io import write_image, write_json, write_npy
+from plenocal.io.files import write_image, write_json, write_npy
 from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]

@@ -7,7 +7,7 @@ import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
 from plenocal.convert.quality import dataset_quality
 from plenocal.convert.setup import read_setup
-from plenocal.io import write_json
+from plenocal.io.files import write_json
 from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]

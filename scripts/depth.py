@@ -16,7 +16,7 @@ from plenocal.depth.inputs import (
     reg_a_bounds,
     rig_bounds,
 )
-from plenocal.io import read_image, write_image, write_json, write_npy
+from plenocal.io.files import read_image, write_image, write_json, write_npy
 from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]

@@ -11,7 +11,7 @@ from plenocal.artifacts.rig import read_rig
 from plenocal.camera import read_cameras
 from plenocal.depth.inputs import preview, rig_bounds
 from plenocal.depth.views import estimate_view_depth
-from plenocal.io import read_image, write_image, write_json, write_npy
+from plenocal.io.files import read_image, write_image, write_json, write_npy
 from plenocal.names import split_key
 from plenocal.rulelog import rule_logger
 

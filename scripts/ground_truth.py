@@ -2,7 +2,7 @@
 
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
-from plenocal.io import read_json, write_json
+from plenocal.io.files import read_json, write_json
 from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]

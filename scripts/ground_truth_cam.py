@@ -5,8 +5,8 @@ from pathlib import Path
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
 from plenocal.convert.setup import read_setup
-from plenocal.groundtruth import ground_truth_shot
 from plenocal.rulelog import rule_logger
+from plenocal.simulate.groundtruth import ground_truth_shot
 
 snakemake = globals()["snakemake"]
 log = rule_logger(snakemake, "ground_truth_cam")

@@ -5,8 +5,8 @@ from pathlib import Path
 
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
-from plenocal.groundtruth import render_views
 from plenocal.rulelog import rule_logger
+from plenocal.simulate.groundtruth import render_views
 
 snakemake = globals()["snakemake"]
 log = rule_logger(snakemake, "ground_truth_render")

@@ -7,7 +7,7 @@ from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.artifacts.rig import read_rig
 from plenocal.artifacts.scale import read_scale
 from plenocal.camera import read_cameras
-from plenocal.io import write_json
+from plenocal.io.files import write_json
 from plenocal.rulelog import rule_logger
 from plenocal.verify.gt_errors import gt_errors
 

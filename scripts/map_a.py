@@ -3,8 +3,8 @@ model and reg_a.json."""
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.artifacts.reg_a import write_reg_a
+from plenocal.calib.reg_a.sfm import map_a
 from plenocal.rulelog import log_to_file
-from plenocal.sfm.registration import map_a
 
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821

@@ -3,9 +3,9 @@ import shutil
 
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
-from plenocal.io import write_json
+from plenocal.calib.reg_a.sfm import match_a
+from plenocal.io.files import write_json
 from plenocal.rulelog import log_to_file
-from plenocal.sfm.registration import match_a
 
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821

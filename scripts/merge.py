@@ -5,10 +5,10 @@ import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.artifacts.rig import read_rig
 from plenocal.artifacts.scale import read_scale
+from plenocal.calib.merge import merge_cameras
 from plenocal.export.colmap_model import write_colmap
 from plenocal.export.mpeg import write_mpeg
 from plenocal.export.plain import write_plain
-from plenocal.merge import merge_cameras
 from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]

@@ -8,9 +8,9 @@ import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 import numpy as np
 
 from plenocal.export.mpeg_views import export_views
-from plenocal.io import read_image
+from plenocal.io.files import read_image
 from plenocal.rulelog import rule_logger
-from plenocal.synthesis import experiment_plan, layout_from_cams
+from plenocal.verify.synthesis import experiment_plan, layout_from_cams
 
 snakemake = globals()["snakemake"]
 log = rule_logger(snakemake, "mpeg_views")

@@ -7,7 +7,7 @@ import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.artifacts.rig import read_rig
 from plenocal.camera import read_cameras
-from plenocal.io import read_json, write_json
+from plenocal.io.files import read_json, write_json
 from plenocal.rulelog import log_to_file
 from plenocal.verify import reprojection as rp
 

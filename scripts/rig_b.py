@@ -5,7 +5,8 @@ import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 from plenocal.artifacts.disparity import read_disparity
 from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.artifacts.rig import write_rig
-from plenocal.rig import build_rig, read_datasheet
+from plenocal.calib.reg_b.datasheet import read_datasheet
+from plenocal.calib.reg_b.rig import build_rig
 from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]

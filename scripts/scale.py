@@ -3,8 +3,8 @@
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
 from plenocal.artifacts.scale import write_scale
+from plenocal.calib.scale import estimate_scale
 from plenocal.rulelog import rule_logger
-from plenocal.scale import estimate_scale
 
 snakemake = globals()["snakemake"]
 log = rule_logger(snakemake, "scale")

@@ -3,7 +3,7 @@ maps (rule depth_view, computed once with the complete calibration) are rendered
 the complete calibration and, on synthetic data, with the ground-truth cameras - the
 same depth for both, so their difference is the dB lost to calibration - and again
 with the true depth (the dB lost to depth). Renderer: verify.renderer (the project's
-DIBR, or RVS with the DIBR beside it). See plenocal.synthesis."""
+DIBR, or RVS with the DIBR beside it). See plenocal.verify.synthesis."""
 
 import time
 from pathlib import Path
@@ -15,9 +15,9 @@ from plenocal.artifacts.rig import read_rig
 from plenocal.camera import read_cameras
 from plenocal.depth.inputs import rig_bounds
 from plenocal.depth.quality import depth_quality
-from plenocal.io import to_uint8, write_image, write_json
+from plenocal.io.files import to_uint8, write_image, write_json
 from plenocal.rulelog import rule_logger
-from plenocal.synthesis import layout_from_cams, run_experiment, synthesis_summary
+from plenocal.verify.synthesis import layout_from_cams, run_experiment, synthesis_summary
 
 snakemake = globals()["snakemake"]
 log = rule_logger(snakemake, "synthesis")

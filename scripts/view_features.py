@@ -1,13 +1,13 @@
 """Rule view_features: SIFT of the subaperture views of one shot, a part of the view
-database (plenocal.sfm.viewdb); needs no calibration."""
+database (plenocal.calib.reg_a.viewdb); needs no calibration."""
 import shutil
 from pathlib import Path
 
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
-from plenocal.io import make_temp_dir
+from plenocal.calib.reg_a import viewdb
+from plenocal.io.files import make_temp_dir
 from plenocal.rulelog import log_to_file
-from plenocal.sfm import viewdb
 
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821

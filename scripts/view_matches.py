@@ -1,14 +1,14 @@
 """Rule view_matches: the shots' SIFT features merged into one database and the
-matching of the pairs that Table I and the baseline share (plenocal.sfm.viewdb)."""
+matching of the pairs that Table I and the baseline share (plenocal.calib.reg_a.viewdb)."""
 import shutil
 from pathlib import Path
 
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.artifacts.reg_a import read_reg_a
-from plenocal.io import make_temp_dir, write_json
+from plenocal.calib.reg_a import viewdb
+from plenocal.io.files import make_temp_dir, write_json
 from plenocal.rulelog import log_to_file
-from plenocal.sfm import viewdb
 
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821

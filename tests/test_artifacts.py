@@ -9,7 +9,7 @@ from synth.lenslets import calib_for_optics, lenslet_from_patch_size, random_tex
 from plenocal.artifacts.disparity import FORMAT, VERSION, disparity_record, read_disparity
 from plenocal.convert import ConvertSettings, ShotConversion
 from plenocal.grid import MicrolensGrid
-from plenocal.io import read_json, write_json
+from plenocal.io.files import read_json, write_json
 from plenocal.optics import PlenopticOptics
 
 

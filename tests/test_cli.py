@@ -14,9 +14,9 @@ from synth.lenslets import lenslet_from_patch_size, random_texture
 
 from plenocal.cli import build_parser, convert_config, main
 from plenocal.grid import MicrolensGrid
-from plenocal.io import read_image, write_image
+from plenocal.io.files import read_image, write_image
+from plenocal.io.raytrix import LensType, RayCalib, write_calib
 from plenocal.names import view_names
-from plenocal.raytrix import LensType, RayCalib, write_calib
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:

@@ -19,9 +19,9 @@ from plenocal.convert import ConvertError, ConvertSettings, ShotConversion, conv
 from plenocal.convert.patchsize import estimate_patch_size, weighted_median
 from plenocal.convert.quality import summarise, view_quality
 from plenocal.grid import MicrolensGrid
-from plenocal.io import write_image
+from plenocal.io.files import write_image
+from plenocal.io.raytrix import LensType, RayCalib, read_calib, write_calib
 from plenocal.optics import PlenopticOptics
-from plenocal.raytrix import LensType, RayCalib, read_calib, write_calib
 
 FIXTURES = sorted(Path("/work/shared/fixtures/raytrix-calib").glob("*.xml"))
 if not FIXTURES:  # the fixtures travel with the repository's shared folder

@@ -16,7 +16,7 @@ from plenocal.convert import ConvertSettings, ShotConversion
 from plenocal.convert.compare import compare_to_reference, fine_detail
 from plenocal.convert.render import blend_disagreement
 from plenocal.grid import MicrolensGrid
-from plenocal.raytrix import RayCalib, read_calib
+from plenocal.io.raytrix import RayCalib, read_calib
 
 _CANDIDATES = [Path("/work/shared/real"), Path(__file__).resolve().parents[2] / "shared/real"]
 REAL = next((p for p in _CANDIDATES if (p / "frames").is_dir()), None)

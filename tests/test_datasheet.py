@@ -1,5 +1,5 @@
-"""camera.yaml validation (plenocal.datasheet): every bad value is refused with the file,
-the dotted key and the remedy; the simulator's own datasheet passes; read_datasheet
+"""camera.yaml validation (plenocal.calib.reg_b.datasheet): every bad value is refused with
+the file, the dotted key and the remedy; the simulator's own datasheet passes; read_datasheet
 uses the same checks (no bad value reaches rig.json as null)."""
 
 from __future__ import annotations
@@ -11,8 +11,12 @@ from pathlib import Path
 import pytest
 import yaml
 
-from plenocal.datasheet import DatasheetError, check_datasheet, load_datasheet
-from plenocal.rig import read_datasheet
+from plenocal.calib.reg_b.datasheet import (
+    DatasheetError,
+    check_datasheet,
+    load_datasheet,
+    read_datasheet,
+)
 
 # what the simulator writes for the tiny config (plenocal.simulate.dataset.datasheet)
 GOOD = {

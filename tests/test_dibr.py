@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from synth.planes import camera_at, fronto_plane, photo_texture, render_plane
 
-from plenocal.dibr import DibrOptions, View, forward_depth, psnr, push_pull, synthesize
+from plenocal.verify.dibr import DibrOptions, View, forward_depth, psnr, push_pull, synthesize
 
 W, H, F = 320, 240, 500.0
 

@@ -162,7 +162,7 @@ def test_depth16():
 
 
 def test_depth16_files(tmp_path):
-    from plenocal.io import read_image  # noqa: PLC0415
+    from plenocal.io.files import read_image  # noqa: PLC0415
 
     z = np.full((5, 7), 0.6)
     z[0, 0] = 0

@@ -21,8 +21,8 @@ from plenocal.convert.gridcheck import (
     refine_grid,
 )
 from plenocal.grid import MicrolensGrid
-from plenocal.io import dumps_json
-from plenocal.raytrix import LensType, RayCalib
+from plenocal.io.files import dumps_json
+from plenocal.io.raytrix import LensType, RayCalib
 
 FRAMES = Path(__file__).resolve().parents[2] / "shared" / "real" / "frames"
 
@@ -128,7 +128,7 @@ def test_decide_rejects_unknown_mode():
 
 
 def _read_frame(name: str) -> tuple[np.ndarray, RayCalib]:
-    from plenocal.raytrix import read_calib  # noqa: PLC0415
+    from plenocal.io.raytrix import read_calib  # noqa: PLC0415
 
     img = cv2.imread(str(FRAMES / f"{name}.png"), cv2.IMREAD_COLOR)
     assert img is not None, f"missing {FRAMES / name}.png"
@@ -202,7 +202,7 @@ def test_raytrix_crop_file_grid_kept():
 @pytest.mark.skipif(not FRAMES.is_dir(), reason="shared/real/frames not present")
 def test_refined_grid_keeps_the_lens_types():
     """Fujita2's three lens types: a refined lattice gives every lens index its file type."""
-    from plenocal.raytrix import read_calib  # noqa: PLC0415
+    from plenocal.io.raytrix import read_calib  # noqa: PLC0415
 
     calib = read_calib(FRAMES / "Fujita2.xml")
     W, H = 600, 500
@@ -225,8 +225,8 @@ def test_simulator_shot(tmp_path):
     import yaml  # noqa: PLC0415
 
     from plenocal.config import validate_config  # noqa: PLC0415
-    from plenocal.io import read_image  # noqa: PLC0415
-    from plenocal.raytrix import read_calib  # noqa: PLC0415
+    from plenocal.io.files import read_image  # noqa: PLC0415
+    from plenocal.io.raytrix import read_calib  # noqa: PLC0415
     from plenocal.simulate.dataset import render_shot, setup_dataset  # noqa: PLC0415
 
     root = Path(__file__).resolve().parents[1]

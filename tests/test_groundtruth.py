@@ -14,9 +14,14 @@ import yaml
 from plenocal.camera import read_cameras
 from plenocal.config import validate_config
 from plenocal.grid import MicrolensGrid
-from plenocal.groundtruth import fit_pinhole, ground_truth_shot, intersect_rays, shot_cameras
 from plenocal.optics import PlenopticOptics
 from plenocal.simulate.dataset import make_calib, nearest_lens_map, setup_dataset
+from plenocal.simulate.groundtruth import (
+    fit_pinhole,
+    ground_truth_shot,
+    intersect_rays,
+    shot_cameras,
+)
 from plenocal.simulate.optics_setup import optics_from_config
 from plenocal.simulate.raytrace import render_lenslet, render_pinhole
 from plenocal.simulate.scene import scene_arrays

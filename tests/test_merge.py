@@ -7,9 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from plenocal import merge, rig
 from plenocal import optics as o
+from plenocal.artifacts.disparity import Conversion
 from plenocal.artifacts.rig import RigB
+from plenocal.calib import merge
+from plenocal.calib.reg_b import rig
+from plenocal.calib.reg_b.datasheet import Datasheet
 from plenocal.camera import intrinsics
 
 
@@ -69,9 +72,9 @@ def test_points_seen_by_a_merged_view_agree_with_the_scene():
 
 
 def test_merge_with_a_rig_document():
-    ds = rig.Datasheet(0.0055, 2048, 1536, 600.0, 35.0, 0.13, (2.8,), 5.0, None, 10.0, 470.0,
+    ds = Datasheet(0.0055, 2048, 1536, 600.0, 35.0, 0.13, (2.8,), 5.0, None, 10.0, 470.0,
                        740.0)
-    conv = rig.Conversion(-4.5, -3.0, 3.0971, 6.0, 23.92, 21.92, 301, 225, 5)
+    conv = Conversion(-4.5, -3.0, 3.0971, 6.0, 23.92, 21.92, 301, 225, 5)
     doc = rig.build_rig(ds, [conv], 1799.5, 5, model="exact")
     views = RigB(doc).view_poses()
     cams = merge.merge_cameras({"x00_y00": np.eye(4), "x01_y00": np.eye(4)}, views, 1.0,

@@ -16,7 +16,7 @@ import yaml
 
 from plenocal.artifacts.reg_a import RegistrationA, write_reg_a
 from plenocal.camera import PinholeCamera
-from plenocal.io import write_json
+from plenocal.io.files import write_json
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))

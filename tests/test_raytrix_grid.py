@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from plenocal.grid import MicrolensGrid
-from plenocal.raytrix import CalibError, calib_to_xml, parse_calib, read_calib
+from plenocal.io.raytrix import CalibError, calib_to_xml, parse_calib, read_calib
 
 # shared/ lies beside the repository (in CI too)
 FIXTURES = Path(__file__).resolve().parents[2] / "shared" / "fixtures" / "raytrix-calib"

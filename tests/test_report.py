@@ -20,7 +20,7 @@ import pytest
 
 from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.camera import PinholeCamera, intrinsics, pose, write_cameras
-from plenocal.io import write_image, write_json
+from plenocal.io.files import write_image, write_json
 from plenocal.report.html import build_report
 from plenocal.report.sources import layout, psnr_sets, table1_rows
 from plenocal.verify.gt_errors import gt_errors
@@ -99,7 +99,7 @@ def make_results(root: Path) -> Path:
                                    cameras={c: PinholeCamera(np.eye(3), M, W, H)
                                             for c, M in sfm.items()}),
         rig=rig, r=0.0201, calib=calib))
-    # as scripts/synthesis.py writes them (plenocal.synthesis.experiment1..3)
+    # as scripts/synthesis.py writes them (plenocal.verify.synthesis.experiment1..3)
     corners = ["x00_y00", "x02_y00", "x00_y01", "x02_y01"]
     array = [c for c in CAMS if c.startswith("x")]
 

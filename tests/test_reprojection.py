@@ -10,10 +10,10 @@ from synth.scenes import default_scene, render, rig_cameras, view_sets
 
 from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.artifacts.rig import RigB
+from plenocal.calib.reg_a import colmap as cm
+from plenocal.calib.reg_a import viewdb
 from plenocal.camera import PinholeCamera, invert_pose, pose
-from plenocal.io import write_image
-from plenocal.sfm import colmap as cm
-from plenocal.sfm import viewdb
+from plenocal.io.files import write_image
 from plenocal.verify.reprojection import (
     evaluate_sets,
     observation_errors,

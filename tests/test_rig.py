@@ -12,21 +12,25 @@ import pytest
 import yaml
 
 from plenocal import optics as o
-from plenocal import rig
 from plenocal.artifacts.disparity import Conversion, read_disparity
 from plenocal.artifacts.rig import RigB
+from plenocal.calib.reg_b import rig
+from plenocal.calib.reg_b.datasheet import Datasheet, read_datasheet
+from plenocal.calib.reg_b.exact_model import exact_model
+from plenocal.calib.reg_b.paper_model import inverse_check, paper_symbols
 from plenocal.camera import PinholeCamera
-from plenocal.io import write_json
+from plenocal.io.files import write_json
+from plenocal.verify.rig_truth import compare_with_truth
 
 SIN45 = math.sqrt(0.5)
 
 
-def datasheet(**kw) -> rig.Datasheet:
+def datasheet(**kw) -> Datasheet:
     base = dict(pixel_size=0.0055, sensor_width=2048, sensor_height=1536, focus_distance=600.0,
                 focal_length_nominal=35.0, mla_pitch=0.13, f_numbers=(2.8,), k=5.0,
                 sensor_distance=None, array_step=10.0, near=470.0, far=740.0)
     base.update(kw)
-    return rig.Datasheet(**base)
+    return Datasheet(**base)
 
 
 def conversion(**kw) -> Conversion:
@@ -39,7 +43,7 @@ def conversion(**kw) -> Conversion:
 def test_paper_symbols_by_hand():
     # p = 5.5 um, D = 0.13 mm, F_n 2.8, k = 5, X_o = 600 mm, F_m = 1800 px, T = 6,
     # D_px = 23.9, N = 5, D' = D_px - 2
-    s = rig.paper_symbols(datasheet(), conversion(), 1800.0, 5)
+    s = paper_symbols(datasheet(), conversion(), 1800.0, 5)
     P = 0.0055 * 23.9 / 6  # 0.021908333 mm
     assert s["P"] == pytest.approx(P, rel=1e-12)
     F = 1800 * P  # 39.435 mm
@@ -68,7 +72,7 @@ def test_paper_symbols_by_hand():
 
 
 def test_middle_f_number_and_given_sensor_distance():
-    s = rig.paper_symbols(datasheet(f_numbers=(5.6, 2.8, 4.0), sensor_distance=0.65),
+    s = paper_symbols(datasheet(f_numbers=(5.6, 2.8, 4.0), sensor_distance=0.65),
                           conversion(), 1800.0, 5)
     assert s["F_n"] == 4.0
     assert s["f"] == pytest.approx(0.52)
@@ -106,10 +110,10 @@ KINDS = [("keplerian", 0.6), ("galilean", 0.6), ("galilean", 1.5)]
 def test_exact_model_recovers_the_optics(kind, focus):
     opt = optics(kind, focus)
     ds, conv, F_m = true_inputs(opt)
-    sym = rig.paper_symbols(ds, conv, F_m, 5)
+    sym = paper_symbols(ds, conv, F_m, 5)
     assert sym["s"] == pytest.approx(opt.s * 1e3, rel=1e-12)  # k f / (k -+ 1) by kind
     assert sym["t"] == pytest.approx(opt.t * 1e3, rel=1e-12)  # signed: < 0 Galilean
-    ex = rig.exact_model(sym)
+    ex = exact_model(sym)
     assert ex["L"] == pytest.approx(opt.L * 1e3, rel=1e-12)
     assert ex["F_true"] == pytest.approx(35.0, rel=1e-12)
     assert ex["Z0"] == pytest.approx(opt.mla_conjugate_distance * 1e3, rel=1e-12)
@@ -205,15 +209,15 @@ def test_inverse_check_on_a_measured_disparity_range(kind, focus):
     opt = optics(kind, focus)
     ds, conv, F_m = true_inputs(opt)
     conv = Conversion(**{**conv.__dict__, "d_max": conv.d_max - 0.01 * abs(conv.d_max)})
-    sym = rig.paper_symbols(ds, conv, F_m, 5)
-    ex = rig.exact_model(sym)
-    ck = rig.inverse_check(sym, 470.0, 740.0, ex["B"], ex["alpha_equivalent"])
+    sym = paper_symbols(ds, conv, F_m, 5)
+    ex = exact_model(sym)
+    ck = inverse_check(sym, 470.0, 740.0, ex["B"], ex["alpha_equivalent"])
     assert ck["verdict"] == "pass"
     assert abs(ck["pp_shift_diff_px"]) < 0.25
     if kind == "galilean":
         assert abs(ck["rel_diff_alpha"]) > 0.05  # what the relative test would fail
     for B, alpha in ((ex["B"], -ex["alpha_equivalent"]), (1.1 * ex["B"], ex["alpha_equivalent"])):
-        assert rig.inverse_check(sym, 470.0, 740.0, B, alpha)["verdict"] == "fail"
+        assert inverse_check(sym, 470.0, 740.0, B, alpha)["verdict"] == "fail"
 
 
 def _pixels(views, X):
@@ -229,8 +233,8 @@ def _model_gap(q_scale: float, points: np.ndarray) -> tuple[float, float]:
     opt = optics()
     ds, conv, F_m = true_inputs(opt)
     conv = Conversion(**{**conv.__dict__, "q": conv.q * q_scale})
-    sym = rig.paper_symbols(ds, conv, F_m, 5)
-    ex = rig.exact_model(sym)
+    sym = paper_symbols(ds, conv, F_m, 5)
+    ex = exact_model(sym)
     paper = rig.view_cameras("paper", 5, 301, 225, F_m, ex["B"], alpha=ex["alpha_equivalent"])
     exact = rig.view_cameras("exact", 5, 301, 225, F_m, ex["B"], pp_shift_px=ex["pp_shift_px"])
     a, b = _pixels(paper, points), _pixels(exact, points)
@@ -269,11 +273,11 @@ def test_compare_with_truth_finds_the_paper_errors():
     W[:3, 3] = (0.3, -0.1, 2.0)
     truth = {k: PinholeCamera(c.K, W @ c.cam_to_world, c.width, c.height)
              for k, c in truth.items()}
-    c = rig.compare_with_truth(exact, truth)
+    c = compare_with_truth(exact, truth)
     assert abs(c["rel_err_B"]) < 1e-9 and abs(c["rel_err_alpha"]) < 1e-9
     assert c["centre_rmse_mm"] < 1e-9 and c["rotation_max_deg"] < 1e-6
     paper = rig.build_rig(ds, [conv], F_m, 5, model="paper")
-    c = rig.compare_with_truth(paper, truth)
+    c = compare_with_truth(paper, truth)
     assert c["rel_err_B"] == pytest.approx(paper["exact"]["B_paper_over_B"] - 1, rel=1e-6)
     # the paper's alpha (F = L + s in F and e) is ~2.2 % large
     assert c["rel_err_alpha"] == pytest.approx(paper["exact"]["alpha_paper_over_alpha"] - 1,
@@ -291,7 +295,7 @@ def test_rig_json_from_files(tmp_path):
         "array": {"step_mm": 10.0}, "scene": {"near_mm": 470.0, "far_mm": 740.0},
     }
     (tmp_path / "camera.yaml").write_text(yaml.safe_dump(cam_yaml))
-    read = rig.read_datasheet(tmp_path / "camera.yaml")
+    read = read_datasheet(tmp_path / "camera.yaml")
     assert read == ds
     shots = []
     for i, jitter in enumerate((0.0, 0.05, -0.05)):
@@ -316,20 +320,20 @@ def test_rig_json_from_files(tmp_path):
     with pytest.raises(ValueError, match="view size"):
         rig.combine_conversions([conv, Conversion(**{**conv.__dict__, "width": 99})])
     with pytest.raises(FileNotFoundError, match="camera.yaml"):
-        rig.read_datasheet(tmp_path / "nope" / "camera.yaml")
+        read_datasheet(tmp_path / "nope" / "camera.yaml")
 
 
 def _traced_set(kind: str, focus: float, tmp_path, sensor_distance: bool):
     """A small simulated camera of either MLA kind: the traced ground-truth cameras of
-    its 5 x 5 views (plenocal.groundtruth), its camera.yaml as the simulator writes it
+    its 5 x 5 views (plenocal.simulate.groundtruth), its camera.yaml as the simulator writes it
     (with or without mla.sensor_distance_mm) and the disparity.json the converter
     writes for patch sizes of the true scene range 0.47-0.74 m."""
     from plenocal.artifacts.disparity import disparity_record
     from plenocal.config import validate_config
     from plenocal.grid import MicrolensGrid
-    from plenocal.groundtruth import shot_cameras
     from plenocal.simulate.dataset import datasheet as sim_datasheet
     from plenocal.simulate.dataset import make_calib
+    from plenocal.simulate.groundtruth import shot_cameras
     from plenocal.simulate.optics_setup import optics_from_config
     from plenocal.viewgeom import make_layout
 
@@ -369,10 +373,10 @@ def test_registration_b_against_the_traced_truth(kind, focus, sensor_distance, t
     # the converter's Galilean disparities are positive in the paper's sign: views
     # converging behind the scene (or diverging); Keplerian ones negative
     assert (conv.d_min > 0) == (kind == "galilean") and conv.d_min * conv.d_max > 0
-    ds = rig.read_datasheet(tmp_path / "camera.yaml")
+    ds = read_datasheet(tmp_path / "camera.yaml")
     F_m = truth["2_2"].K[0, 0]
     exact = rig.build_rig(ds, [conv], F_m, 5, model="exact")
-    c = rig.compare_with_truth(exact, truth)
+    c = compare_with_truth(exact, truth)
     gt = c["truth"]
     # the truth itself: centres L q p / s apart, shift F_m B / Z0 (negative: diverging)
     assert gt["B_m"] == pytest.approx(opt.L * conv.q * opt.pixel_size / opt.s, rel=1e-9)
@@ -386,7 +390,7 @@ def test_registration_b_against_the_traced_truth(kind, focus, sensor_distance, t
     assert exact["exact"]["X_f"] == pytest.approx(740.0, rel=1e-5)
     assert exact["exact"]["check"]["verdict"] == "pass"
     paper = rig.build_rig(ds, [conv], F_m, 5, model="paper")
-    p = rig.compare_with_truth(paper, truth)
+    p = compare_with_truth(paper, truth)
     assert p["rel_err_B"] == pytest.approx(opt.s / opt.L, rel=1e-4)  # B_paper = (L + s) q/s
     assert np.sign(p["estimate"]["pp_shift_px"]) == np.sign(gt["pp_shift_px"])
     lo, hi = {"keplerian": (0.015, 0.03), "galilean": (0.04, 0.3)}[kind]
@@ -419,10 +423,10 @@ def test_mla_kind_from_the_converter(tmp_path):
     with pytest.raises(ValueError, match="shot 1: disparity.json says mla keplerian"):
         rig.combine_conversions([g, kep])
     # s from k: k f / (k + 1) Galilean, k f / (k - 1) Keplerian (f = 0.364 mm)
-    assert rig.paper_symbols(ds, g, F_m, 5)["s"] == pytest.approx(0.364 * 5 / 6)
-    assert rig.paper_symbols(ds, kep, F_m, 5)["s"] == pytest.approx(0.364 * 5 / 4)
+    assert paper_symbols(ds, g, F_m, 5)["s"] == pytest.approx(0.364 * 5 / 6)
+    assert paper_symbols(ds, kep, F_m, 5)["s"] == pytest.approx(0.364 * 5 / 4)
     # a Galilean sensor distance (s < f) read as a Keplerian MLA, and the reverse
     with pytest.raises(ValueError, match="s = 0.3 mm is not above .* keplerian"):
-        rig.paper_symbols(datasheet(sensor_distance=0.3), kep, F_m, 5)
+        paper_symbols(datasheet(sensor_distance=0.3), kep, F_m, 5)
     with pytest.raises(ValueError, match="s = 0.455 mm is not below .* galilean"):
-        rig.paper_symbols(datasheet(sensor_distance=0.455), g, F_m, 5)
+        paper_symbols(datasheet(sensor_distance=0.455), g, F_m, 5)

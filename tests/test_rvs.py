@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 from synth.planes import camera_at, fronto_plane, photo_texture, render_plane
 
-from plenocal.dibr import View, psnr, synthesize
 from plenocal.export.mpeg import write_mpeg
 from plenocal.export.mpeg_views import export_views
-from plenocal.io import read_image, to_float, to_uint8
+from plenocal.io.files import read_image, to_float, to_uint8
+from plenocal.verify.dibr import View, psnr, synthesize
 from plenocal.verify.rvs import RvsError, build_prerequisites, build_rvs, run_rvs, rvs_synthesize
 
 REPO = Path(__file__).resolve().parent.parent

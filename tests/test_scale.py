@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from plenocal import scale
+from plenocal.calib import scale
 
 
 def maps(r: float, seed: int, outliers: float = 0.05):

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from synth.scenes import default_scene, render, rig_cameras
 
+from plenocal.calib.reg_a.sfm import RegistrationError, check_shots, features_a, map_a, match_a
 from plenocal.camera import rotation_angle_deg, umeyama
-from plenocal.io import dumps_json, write_image
-from plenocal.sfm.registration import RegistrationError, check_shots, features_a, map_a, match_a
+from plenocal.io.files import dumps_json, write_image
 
 F, W, H, STEP = 600.0, 480, 360, 0.03
 

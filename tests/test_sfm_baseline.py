@@ -8,11 +8,11 @@ import pytest
 from synth.scenes import default_scene, render, rig_cameras, view_sets
 
 from plenocal.artifacts.reg_a import RegistrationA
-from plenocal.baseline import baseline_sfm, scratch_sfm
+from plenocal.calib.reg_a import viewdb
 from plenocal.camera import PinholeCamera
-from plenocal.io import write_image
-from plenocal.sfm import viewdb
+from plenocal.io.files import write_image
 from plenocal.verify.reprojection import evaluate
+from plenocal.verify.sfm_baselines import baseline_sfm, scratch_sfm
 
 F, W, H = 600.0, 480, 360
 

@@ -14,9 +14,9 @@ import yaml
 
 from plenocal.config import validate_config
 from plenocal.grid import MicrolensGrid
-from plenocal.io import read_image, to_float
+from plenocal.io.files import read_image, to_float
+from plenocal.io.raytrix import read_calib, write_calib
 from plenocal.optics import PlenopticOptics
-from plenocal.raytrix import read_calib, write_calib
 from plenocal.simulate.dataset import make_calib, nearest_lens_map, render_shot, setup_dataset
 from plenocal.simulate.mla import lens_type_map
 from plenocal.simulate.raytrace import render_lenslet
@@ -130,7 +130,7 @@ def test_dataset_files(tmp_path: Path):
     cam = yaml.safe_load((tmp_path / "camera.yaml").read_text())
     assert cam["mla"]["pitch_mm"] == pytest.approx(0.13)
     assert cam["scene"]["near_mm"] == pytest.approx(470)
-    from plenocal.raytrix import read_calib
+    from plenocal.io.raytrix import read_calib
 
     calib = read_calib(tmp_path / "calib.xml")
     optics = optics_of(sim)

@@ -6,8 +6,8 @@ import pytest
 from synth.planes import camera_at, fronto_plane, photo_texture, render_plane
 
 from plenocal.camera import PinholeCamera
-from plenocal.io import to_uint8, write_image
-from plenocal.synthesis import (
+from plenocal.io.files import to_uint8, write_image
+from plenocal.verify.synthesis import (
     SynthesisContext,
     experiment1,
     experiment2,

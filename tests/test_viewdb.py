@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from synth.scenes import default_scene, render, rig_cameras, view_sets
 
-from plenocal.io import write_image
-from plenocal.sfm import viewdb
+from plenocal.calib.reg_a import viewdb
+from plenocal.io.files import write_image
 
 
 @pytest.fixture(scope="module")

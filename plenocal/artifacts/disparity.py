@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocal.artifacts.versioned import decode
-from plenocal.raytrix import RayCalib
+from plenocal.io.raytrix import RayCalib
 from plenocal.viewgeom import MLA_KINDS, ViewLayout
 
 FORMAT = "plenocal.disparity"

@@ -16,7 +16,7 @@ import numpy as np
 
 from plenocal.artifacts.versioned import decode
 from plenocal.camera import PinholeCamera
-from plenocal.io import write_json
+from plenocal.io.files import write_json
 
 FORMAT = "plenocal.reg_a"
 VERSION = 1

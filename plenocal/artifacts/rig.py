@@ -6,7 +6,7 @@ The N x N views of one camera as pinhole cameras in the central view's frame (me
 OpenCV axes, ``cam_to_central``), the view model that made them (``exact`` or the
 paper's), the scene's depth range and the symbols of Eqs. 1-4 (``symbols``: the
 paper's model, ``paper``/``exact``: both models' numbers, ``check``: the inverse check
-of Eqs. 2-3). :func:`plenocal.rig.build_rig` computes the document.
+of Eqs. 2-3). :func:`plenocal.calib.reg_b.rig.build_rig` computes the document.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import numpy as np
 
 from plenocal.artifacts.versioned import decode
 from plenocal.camera import PinholeCamera
-from plenocal.io import write_json
+from plenocal.io.files import write_json
 from plenocal.names import view_key
 
 FORMAT = "plenocal.rig"
@@ -79,7 +79,7 @@ class RigB:
 
 
 def write_rig(path: str | Path, doc: Mapping) -> None:
-    """Write a document of :func:`plenocal.rig.build_rig` as ``rig.json``."""
+    """Write a document of :func:`plenocal.calib.reg_b.rig.build_rig` as ``rig.json``."""
     write_json(path, {"format": FORMAT, "version": VERSION, **doc})
 
 

@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from plenocal.artifacts.versioned import decode
-from plenocal.io import write_json
+from plenocal.io.files import write_json
 
 FORMAT = "plenocal.scale"
 VERSION = 1

@@ -7,7 +7,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from plenocal.io import read_json
+from plenocal.io.files import read_json
 
 
 def read_versioned(path: str | Path, fmt: str, version: int, name: str, remedy: str) -> dict:

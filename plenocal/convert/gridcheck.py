@@ -89,7 +89,7 @@ import cv2
 import numpy as np
 
 from plenocal.grid import MicrolensGrid
-from plenocal.raytrix import RayCalib
+from plenocal.io.raytrix import RayCalib
 
 AUTO_DRIFT_PX = 1.0  # refine (convert.grid: auto) past this drift of the file's grid
 AUTO_DRIFT_SIGMAS = 4.0  # ... and when the drift is this many standard errors

@@ -15,7 +15,7 @@ import numpy as np
 from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
 from plenocal.convert.errors import ConvertError
-from plenocal.io import read_image
+from plenocal.io.files import read_image
 
 CENTRAL_TARGET_DB = 30.0
 MIN_TARGET_DB = 27.0

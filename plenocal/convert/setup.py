@@ -32,8 +32,8 @@ from plenocal.convert.errors import ConvertError
 from plenocal.convert.gridcheck import GRID_MODES, GridCheck, grid_for_mode, round_floats
 from plenocal.convert.shot import ConvertSettings, ShotConversion, build_grid
 from plenocal.grid import MicrolensGrid
-from plenocal.io import read_json, write_json
-from plenocal.raytrix import RayCalib
+from plenocal.io.files import read_json, write_json
+from plenocal.io.raytrix import RayCalib
 
 FORMAT_VERSION = 1
 LATTICE_DIGITS = 8

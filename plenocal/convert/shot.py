@@ -55,10 +55,10 @@ from plenocal.convert.render import (
 )
 from plenocal.convert.vignetting import lens_type_profiles
 from plenocal.grid import MicrolensGrid
-from plenocal.io import read_image
+from plenocal.io.files import read_image
+from plenocal.io.raytrix import CalibError, RayCalib, read_calib
 from plenocal.names import parse_view, view_names
 from plenocal.optics import view_spacing
-from plenocal.raytrix import CalibError, RayCalib, read_calib
 from plenocal.viewgeom import MLA_KINDS, ViewLayout, make_layout
 
 log = logging.getLogger("plenocal.convert")

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocal.camera import PinholeCamera, k_to_colmap
-from plenocal.io import atomic_write_text, to_float, to_uint8, write_image, write_json
+from plenocal.io.files import atomic_write_text, to_float, to_uint8, write_image, write_json
 
 
 class DepthBackendError(RuntimeError):

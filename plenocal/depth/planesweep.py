@@ -33,7 +33,7 @@ import cv2
 import numpy as np
 
 from plenocal.camera import PinholeCamera
-from plenocal.io import to_float
+from plenocal.io.files import to_float
 
 
 @dataclass(frozen=True)

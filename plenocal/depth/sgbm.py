@@ -10,8 +10,8 @@ import cv2
 import numpy as np
 
 from plenocal.camera import PinholeCamera, pose
-from plenocal.dibr import forward_depth
-from plenocal.io import to_float, to_uint8
+from plenocal.io.files import to_float, to_uint8
+from plenocal.verify.dibr import forward_depth
 
 
 def _grey8(img: np.ndarray) -> np.ndarray:

@@ -48,7 +48,7 @@ from plenocal.depth.planesweep import (
     left_right_check,
     source_costs,
 )
-from plenocal.io import to_float
+from plenocal.io.files import to_float
 
 log = logging.getLogger(__name__)
 
@@ -321,7 +321,7 @@ def fill_background(depth: np.ndarray) -> np.ndarray:
     over the whole map."""
     out = _fill_rows(np.ascontiguousarray(depth, dtype=np.float32))
     if (out <= 0).any() and (out > 0).any():
-        from plenocal.dibr import densify_depth  # noqa: PLC0415
+        from plenocal.verify.dibr import densify_depth  # noqa: PLC0415
 
         out, _ = densify_depth(out)
     return out.astype(np.float32)

@@ -58,7 +58,7 @@ def build_reconstruction(cameras: Mapping[str, PinholeCamera], image_ext: str = 
 def write_colmap(folder: str | Path, cameras: Mapping[str, PinholeCamera]) -> None:
     """Write the binary model into ``folder`` (atomic per folder: written into a
     temporary sibling, then renamed)."""
-    from plenocal.io import atomic_write_dir  # noqa: PLC0415
+    from plenocal.io.files import atomic_write_dir  # noqa: PLC0415
 
     rec = build_reconstruction(cameras)
     atomic_write_dir(folder, lambda tmp: rec.write_binary(str(tmp)))

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from plenocal.io import atomic_write_bytes, write_image
+from plenocal.io.files import atomic_write_bytes, write_image
 
 MAX_LEVEL = 2 ** 16 - 1
 

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocal.camera import PinholeCamera
-from plenocal.io import write_json
+from plenocal.io.files import write_json
 
 CV_TO_OMAF = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 

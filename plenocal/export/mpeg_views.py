@@ -23,7 +23,7 @@ import numpy as np
 
 from plenocal.export.depthmaps import write_depth16_png, write_depth16_yuv, write_texture_yuv
 from plenocal.export.mpeg import mpeg_name
-from plenocal.io import read_json, to_float, to_uint8, write_json
+from plenocal.io.files import read_json, to_float, to_uint8, write_json
 
 
 def camera_ranges(mpeg_json: str | Path) -> dict[str, tuple[float, float, int, int]]:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from plenocal.io import atomic_write_text, read_json
+from plenocal.io.files import atomic_write_text, read_json
 from plenocal.names import array_position, array_shot, central_view, key_shot, split_key
 from plenocal.report import figures as fg
 from plenocal.report import sources as src

@@ -11,10 +11,10 @@ import yaml
 
 from plenocal.camera import pose
 from plenocal.grid import MicrolensGrid
-from plenocal.io import atomic_write_text, read_json, write_image, write_json
+from plenocal.io.files import atomic_write_text, read_json, write_image, write_json
+from plenocal.io.raytrix import read_calib, write_calib
 from plenocal.names import array_shot, array_shots, handheld_shot, handheld_shots
 from plenocal.optics import PlenopticOptics
-from plenocal.raytrix import read_calib, write_calib
 from plenocal.simulate.mla import lens_type_map, make_calib
 from plenocal.simulate.optics_setup import optics_from_config
 from plenocal.simulate.raytrace import nearest_lens_centres, render_lenslet

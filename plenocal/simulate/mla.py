@@ -25,8 +25,8 @@ import numpy as np
 from numba import njit
 
 from plenocal.grid import MicrolensGrid
+from plenocal.io.raytrix import LensType, RayCalib
 from plenocal.optics import PlenopticOptics
-from plenocal.raytrix import LensType, RayCalib
 
 SQRT3 = math.sqrt(3.0)
 OPEN_NEAR = 1.0  # Raytrix's open ends of the outer lens types' depth ranges

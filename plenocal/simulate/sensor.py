@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from plenocal.io import to_uint8
+from plenocal.io.files import to_uint8
 from plenocal.optics import PlenopticOptics
 
 

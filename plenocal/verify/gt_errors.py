@@ -17,7 +17,7 @@ Registration A (SfM units, arbitrary frame)
     focal 0.5 %, centres 2 % of the step, rotations 0.05 deg.
 
 Registration B (one N x N set, metres, relative to the central view)
-    :func:`plenocal.rig.compare_with_truth` against the true set of every shot:
+    :func:`plenocal.verify.rig_truth.compare_with_truth` against the true set of every shot:
     baseline per view step, alpha-equivalent (the rotation per step that the
     principal-point shift is equivalent to), principal-point shift per step.
     Targets: baseline 1 %, alpha 2 %, principal-point shift 0.5 px.
@@ -45,6 +45,7 @@ import numpy as np
 from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.camera import PinholeCamera, rotation_angle_deg, umeyama
 from plenocal.names import array_position, central_view, key_shot, key_view, parse_view, split_key
+from plenocal.verify.rig_truth import compare_with_truth
 
 #: Targets of issues 4 and 5: (value key, limit, unit, what it bounds).
 TARGETS = {
@@ -169,8 +170,6 @@ def registration_a_errors(truth: Mapping[str, PinholeCamera], focal_px: float,
 
 def registration_b_errors(rig: Mapping, truth: Mapping[str, PinholeCamera]) -> dict:
     """Registration B (one rig) against the true N x N set of every shot."""
-    from plenocal.rig import compare_with_truth  # noqa: PLC0415  (rig imports yaml)
-
     n = int(rig["n_views"])
     shots = sorted({key_shot(k) for k in truth})
     per_set = {}

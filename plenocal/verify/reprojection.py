@@ -2,7 +2,7 @@
 triangulate the views' SIFT matches with every pose and intrinsic held fixed, and
 measure how far the triangulated points reproject from their keypoints. Every
 calibration is measured on the same verified matches, those of the view database
-(:mod:`plenocal.sfm.viewdb`), each view with a camera of its own set to the
+(:mod:`plenocal.calib.reg_a.viewdb`), each view with a camera of its own set to the
 calibration's intrinsics.
 
 COLMAP's point triangulator drops observations that reproject farther than 4 px
@@ -53,10 +53,10 @@ import numpy as np
 
 from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.artifacts.rig import RigB
+from plenocal.calib.reg_a import colmap as cm
+from plenocal.calib.reg_a import viewdb
 from plenocal.camera import PinholeCamera
 from plenocal.names import is_handheld_shot, key_shot, view_key
-from plenocal.sfm import colmap as cm
-from plenocal.sfm import viewdb
 
 log = logging.getLogger(__name__)
 
@@ -195,7 +195,7 @@ def triangulated_stats(cameras: Mapping[str, PinholeCamera], database: str | Pat
                        work_dir: str | Path | None = None) -> dict:
     """Reprojection error of the calibration ``cameras`` (``"<cam>/<view>"`` ->
     PinholeCamera) on the verified matches of the view ``database``
-    (:mod:`plenocal.sfm.viewdb`): its images copied with one camera each set to the
+    (:mod:`plenocal.calib.reg_a.viewdb`): its images copied with one camera each set to the
     calibration, triangulation with poses and intrinsics fixed, then the statistics
     (module docstring)."""
     if len(cameras) < 2:

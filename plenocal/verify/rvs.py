@@ -31,7 +31,7 @@ import numpy as np
 from plenocal.camera import PinholeCamera
 from plenocal.export.depthmaps import write_depth16_png
 from plenocal.export.mpeg import mpeg_document
-from plenocal.io import to_float, to_uint8, write_image, write_json
+from plenocal.io.files import to_float, to_uint8, write_image, write_json
 
 RVS_HINT = ("build RVS 4.0 from its source (README, 'MPEG exports and RVS'): "
             "python -m plenocal.verify.rvs <rvs-4.0-src.tar.gz>, and give the binary it "

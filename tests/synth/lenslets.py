@@ -108,7 +108,7 @@ def lenslet_from_optics(grid: MicrolensGrid, optics: PlenopticOptics, depth_m: f
 def calib_for_optics(optics: PlenopticOptics, depth_range: tuple[float, float] = (1.5, 8.0),
                      lens_border: float = 1.0):
     """A one-lens-type RayCalib whose micro-image pitch is the optics' (grid centred)."""
-    from plenocal.raytrix import LensType, RayCalib  # noqa: PLC0415
+    from plenocal.io.raytrix import LensType, RayCalib  # noqa: PLC0415
 
     return RayCalib(
         diameter=optics.micro_image_pitch_px, offset=(0.0, 0.0), rotation=0.0,

@@ -38,7 +38,7 @@ import numba
 import numpy as np
 
 from plenocal.camera import PinholeCamera
-from plenocal.io import to_float
+from plenocal.io.files import to_float
 
 
 @dataclass(frozen=True)

@@ -11,13 +11,15 @@ Besides types, the schema holds a plausible range per field, so that a value wri
 the wrong unit (a pixel size of 5.5 "mm" meant as micrometres, a pitch of 130) stops
 the run at the start instead of giving an absurd rig after conversion and SfM. The
 checks a schema cannot express (NaN, near < far, a focus distance beyond the focal
-length) follow in :func:`check_datasheet`.
+length) follow in :func:`check_datasheet`. :func:`read_datasheet` gives the checked file as
+the typed :class:`Datasheet` that registration B computes with.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -165,8 +167,9 @@ def _check_ranges(doc: Any, schema: Mapping, path: tuple, source: str | Path) ->
             guess = ""
             if key.endswith("_mm") and doc > hi and lo <= doc / 1000.0 <= hi:
                 guess = f"; {doc} looks like micrometres: {doc / 1000.0:g} mm is plausible"
+            what = schema.get("description", "see plenocal/calib/reg_b/datasheet.py")
             raise _fail(source, key, doc, f"outside the plausible range {lo:g}-{hi:g}{unit} "
-                        f"({schema.get('description', 'see plenocal/datasheet.py')}){guess}")
+                        f"({what}){guess}")
     if isinstance(doc, Mapping):
         for k, sub in schema.get("properties", {}).items():
             if k in doc:
@@ -196,7 +199,7 @@ def check_datasheet(doc: Any, source: str | Path = "camera.yaml") -> dict:
         err = max(errors, key=lambda e: len(e.absolute_path))
         if err.validator == "required":
             raise DatasheetError(f"{source}: {_schema_message(err)} (the datasheet must give "
-                                 "it; see plenocal/datasheet.py SCHEMA for every key)")
+                                 "it; see plenocal/calib/reg_b/datasheet.py SCHEMA for every key)")
         shown = err.instance if not isinstance(err.instance, Mapping) else "{...}"
         raise _fail(source, _dotted(err.absolute_path), shown, _schema_message(err))
     _check_ranges(doc, SCHEMA, (), source)
@@ -265,3 +268,74 @@ def load_datasheet(path: str | Path) -> dict:
     except yaml.YAMLError as exc:
         raise DatasheetError(f"{path}: not valid YAML: {exc}") from None
     return check_datasheet(doc, path)
+
+
+# The checked datasheet, typed, as registration B computes with it
+
+
+@dataclass(frozen=True)
+class Datasheet:
+    """What ``camera.yaml`` gives (millimetres)."""
+
+    pixel_size: float  # p
+    sensor_width: int
+    sensor_height: int
+    focus_distance: float  # X_o
+    focal_length_nominal: float  # main lens, nominal (information only: F comes from F_m P)
+    mla_pitch: float  # D, physical
+    f_numbers: tuple[float, ...]
+    k: float
+    sensor_distance: float | None  # s, if the datasheet gives it
+    array_step: float | None
+    near: float | None  # measured X_n
+    far: float | None  # measured X_f
+
+
+def _need(doc: Mapping, path: str, source: str | Path):
+    cur: object = doc
+    for part in path.split("."):
+        if not isinstance(cur, Mapping) or part not in cur:
+            raise ValueError(f"{source}: missing key {path!r} (the datasheet must give it; "
+                             "see read_datasheet in plenocal/calib/reg_b/datasheet.py for "
+                             "the expected keys)")
+        cur = cur[part]
+    return cur
+
+
+def _opt(doc: Mapping, path: str):
+    cur: object = doc
+    for part in path.split("."):
+        if not isinstance(cur, Mapping) or part not in cur or cur[part] is None:
+            return None
+        cur = cur[part]
+    return cur
+
+
+def read_datasheet(path: str | Path) -> Datasheet:
+    """Read ``camera.yaml``: pixel_size_mm, sensor_width_px, sensor_height_px,
+    main_lens.{focus_distance_mm, focal_length_mm}, mla.{pitch_mm, f_numbers, k,
+    sensor_distance_mm (optional)}, array.step_mm, scene.{near_mm, far_mm}. Without
+    sensor_distance_mm, ``s`` follows from ``k`` by the MLA kind of the converter's
+    disparity.json (:func:`plenocal.calib.reg_b.paper_model.sensor_distance`).
+
+    Validated against :data:`SCHEMA` first: a bad value raises :class:`DatasheetError`
+    naming the file and the key."""
+    path = Path(path)
+    doc = load_datasheet(path)
+    fn = _need(doc, "mla.f_numbers", path)
+    fns = tuple(float(x) for x in (fn if isinstance(fn, list | tuple) else [fn]))
+    opt_f = lambda key: None if _opt(doc, key) is None else float(_opt(doc, key))  # noqa: E731
+    return Datasheet(
+        pixel_size=float(_need(doc, "pixel_size_mm", path)),
+        sensor_width=int(_need(doc, "sensor_width_px", path)),
+        sensor_height=int(_need(doc, "sensor_height_px", path)),
+        focus_distance=float(_need(doc, "main_lens.focus_distance_mm", path)),
+        focal_length_nominal=float(_opt(doc, "main_lens.focal_length_mm") or float("nan")),
+        mla_pitch=float(_need(doc, "mla.pitch_mm", path)),
+        f_numbers=fns,
+        k=float(_need(doc, "mla.k", path)),
+        sensor_distance=opt_f("mla.sensor_distance_mm"),
+        array_step=opt_f("array.step_mm"),
+        near=opt_f("scene.near_mm"),
+        far=opt_f("scene.far_mm"),
+    )

@@ -32,9 +32,9 @@ from pathlib import Path
 import numpy as np
 
 from plenocal.artifacts.reg_a import RegistrationA
-from plenocal.io import atomic_write_dir, make_temp_dir
+from plenocal.calib.reg_a import colmap as cm
+from plenocal.io.files import atomic_write_dir, make_temp_dir
 from plenocal.names import is_handheld_shot
-from plenocal.sfm import colmap as cm
 
 log = logging.getLogger(__name__)
 

@@ -19,9 +19,9 @@ import numpy as np
 
 from plenocal.camera import PinholeCamera, pose
 from plenocal.grid import MicrolensGrid
-from plenocal.io import read_json, write_json
+from plenocal.io.files import read_json, write_json
+from plenocal.io.raytrix import read_calib
 from plenocal.optics import PlenopticOptics
-from plenocal.raytrix import read_calib
 from plenocal.simulate.dataset import optics_from_truth
 from plenocal.viewgeom import ViewLayout, make_layout, parse_view, view_names
 
@@ -122,7 +122,7 @@ def render_views(scene_json: str | Path, cams_json: str | Path, cam: str, views:
     z-depth maps of views ``views`` of shot ``cam``, the scene's textures loaded once
     for all of them (rule ground_truth_render: one view; ground_truth_render_set: the
     rest of the full set)."""
-    from plenocal.io import to_uint8, write_image, write_npy  # noqa: PLC0415
+    from plenocal.io.files import to_uint8, write_image, write_npy  # noqa: PLC0415
     from plenocal.simulate.raytrace import render_pinhole  # noqa: PLC0415
     from plenocal.simulate.scene import scene_arrays  # noqa: PLC0415
 

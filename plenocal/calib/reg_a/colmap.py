@@ -48,7 +48,7 @@ def stage_images(images: Mapping[str, str | Path], folder: str | Path,
 
 def image_size(path: str | Path) -> tuple[int, int]:
     """(width, height) of an image file."""
-    from plenocal.io import read_image  # noqa: PLC0415
+    from plenocal.io.files import read_image  # noqa: PLC0415
 
     img = read_image(path)
     return int(img.shape[1]), int(img.shape[0])

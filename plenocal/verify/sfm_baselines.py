@@ -6,7 +6,7 @@ for comparison, plain SfM of all views from scratch ("leads to a failure and
 incomplete registration").
 
 A+SfM: all views of the view database (SIFT and matches shared with Table I,
-:mod:`plenocal.sfm.viewdb`) with one camera for all, A's intrinsics; the central views
+:mod:`plenocal.calib.reg_a.viewdb`) with one camera for all, A's intrinsics; the central views
 get A's poses and their points are triangulated with those poses fixed; COLMAP's
 incremental mapper then continues from that model with A's frames and the camera held
 fixed, registering each remaining view by absolute pose
@@ -27,11 +27,11 @@ import time
 from pathlib import Path
 
 from plenocal.artifacts.reg_a import RegistrationA
+from plenocal.calib.reg_a import colmap as cm
+from plenocal.calib.reg_a import viewdb
+from plenocal.calib.reg_a.sfm import incremental_options
 from plenocal.camera import PinholeCamera
 from plenocal.names import view_key
-from plenocal.sfm import colmap as cm
-from plenocal.sfm import viewdb
-from plenocal.sfm.registration import incremental_options
 
 log = logging.getLogger(__name__)
 
@@ -72,7 +72,7 @@ def _continue_options(seed: int, num_threads: int, camera_ids: set[int]):
 def baseline_sfm(reg_a: RegistrationA, database: str | Path, central: str, *, seed: int = 0,
                  num_threads: int = 1, work_dir: str | Path | None = None
                  ) -> tuple[dict[str, PinholeCamera], dict]:
-    """Register the views of the view ``database`` (:mod:`plenocal.sfm.viewdb`: SIFT
+    """Register the views of the view ``database`` (:mod:`plenocal.calib.reg_a.viewdb`: SIFT
     and verified matches of every ``"<cam>/<view>"``) onto registration A (``reg_a``:
     :mod:`plenocal.artifacts.reg_a`; ``central``: the central view name). Returns the cameras
     of the registered views (SfM units) and a summary (counts, unregistered views,

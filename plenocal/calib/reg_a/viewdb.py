@@ -42,8 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
+from plenocal.calib.reg_a import colmap as cm
 from plenocal.camera import PinholeCamera, k_to_colmap
-from plenocal.sfm import colmap as cm
 
 log = logging.getLogger(__name__)
 

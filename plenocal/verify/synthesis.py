@@ -7,7 +7,7 @@ For each experiment: every input view has one z-depth map (given - the workflow
 computes them once with the complete calibration, :mod:`plenocal.depth.views` - or,
 when not given, estimated here with the calibration under test, by SGM over the
 plane-sweep cost volume), the targets are rendered from the inputs by the project's
-DIBR (:mod:`plenocal.dibr`) or by MPEG's RVS (``verify.renderer: rvs``,
+DIBR (:mod:`plenocal.verify.dibr`) or by MPEG's RVS (``verify.renderer: rvs``,
 :mod:`plenocal.verify.rvs`), and each is scored by PSNR against the captured
 (converted) view, excluding a border. The dB lost to calibration compares the two
 camera sets with one and the same depth maps.
@@ -32,9 +32,8 @@ import numpy as np
 
 from plenocal.camera import PinholeCamera
 from plenocal.depth.views import estimate_view_depth
-from plenocal.dibr import DibrOptions, PreparedView, View, prepare_view, psnr, synthesize
 from plenocal.export.mpeg import mpeg_name
-from plenocal.io import read_image, to_float
+from plenocal.io.files import read_image, to_float
 from plenocal.names import (
     array_position,
     array_shot,
@@ -44,6 +43,7 @@ from plenocal.names import (
     split_key,
     view_name,
 )
+from plenocal.verify.dibr import DibrOptions, PreparedView, View, prepare_view, psnr, synthesize
 
 log = logging.getLogger(__name__)
 

@@ -36,7 +36,7 @@ from xml.etree.ElementTree import Element, SubElement, tostring
 import defusedxml.ElementTree as SafeET
 from defusedxml import DefusedXmlException
 
-from plenocal.io import atomic_write_text
+from plenocal.io.files import atomic_write_text
 
 
 class CalibError(ValueError):

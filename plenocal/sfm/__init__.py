@@ -1,2 +1,0 @@
-"""Structure-from-motion with pycolmap: registration A (Section II-B of the paper), the
-COLMAP boundary conversions, and a synthetic capture for the tests."""
