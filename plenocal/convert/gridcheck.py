@@ -40,7 +40,7 @@ Where is the RayCalibData offset measured from? On the three Raytrix frames whos
 fit their micro images (Fujita2, Origami, Boxer-IrishMan-Gladiator2), the fitted lattice
 at the image centre lies at file + (-0.11, +0.24), (-0.19, -0.04) and (+0.35, -0.16) px
 (mean (+0.02, +0.01)) when the offset is read from ``((W-1)/2, (H-1)/2)`` (this project's
-convention, :mod:`plenocal.raytrix`). TLCT's ``(W/2, H/2)`` puts the grid half a pixel
+convention, :mod:`plenocal.io.raytrix`). TLCT's ``(W/2, H/2)`` puts the grid half a pixel
 further right and down: the micro images would then sit at (-0.5, -0.5) px from its grid,
 on average. The measurement supports ``((W-1)/2, (H-1)/2)``, by 0.5 px against a frame-to-
 frame spread of 0.2-0.35 px; on synthetic frames the check is unbiased to 0.04 px, so the
