@@ -20,6 +20,7 @@ import pytest
 
 from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.artifacts.results import (
+    TABLE1_ROWS,
     ConvertQuality,
     GroundTruthErrors,
     PsnrTable,
@@ -39,7 +40,7 @@ from plenocal.camera import PinholeCamera, intrinsics, pose, write_cameras
 from plenocal.convert.quality import summarise
 from plenocal.io import write_image, write_json
 from plenocal.report.html import build_report
-from plenocal.report.sources import layout, table1_rows, table_name
+from plenocal.report.sources import PAPER_TABLE1, layout, table1_rows, table_name
 from plenocal.synthesis import psnr_tables
 from plenocal.verify.gt_errors import gt_errors
 
@@ -199,6 +200,7 @@ def test_table1_rows_pair_measurements_with_the_paper():
     assert rows["baseline_sfm"].mean_px is None and rows["baseline_sfm"].paper_mean_px == 0.770
     assert rows["baseline_sfm"].note == "not in reprojection.json"
     assert "sfm_scratch" not in rows
+    assert tuple(PAPER_TABLE1) == TABLE1_ROWS  # every row of the file has its place
 
 
 def test_table1_refuses_unknown_rows():

@@ -377,7 +377,7 @@ def _psnr_section(page: Page, key: str, result: SynthesisResult | None, paper: s
 
 
 @dataclass(frozen=True)
-class SynthImage:
+class Fig10Image:
     rel: str  # path under results/<d>/
     key: str  # the view it shows, "<cam>/<view>"
     label: str  # "Exp. 3 (checks A+B), lateral inputs"
@@ -389,10 +389,10 @@ class SynthImage:
 _CHECKS = {1: "checks A", 2: "checks B", 3: "checks A+B"}
 
 
-def _synth_images(page: Page, results: dict[str, SynthesisResult]) -> dict[str, list[SynthImage]]:
+def _synth_images(page: Page, results: dict[str, SynthesisResult]) -> dict[str, list[Fig10Image]]:
     """The synthesised images that the synthesis files list (``results``: source key ->
     file), grouped by the view they show; their paths are relative to the file's folder."""
-    out: dict[str, list[SynthImage]] = {}
+    out: dict[str, list[Fig10Image]] = {}
     for key, res in sorted(results.items()):
         folder = Path(src.SOURCES[key][0]).parent
         for im in res.images:
@@ -402,7 +402,7 @@ def _synth_images(page: Page, results: dict[str, SynthesisResult]) -> dict[str, 
             label = (f"Exp. {res.experiment} ({_CHECKS[res.experiment]})"
                      + (f", {variant} inputs" if variant else "")
                      + (" (ground-truth cameras)" if truth else ""))
-            out.setdefault(im.view, []).append(SynthImage(
+            out.setdefault(im.view, []).append(Fig10Image(
                 rel, im.view, label, truth, (truth, res.experiment, variant, rel)))
     return {k: sorted(v, key=lambda s: s.order) for k, v in out.items()}
 
