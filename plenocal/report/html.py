@@ -153,6 +153,20 @@ def _absent(page: Page, key: str) -> bool:
     return not page.has(src.SOURCES[key][0])
 
 
+def _not_read(page: Page, key: str, synthetic: bool, why_real: str) -> None:
+    """What a section says when source ``key``, made on synthetic data only, was not read:
+    nothing more when it is unreadable (:func:`_read` said why), "not produced" when it is
+    absent from a synthetic dataset, ``why_real`` on a real capture."""
+    if not _absent(page, key):
+        return
+    if synthetic:
+        page.missing(key)
+    else:
+        rule = src.SOURCES[key][1]
+        page.add(f'<p class="note">{escape(why_real)}: rule <code>{escape(rule)}</code> runs '
+                 "on synthetic datasets only.</p>")
+
+
 def _read(page: Page, key: str, reader: Callable[[Path], T]) -> T | None:
     """Source ``key`` read by its typed ``reader``, or None when absent; a file of another
     version or a damaged one is reported on the page with the reader's remedy."""
@@ -210,13 +224,7 @@ def section_gt(page: Page, synthetic: bool) -> None:
     page.section("gt", "Errors against ground truth")
     doc: GroundTruthErrors | None = _read(page, "gt_errors", read_gt_errors)
     if doc is None:
-        if not _absent(page, "gt_errors"):
-            return
-        if synthetic:
-            page.missing("gt_errors")
-        else:
-            page.add('<p class="note">A real capture has no ground truth: rule '
-                     "<code>gt_errors</code> runs on synthetic datasets only.</p>")
+        _not_read(page, "gt_errors", synthetic, "A real capture has no ground truth")
         return
     rows = []
     for c in doc.checks:
@@ -329,18 +337,18 @@ def _psnr_section(page: Page, key: str, result: SynthesisResult | None, paper: s
         page.add(f'<p class="missing"><code>{escape(src.SOURCES[key][0])}</code> holds '
                  "no per-view PSNR.</p>")
         return
-    names = {id(t): src.table_name(t, result.renderer) for t in tables}
+    names = [src.table_name(t, result.renderer) for t in tables]
     allv = [v for t in tables for v in t.psnr_db.values()]
     vmin, vmax = float(np.floor(min(allv))), float(np.ceil(max(allv)))
     if vmax - vmin < 1.0:
         vmax = vmin + 1.0
-    lost = {id(t): (d, n) for t, _, d, n in result.db_lost()}
+    # (the complete calibration's tables: their names are unique)
+    lost = {src.table_name(t, result.renderer): (d, n) for t, _, d, n in result.db_lost()}
     kpis = []
-    for t in tables:
-        name = names[id(t)]
+    for t, name in zip(tables, names, strict=True):
         extra = ""
-        if id(t) in lost:
-            d, n = lost[id(t)]
+        if name in lost:
+            d, n = lost[name]
             extra = (f"<br>{d:.2f} dB lost to calibration (vs ground-truth cameras, {n} views) "
                      f"{_verdict(d <= 0.5)}")
         kpis.append(f'<span class="kpi" id="kpi-{escape(key)}-{escape(name)}">'
@@ -349,8 +357,7 @@ def _psnr_section(page: Page, key: str, result: SynthesisResult | None, paper: s
     page.add("<div>" + "".join(kpis) + "</div>")
     page.add(f"<p class=note>{escape(paper)} Target: at most 0.5 dB lost to calibration "
              "(the same experiment with ground-truth cameras).</p>")
-    for t in tables:
-        name = names[id(t)]
+    for t, name in zip(tables, names, strict=True):
         g = src.layout(t, n_views, cols, rows)
         labels = None
         if g.annotate:
@@ -500,13 +507,7 @@ def section_convert_quality(page: Page, synthetic: bool = True) -> None:
     page.section("convert", "Converter quality (views against ideal renders)")
     doc: ConvertQuality | None = _read(page, "convert_quality", read_convert_quality)
     if doc is None:
-        if not _absent(page, "convert_quality"):
-            return
-        if synthetic:
-            page.missing("convert_quality")
-        else:
-            page.add('<p class="note">A real capture has no ideal renders: rule '
-                     "<code>convert_quality</code> runs on synthetic datasets only.</p>")
+        _not_read(page, "convert_quality", synthetic, "A real capture has no ideal renders")
         return
     allq = [q for views in doc.per_view.values() for q in views.values()]
     if not allq:
