@@ -39,6 +39,7 @@ from synth.planes import (  # noqa: E402
     render_plane,
 )
 
+from plenocal.artifacts.results import read_synthesis  # noqa: E402
 from plenocal.camera import read_cameras  # noqa: E402
 from plenocal.depth.inputs import nearest_sources  # noqa: E402
 from plenocal.depth.planesweep import (  # noqa: E402
@@ -134,7 +135,7 @@ def synthesis_figures(root: Path, out: Lines) -> None:
         path = root / "eval" / f"synthesis_exp{k}.json"
         if not path.is_file():
             continue
-        doc = read_json(path)
+        doc = read_synthesis(path).summary
         blocks = {doc["renderer"]: doc, **doc.get("renderers", {})}
         for name, b in blocks.items():
             for depth_name, key in (("estimated", "calibrations"), ("true", "true_depth")):

@@ -174,10 +174,12 @@ def proposed_vs_naive(work: Path, rules: dict[str, dict[str, float]]) -> list[st
     as is SfM from scratch, rule baseline_scratch) and Table I's errors."""
     import json  # noqa: PLC0415
 
+    from plenocal.artifacts.results import read_reprojection_table  # noqa: PLC0415
+
     ds = next(iter(sorted(work.glob("results/*/eval/reprojection.json"))), None)
     if ds is None:
         return ["(no reprojection.json: Table I did not run)"]
-    table_i = json.loads(ds.read_text())
+    table_i = read_reprojection_table(ds).rows
     scratch_json = ds.parents[1] / "baseline" / "scratch.json"
     t_prop = sum(rules.get(r, {"s": 0.0})["s"] for r in PROPOSED)
     t_naive = sum(rules.get(r, {"s": 0.0})["s"] for r in NAIVE)

@@ -5,9 +5,9 @@ from pathlib import Path
 
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
+from plenocal.artifacts.results import ConvertQuality, write_convert_quality
 from plenocal.convert.quality import dataset_quality
 from plenocal.convert.setup import read_setup
-from plenocal.io.files import write_json
 from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]
@@ -26,4 +26,4 @@ for cam, views in result["per_view"].items():
 log.info("mean PSNR of central views %.2f dB, min %.2f dB (%s); targets met: %s",
          result["mean_psnr_central_db"] or float("nan"), result["min_psnr_db"] or float("nan"),
          result["worst_view"], result["meets_targets"])
-write_json(snakemake.output.quality, result)
+write_convert_quality(snakemake.output.quality, ConvertQuality.from_dict(result))

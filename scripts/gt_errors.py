@@ -4,10 +4,10 @@
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
 from plenocal.artifacts.reg_a import read_reg_a
+from plenocal.artifacts.results import GroundTruthErrors, write_gt_errors
 from plenocal.artifacts.rig import read_rig
 from plenocal.artifacts.scale import read_scale
 from plenocal.camera import read_cameras
-from plenocal.io.files import write_json
 from plenocal.rulelog import rule_logger
 from plenocal.verify.gt_errors import gt_errors
 
@@ -27,4 +27,4 @@ for c in out["checks"]:
     v = "n/a" if c["value"] is None else f"{c['value']:.4g}"
     log.info("%-18s %10s %-10s target %-5g %s", c["name"], v, c["unit"], c["target"],
              {True: "pass", False: "FAIL", None: "-"}[c["pass"]])
-write_json(snakemake.output.errors, out)
+write_gt_errors(snakemake.output.errors, GroundTruthErrors.from_dict(out))

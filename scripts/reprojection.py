@@ -5,6 +5,7 @@ import logging
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.artifacts.reg_a import read_reg_a
+from plenocal.artifacts.results import ReprojectionTable, write_reprojection_table
 from plenocal.artifacts.rig import read_rig
 from plenocal.camera import read_cameras
 from plenocal.io.files import read_json, write_json
@@ -27,7 +28,7 @@ if sm.rule == "reprojection":
     for name, row in doc.items():
         logging.info("Table I %-13s images %4s  mean %s px  median %s px", name,
                      row.get("num_images"), row.get("mean_px"), row.get("median_px"))
-    write_json(sm.output[0], doc)
+    write_reprojection_table(sm.output[0], ReprojectionTable(doc))
 else:
     cfg = sm.params.sfm
     opts = dict(max_error_px=cfg["reprojection"]["max_error_px"],

@@ -5,19 +5,27 @@ same depth for both, so their difference is the dB lost to calibration - and aga
 with the true depth (the dB lost to depth). Renderer: verify.renderer (the project's
 DIBR, or RVS with the DIBR beside it). See plenocal.verify.synthesis."""
 
+import os
 import time
 from pathlib import Path
 
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 import numpy as np
 
+from plenocal.artifacts.results import SynthesisResult, SynthImage, write_synthesis
 from plenocal.artifacts.rig import read_rig
 from plenocal.camera import read_cameras
 from plenocal.depth.inputs import rig_bounds
 from plenocal.depth.quality import depth_quality
-from plenocal.io.files import to_uint8, write_image, write_json
+from plenocal.io.files import to_uint8, write_image
+from plenocal.names import key_shot
 from plenocal.rulelog import rule_logger
-from plenocal.verify.synthesis import layout_from_cams, run_experiment, synthesis_summary
+from plenocal.verify.synthesis import (
+    layout_from_cams,
+    psnr_tables,
+    run_experiment,
+    synthesis_summary,
+)
 
 snakemake = globals()["snakemake"]
 log = rule_logger(snakemake, "synthesis")
@@ -58,18 +66,26 @@ for renderer in renderers:
             log.info("%s, %s depth, %s cameras: experiment %d, %.1f s", renderer, dname, cname,
                      exp, res["seconds"])
             if dname == "estimated" and renderer == renderers[0]:
-                kept_all.update({f"{cname}_{k}": img for k, img in kept.items()})
+                kept_all.update({(cname, k): img for k, img in kept.items()})
 
 quality = {}
 if "true" in depths:
     quality = {k: depth_quality(z, depths["true"][k], 0.01, int(cfg.get("psnr_border_px", 8)))
                for k, z in depths["estimated"].items() if k in depths["true"]}
-out = {"experiment": exp, "near_m": near, "far_m": far,
-       "psnr_border_px": int(cfg.get("psnr_border_px", 8)),
-       "depth_method": cfg["depth"].get("synthesis_method", "sgm"),
-       "depth_quality": quality, **synthesis_summary(exp, runs, renderers)}
+summary = {"near_m": near, "far_m": far, "psnr_border_px": int(cfg.get("psnr_border_px", 8)),
+           "depth_method": cfg["depth"].get("synthesis_method", "sgm"),
+           "depth_quality": quality, **synthesis_summary(exp, runs, renderers)}
 synth_dir = Path(snakemake.output.synth)
-for key, img in sorted(kept_all.items()):
-    write_image(synth_dir / f"{key.replace('/', '_').replace(':', '_')}.png", to_uint8(img))
+kept_images = []
+for (cname, k), img in sorted(kept_all.items()):
+    # Exp. 3 keeps "<central|lateral>:<shot>/<view>", Exp. 2 the views of a set
+    variant, _, view = k.rpartition(":")
+    path = synth_dir / f"{cname}_{k.replace('/', '_').replace(':', '_')}.png"
+    write_image(path, to_uint8(img))
+    kept_images.append(SynthImage(
+        Path(os.path.relpath(path, Path(snakemake.output.json).parent)).as_posix(), view, cname,
+        variant or (key_shot(view) if exp == 2 else "")))
 synth_dir.mkdir(parents=True, exist_ok=True)
-write_json(snakemake.output.json, out)
+write_synthesis(snakemake.output.json, SynthesisResult(
+    experiment=exp, renderer=renderers[0], tables=tuple(psnr_tables(exp, runs, renderers)),
+    images=tuple(kept_images), summary=summary))

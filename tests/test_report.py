@@ -19,11 +19,30 @@ import numpy as np
 import pytest
 
 from plenocal.artifacts.reg_a import RegistrationA
+from plenocal.artifacts.results import (
+    TABLE1_ROWS,
+    ConvertQuality,
+    GroundTruthErrors,
+    PsnrTable,
+    ReprojectionTable,
+    SynthesisResult,
+    SynthImage,
+    read_reprojection_table,
+    read_synthesis,
+    write_convert_quality,
+    write_gt_errors,
+    write_reprojection_table,
+    write_synthesis,
+)
+from plenocal.artifacts.rig import write_rig
+from plenocal.artifacts.scale import ScaleResult, write_scale
 from plenocal.camera import PinholeCamera, intrinsics, pose, write_cameras
+from plenocal.convert.quality import summarise
 from plenocal.io.files import write_image, write_json
 from plenocal.report.html import build_report
-from plenocal.report.sources import layout, psnr_sets, table1_rows
+from plenocal.report.sources import PAPER_TABLE1, layout, table1_rows, table_name
 from plenocal.verify.gt_errors import gt_errors
+from plenocal.verify.synthesis import psnr_tables
 
 N = 3
 COLS, ROWS = 3, 2
@@ -70,7 +89,7 @@ def make_results(root: Path) -> Path:
     write_cameras(res / "ground_truth" / "cameras.json", truth)
     write_cameras(res / "calibration" / "cameras.json", calib)
     # as plenocal.verify.reprojection and scripts/reprojection.py write it
-    write_json(res / "eval" / "reprojection.json", {
+    write_reprojection_table(res / "eval" / "reprojection.json", ReprojectionTable({
         "reg_a": stats(0.61, 0.48, 10, array=6, hand=4),
         "reg_b": {"sets": {c: stats(0.40 + 0.01 * i, 0.30, 9) for i, c in enumerate(CAMS)},
                   "mean_px": 0.43, "median_px": 0.30, "num_sets": 7, "num_images": 9,
@@ -79,70 +98,73 @@ def make_results(root: Path) -> Path:
         "baseline_sfm": dict(stats(0.812, 0.60, 63, array=54, hand=9), num_registered=63),
         "ground_truth": stats(0.31, 0.25, 15),
         "sfm_scratch": {"num_images": 63, "num_registered": 58, "num_models": 2},
-    })
+    }))
     sfm = {c: np.linalg.inv(pose(np.eye(3), [0.1, 0, 0])) @ truth[f"{c}/1_1"].cam_to_world
            for c in CAMS}
     for M in sfm.values():
         M[:3, 3] /= 0.02
     rig = {"model": "exact", "n_views": N, "width": W, "height": H, "focal_px": 120.0,
+           "depth_range_m": [0.4, 0.8], "symbols": {},
            "views": {v: {"K": truth[f"x00_y00/{v}"].K,
                          "cam_to_central": pose(np.eye(3), [(int(v[2]) - 1) * 2e-4,
                                                             (int(v[0]) - 1) * 2e-4, 0])}
                      for v in VIEWS},
            "exact": {"B": 0.2}, "check": {"verdict": "pass"}}
-    write_json(res / "reg_b" / "rig.json", rig)
-    write_json(res / "merge" / "scale.json", {"r": 0.0201, "r_used": 0.0201,
-                                              "estimator": "mean",
-                                              "spread": {"relative": 0.004, "n_shots": 7}})
-    write_json(res / "eval" / "gt_errors.json", gt_errors(
+    write_rig(res / "reg_b" / "rig.json", rig)
+    write_scale(res / "merge" / "scale.json", ScaleResult(
+        r=0.0201, r_median=0.0201, r_median_of_ratios=0.0201, estimator="mean",
+        spread={"relative": 0.004, "n_shots": 7}))
+    write_gt_errors(res / "eval" / "gt_errors.json", GroundTruthErrors.from_dict(gt_errors(
         truth, reg_a=RegistrationA(focal_px=120.3, width=W, height=H, mapper="incremental",
                                    cameras={c: PinholeCamera(np.eye(3), M, W, H)
                                             for c, M in sfm.items()}),
-        rig=rig, r=0.0201, calib=calib))
-    # as scripts/synthesis.py writes them (plenocal.verify.synthesis.experiment1..3)
+        rig=rig, r=0.0201, calib=calib)))
+    # as scripts/synthesis.py writes them: the runs of plenocal.verify.synthesis.experiment1..3 by
+    # (renderer, depth, cameras), flattened by psnr_tables
     corners = ["x00_y00", "x02_y00", "x00_y01", "x02_y01"]
     array = [c for c in CAMS if c.startswith("x")]
 
     def scores(keys, base):
-        d = {k: base + 0.5 * i for i, k in enumerate(keys)}
-        v = list(d.values())
-        return {"psnr": d, "mean_psnr": float(np.mean(v)), "min_psnr": min(v),
-                "max_psnr": max(v), "count": len(v)}
+        return {"psnr": {k: base + 0.5 * i for i, k in enumerate(keys)}}
 
-    exp1 = {"experiment": 1, "calibrations": {}, "near_m": 0.4, "far_m": 0.8}
-    for name, off in (("complete", 0.0), ("ground_truth", 0.3)):
-        exp1["calibrations"][name] = dict(
-            scores([f"{c}/1_1" for c in array if c not in corners], 28.0 + off),
-            inputs=[f"{c}/1_1" for c in corners], grid=[[None] * COLS] * ROWS)
-    exp1["db_lost"] = 0.3
-    write_json(res / "eval" / "synthesis_exp1.json", exp1)
+    runs1 = {("dibr", "estimated", name): dict(
+        scores([f"{c}/1_1" for c in array if c not in corners], 28.0 + off),
+        inputs=[f"{c}/1_1" for c in corners]) for name, off in (("complete", 0.0),
+                                                                ("ground_truth", 0.3))}
     sides = [f"{CENTRE_CAM}/{v}" for v in ("0_1", "1_0", "1_2", "2_1")]
-    exp2 = {"experiment": 2, "calibrations": {"complete": {"sets": {CENTRE_CAM: dict(
+    runs2 = {("dibr", "estimated", "complete"): {"sets": {CENTRE_CAM: dict(
         scores([f"{CENTRE_CAM}/{v}" for v in VIEWS if f"{CENTRE_CAM}/{v}" not in sides],
-               36.0), inputs=sides)}, "mean_psnr": 37.0}}}
-    write_json(res / "eval" / "synthesis_exp2.json", exp2)
-    exp3 = {"experiment": 3, "calibrations": {}}
+               36.0), inputs=sides)}}}
+    runs3 = {}
     for name, off in (("complete", 0.0), ("ground_truth", 0.2)):
-        exp3["calibrations"][name] = {"view_stride": 1}
+        runs3["dibr", "estimated", name] = {}
         for variant, v_in in (("central", "1_1"), ("lateral", "0_0")):
             inputs = [f"{c}/{v_in}" for c in corners]
-            exp3["calibrations"][name][variant] = dict(
+            runs3["dibr", "estimated", name][variant] = dict(
                 scores([f"{c}/{v}" for c in array for v in VIEWS
                         if f"{c}/{v}" not in inputs], 29.0 + off), inputs=inputs)
-    exp3["db_lost"] = {"central": 0.2, "lateral": 0.2}
-    write_json(res / "eval" / "synthesis_exp3.json", exp3)
-    write_json(res / "convert" / "quality.json", {
-        c: {v: {"psnr": 33.0 + 0.1 * k, "ssim": 0.95} for k, v in enumerate(VIEWS)}
-        for c in CAMS})
+    # the images' names say nothing: what they show is in the synthesis files
+    kept = {1: [("complete", ""), ("ground_truth", "")], 2: [("complete", CENTRE_CAM)],
+            3: [("complete", "central"), ("complete", "lateral"), ("ground_truth", "lateral")]}
     cap = texture(1)
     write_image(res / "views" / CENTRE_CAM / "1_1.png", cap)
-    names = [("exp1", "complete"), ("exp1", "ground_truth"), ("exp2", "complete"),
-             ("exp3", "complete_central"), ("exp3", "complete_lateral"),
-             ("exp3", "ground_truth_lateral")]
-    for k, (exp, name) in enumerate(names):
-        noisy = np.clip(cap.astype(int) + np.random.default_rng(k).integers(-20, 20, cap.shape),
-                        0, 255).astype(np.uint8)
-        write_image(res / "eval" / "synth" / exp / f"{name}_{CENTRE_CAM}_1_1.png", noisy)
+    k = 0
+    for exp, runs in ((1, runs1), (2, runs2), (3, runs3)):
+        images = []
+        for cameras_, run in kept[exp]:
+            noisy = np.clip(cap.astype(int) + np.random.default_rng(k).integers(
+                -20, 20, cap.shape), 0, 255).astype(np.uint8)
+            write_image(res / "eval" / "synth" / f"e{exp}" / f"kept{k}.png", noisy)
+            images.append(SynthImage(f"synth/e{exp}/kept{k}.png", f"{CENTRE_CAM}/1_1",
+                                     cameras_, run))
+            k += 1
+        write_synthesis(res / "eval" / f"synthesis_exp{exp}.json", SynthesisResult(
+            experiment=exp, renderer="dibr", tables=tuple(psnr_tables(exp, runs, ["dibr"])),
+            images=tuple(images), summary={"near_m": 0.4, "far_m": 0.8}))
+    write_convert_quality(res / "convert" / "quality.json", ConvertQuality.from_dict(
+        summarise({c: {v: {"psnr_db": 33.0 + 0.1 * k, "ssim": 0.95}
+                       for k, v in enumerate(VIEWS)} for c in CAMS}, "1_1")
+        | {"border_px": 6}))
     for i, c in enumerate(CAMS):
         write_image(res / "views" / c / "patch_size.png", texture(10 + i)[:, :, 0])
         depth = (np.linspace(1000, 60000, W * H).reshape(H, W)).astype(np.uint16)
@@ -164,47 +186,64 @@ def build(res: Path) -> str:
 
 
 def test_table1_rows_pair_measurements_with_the_paper():
-    doc = {"reg_a": stats(0.61, 0.48, 10, array=6, hand=4),
-           "reg_b": {"sets": {"a": stats(0.4, 0.3, 9), "b": stats(0.5, 0.4, 9)}},
-           "complete": stats(0.7, 0.5, 63)}
-    rows = {r.key: r for r in table1_rows(doc)}
+    table = ReprojectionTable({
+        "reg_a": stats(0.61, 0.48, 10, array=6, hand=4),
+        "reg_b": {"sets": {"a": stats(0.4, 0.3, 9), "b": stats(0.5, 0.4, 9)},
+                  "mean_px": 0.45, "median_px": 0.35, "num_images": 9},
+        "complete": stats(0.7, 0.5, 63)})
+    rows = {r.key: r for r in table1_rows(table)}
     assert rows["reg_a"].images == "6 + 4" and rows["reg_a"].paper_mean_px == 0.663
     assert rows["reg_b"].mean_px == pytest.approx(0.45) and rows["reg_b"].images == "9 per set"
+    assert rows["reg_b"].note == "mean over 2 sets (range 0.400-0.500 px)"
     assert rows["reg_b"].paper_mean_px == 0.450
     assert rows["complete"].paper_mean_px == 0.714
     assert rows["baseline_sfm"].mean_px is None and rows["baseline_sfm"].paper_mean_px == 0.770
+    assert rows["baseline_sfm"].note == "not in reprojection.json"
     assert "sfm_scratch" not in rows
+    assert tuple(PAPER_TABLE1) == TABLE1_ROWS  # every row of the file has its place
+
+
+def test_table1_refuses_unknown_rows():
+    with pytest.raises(ValueError, match=r"unknown rows \['registration_a'\]"):
+        ReprojectionTable({"registration_a": stats(0.6, 0.5, 10)})
 
 
 def test_psnr_layouts_follow_figs_7_to_9(tmp_path):
     res = make_results(tmp_path)
-    exp1 = json.loads((res / "eval" / "synthesis_exp1.json").read_text())
-    sets = {s.name: s for s in psnr_sets(exp1, "1_1")}
+    exp1 = read_synthesis(res / "eval" / "synthesis_exp1.json")
+    assert exp1.experiment == 1 and exp1.metric == "psnr_db"
+    sets = {table_name(t, exp1.renderer): t for t in exp1.tables}
     assert sorted(sets) == ["complete", "ground_truth"]
-    assert sets["complete"].inputs == ["x00_y00/1_1", "x00_y01/1_1", "x02_y00/1_1",
-                                       "x02_y01/1_1"]
+    assert sets["complete"].inputs == ("x00_y00/1_1", "x02_y00/1_1", "x00_y01/1_1",
+                                       "x02_y01/1_1")
     g = layout(sets["complete"], N, COLS, ROWS)
     assert g.kind == "shots" and g.values.shape == (ROWS, COLS)
     assert g.marks[0, 0] == "input" and math.isnan(g.values[0, 0])
     assert g.values[0, 1] == pytest.approx(28.0)  # x01_y00
     assert g.values[1, 1] == pytest.approx(28.5)  # x01_y01
     assert g.outside == {}
-    exp2 = json.loads((res / "eval" / "synthesis_exp2.json").read_text())
-    (s2,) = psnr_sets(exp2, "1_1")
-    assert s2.name == "complete/x01_y01"
+    ((t, gt, lost, n),) = exp1.db_lost()
+    assert (t.cameras, gt.cameras, n) == ("complete", "ground_truth", 2)
+    assert lost == pytest.approx(0.3)
+    exp2 = read_synthesis(res / "eval" / "synthesis_exp2.json")
+    (s2,) = exp2.tables
+    assert table_name(s2, exp2.renderer) == "complete/x01_y01" and exp2.db_lost() == []
     g2 = layout(s2, N, COLS, ROWS)
     assert g2.kind == "set" and g2.values.shape == (N, N) and g2.marks[0, 1] == "input"
     assert g2.values[0, 0] == pytest.approx(36.0) and g2.values[1, 1] == pytest.approx(37.0)
-    exp3 = json.loads((res / "eval" / "synthesis_exp3.json").read_text())
-    s3 = psnr_sets(exp3, "1_1")
-    assert [s.name for s in s3] == ["complete/central", "complete/lateral",
-                                    "ground_truth/central", "ground_truth/lateral"]
+    exp3 = read_synthesis(res / "eval" / "synthesis_exp3.json")
+    s3 = exp3.tables
+    assert [table_name(t, exp3.renderer) for t in s3] == [
+        "complete/central", "complete/lateral", "ground_truth/central", "ground_truth/lateral"]
     g3 = layout(s3[0], N, COLS, ROWS)
     assert g3.kind == "views" and g3.values.shape == (ROWS * N, COLS * N)
     assert g3.marks[1, 1] == "input"  # x00_y00/1_1 in the central experiment
     assert g3.values[0, 0] == pytest.approx(29.0)  # x00_y00/0_0, the first target
     # x01_y01/2_2: after 8 + 9 + 8 + 8 targets of the shots before it, and 8 of its own
     assert g3.values[3 + 2, 3 + 2] == pytest.approx(29.0 + 0.5 * (8 + 9 + 8 + 8 + 8))
+    # another renderer and the true depth are named by their fields
+    rvs = PsnrTable("rvs", "true", "complete", "lateral", (), {})
+    assert table_name(rvs, "dibr") == "rvs/true_depth/complete/lateral"
 
 
 def test_page_content_and_determinism(tmp_path):
@@ -235,6 +274,56 @@ def test_page_content_and_determinism(tmp_path):
     assert (res / "report" / "index.html").read_bytes() == first
 
 
+SECTIONS = ("overview", "table1", "gt", "summary", "array", "exp1", "exp2", "exp3", "fig10",
+            "convert", "patch", "depth")
+
+
+def sections(html: str) -> dict[str, str]:
+    """Each section's HTML by its anchor."""
+    parts = re.split(r'<h2 id="(\w+)">', html)
+    return {parts[i]: parts[i + 1] for i in range(1, len(parts) - 1, 2)}
+
+
+def test_every_section_is_shown_from_the_typed_files(tmp_path):
+    res = make_results(tmp_path)
+    by = sections(build(res))
+    assert [k for k in by if k != "sources"] == list(SECTIONS)
+    for key in SECTIONS[:-1]:  # (one depth preview is absent on purpose)
+        assert 'class="missing"' not in by[key], (key, by[key][:500])
+    assert 'id="table1"' in by["table1"] and "<td>0.702</td>" in by["table1"]
+    assert by["gt"].count('<tr id="gt-') == 9
+    assert "0.0201</b>mean" in by["summary"] and "exact model" in by["summary"]
+    for key, names in (("exp1", ["complete", "ground_truth"]), ("exp2", ["complete/x01_y01"]),
+                       ("exp3", ["complete/central", "complete/lateral",
+                                 "ground_truth/central", "ground_truth/lateral"])):
+        assert re.findall(rf'id="hm-{key}-([\w/]+)"', by[key]) == names, key
+    # Fig. 10: every image the synthesis files list, labelled by its fields (the files'
+    # names say nothing)
+    for label in ("Exp. 1 (checks A)", "Exp. 1 (checks A) (ground-truth cameras)",
+                  "Exp. 2 (checks B)", "Exp. 3 (checks A+B), central inputs",
+                  "Exp. 3 (checks A+B), lateral inputs",
+                  "Exp. 3 (checks A+B), lateral inputs (ground-truth cameras)"):
+        assert f'alt="{label}"' in by["fig10"], label
+    assert 'href="../eval/synth/e3/kept5.png"' in by["fig10"]
+    assert "<td>33.40</td>" in by["convert"]  # view 1_1: the 5th of each shot
+
+
+def test_a_file_of_another_version_is_named_on_the_page(tmp_path):
+    res = make_results(tmp_path)
+    for rel in ("eval/synthesis_exp2.json", "eval/reprojection.json"):
+        doc = json.loads((res / rel).read_text())
+        write_json(res / rel, {**doc, "version": 0})
+    by = sections(build(res))
+    assert ("eval/synthesis_exp2.json: not a synthesis result of version 1 (format "
+            "&#x27;plenocal.synthesis&#x27;, version 0); rerun rule synthesis_exp&lt;k&gt;"
+            in by["exp2"])
+    assert "not a Table I (reprojection.json) of version 1" in by["table1"]
+    assert "run rule reprojection" in by["table1"] and "is absent" not in by["table1"]
+    # the other sections are unaffected, and Fig. 10 shows the images the others list
+    assert 'id="hm-exp3-complete/central"' in by["exp3"]
+    assert "Exp. 2 (checks B)" not in by["fig10"] and "Exp. 3 (checks A+B)" in by["fig10"]
+
+
 def test_absent_sources_are_named_with_their_rules(tmp_path):
     res = tmp_path / "results" / "fake"
     res.mkdir(parents=True)
@@ -251,13 +340,13 @@ def test_absent_sources_are_named_with_their_rules(tmp_path):
 
 def _set_means(res: Path, complete: float, baseline: float, truth: float | None) -> None:
     path = res / "eval" / "reprojection.json"
-    doc = json.loads(path.read_text())
-    doc["complete"]["mean_px"], doc["baseline_sfm"]["mean_px"] = complete, baseline
+    rows = read_reprojection_table(path).rows
+    rows["complete"]["mean_px"], rows["baseline_sfm"]["mean_px"] = complete, baseline
     if truth is None:
-        doc.pop("ground_truth", None)
+        rows.pop("ground_truth", None)
     else:
-        doc["ground_truth"]["mean_px"] = truth
-    write_json(path, doc)
+        rows["ground_truth"]["mean_px"] = truth
+    write_reprojection_table(path, ReprojectionTable(rows))
 
 
 def test_table1_verdict_judges_against_what_the_data_allow(tmp_path):

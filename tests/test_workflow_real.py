@@ -6,7 +6,6 @@ and the key."""
 
 from __future__ import annotations
 
-import json
 import re
 import shutil
 from pathlib import Path
@@ -14,6 +13,8 @@ from pathlib import Path
 import pytest
 import yaml
 from conftest import ROOT, snakemake, workflow_copy
+
+from plenocal.artifacts.results import read_reprojection_table
 
 pytestmark = pytest.mark.workflow
 
@@ -63,7 +64,7 @@ def test_real_capture_runs_the_default_target(real_run: Path):
     # nothing that needs ground truth was made or asked for
     assert not (res / "ground_truth").exists() and not (res / "eval" / "gt_errors.json").exists()
     assert not (res / "convert" / "quality.json").exists()
-    table1 = json.loads((res / "eval" / "reprojection.json").read_text())
+    table1 = read_reprojection_table(res / "eval" / "reprojection.json").rows
     assert "ground_truth" not in table1 and "complete" in table1
     html = (res / "report" / "index.html").read_text()
     first = html[:html.index('id="table1"')]

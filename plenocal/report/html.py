@@ -12,14 +12,25 @@ The bytes depend only on the inputs (no timestamps, sorted iteration).
 
 from __future__ import annotations
 
-import re
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from html import escape
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
+from plenocal.artifacts.results import (
+    ConvertQuality,
+    GroundTruthErrors,
+    SynthesisResult,
+    read_convert_quality,
+    read_gt_errors,
+    read_reprojection_table,
+    read_synthesis,
+)
+from plenocal.artifacts.rig import read_rig
+from plenocal.artifacts.scale import read_scale
 from plenocal.io.files import atomic_write_text, read_json
 from plenocal.names import array_position, array_shot, central_view, key_shot, split_key
 from plenocal.report import figures as fg
@@ -135,13 +146,35 @@ def _verdict(ok: bool | None) -> str:
     return '<span class="pass">pass</span>' if ok else '<span class="fail">FAIL</span>'
 
 
-def _read(page: Page, key: str):
-    """The parsed JSON source ``key`` or None (a broken file is reported, not raised)."""
+T = TypeVar("T")
+
+
+def _absent(page: Page, key: str) -> bool:
+    return not page.has(src.SOURCES[key][0])
+
+
+def _not_read(page: Page, key: str, synthetic: bool, why_real: str) -> None:
+    """What a section says when source ``key``, made on synthetic data only, was not read:
+    nothing more when it is unreadable (:func:`_read` said why), "not produced" when it is
+    absent from a synthetic dataset, ``why_real`` on a real capture."""
+    if not _absent(page, key):
+        return
+    if synthetic:
+        page.missing(key)
+    else:
+        rule = src.SOURCES[key][1]
+        page.add(f'<p class="note">{escape(why_real)}: rule <code>{escape(rule)}</code> runs '
+                 "on synthetic datasets only.</p>")
+
+
+def _read(page: Page, key: str, reader: Callable[[Path], T]) -> T | None:
+    """Source ``key`` read by its typed ``reader``, or None when absent; a file of another
+    version or a damaged one is reported on the page with the reader's remedy."""
     rel = src.SOURCES[key][0]
     if not page.has(rel):
         return None
     try:
-        return read_json(page.path(rel))
+        return reader(page.path(rel))
     except (OSError, ValueError) as err:
         page.add(f'<p class="missing"><code>{escape(rel)}</code> is unreadable: '
                  f"{escape(str(err))}</p>")
@@ -155,11 +188,12 @@ def _read(page: Page, key: str):
 
 def section_table1(page: Page, synthetic: bool) -> None:
     page.section("table1", "Table I: reprojection error")
-    doc = _read(page, "reprojection")
-    if doc is None:
-        page.missing("reprojection")
+    table = _read(page, "reprojection", read_reprojection_table)
+    if table is None:
+        if _absent(page, "reprojection"):
+            page.missing("reprojection")
         return
-    rows = src.table1_rows(doc)
+    rows = src.table1_rows(table)
     head = ("<tr><th class=l>Registration</th><th>mean [px]</th><th>median [px]</th>"
             "<th>images</th><th>observations</th><th>paper mean [px]</th>"
             "<th>paper images</th><th class=l>note</th></tr>")
@@ -188,24 +222,20 @@ def section_table1(page: Page, synthetic: bool) -> None:
 
 def section_gt(page: Page, synthetic: bool) -> None:
     page.section("gt", "Errors against ground truth")
-    doc = _read(page, "gt_errors")
+    doc: GroundTruthErrors | None = _read(page, "gt_errors", read_gt_errors)
     if doc is None:
-        if synthetic:
-            page.missing("gt_errors")
-        else:
-            page.add('<p class="note">A real capture has no ground truth: rule '
-                     "<code>gt_errors</code> runs on synthetic datasets only.</p>")
+        _not_read(page, "gt_errors", synthetic, "A real capture has no ground truth")
         return
     rows = []
-    for c in doc.get("checks", []):
-        rows.append(f'<tr id="gt-{escape(c["name"])}"><td class=l>{escape(c["what"])}</td>'
-                    f"<td>{_fmt(c['value'], 4)}</td><td>&le; {c['target']:g}</td>"
-                    f"<td class=l>{escape(c['unit'])}</td><td>{_verdict(c['pass'])}</td></tr>")
+    for c in doc.checks:
+        rows.append(f'<tr id="gt-{escape(c.name)}"><td class=l>{escape(c.what)}</td>'
+                    f"<td>{_fmt(c.value, 4)}</td><td>&le; {c.target:g}</td>"
+                    f"<td class=l>{escape(c.unit)}</td><td>{_verdict(c.passed)}</td></tr>")
     page.add('<table id="gt-checks"><tr><th class=l>quantity</th><th>measured</th>'
              "<th>target</th><th class=l>unit</th><th>verdict</th></tr>"
              + "".join(rows) + "</table>")
     details = []
-    a = doc.get("registration_a")
+    a = doc.registration_a
     if a:
         details.append(("Registration A", [
             ("focal length [px] (truth)", f"{a['focal_px']:.3f} ({a['focal_px_truth']:.3f})"),
@@ -215,7 +245,7 @@ def section_gt(page: Page, synthetic: bool) -> None:
             ("rotation error mean / max [deg]", f"{a['rotation_err_deg']['mean']:.4f} / "
              f"{a['rotation_err_deg']['max']:.4f}"),
             ("shots compared", str(a["n_shots"]))]))
-    b = doc.get("registration_b")
+    b = doc.registration_b
     if b:
         details.append((f"Registration B (model {b.get('model')})", [
             ("baseline B per step [mm] (truth)", f"{1000 * b['baseline_m']:.5f} "
@@ -227,12 +257,12 @@ def section_gt(page: Page, synthetic: bool) -> None:
             ("worst set: centre RMSE [mm] / rotation [deg]",
              f"{_fmt(b.get('centre_rmse_mm'), 5)} / {_fmt(b.get('rotation_max_deg'), 5)}"),
             ("sets compared", str(b["n_sets"]))]))
-    s = doc.get("scale")
+    s = doc.scale
     if s:
         details.append(("Scale r (Eq. 5)", [
             ("r used (truth)", f"{s['r']:.6g} ({s['r_truth']:.6g})"),
             ("error [%]", f"{s['err_pct']:.4f}")]))
-    al = doc.get("complete")
+    al = doc.complete
     if al:
         details.append(("Complete calibration (all views, rigid alignment)", [
             ("centre RMSE / max [mm]", f"{al['centre_rmse_mm']:.4f} / "
@@ -294,40 +324,41 @@ def section_cameras(page: Page) -> None:
         + f"hover a point for its name. Source: {links}</figcaption></figure>")
 
 
-def _psnr_section(page: Page, key: str, title: str, paper: str, n_views: int, cols: int,
-                  rows: int) -> None:
-    page.section(key, title)
-    doc = _read(page, key)
-    if doc is None:
-        page.missing(key)
+def _psnr_section(page: Page, key: str, result: SynthesisResult | None, paper: str,
+                  n_views: int, cols: int, rows: int) -> None:
+    """The body of an experiment's section: the PSNR tables of ``result`` (source ``key``)
+    as heat maps laid out as in Figs. 7-9, with the dB lost to calibration."""
+    if result is None:
+        if _absent(page, key):
+            page.missing(key)
         return
-
-    sets = src.psnr_sets(doc, central_view(n_views))
-    if not sets:
+    tables = [t for t in result.tables if t.psnr_db]
+    if not tables:
         page.add(f'<p class="missing"><code>{escape(src.SOURCES[key][0])}</code> holds '
                  "no per-view PSNR.</p>")
         return
-    allv = [v for s in sets for v in s.values.values()]
+    names = [src.table_name(t, result.renderer) for t in tables]
+    allv = [v for t in tables for v in t.psnr_db.values()]
     vmin, vmax = float(np.floor(min(allv))), float(np.ceil(max(allv)))
     if vmax - vmin < 1.0:
         vmax = vmin + 1.0
-    lost = {s: (g, d, n) for s, g, d, n in src.db_lost(sets)}
+    # (the complete calibration's tables: their names are unique)
+    lost = {src.table_name(t, result.renderer): (d, n) for t, _, d, n in result.db_lost()}
     kpis = []
-    for s in sets:
-        mean = float(np.mean(list(s.values.values())))
+    for t, name in zip(tables, names, strict=True):
         extra = ""
-        if s.name in lost:
-            g, d, n = lost[s.name]
+        if name in lost:
+            d, n = lost[name]
             extra = (f"<br>{d:.2f} dB lost to calibration (vs ground-truth cameras, {n} views) "
                      f"{_verdict(d <= 0.5)}")
-        kpis.append(f'<span class="kpi" id="kpi-{escape(key)}-{escape(s.name)}">'
-                    f"{escape(s.name)}<b>{mean:.2f} dB</b>mean over {len(s.values)} views"
+        kpis.append(f'<span class="kpi" id="kpi-{escape(key)}-{escape(name)}">'
+                    f"{escape(name)}<b>{t.mean_db:.2f} dB</b>mean over {len(t.psnr_db)} views"
                     f"{extra}</span>")
     page.add("<div>" + "".join(kpis) + "</div>")
     page.add(f"<p class=note>{escape(paper)} Target: at most 0.5 dB lost to calibration "
              "(the same experiment with ground-truth cameras).</p>")
-    for s in sets:
-        g = src.layout(s, n_views, cols, rows)
+    for t, name in zip(tables, names, strict=True):
+        g = src.layout(t, n_views, cols, rows)
         labels = None
         if g.annotate:
             labels = np.vectorize(lambda v: f"{v:.2f}" if np.isfinite(v) else "")(g.values)
@@ -335,14 +366,14 @@ def _psnr_section(page: Page, key: str, title: str, paper: str, n_views: int, co
                              marks=g.marks, group=g.group, annotate=g.annotate,
                              cell=(58, 30) if g.annotate else (16, 16),
                              col_labels=g.col_labels, row_labels=g.row_labels)
-        cap = f"{s.name}: PSNR per synthesised view; hatched: input views"
+        cap = f"{name}: PSNR per synthesised view; hatched: input views"
         if g.kind == "views":
             cap += f" ({n_views} x {n_views} views per shot, thick lines between shots)"
-        page.add(f'<figure class="heatmap" id="hm-{escape(key)}-{escape(s.name)}">{svg}'
+        page.add(f'<figure class="heatmap" id="hm-{escape(key)}-{escape(name)}">{svg}'
                  f"<figcaption>{escape(cap)}. Source: {page.link(src.SOURCES[key][0])}"
                  "</figcaption></figure>")
         if g.kind == "views":
-            means = src.shot_means(s)
+            means = src.shot_means(t)
             page.add("<table><tr><th class=l>shot</th>" + "".join(
                 f"<th>{escape(c)}</th>" for c in means) + "</tr><tr><td class=l>mean "
                 "PSNR [dB]</td>" + "".join(f"<td>{v:.2f}</td>" for v in means.values())
@@ -352,45 +383,34 @@ def _psnr_section(page: Page, key: str, title: str, paper: str, n_views: int, co
                 f"{escape(k)} {v:.2f} dB" for k, v in sorted(g.outside.items())) + "</p>")
 
 
-_KEY_IN_NAME = re.compile(r"(x\d{2}_y\d{2}|hand\d{2})[_/-]?(\d+_\d+)")
-_EXP_DIR = re.compile(r"exp(\d+)")
-_GT_WORDS = ("ground_truth", "truth", "gt")
-
-
 @dataclass(frozen=True)
-class SynthImage:
+class Fig10Image:
     rel: str  # path under results/<d>/
     key: str  # the view it shows, "<cam>/<view>"
-    label: str  # "Exp. 3, lateral inputs"
+    label: str  # "Exp. 3 (checks A+B), lateral inputs"
     truth: bool  # synthesised with the ground-truth cameras
     order: tuple
 
 
-def _synth_images(page: Page) -> dict[str, list[SynthImage]]:
-    """Synthesised images under eval/synth/ (``exp<k>/<calibration>[_<variant>]_<cam>_
-    <r>_<c>.png``, as the synthesis rules write them), grouped by the view they show."""
-    rel_dir = src.SOURCES["synth_dir"][0]
-    root = page.path(rel_dir)
-    out: dict[str, list[SynthImage]] = {}
-    for p in sorted(root.rglob("*.png")):
-        rel = p.relative_to(page.results).as_posix()
-        inner = p.relative_to(root).as_posix()
-        m = _KEY_IN_NAME.search(p.name)
-        if not m:
-            continue
-        e = _EXP_DIR.search(inner)
-        exp = int(e.group(1)) if e else 0
-        words = [w for w in p.name[:m.start()].strip("_-").split("_") if w]
-        truth = any(w in _GT_WORDS for w in words) or "ground_truth" in p.name
-        variant = [w for w in words if w not in _GT_WORDS + ("ground", "complete",
-                                                             "calibrated")]
-        what = {1: " (checks A)", 2: " (checks B)", 3: " (checks A+B)"}.get(exp, "")
-        label = (f"Exp. {exp}{what}" if exp else Path(inner).stem) + (
-            f", {' '.join(variant)} inputs" if variant else "") + (
-            " (ground-truth cameras)" if truth else "")
-        key = f"{m.group(1)}/{m.group(2)}"
-        out.setdefault(key, []).append(SynthImage(rel, key, label, truth,
-                                                  (truth, exp, variant, rel)))
+#: what each experiment checks (Section III)
+_CHECKS = {1: "checks A", 2: "checks B", 3: "checks A+B"}
+
+
+def _synth_images(page: Page, results: dict[str, SynthesisResult]) -> dict[str, list[Fig10Image]]:
+    """The synthesised images that the synthesis files list (``results``: source key ->
+    file), grouped by the view they show; their paths are relative to the file's folder."""
+    out: dict[str, list[Fig10Image]] = {}
+    for key, res in sorted(results.items()):
+        folder = Path(src.SOURCES[key][0]).parent
+        for im in res.images:
+            rel = (folder / im.path).as_posix()
+            truth = im.cameras == "ground_truth"
+            variant = im.run if res.experiment == 3 else ""
+            label = (f"Exp. {res.experiment} ({_CHECKS[res.experiment]})"
+                     + (f", {variant} inputs" if variant else "")
+                     + (" (ground-truth cameras)" if truth else ""))
+            out.setdefault(im.view, []).append(Fig10Image(
+                rel, im.view, label, truth, (truth, res.experiment, variant, rel)))
     return {k: sorted(v, key=lambda s: s.order) for k, v in out.items()}
 
 
@@ -428,18 +448,19 @@ def _crop_boxes(ref: np.ndarray, others: Sequence[np.ndarray], n: int = 2
     return boxes
 
 
-def section_fig10(page: Page, n_views: int, centre_cam: str | None) -> None:
+def section_fig10(page: Page, results: dict[str, SynthesisResult], n_views: int,
+                  centre_cam: str | None) -> None:
     import cv2  # noqa: PLC0415
 
     page.section("fig10", "Synthesised versus captured views (Fig. 10)")
-    rel_dir = src.SOURCES["synth_dir"][0]
-    if not page.has(rel_dir):
-        page.missing("synth_dir", "synthesised images")
+    if not results:
+        page.add('<p class="missing">Not produced: synthesised images: no '
+                 "<code>eval/synthesis_exp&lt;k&gt;.json</code> to list them (made by rules "
+                 "<code>synthesis_exp1..3</code>).</p>")
         return
-    groups = _synth_images(page)
+    groups = _synth_images(page, results)
     if not groups:
-        page.add(f'<p class="missing">No synthesised image named <code>&lt;cam&gt;_&lt;r&gt;_'
-                 f"&lt;c&gt;</code> under <code>{escape(rel_dir)}/</code>.</p>")
+        page.add('<p class="missing">The synthesis files list no synthesised image.</p>')
         return
 
     want = f"{centre_cam}/{central_view(n_views)}" if centre_cam else None
@@ -482,57 +503,28 @@ def section_fig10(page: Page, n_views: int, centre_cam: str | None) -> None:
                      f"{box[2]} x {box[3]} px</p>" + "".join(crops) + "</div>")
 
 
-def _quality_rows(doc: Mapping) -> dict[str, dict[str, float]]:
-    """``"<cam>/<view>"`` (or view) -> {"psnr", "ssim"} from convert/quality.json."""
-    out: dict[str, dict[str, float]] = {}
-
-    def walk(node, prefix: str):
-        if not isinstance(node, Mapping):
-            return
-        for k in sorted(node):
-            v = node[k]
-            key = f"{prefix}/{k}" if prefix else str(k)
-            if isinstance(v, Mapping) and any(n in v for n in ("psnr", "ssim", "psnr_db")):
-                vals = {n: float(v[m]) for n, m in (("psnr", "psnr"), ("psnr", "psnr_db"),
-                                                     ("ssim", "ssim"))
-                        if src._num(v.get(m)) is not None}
-                if vals:
-                    out[key] = vals
-            elif isinstance(v, Mapping):
-                walk(v, key if (src.CAM_RE.match(str(k)) or src.VIEW_RE.match(str(k)))
-                     else prefix)
-
-    walk(doc, "")
-    return out
-
-
 def section_convert_quality(page: Page, synthetic: bool = True) -> None:
     page.section("convert", "Converter quality (views against ideal renders)")
-    doc = _read(page, "convert_quality")
-    if doc is None and not synthetic:
-        page.add('<p class="note">A real capture has no ideal renders: rule '
-                 "<code>convert_quality</code> runs on synthetic datasets only.</p>")
-        return
+    doc: ConvertQuality | None = _read(page, "convert_quality", read_convert_quality)
     if doc is None:
-        page.missing("convert_quality")
+        _not_read(page, "convert_quality", synthetic, "A real capture has no ideal renders")
         return
-    rows = _quality_rows(doc)
-    if not rows:
+    allq = [q for views in doc.per_view.values() for q in views.values()]
+    if not allq:
         page.add('<p class="missing">convert/quality.json holds no per-view PSNR/SSIM.</p>')
         return
-    by_view: dict[str, list[dict]] = {}
-    for k, v in rows.items():
-        by_view.setdefault(k.split("/")[-1], []).append(v)  # "<cam>/<view>" or "<view>"
+    by_view: dict[str, list] = {}
+    for views in doc.per_view.values():
+        for v, q in views.items():
+            by_view.setdefault(v, []).append(q)
 
     def mean(lst, n):
-        x = [d[n] for d in lst if n in d]
-        return float(np.mean(x)) if x else None
+        return float(np.mean([getattr(q, n) for q in lst]))
 
-    allr = list(rows.values())
-    page.add(f'<span class="kpi">mean PSNR<b>{_fmt(mean(allr, "psnr"), 2, " dB")}</b>'
-             f'{len(allr)} views</span><span class="kpi">mean SSIM'
-             f'<b>{_fmt(mean(allr, "ssim"), 4)}</b>&nbsp;</span>')
-    body = "".join(f"<tr><td class=l>{escape(v)}</td><td>{_fmt(mean(lst, 'psnr'), 2)}</td>"
+    page.add(f'<span class="kpi">mean PSNR<b>{_fmt(mean(allq, "psnr_db"), 2, " dB")}</b>'
+             f'{len(allq)} views</span><span class="kpi">mean SSIM'
+             f'<b>{_fmt(mean(allq, "ssim"), 4)}</b>&nbsp;</span>')
+    body = "".join(f"<tr><td class=l>{escape(v)}</td><td>{_fmt(mean(lst, 'psnr_db'), 2)}</td>"
                    f"<td>{_fmt(mean(lst, 'ssim'), 4)}</td><td>{len(lst)}</td></tr>"
                    for v, lst in sorted(by_view.items()))
     page.add('<table id="convert-quality"><tr><th class=l>view</th><th>PSNR [dB]</th>'
@@ -558,27 +550,21 @@ def section_thumbs(page: Page, anchor: str, title: str, items: Sequence[tuple[st
 
 def section_summary(page: Page) -> None:
     page.section("summary", "Calibration summary")
-    found = False
-    sc = _read(page, "scale")
+    sc = _read(page, "scale", read_scale)
     if sc is not None:
-        found = True
-        spread = sc.get("spread", {})
         page.add('<span class="kpi">scale r (Eq. 5)<b>'
-                 f"{float(sc.get('r_used', sc.get('r', float('nan')))):.6g}</b>"
-                 f"{escape(str(sc.get('estimator', 'mean')))}; relative spread "
-                 f"{_fmt(spread.get('relative'), 4)} over {_fmt(spread.get('n_shots'))} shots "
-                 f"{page.link(src.SOURCES['scale'][0], '[source]')}</span>")
-    rig = _read(page, "rig")
+                 f"{sc.r_used:.6g}</b>{escape(sc.estimator)}; relative spread "
+                 f"{_fmt(sc.spread.get('relative'), 4)} over {_fmt(sc.spread.get('n_shots'))} "
+                 f"shots {page.link(src.SOURCES['scale'][0], '[source]')}</span>")
+    rig = _read(page, "rig", read_rig)
     if rig is not None:
-        found = True
-        chk = rig.get("check") or {}
-        model = str(rig.get("model"))
-        m = rig.get(model) if isinstance(rig.get(model), Mapping) else {}
-        page.add('<span class="kpi">registration B<b>' + escape(model) + " model</b>"
-                 f"B = {_fmt(m.get('B'), 5)} mm, {rig.get('n_views')} x {rig.get('n_views')} "
-                 f"views; Eqs. 2-3 check: {escape(str(chk.get('verdict', '-')))} "
+        chk = rig.doc.get("check") or {}
+        page.add('<span class="kpi">registration B<b>' + escape(rig.model) + " model</b>"
+                 f"B = {_fmt(rig.doc[rig.model].get('B'), 5)} mm, {rig.n_views} x "
+                 f"{rig.n_views} views; Eqs. 2-3 check: "
+                 f"{escape(str(chk.get('verdict', '-')))} "
                  f"{page.link(src.SOURCES['rig'][0], '[source]')}</span>")
-    if not found:
+    if sc is None and rig is None and _absent(page, "scale") and _absent(page, "rig"):
         page.missing("scale")
         page.missing("rig")
 
@@ -671,10 +657,15 @@ def build_report(results: str | Path, out_path: str | Path, dataset: str, *,
                  "The paper: 29.98 dB from the central views, 29.32 dB from the lateral "
                  "views."),
     }
+    synthesis: dict[str, SynthesisResult] = {}
     for key, (title, paper) in papers.items():
-        _psnr_section(page, key, title, paper, n_views, max(cols, 1), max(rows, 1))
+        page.section(key, title)
+        result = _read(page, key, read_synthesis)
+        if result is not None:
+            synthesis[key] = result
+        _psnr_section(page, key, result, paper, n_views, max(cols, 1), max(rows, 1))
         say(title)
-    section_fig10(page, n_views, centre_cam)
+    section_fig10(page, synthesis, n_views, centre_cam)
     section_convert_quality(page, synthetic)
     section_thumbs(page, "patch", "Patch size per microlens (converter)",
                    [(f"views/{c}/patch_size.png", c) for c in cams], "convert",

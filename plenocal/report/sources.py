@@ -1,31 +1,21 @@
-"""What the report reads, where it lives, which rule makes it, and how its numbers
-are pulled out of the evaluation files.
+"""What the report reads, where it lives, which rule makes it, and how its figures are
+laid out as in Table I and Figs. 7-9.
 
-Paths are relative to ``results/<dataset>/``. The readers accept the layouts that the
-verification rules write (see :mod:`plenocal.verify.reprojection`, the synthesis
-rules and :mod:`plenocal.verify.gt_errors`) and tolerate a few equivalent spellings,
-so that the report degrades to a clear "not produced" line instead of failing when a
-stage is absent or older.
+Paths are relative to ``results/<dataset>/``. The evaluation files are read through
+their typed definitions (:mod:`plenocal.artifacts.results`): the experiment, the camera
+sets and the metric are fields of a file, never guessed from its structure or its name.
 """
 
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
-from plenocal.names import (
-    SHOT_PATTERN,
-    VIEW_PATTERN,
-    array_position,
-    key_shot,
-    key_view,
-    parse_view,
-    split_key,
-)
+from plenocal.artifacts.results import PsnrTable, ReprojectionTable
+from plenocal.names import array_position, key_shot, key_view, parse_view, split_key
 
 #: source key -> (path under results/<d>/, the rule that makes it)
 SOURCES: dict[str, tuple[str, str]] = {
@@ -37,12 +27,12 @@ SOURCES: dict[str, tuple[str, str]] = {
     "calibration": ("calibration/cameras.json", "merge"),
     "ground_truth": ("ground_truth/cameras.json", "ground_truth"),
     "convert_quality": ("convert/quality.json", "convert_quality"),
-    "synth_dir": ("eval/synth", "synthesis_exp1..3"),
     "scale": ("merge/scale.json", "scale"),
     "rig": ("reg_b/rig.json", "rig_b"),
 }
 
-#: Table I of the paper: row key -> (label, paper's mean error px, paper's image count)
+#: Table I of the paper: row key (plenocal.artifacts.results.TABLE1_ROWS, in that order) ->
+#: (label, paper's mean error px, paper's image count)
 PAPER_TABLE1 = {
     "reg_a": ("Registration A (central views, SfM)", 0.663, "21 + 7"),
     "reg_b": ("Registration B (N x N set, mean over sets)", 0.450, "25"),
@@ -53,32 +43,11 @@ PAPER_TABLE1 = {
                      None),
 }
 
-_ALIASES = {
-    "reg_a": ("reg_a", "registration_a", "A", "a"),
-    "reg_b": ("reg_b", "registration_b", "B", "b"),
-    "complete": ("complete", "complete_ab", "merged", "calibration"),
-    "baseline_sfm": ("baseline_sfm", "a_sfm", "naive", "baseline", "complete_a_sfm"),
-    "sfm_scratch": ("sfm_scratch", "sfm_from_scratch", "scratch", "plain_sfm"),
-    "ground_truth": ("ground_truth", "truth", "gt"),
-}
-
-CAM_RE = re.compile(rf"^({SHOT_PATTERN})$")
-VIEW_RE = re.compile(rf"^({VIEW_PATTERN})$")
-KEY_RE = re.compile(rf"^({SHOT_PATTERN})/({VIEW_PATTERN})$")
-
-
 def _num(v) -> float | None:
     if isinstance(v, bool) or v is None:
         return None
     if isinstance(v, int | float) and math.isfinite(float(v)):
         return float(v)
-    return None
-
-
-def _first(doc: Mapping, *names: str):
-    for n in names:
-        if n in doc and doc[n] is not None:
-            return doc[n]
     return None
 
 
@@ -100,65 +69,49 @@ class Table1Row:
     note: str = ""
 
 
-def _stats_of(entry: Mapping) -> tuple[float | None, float | None, int | None, int | None]:
-    mean = _num(_first(entry, "mean_px", "mean", "mean_error_px"))
-    median = _num(_first(entry, "median_px", "median", "median_error_px"))
-    n_img = _first(entry, "num_images", "n_images", "images")
-    n_obs = _first(entry, "num_observations", "n_observations", "observations")
-    return (mean, median, int(n_img) if _num(n_img) is not None else None,
-            int(n_obs) if _num(n_obs) is not None else None)
+def _count(entry: Mapping, key: str) -> int | None:
+    return None if _num(entry.get(key)) is None else int(entry[key])
 
 
-def _image_count(entry: Mapping, n: int | None) -> str:
+def _image_count(entry: Mapping) -> str:
     """The paper writes array + hand-held counts ("21 + 7") where they are known."""
-    a, h = _first(entry, "num_array_images"), _first(entry, "num_handheld_images")
-    if _num(a) is not None and _num(h) is not None:
-        return f"{int(a)} + {int(h)}"
+    a, h = _count(entry, "num_array_images"), _count(entry, "num_handheld_images")
+    if a is not None and h is not None:
+        return f"{a} + {h}"
+    n = _count(entry, "num_images")
     return "-" if n is None else str(n)
 
 
-def table1_rows(doc: Mapping) -> list[Table1Row]:
-    """Rows of Table I from ``reprojection.json``: registration A, B (the mean over
-    the sets when per-set figures are given), complete, the A+SfM baseline and SfM
-    from scratch, each with the paper's value beside it."""
+def table1_rows(table: ReprojectionTable) -> list[Table1Row]:
+    """Rows of Table I: registration A, B (the mean over the sets), complete, the A+SfM
+    baseline, SfM from scratch and the ground-truth cameras, each with the paper's value
+    beside it; a row the paper has and the table lacks says so."""
     rows = []
     for key, (label, paper, paper_n) in PAPER_TABLE1.items():
-        entry = None
-        for alias in _ALIASES[key]:
-            if isinstance(doc.get(alias), Mapping):
-                entry = doc[alias]
-                break
+        entry = table.rows.get(key)
         if entry is None:
             if paper is not None:
                 rows.append(Table1Row(key, label, None, None, "-", None, paper, paper_n,
                                       "not in reprojection.json"))
             continue
-        mean, median, n_img, n_obs = _stats_of(entry)
-        note = ""
-        sets = entry.get("sets") or entry.get("per_set")
-        if mean is None and isinstance(sets, Mapping) and sets:
-            st = [_stats_of(v) for v in sets.values() if isinstance(v, Mapping)]
-            means = [s[0] for s in st if s[0] is not None]
-            medians = [s[1] for s in st if s[1] is not None]
-            mean = float(np.mean(means)) if means else None
-            median = float(np.mean(medians)) if medians else None
-            counts = sorted({s[2] for s in st if s[2] is not None})
-            n_img = counts[0] if len(counts) == 1 else None
-            n_obs = int(sum(s[3] for s in st if s[3] is not None)) or None
-        if isinstance(sets, Mapping) and sets:
-            means = [m for m, *_ in (_stats_of(v) for v in sets.values()
-                                     if isinstance(v, Mapping)) if m is not None]
-            note = f"mean over {len(sets)} sets"
-            if means:
-                note += f" (range {min(means):.3f}-{max(means):.3f} px)"
-        registered = _first(entry, "num_registered", "registered_images")
-        if _num(registered) is not None:
-            of = f" of {n_img}" if n_img is not None else ""
-            note = (note + "; " if note else "") + f"{int(registered)}{of} views registered"
-        images = _image_count(entry, n_img)
+        notes = []
+        sets = entry.get("sets") or {}
+        if sets:
+            means = [m for m in (_num(v.get("mean_px")) for v in sets.values()) if m is not None]
+            notes.append(f"mean over {len(sets)} sets"
+                         + (f" (range {min(means):.3f}-{max(means):.3f} px)" if means else ""))
+        n_img = _count(entry, "num_images")
+        registered = _count(entry, "num_registered")
+        if registered is not None:
+            notes.append(f"{registered}{f' of {n_img}' if n_img is not None else ''} views "
+                         "registered")
+        images = _image_count(entry)
         if key == "reg_b" and n_img is not None and images == str(n_img):
             images = f"{n_img} per set"
-        rows.append(Table1Row(key, label, mean, median, images, n_obs, paper, paper_n, note))
+        rows.append(Table1Row(key, label, _num(entry.get("mean_px")),
+                              _num(entry.get("median_px")), images,
+                              _count(entry, "num_observations"), paper, paper_n,
+                              "; ".join(notes)))
     return rows
 
 
@@ -219,93 +172,13 @@ def table1_verdict(rows: list[Table1Row]) -> tuple[float, float] | None:
 # PSNR of the view-synthesis experiments
 # ---------------------------------------------------------------------------
 
-_GENERIC = {"psnr", "psnr_db", "per_view", "views", "results", "targets", "values", "db",
-            "calibrations", "sets"}
-
-
-@dataclass
-class PsnrSet:
-    """One PSNR table: ``values`` ``"<cam>/<view>"`` -> dB, ``inputs`` the input views."""
-
-    name: str
-    values: dict[str, float]
-    inputs: list[str]
-
-
-def _psnr_value(v) -> float | None:
-    if isinstance(v, Mapping):
-        return _num(_first(v, "psnr", "psnr_db", "PSNR"))
-    return _num(v)
-
-
-def _as_key(k: str, default_cam: str | None, default_view: str | None) -> str | None:
-    if KEY_RE.match(k):
-        return k
-    if CAM_RE.match(k) and default_view is not None:
-        return f"{k}/{default_view}"
-    if VIEW_RE.match(k) and default_cam is not None:
-        return f"{default_cam}/{k}"
-    return None
-
-
-def _inputs_of(node: Mapping, default_cam: str | None, default_view: str | None) -> list[str]:
-    raw = _first(node, "inputs", "input_views", "sources")
-    if not isinstance(raw, list):
-        return []
-    out = []
-    for k in raw:
-        if isinstance(k, str):
-            key = _as_key(k, default_cam, default_view)
-            if key:
-                out.append(key)
-    return out
-
-
-def psnr_sets(doc: Mapping, central: str, default_cam: str | None = None) -> list[PsnrSet]:
-    """Every PSNR table in a synthesis JSON, named by its path (e.g. ``calibrated``,
-    ``ground_truth``, ``lateral/ground_truth``). A table is a mapping whose keys are
-    views (``<cam>/<view>``, ``<cam>`` meaning its central view, or ``<r>_<c>`` of
-    ``default_cam``'s set) and whose values are numbers or ``{"psnr": ...}``."""
-    found: list[PsnrSet] = []
-    default_cam = _first(doc, "cam", "shot", "set") if isinstance(
-        _first(doc, "cam", "shot", "set"), str) else default_cam
-
-    def walk(node, path: list[str], inputs: list[str]):
-        if not isinstance(node, Mapping):
-            return
-        inputs = _inputs_of(node, default_cam, central) or inputs
-        values = {}
-        for k, v in node.items():
-            key = _as_key(str(k), default_cam, central)
-            p = _psnr_value(v) if key else None
-            if key and p is not None:
-                values[key] = p
-        if values:
-            name = "/".join(x for x in path if x.lower() not in _GENERIC) or "calibrated"
-            found.append(PsnrSet(name, dict(sorted(values.items())), sorted(set(inputs))))
-            return
-        for k in sorted(node):
-            if isinstance(node[k], Mapping):
-                walk(node[k], path + [str(k)], inputs)
-
-    walk(doc, [], [])
-    return found
-
-
-def summary_numbers(doc: Mapping) -> dict[str, float]:
-    """Top-level scalar figures of a synthesis JSON (mean PSNR, dB lost, ...), flattened
-    one level (``{"ground_truth": {"mean_psnr": 30}}`` -> ``ground_truth.mean_psnr``)."""
-    out = {}
-    for k in sorted(doc):
-        v = doc[k]
-        if _num(v) is not None:
-            out[k] = float(v)
-        elif isinstance(v, Mapping):
-            for k2 in sorted(v):
-                if _num(v[k2]) is not None and not (KEY_RE.match(k2) or CAM_RE.match(k2)
-                                                    or VIEW_RE.match(k2)):
-                    out[f"{k}.{k2}"] = float(v[k2])
-    return out
+def table_name(t: PsnrTable, primary_renderer: str) -> str:
+    """A PSNR table's name on the page, from its fields: the renderer when it is not the
+    experiment's primary one, ``true_depth`` for the simulator's depth, the camera set
+    and the run (Exp. 2's set, Exp. 3's inputs), e.g. ``complete/lateral``."""
+    parts = [t.renderer if t.renderer != primary_renderer else "",
+             "true_depth" if t.depth == "true" else "", t.cameras, t.run]
+    return "/".join(p for p in parts if p)
 
 
 @dataclass
@@ -323,14 +196,14 @@ class Grid:
     outside: dict[str, float]  # values that have no place in the grid (hand-held shots)
 
 
-def layout(ps: PsnrSet, n_views: int, cols: int, rows: int) -> Grid:
+def layout(ps: PsnrTable, n_views: int, cols: int, rows: int) -> Grid:
     """Place a PSNR table on the array (one cell per shot: Fig. 7), on one N x N set
     (Fig. 8) or on every view of the array (Fig. 9), by what its keys cover."""
-    keys = list(ps.values) + list(ps.inputs)
+    keys = list(ps.psnr_db) + list(ps.inputs)
     cams = sorted({key_shot(k) for k in keys})
     vws = sorted({key_view(k) for k in keys})
     array_cams = [c for c in cams if array_position(c) is not None]
-    outside = {k: v for k, v in ps.values.items() if array_position(key_shot(k)) is None}
+    outside = {k: v for k, v in ps.psnr_db.items() if array_position(key_shot(k)) is None}
     inputs = set(ps.inputs)
     if len(vws) == 1 and array_cams:
         kind, R, C = "shots", rows, cols
@@ -356,9 +229,9 @@ def layout(ps: PsnrSet, n_views: int, cols: int, rows: int) -> Grid:
         rc = cell(key)
         if rc is None or not (0 <= rc[0] < R and 0 <= rc[1] < C):
             continue
-        if key in ps.values:
-            values[rc] = ps.values[key]
-            titles[rc] = f"{key}: {ps.values[key]:.2f} dB"
+        if key in ps.psnr_db:
+            values[rc] = ps.psnr_db[key]
+            titles[rc] = f"{key}: {ps.psnr_db[key]:.2f} dB"
         if key in inputs:
             marks[rc] = "input"
             titles[rc] = f"{key}: input view"
@@ -376,38 +249,12 @@ def layout(ps: PsnrSet, n_views: int, cols: int, rows: int) -> Grid:
                 (n_views, n_views) if kind == "views" else None, kind != "views", outside)
 
 
-def shot_means(ps: PsnrSet) -> dict[str, float]:
+def shot_means(ps: PsnrTable) -> dict[str, float]:
     """Mean PSNR per shot (the summary of a Fig. 9 grid)."""
     acc: dict[str, list[float]] = {}
-    for k, v in ps.values.items():
+    for k, v in ps.psnr_db.items():
         acc.setdefault(key_shot(k), []).append(v)
     return {c: float(np.mean(v)) for c, v in sorted(acc.items())}
-
-
-def db_lost(sets: list[PsnrSet]) -> list[tuple[str, str, float, int]]:
-    """(calibrated set, ground-truth set, mean dB lost, views compared) for every set
-    whose name has a ground-truth twin (``ground_truth`` / ``gt`` in its path)."""
-    def is_gt(name: str) -> bool:
-        return any(p in ("ground_truth", "gt", "truth", "gt_cameras")
-                   for p in name.split("/"))
-
-    def strip(name: str) -> str:
-        return "/".join(p for p in name.split("/") if p not in (
-            "ground_truth", "gt", "truth", "gt_cameras", "calibrated", "calibration",
-            "estimated", "complete"))
-
-    out = []
-    gts = [s for s in sets if is_gt(s.name)]
-    for s in sets:
-        if is_gt(s.name):
-            continue
-        for g in gts:
-            if strip(g.name) == strip(s.name):
-                common = sorted(set(s.values) & set(g.values))
-                if common:
-                    lost = float(np.mean([g.values[k] - s.values[k] for k in common]))
-                    out.append((s.name, g.name, lost, len(common)))
-    return out
 
 
 # ---------------------------------------------------------------------------
@@ -425,10 +272,6 @@ WARNING_SOURCES: tuple[str, ...] = (
     "reg_b/rig.json",  # registration B: Eqs. 2-3 inverse check
     "merge/scale.json",  # scale r (Eq. 5): spread between shots
     "calibration/cameras.json",
-    "eval/reprojection.json",
-    "eval/synthesis_exp1.json",
-    "eval/synthesis_exp2.json",
-    "eval/synthesis_exp3.json",
 )
 
 
@@ -446,7 +289,7 @@ def _messages(raw) -> list[str]:
     out = []
     for w in items:
         if isinstance(w, Mapping):
-            text = _first(w, "message", "text", "warning")
+            text = w.get("message")
             out.append(str(text) if text is not None else
                        ", ".join(f"{k}: {w[k]}" for k in sorted(w)))
         elif w is not None and str(w).strip():

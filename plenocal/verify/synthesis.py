@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from plenocal.artifacts.results import CAMERA_SETS, DEPTHS, PsnrTable
 from plenocal.camera import PinholeCamera
 from plenocal.depth.views import estimate_view_depth
 from plenocal.export.mpeg import mpeg_name
@@ -379,4 +380,29 @@ def synthesis_summary(exp: int, runs: dict[tuple[str, str, str], dict],
     renderer's block at the top level, every renderer's under ``renderers``."""
     out = {"renderer": renderers[0], **_block(exp, runs, renderers[0])}
     out["renderers"] = {r: _block(exp, runs, r) for r in renderers[1:]}
+    return out
+
+
+def psnr_tables(exp: int, runs: dict[tuple[str, str, str], dict],
+                renderers: list[str]) -> list[PsnrTable]:
+    """The PSNR tables of ``runs[(renderer, depth, cameras)]`` (the results of
+    :func:`run_experiment`), one per run of the experiment: Exp. 1 one, Exp. 2 one per
+    set (``run`` = its shot), Exp. 3 one per input choice (``central``, ``lateral``).
+    Ordered by renderer (as given), depth, camera set and run."""
+    def parts(res: dict) -> dict[str, dict]:
+        if exp == 1:
+            return {"": res}
+        if exp == 2:
+            return res["sets"]
+        return {v: res[v] for v in ("central", "lateral")}
+
+    out = []
+    for renderer in renderers:
+        for depth in DEPTHS:
+            for cameras in CAMERA_SETS:
+                res = runs.get((renderer, depth, cameras))
+                if res is None:
+                    continue
+                out += [PsnrTable(renderer, depth, cameras, run, tuple(r["inputs"]),
+                                  dict(r["psnr"])) for run, r in sorted(parts(res).items())]
     return out

@@ -1,0 +1,338 @@
+"""The evaluation results that the report reads (Section III of the paper), each with one
+typed definition: its writing, its reading, a format name and version, and a clear
+error for a file of another version (issue 16). What a file holds - the experiment, the
+calibrations compared, the metric - is a field of the file, never parsed from its name.
+
+* ``eval/reprojection.json`` - Table I (rule ``reprojection``): :class:`ReprojectionTable`
+* ``eval/gt_errors.json`` - errors against ground truth (rule ``gt_errors``):
+  :class:`GroundTruthErrors`
+* ``eval/synthesis_exp<k>.json`` - the view-synthesis experiments of Figs. 6-9 (rules
+  ``synthesis_exp1..3``): :class:`SynthesisResult`, with the PSNR tables of Figs. 7-9 and
+  the synthesised images of Fig. 10
+* ``convert/quality.json`` - the converted views against ideal renders (rule
+  ``convert_quality``): :class:`ConvertQuality`
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from plenocal.artifacts.versioned import decode
+from plenocal.io.files import write_json
+
+# ---------------------------------------------------------------------------
+# Table I: eval/reprojection.json
+# ---------------------------------------------------------------------------
+
+TABLE1_FORMAT = "plenocal.table1"
+TABLE1_VERSION = 1
+#: the rows of Table I, in the paper's order (registration A, B, the complete calibration,
+#: the naive A+SfM baseline), then SfM from scratch and the ground-truth cameras
+TABLE1_ROWS = ("reg_a", "reg_b", "complete", "baseline_sfm", "sfm_scratch", "ground_truth")
+
+
+@dataclass(frozen=True)
+class ReprojectionTable:
+    """Table I: row (one of :data:`TABLE1_ROWS`) -> the figures of that calibration as
+    :mod:`plenocal.verify.reprojection` computes them: ``mean_px``, ``median_px``,
+    ``num_images``, ``num_observations``, ``num_array_images`` + ``num_handheld_images``,
+    ``num_registered`` (the baseline), ``sets`` (registration B, one entry per N x N set);
+    ``sfm_scratch`` has image, registration and model counts only."""
+
+    rows: dict[str, dict]
+    metric: str = "reprojection_error_px"  # per observation, after triangulation
+
+    def __post_init__(self) -> None:
+        unknown = sorted(set(self.rows) - set(TABLE1_ROWS))
+        if unknown:
+            raise ValueError(f"Table I: unknown rows {unknown}; the rows are "
+                             f"{', '.join(TABLE1_ROWS)}")
+
+    def to_dict(self) -> dict:
+        return {"format": TABLE1_FORMAT, "version": TABLE1_VERSION, "metric": self.metric,
+                "rows": {k: self.rows[k] for k in TABLE1_ROWS if k in self.rows}}
+
+
+def write_reprojection_table(path: str | Path, table: ReprojectionTable) -> None:
+    write_json(path, table.to_dict())
+
+
+def read_reprojection_table(path: str | Path) -> ReprojectionTable:
+    """Read ``eval/reprojection.json`` (this version only)."""
+    return decode(path, TABLE1_FORMAT, TABLE1_VERSION, "Table I (reprojection.json)",
+                  "run rule reprojection", lambda doc: ReprojectionTable(
+                      rows={k: dict(v) for k, v in doc["rows"].items()},
+                      metric=str(doc["metric"])))
+
+
+# ---------------------------------------------------------------------------
+# Errors against ground truth: eval/gt_errors.json
+# ---------------------------------------------------------------------------
+
+GT_ERRORS_FORMAT = "plenocal.gt_errors"
+GT_ERRORS_VERSION = 1
+
+
+@dataclass(frozen=True)
+class Check:
+    """One target of issues 4-5: ``value`` (None when its stage was not compared) <=
+    ``target`` in ``unit``."""
+
+    name: str
+    what: str
+    value: float | None
+    target: float
+    unit: str
+    passed: bool | None
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "what": self.what, "value": self.value,
+                "target": self.target, "unit": self.unit, "pass": self.passed}
+
+
+@dataclass(frozen=True)
+class GroundTruthErrors:
+    """Every calibration stage against the simulator's ground truth, as
+    :func:`plenocal.verify.gt_errors.gt_errors` computes it: the checks with their
+    verdicts, and per stage (None when not compared) the figures behind them."""
+
+    n_views: int
+    checks: tuple[Check, ...]
+    targets: dict  # check name -> {"limit", "unit", "what"}
+    registration_a: dict | None = None
+    registration_b: dict | None = None
+    scale: dict | None = None
+    complete: dict | None = None
+
+    def to_dict(self) -> dict:
+        out = {"format": GT_ERRORS_FORMAT, "version": GT_ERRORS_VERSION,
+               "n_views": self.n_views, "checks": [c.to_dict() for c in self.checks],
+               "targets": self.targets}
+        for name in _GT_STAGES:
+            if getattr(self, name) is not None:
+                out[name] = getattr(self, name)
+        return out
+
+    @classmethod
+    def from_dict(cls, doc: Mapping) -> GroundTruthErrors:
+        """From the result of :func:`plenocal.verify.gt_errors.gt_errors` (or a read file)."""
+        return cls(n_views=int(doc["n_views"]),
+                   checks=tuple(Check(str(c["name"]), str(c["what"]),
+                                      None if c["value"] is None else float(c["value"]),
+                                      float(c["target"]), str(c["unit"]),
+                                      None if c["pass"] is None else bool(c["pass"]))
+                                for c in doc["checks"]),
+                   targets=dict(doc["targets"]),
+                   **{n: dict(doc[n]) for n in _GT_STAGES if doc.get(n) is not None})
+
+
+_GT_STAGES = ("registration_a", "registration_b", "scale", "complete")
+
+
+def write_gt_errors(path: str | Path, errors: GroundTruthErrors) -> None:
+    write_json(path, errors.to_dict())
+
+
+def read_gt_errors(path: str | Path) -> GroundTruthErrors:
+    """Read ``eval/gt_errors.json`` (this version only)."""
+    return decode(path, GT_ERRORS_FORMAT, GT_ERRORS_VERSION, "gt_errors.json",
+                  "run rule gt_errors", GroundTruthErrors.from_dict)
+
+
+# ---------------------------------------------------------------------------
+# View synthesis: eval/synthesis_exp<k>.json
+# ---------------------------------------------------------------------------
+
+SYNTHESIS_FORMAT = "plenocal.synthesis"
+SYNTHESIS_VERSION = 1
+EXPERIMENTS = (1, 2, 3)
+#: the camera sets a synthesis is rendered with (``ground_truth`` on synthetic data only)
+CAMERA_SETS = ("complete", "ground_truth")
+#: the depth maps it is rendered from: the project's, or the simulator's true depth
+DEPTHS = ("estimated", "true")
+
+
+@dataclass(frozen=True)
+class PsnrTable:
+    """One run of an experiment: the targets' PSNR [dB] against the captured views,
+    synthesised from ``inputs`` by ``renderer`` with the ``depth`` maps and the
+    ``cameras``. ``run``: "" (Exp. 1), the set's shot (Exp. 2), or the inputs of Exp. 3,
+    ``central`` or ``lateral``."""
+
+    renderer: str  # dibr | rvs
+    depth: str  # one of DEPTHS
+    cameras: str  # one of CAMERA_SETS
+    run: str
+    inputs: tuple[str, ...]  # "<shot>/<view>"
+    psnr_db: dict[str, float]  # target "<shot>/<view>" -> dB
+
+    def __post_init__(self) -> None:
+        if self.depth not in DEPTHS or self.cameras not in CAMERA_SETS:
+            raise ValueError(f"PSNR table: depth {self.depth!r} (use {', '.join(DEPTHS)}), "
+                             f"cameras {self.cameras!r} (use {', '.join(CAMERA_SETS)})")
+
+    @property
+    def mean_db(self) -> float | None:
+        return float(np.mean(list(self.psnr_db.values()))) if self.psnr_db else None
+
+    def to_dict(self) -> dict:
+        return {"renderer": self.renderer, "depth": self.depth, "cameras": self.cameras,
+                "run": self.run, "inputs": list(self.inputs), "psnr_db": self.psnr_db}
+
+
+@dataclass(frozen=True)
+class SynthImage:
+    """A synthesised view kept for Fig. 10: ``path`` relative to the folder of the
+    synthesis file, ``view`` ``"<shot>/<view>"``, ``cameras`` and ``run`` as in
+    :class:`PsnrTable` (the primary renderer, the estimated depth)."""
+
+    path: str
+    view: str
+    cameras: str
+    run: str
+
+    def to_dict(self) -> dict:
+        return {"path": self.path, "view": self.view, "cameras": self.cameras, "run": self.run}
+
+
+@dataclass(frozen=True)
+class SynthesisResult:
+    """One view-synthesis experiment (Section III, Fig. 6): its PSNR tables, the images
+    kept for Fig. 10, and ``summary``, the figures of
+    :func:`plenocal.verify.synthesis.synthesis_summary` per renderer, depth and camera set (means,
+    the dB lost, the depth's quality, the timings) for people and ``bench/``."""
+
+    experiment: int
+    renderer: str  # the primary renderer (verify.renderer)
+    tables: tuple[PsnrTable, ...]
+    images: tuple[SynthImage, ...] = ()
+    summary: dict = field(default_factory=dict)
+    metric: str = "psnr_db"
+
+    def __post_init__(self) -> None:
+        if self.experiment not in EXPERIMENTS:
+            raise ValueError(f"synthesis: no experiment {self.experiment} (1, 2 or 3)")
+
+    def db_lost(self) -> list[tuple[PsnrTable, PsnrTable, float, int]]:
+        """(complete, ground truth, mean dB lost to calibration, views compared) for every
+        table of the complete calibration whose twin with the ground-truth cameras (same
+        renderer, depth and run) shares targets with it."""
+        truth = {(t.renderer, t.depth, t.run): t for t in self.tables
+                 if t.cameras == "ground_truth"}
+        out = []
+        for t in self.tables:
+            g = truth.get((t.renderer, t.depth, t.run))
+            if t.cameras != "complete" or g is None:
+                continue
+            common = sorted(set(t.psnr_db) & set(g.psnr_db))
+            if common:
+                out.append((t, g, float(np.mean([g.psnr_db[k] - t.psnr_db[k]
+                                                 for k in common])), len(common)))
+        return out
+
+    def to_dict(self) -> dict:
+        return {"format": SYNTHESIS_FORMAT, "version": SYNTHESIS_VERSION,
+                "experiment": self.experiment, "metric": self.metric,
+                "renderer": self.renderer, "tables": [t.to_dict() for t in self.tables],
+                "images": [i.to_dict() for i in self.images], "summary": self.summary}
+
+
+def write_synthesis(path: str | Path, result: SynthesisResult) -> None:
+    write_json(path, result.to_dict())
+
+
+def read_synthesis(path: str | Path) -> SynthesisResult:
+    """Read ``eval/synthesis_exp<k>.json`` (this version only)."""
+    return decode(path, SYNTHESIS_FORMAT, SYNTHESIS_VERSION, "synthesis result",
+                  "rerun rule synthesis_exp<k>", lambda doc: SynthesisResult(
+                      experiment=int(doc["experiment"]), renderer=str(doc["renderer"]),
+                      tables=tuple(PsnrTable(
+                          str(t["renderer"]), str(t["depth"]), str(t["cameras"]),
+                          str(t["run"]), tuple(t["inputs"]),
+                          {k: float(v) for k, v in t["psnr_db"].items()})
+                          for t in doc["tables"]),
+                      images=tuple(SynthImage(str(i["path"]), str(i["view"]),
+                                              str(i["cameras"]), str(i["run"]))
+                                   for i in doc["images"]),
+                      summary=dict(doc["summary"]), metric=str(doc["metric"])))
+
+
+# ---------------------------------------------------------------------------
+# Converter quality: convert/quality.json
+# ---------------------------------------------------------------------------
+
+QUALITY_FORMAT = "plenocal.convert_quality"
+QUALITY_VERSION = 1
+
+
+@dataclass(frozen=True)
+class ViewQuality:
+    psnr_db: float
+    ssim: float
+
+
+@dataclass(frozen=True)
+class ConvertQuality:
+    """Every converted view against the simulator's ideal render, excluding a border, as
+    :func:`plenocal.convert.quality.dataset_quality` computes it: per shot and view, the
+    means (all views and the central views), the worst view and the verdict against the
+    targets."""
+
+    per_view: dict[str, dict[str, ViewQuality]]  # shot -> view -> quality
+    border_px: int
+    central_view: str
+    mean_psnr_db: float | None
+    mean_ssim: float | None
+    mean_psnr_central_db: float | None
+    mean_ssim_central: float | None
+    min_psnr_db: float | None
+    worst_view: str | None
+    targets: dict  # figure -> the least it may be
+    meets_targets: bool
+
+    @property
+    def views(self) -> int:
+        return sum(len(v) for v in self.per_view.values())
+
+    def to_dict(self) -> dict:
+        return {"format": QUALITY_FORMAT, "version": QUALITY_VERSION,
+                "per_view": {c: {v: {"psnr_db": q.psnr_db, "ssim": q.ssim}
+                                 for v, q in views.items()}
+                             for c, views in self.per_view.items()},
+                "border_px": self.border_px, "central_view": self.central_view,
+                "mean_psnr_db": self.mean_psnr_db, "mean_ssim": self.mean_ssim,
+                "mean_psnr_central_db": self.mean_psnr_central_db,
+                "mean_ssim_central": self.mean_ssim_central, "min_psnr_db": self.min_psnr_db,
+                "worst_view": self.worst_view, "views": self.views, "targets": self.targets,
+                "meets_targets": self.meets_targets}
+
+    @classmethod
+    def from_dict(cls, doc: Mapping) -> ConvertQuality:
+        """From the result of :func:`plenocal.convert.quality.dataset_quality` (or a read
+        file)."""
+        def opt(key: str) -> float | None:
+            return None if doc[key] is None else float(doc[key])
+
+        return cls(per_view={c: {v: ViewQuality(float(q["psnr_db"]), float(q["ssim"]))
+                                 for v, q in views.items()}
+                             for c, views in doc["per_view"].items()},
+                   border_px=int(doc["border_px"]), central_view=str(doc["central_view"]),
+                   mean_psnr_db=opt("mean_psnr_db"), mean_ssim=opt("mean_ssim"),
+                   mean_psnr_central_db=opt("mean_psnr_central_db"),
+                   mean_ssim_central=opt("mean_ssim_central"), min_psnr_db=opt("min_psnr_db"),
+                   worst_view=doc["worst_view"], targets=dict(doc["targets"]),
+                   meets_targets=bool(doc["meets_targets"]))
+
+
+def write_convert_quality(path: str | Path, quality: ConvertQuality) -> None:
+    write_json(path, quality.to_dict())
+
+
+def read_convert_quality(path: str | Path) -> ConvertQuality:
+    """Read ``convert/quality.json`` (this version only)."""
+    return decode(path, QUALITY_FORMAT, QUALITY_VERSION, "converter quality (quality.json)",
+                  "run rule convert_quality", ConvertQuality.from_dict)
