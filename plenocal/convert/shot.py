@@ -49,7 +49,6 @@ from plenocal.convert.render import (
     RenderPlan,
     RenderSettings,
     make_plans,
-    render_source,
     render_view,
     rim_reach,
 )
@@ -232,7 +231,6 @@ class ShotConversion:
             log.info("%s: 16-bit image with %d significant bits (max %d)", source, self.bits,
                      int(image.max()))
         self._source = to_unit_float(image, self.bits)
-        self._render_source: np.ndarray | None = None  # render_source(_source), on demand
         q = st.view_spacing_px if st.view_spacing_px is not None else view_spacing(
             calib.safe_diameter, n_views)
         max_q = math.hypot(1, 1) * (n_views - 1) / 2 * q
@@ -288,10 +286,7 @@ class ShotConversion:
         return self._plans[min(reach, len(self._plans) - 1)]
 
     def view_float(self, r: int, c: int) -> np.ndarray:
-        if self._render_source is None:
-            self._render_source = render_source(self._source)
-        return render_view(self.plan_for(r, c), self._render_source, r, c,
-                           channels=1 if self._source.ndim == 2 else self._source.shape[2])
+        return render_view(self.plan_for(r, c), self._source, r, c)
 
     def view(self, r: int, c: int) -> np.ndarray:
         """View (r, c) as uint8 RGB (layout.height x layout.width x 3)."""
