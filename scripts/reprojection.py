@@ -22,7 +22,7 @@ if sm.rule == "reprojection":
         s = read_json(sm.input.scratch[0])
         doc["sfm_scratch"] = {"num_images": s["num_images"],
                               "num_registered": s["registered_largest_model"],
-                              "num_models": s["num_models"], "mapping_s": s["mapping_s"],
+                              "num_models": s["num_models"],
                               "focal_px": s.get("focal_px")}
     doc["baseline_sfm"]["num_registered"] = base["a_sfm_registered"]
     for name, row in doc.items():

@@ -218,7 +218,7 @@ def match_views(database: str | Path, *,
              len(pairs), n_verified, seconds)
     return {"num_images": len(names), "num_pairs": len(pairs),
             "num_verified_pairs": int(n_verified), "shot_neighbours": shot_neighbours,
-            "view_radius": view_radius, "matching_s": seconds}
+            "view_radius": view_radius}
 
 
 def match_view_database(features: str | Path, database: str | Path, **kwargs) -> dict:
