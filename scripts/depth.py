@@ -10,12 +10,7 @@ import cv2  # (first: see DESIGN.md on cv2/pycolmap)
 from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.artifacts.rig import read_rig
 from plenocal.depth import estimate_depth, resolve_backend
-from plenocal.depth.inputs import (
-    nearest_sources,
-    preview,
-    reg_a_bounds,
-    rig_bounds,
-)
+from plenocal.depth.inputs import depth_job_a, depth_job_b, preview
 from plenocal.io.files import read_image, write_image, write_json, write_npy
 from plenocal.rulelog import rule_logger
 
@@ -31,33 +26,19 @@ margin = float(cfg["bounds_margin"])
 views_dir = Path(snakemake.params.views_dir)
 
 if reg == "a":
-    reg_a = read_reg_a(snakemake.input.reg_a)
-    cameras = reg_a.cameras
-    if cam not in cameras:
-        raise ValueError(f"depth: shot {cam} is not registered in {snakemake.input.reg_a}; "
-                         "look at the registration A log for why")
-    near, far = reg_a_bounds(reg_a, cam, snakemake.params.model_dir, margin)
-    srcs = nearest_sources(cam, cameras, int(cfg["sources_a"]))
-    ref_cam, src_cams = cameras[cam], [cameras[s] for s in srcs]
-    ref_path = views_dir / cam / f"{centre}.png"
-    src_paths = [views_dir / s / f"{centre}.png" for s in srcs]
-    units = "sfm"
+    job = depth_job_a(read_reg_a(snakemake.input.reg_a), snakemake.input.reg_a, cam, centre,
+                      views_dir, snakemake.params.model_dir, int(cfg["sources_a"]), margin)
 else:
-    rig = read_rig(snakemake.input.rig)
-    cameras = rig.cameras()
-    near, far = rig_bounds(rig, margin)
-    srcs = nearest_sources(centre, cameras, cfg["sources_b"])
-    ref_cam, src_cams = cameras[centre], [cameras[s] for s in srcs]
-    ref_path = views_dir / cam / f"{centre}.png"
-    src_paths = [views_dir / cam / f"{s}.png" for s in srcs]
-    units = "m"
+    job = depth_job_b(read_rig(snakemake.input.rig), cam, centre, views_dir, cfg["sources_b"],
+                      margin)
+near, far, units, srcs = job.near, job.far, job.units, job.src_names
 
 backend = resolve_backend(cfg["backend"])
 log.info("%s/%s: backend %s, bounds [%.6g, %.6g] %s, sources %s", reg, cam, backend, near,
          far, units, ", ".join(srcs))
 t0 = time.perf_counter()
-depth = estimate_depth(ref_cam, read_image(ref_path), src_cams,
-                       [read_image(p) for p in src_paths], near, far, cfg, backend=backend)
+depth = estimate_depth(job.ref_cam, read_image(job.ref_path), job.src_cams,
+                       [read_image(p) for p in job.src_paths], near, far, cfg, backend=backend)
 valid = float((depth > 0).mean())
 log.info("%s/%s: %.1f s, %.1f %% valid", reg, cam, time.perf_counter() - t0, 100 * valid)
 write_npy(snakemake.output.depth, depth)

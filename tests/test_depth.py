@@ -248,3 +248,26 @@ def test_plane_homographies_match_the_single_plane_homography(texture):
     for h, d in zip(hs, depths, strict=True):
         np.testing.assert_allclose(h, plane_homography(ref, srcs[2], float(d)), rtol=1e-12,
                                    atol=1e-12)
+
+
+def test_depth_jobs_of_both_registrations():
+    """depth_job_a refuses a shot SfM did not register (naming the file); depth_job_b takes
+    the reference's own set as sources, in metres."""
+    from plenocal.artifacts.disparity import Conversion
+    from plenocal.artifacts.reg_a import RegistrationA
+    from plenocal.artifacts.rig import RigB
+    from plenocal.calib.reg_b import rig
+    from plenocal.calib.reg_b.datasheet import Datasheet
+    from plenocal.depth.inputs import depth_job_a, depth_job_b
+
+    reg_a = RegistrationA(1799.5, 301, 225, "incremental", {})
+    with pytest.raises(ValueError, match=r"shot x01_y00 is not registered in a\.json"):
+        depth_job_a(reg_a, "a.json", "x01_y00", "2_2", "views", None, 2, 0.1)
+    ds = Datasheet(0.0055, 2048, 1536, 600.0, 35.0, 0.13, (2.8,), 5.0, None, 10.0, 470.0,
+                   740.0)
+    conv = Conversion(-4.5, -3.0, 3.0971, 6.0, 23.92, 21.92, 301, 225, 5)
+    job = depth_job_b(RigB(rig.build_rig(ds, [conv], 1799.5, 5, model="exact")), "x01_y00",
+                      "2_2", "views", 4, 0.1)
+    assert job.units == "m" and len(job.src_names) == 4 and "2_2" not in job.src_names
+    assert all(p.parent.name == "x01_y00" for p in job.src_paths)
+    assert str(job.ref_path) == "views/x01_y00/2_2.png" and 0 < job.near < job.far

@@ -83,3 +83,28 @@ def test_merge_with_a_rig_document():
     a, b = cams["x00_y00/2_3"], cams["x00_y00/2_2"]
     assert a.centre[0] - b.centre[0] == pytest.approx(doc["exact"]["B"] / 1000)
     assert a.K[0, 2] - b.K[0, 2] == pytest.approx(doc["exact"]["pp_shift_px"])
+
+
+def test_merge_registrations_checks_its_inputs():
+    """merge_registrations: Eq. 6 for the shots asked for; a shot registration A has no
+    pose for, or a rig built on another focal length, is refused naming the file."""
+    from plenocal.artifacts.reg_a import RegistrationA
+    from plenocal.camera import PinholeCamera
+
+    ds = Datasheet(0.0055, 2048, 1536, 600.0, 35.0, 0.13, (2.8,), 5.0, None, 10.0, 470.0,
+                   740.0)
+    conv = Conversion(-4.5, -3.0, 3.0971, 6.0, 23.92, 21.92, 301, 225, 5)
+    doc = rig.build_rig(ds, [conv], 1799.5, 5, model="exact")
+    K = intrinsics(1799.5, 150.0, 112.0)
+    pose = np.eye(4)
+    pose[:3, 3] = (1.0, 2.0, 3.0)
+    reg_a = RegistrationA(1799.5, 301, 225, "incremental",
+                          {"x00_y00": PinholeCamera(K, pose, 301, 225)})
+    cams = merge.merge_registrations(reg_a, RigB(doc), 0.5, ["x00_y00"])
+    assert len(cams) == 25
+    np.testing.assert_allclose(cams["x00_y00/2_2"].centre, (0.5, 1.0, 1.5), atol=1e-12)
+    with pytest.raises(ValueError, match=r"a\.json: registration A has no pose for x01_y00"):
+        merge.merge_registrations(reg_a, RigB(doc), 0.5, ["x00_y00", "x01_y00"], "a.json")
+    other = RegistrationA(1700.0, 301, 225, "incremental", reg_a.cameras)
+    with pytest.raises(ValueError, match=r"r\.json was built with focal length .*rerun rig_b"):
+        merge.merge_registrations(other, RigB(doc), 0.5, ["x00_y00"], rig_path="r.json")

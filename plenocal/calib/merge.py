@@ -16,6 +16,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from plenocal.artifacts.reg_a import RegistrationA
+from plenocal.artifacts.rig import RigB
 from plenocal.camera import PinholeCamera
 
 
@@ -40,3 +42,21 @@ def merge_cameras(poses_a: Mapping[str, np.ndarray], views_b: Mapping[str, tuple
             out[f"{cam}/{view}"] = PinholeCamera(np.array(K, dtype=float), MA @ MB,
                                                  int(width), int(height))
     return out
+
+
+def merge_registrations(reg_a: RegistrationA, rig: RigB, r: float, shots: list[str],
+                        reg_a_path: str = "reg_a.json", rig_path: str = "rig.json"
+                        ) -> dict[str, PinholeCamera]:
+    """Eq. 6 for every view of the shots ``shots``: their poses from registration A, the
+    rig's views, the scale ``r`` of Eq. 5. Refused, with the file and the remedy, where
+    registration A has no pose for a shot or the rig was built with another focal length
+    than registration A's (both are written by earlier rules)."""
+    missing = [c for c in shots if c not in reg_a.cameras]
+    if missing:
+        raise ValueError(f"{reg_a_path}: registration A has no pose for {', '.join(missing)}; "
+                         "rerun map_a or drop those shots")
+    if abs(reg_a.focal_px - rig.focal_px) > 1e-6 * reg_a.focal_px:
+        raise ValueError(f"{rig_path} was built with focal length {rig.focal_px} px, "
+                         f"registration A now says {reg_a.focal_px} px: rerun rig_b")
+    poses = {c: reg_a.poses[c] for c in shots}
+    return merge_cameras(poses, rig.view_poses(), r, rig.width, rig.height)

@@ -13,6 +13,7 @@ registration, the scene bounds, and previews.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -100,3 +101,48 @@ def preview(depth: np.ndarray) -> np.ndarray:
     out[v] = col[v]
     return out
 
+
+
+@dataclass(frozen=True)
+class DepthJob:
+    """One depth map of the workflow: the reference camera and image, the sources, the
+    bounds and their units (``sfm`` in registration A, ``m`` in B)."""
+
+    ref_cam: PinholeCamera
+    ref_path: Path
+    src_names: list[str]
+    src_cams: list[PinholeCamera]
+    src_paths: list[Path]
+    near: float
+    far: float
+    units: str
+
+
+def depth_job_a(reg_a: RegistrationA, reg_a_path: str | Path, cam: str, centre: str,
+                views_dir: str | Path, model_dir: str | Path | None, k: int,
+                margin: float) -> DepthJob:
+    """Registration A's map of shot ``cam`` (see the module docstring); a shot that SfM did
+    not register is refused with the file and where to look."""
+    cameras = reg_a.cameras
+    if cam not in cameras:
+        raise ValueError(f"depth: shot {cam} is not registered in {reg_a_path}; look at the "
+                         "registration A log for why")
+    near, far = reg_a_bounds(reg_a, cam, model_dir, margin)
+    srcs = nearest_sources(cam, cameras, k)
+    views = Path(views_dir)
+    return DepthJob(cameras[cam], views / cam / f"{centre}.png", srcs,
+                    [cameras[s] for s in srcs], [views / s / f"{centre}.png" for s in srcs],
+                    near, far, "sfm")
+
+
+def depth_job_b(rig: RigB, cam: str, centre: str, views_dir: str | Path, k: int | None,
+                margin: float) -> DepthJob:
+    """Registration B's map of shot ``cam``: its central view from the other views of its
+    own set (see the module docstring)."""
+    cameras = rig.cameras()
+    near, far = rig_bounds(rig, margin)
+    srcs = nearest_sources(centre, cameras, k)
+    views = Path(views_dir) / cam
+    return DepthJob(cameras[centre], views / f"{centre}.png", srcs,
+                    [cameras[s] for s in srcs], [views / f"{s}.png" for s in srcs],
+                    near, far, "m")
