@@ -47,22 +47,12 @@ def rig_bounds(rig: RigB, margin: float) -> tuple[float, float]:
 
 
 def _model_points_depths(model_dir: Path, cam: str, cam_to_world: np.ndarray) -> np.ndarray:
-    import cv2  # noqa: PLC0415,F401  (cv2 before pycolmap: DESIGN.md known traps)
-    import pycolmap  # noqa: PLC0415
+    """Depths (> 0) in shot ``cam``'s camera frame of the sparse points its image (staged
+    as ``<cam>.png`` by registration A) sees in the COLMAP model; every point of the model
+    where the image is not in it."""
+    from plenocal.calib.reg_a.colmap import model_points  # noqa: PLC0415
 
-    rec = pycolmap.Reconstruction(str(model_dir))
-    img = None
-    for im in rec.images.values():
-        name = im.name
-        if Path(name).stem == cam or name.startswith(cam + "/") or f"/{cam}." in "/" + name:
-            img = im
-            break
-    if img is not None:
-        ids = [p.point3D_id for p in img.points2D if p.has_point3D()]
-        pts = np.array([rec.points3D[i].xyz for i in ids]) if ids else np.zeros((0, 3))
-    else:
-        pts = np.array([p.xyz for p in rec.points3D.values()]) if rec.points3D else \
-            np.zeros((0, 3))
+    pts = model_points(model_dir, f"{cam}.png")
     if len(pts) == 0:
         return np.zeros(0)
     Xc = transform(np.linalg.inv(cam_to_world), pts)

@@ -1,5 +1,6 @@
-"""The COLMAP boundary: image staging, SIFT extraction, matching, and the conversions
-between COLMAP's reconstruction and the internal convention.
+"""The COLMAP boundary: image staging, SIFT extraction, matching, the conversions
+between COLMAP's reconstruction and the internal convention, and the sparse points an
+image of registration A's model sees (:func:`model_points`, for the depth bounds).
 
 COLMAP stores cam_from_world and puts the centre of pixel (0, 0) at (0.5, 0.5); the
 project uses camera-to-world poses and pixel centres at integers (DESIGN.md). Every
@@ -230,3 +231,18 @@ def known_pose_reconstruction(database: str | Path, cameras: Mapping[str, Pinhol
         if im is not None and im.name in cameras:
             rec.register_frame(frame.frame_id)
     return rec
+
+
+def model_points(model_dir: str | Path, image_name: str) -> np.ndarray:
+    """(n, 3) world coordinates of the sparse points that image ``image_name`` of the
+    COLMAP model in ``model_dir`` observes; of every point of the model where no image has
+    that name."""
+    import pycolmap  # noqa: PLC0415
+
+    rec = pycolmap.Reconstruction(str(model_dir))
+    image = next((im for im in rec.images.values() if im.name == image_name), None)
+    if image is None:
+        pts = [p.xyz for p in rec.points3D.values()]
+    else:
+        pts = [rec.points3D[p.point3D_id].xyz for p in image.points2D if p.has_point3D()]
+    return np.array(pts, dtype=float).reshape(-1, 3)
