@@ -61,6 +61,13 @@ def _set_key(cfg: dict, dotted: str, value) -> None:
     node[keys[-1]] = value
 
 
+def _auto_or_int(parser: argparse.ArgumentParser, flag: str, help_text: str) -> None:
+    """An option that takes ``auto`` or a whole number, left to the converter's default
+    when not given."""
+    parser.add_argument(flag, type=_int_or_auto(flag), default=None, metavar="auto|N",
+                        help=help_text + ". Default: the converter's default")
+
+
 def _int_or_auto(name: str):
     def parse(text: str):
         if text == "auto":
@@ -106,22 +113,18 @@ def build_parser() -> argparse.ArgumentParser:
                            "(read from the image by matching both ways; the default, and the "
                            "choice unless the frame has no texture; the README's 'MLA kinds' "
                            "says what it finds on real cameras)")
-    c.add_argument("--tile-size", type=_int_or_auto("--tile-size"), default=None,
-                   metavar="auto|N",
-                   help="output pixels per micro-image pitch (convert.tile_size): auto (from "
-                        "the patch sizes: the views' natural resolution) or a number. "
-                        "Default: the converter's default")
+    _auto_or_int(c, "--tile-size",
+                 "output pixels per micro-image pitch (convert.tile_size): auto (from the "
+                 "patch sizes: the views' natural resolution) or a number")
     c.add_argument("--grid", choices=("file", "refine", "auto"), default=None,
                    help="microlens grid (convert.grid): file (calib.xml as it is), refine "
                         "(fit the lattice to the micro-image centres in the image), auto "
                         "(refine when the file's grid drifts more than 1 px from the micro "
                         "images, see plenocal.convert.gridcheck). The check always runs and "
                         "lands in disparity.json. Default: auto")
-    c.add_argument("--bit-depth", type=_int_or_auto("--bit-depth"), default=None,
-                   metavar="auto|N",
-                   help="significant bits of a 16-bit image (convert.bit_depth): auto (10, "
-                        "12 or 14 bits recognised from the maximum) or 8..16. Default: "
-                        "the converter's default")
+    _auto_or_int(c, "--bit-depth",
+                 "significant bits of a 16-bit image (convert.bit_depth): auto (10, 12 or "
+                 "14 bits recognised from the maximum) or 8..16")
     c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="any other key of the config's convert block (config.schema.yaml), "
                         "dotted for nested ones (e.g. --set upsample=1.5 --set "

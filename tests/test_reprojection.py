@@ -6,7 +6,7 @@ import os
 import cv2  # noqa: F401  (before pycolmap)
 import numpy as np
 import pytest
-from synth.scenes import default_scene, render, rig_cameras, view_sets
+from synth.scenes import default_scene, render, render_view_sets, rig_cameras
 
 from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.artifacts.rig import RigB
@@ -114,15 +114,7 @@ def test_nearest_shots_ties_by_name():
 @pytest.fixture(scope="module")
 def sets(shots, tmp_path_factory):
     cams, _ = shots
-    root = tmp_path_factory.mktemp("sets")
-    sub = {k: cams[k] for k in ("x00_y00", "x02_y01", "hand00", "hand01")}
-    vs = view_sets(sub, 3, 0.003)
-    scene = default_scene()
-    paths = {}
-    for name, cam in vs.items():
-        paths[name] = root / f"{name}.png"
-        write_image(paths[name], render(cam, scene))
-    return sub, vs, paths
+    return render_view_sets(cams, tmp_path_factory.mktemp("sets"))
 
 
 def test_rig_sets(sets, tmp_path):

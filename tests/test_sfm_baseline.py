@@ -5,12 +5,11 @@ centres, and SfM from scratch reports its registered count."""
 import cv2  # noqa: F401  (before pycolmap)
 import numpy as np
 import pytest
-from synth.scenes import default_scene, render, rig_cameras, view_sets
+from synth.scenes import render_view_sets, rig_cameras
 
 from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.calib.reg_a import viewdb
 from plenocal.camera import PinholeCamera
-from plenocal.io.files import write_image
 from plenocal.verify.reprojection import evaluate
 from plenocal.verify.sfm_baselines import baseline_sfm, scratch_sfm
 
@@ -20,15 +19,7 @@ F, W, H = 600.0, 480, 360
 @pytest.fixture(scope="module")
 def sets(tmp_path_factory):
     cams = rig_cameras(f=F, width=W, height=H, handheld=3)
-    root = tmp_path_factory.mktemp("sets")
-    sub = {k: cams[k] for k in ("x00_y00", "x02_y01", "hand00", "hand01")}
-    vs = view_sets(sub, 3, 0.003)
-    scene = default_scene()
-    paths = {}
-    for name, cam in vs.items():
-        paths[name] = root / f"{name}.png"
-        write_image(paths[name], render(cam, scene))
-    return sub, vs, paths
+    return render_view_sets(cams, tmp_path_factory.mktemp("sets"))
 
 
 def test_baseline_registers_remaining_views(sets, tmp_path):

@@ -144,3 +144,23 @@ def view_sets(shots: dict[str, PinholeCamera], n: int = 3,
                                                         (r - h) * baseline_m, 0.0])
                 out[f"{cam}/{r}_{c}"] = PinholeCamera(pc.K, M, pc.width, pc.height)
     return out
+
+
+def render_view_sets(cams: dict[str, PinholeCamera], root, n: int = 3,
+                     baseline_m: float = 0.003, shots=("x00_y00", "x02_y01", "hand00", "hand01")
+                     ) -> tuple[dict[str, PinholeCamera], dict[str, PinholeCamera], dict]:
+    """The ``n`` x ``n`` view sets of ``shots`` (:func:`view_sets`) rendered of the
+    default scene into ``root`` as ``<shot>/<view>.png``: (the shots' cameras, the views'
+    cameras, the views' paths)."""
+    from pathlib import Path  # noqa: PLC0415
+
+    from plenocal.io.files import write_image  # noqa: PLC0415
+
+    sub = {k: cams[k] for k in shots}
+    vs = view_sets(sub, n, baseline_m)
+    scene = default_scene()
+    paths = {}
+    for name, cam in vs.items():
+        paths[name] = Path(root) / f"{name}.png"
+        write_image(paths[name], render(cam, scene))
+    return sub, vs, paths
