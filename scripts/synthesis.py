@@ -59,7 +59,9 @@ for renderer in renderers:
         for cname, cams in cameras.items():
             t0 = time.perf_counter()
             res, kept = run_experiment(exp, cams, lambda c, v: str(views_dir / c / f"{v}.png"),
-                                       layout, near, far, {**cfg, "renderer": renderer},
+                                       layout, near, far,
+                                       {**cfg, "renderer": renderer,
+                                        "threads": int(snakemake.threads)},
                                        dict(dmaps), images)
             seconds = time.perf_counter() - t0  # logged only: the file stays the same bits
             runs[(renderer, dname, cname)] = res

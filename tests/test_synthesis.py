@@ -118,3 +118,20 @@ def test_plan_and_shared_depth(dataset):
     assert out["db_lost"] == out["db_lost_true_depth"] > 0.5
     assert out["db_lost_to_depth"] == 0.0
     assert set(out["calibrations"]) == set(out["true_depth"]) == {"complete", "ground_truth"}
+
+
+def test_threads_render_the_same_images(dataset):
+    """The job's cores share the targets (config ``threads``): the same images and PSNR,
+    bit for bit, as one thread."""
+    root, cams = dataset
+    one = _ctx(root, cams)
+    two = SynthesisContext(one.cameras, one.image_path, one.layout, one.near, one.far,
+                           {**CFG, "threads": 2})
+    assert two.workers == 2 and one.workers == 1
+    inputs = ["x00_y00/1_1", "x02_y01/1_1"]
+    targets = [f"x01_y00/{v}" for v in view_names(N)] + ["x01_y01/1_1"]
+    a, b = one.render(inputs, targets), two.render(inputs, targets)
+    assert list(a) == list(b) == targets
+    for t in targets:
+        np.testing.assert_array_equal(a[t], b[t])
+    assert one.score(inputs, targets)[0] == two.score(inputs, targets)[0]

@@ -65,7 +65,7 @@ class View:
     depth: np.ndarray  # float32 z-depth, 0 = invalid
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _push_down(sv, sw):  # pragma: no cover - numba
     """One push level: 2x2 block sums of the weighted values and of the weights (odd
     sizes padded with zeros), in float32 as the levels, summed in the order numpy's
@@ -97,7 +97,7 @@ def _push_down(sv, sw):  # pragma: no cover - numba
     return dv, dw
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _pull_up(mean, sv, sw):  # pragma: no cover - numba
     """One pull level: the level's own mean where it has weight, else the coarser mean."""
     H, W, C = sv.shape
@@ -134,7 +134,7 @@ def push_pull(values: np.ndarray, weight: np.ndarray) -> np.ndarray:
     return out[..., 0] if squeeze else out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _fill_rows(img, seen):  # pragma: no cover - numba
     H, W, C = img.shape
     out = img.copy()
@@ -197,7 +197,7 @@ def _geometry(cam: PinholeCamera) -> tuple[np.ndarray, ...]:
             c(w2c[:3, 3]))
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _pixel_into(Kinv, R, C, R2, t2, x, y, z):  # pragma: no cover - numba
     """Pixel (x, y) of a camera (``Kinv``, camera-to-world rotation ``R``, centre ``C``)
     at z-depth ``z``, in the frame of another camera (world-to-camera ``R2``, ``t2``):
@@ -215,7 +215,7 @@ def _pixel_into(Kinv, R, C, R2, t2, x, y, z):  # pragma: no cover - numba
     return a, b, c
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _splat(depth, Kinv_s, R_s, C_s, K_t, R_t, t_t, zbuf):  # pragma: no cover - numba
     """Forward warp of every input pixel with depth > 0 (unproject with the input
     camera, project into the target) as a 2x2 splat into the target z-buffer ``zbuf``
@@ -258,7 +258,7 @@ def forward_depth(src: PinholeCamera, depth: np.ndarray, tgt: PinholeCamera) -> 
     return np.where(np.isfinite(zbuf), zbuf, 0.0).astype(np.float32)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _backward(zt, Kinv_t, R_t, C_t, K_s, R_s, t_s, mx, my, zs):  # pragma: no cover - numba
     """Every target pixel with depth zt > 0 unprojected and projected into the input:
     the input's pixel (mx, my; -10 where zt = 0) and its z-depth there (zs)."""
@@ -341,7 +341,7 @@ def warp_view(view: View | PreparedView, tgt: PinholeCamera,
     return colour.astype(np.float32), np.where(ok, zt, 0.0).astype(np.float32), w
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _blend(colour, z, w, q, z_tolerance, depth_exponent):  # pragma: no cover - numba
     """Per target pixel, the inputs' samples (colour (n, H, W, C), depth and weight
     (n, H, W), float32) averaged with weights ``w q (z_near / z)^depth_exponent``

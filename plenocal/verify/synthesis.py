@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -104,6 +105,11 @@ class SynthesisContext:
     _images: dict = field(default_factory=dict)
     _prepared: dict[str, PreparedView] = field(default_factory=dict)
 
+    @property
+    def workers(self) -> int:
+        """Threads for the targets (``config["threads"]``: the job's cores)."""
+        return max(1, int(self.config.get("threads", 1)))
+
     def camera(self, key: str) -> PinholeCamera:
         if key not in self.cameras:
             raise KeyError(f"synthesis: view {key} is not in the calibration; was it "
@@ -152,7 +158,18 @@ class SynthesisContext:
         """Every target rendered from the inputs by the configured renderer."""
         renderer = self.config.get("renderer", "dibr")
         if renderer == "dibr":
-            return {t: self.synthesize(inputs, t)[0] for t in targets}
+            opt = dibr_options(self.config)
+            views = [self.prepared(k, opt) for k in inputs]
+            cams = [self.camera(t) for t in targets]
+            workers = self.workers
+            if workers == 1 or len(targets) < 2:
+                return {t: synthesize(views, c, opt)[0] for t, c in zip(targets, cams,
+                                                                        strict=True)}
+            # targets are independent: the job's cores share them (the compiled warp and
+            # blend release the GIL); map keeps the order, so the result is the same
+            with ThreadPoolExecutor(workers) as pool:
+                outs = pool.map(lambda c: synthesize(views, c, opt)[0], cams)
+                return dict(zip(targets, outs, strict=True))
         if renderer != "rvs":
             raise ValueError(f"config: verify.renderer = {renderer!r}: must be dibr or rvs")
         from plenocal.verify.rvs import RvsError, rvs_synthesize  # noqa: PLC0415
@@ -173,14 +190,20 @@ class SynthesisContext:
         border = int(self.config.get("psnr_border_px", 8))
         scores, kept = {}, {}
         rendered = self.render(inputs, targets)
-        for t in targets:
-            out = rendered[t]
-            if out.ndim == 3 and self.image(t).ndim == 2:
+
+        def compare(t: str) -> tuple[np.ndarray, float]:
+            out, truth = rendered[t], self.image(t)
+            if out.ndim == 3 and truth.ndim == 2:
                 out = out.mean(axis=2)
-            scores[t] = psnr(out, self.image(t), border)
-            log.info("synthesized %s: %.2f dB", t, scores[t])
-            if keep and t in keep:
-                kept[t] = out
+            return out, psnr(out, truth, border)
+
+        # reading the captured targets and their PSNR, on the job's cores (in order)
+        with ThreadPoolExecutor(self.workers) as pool:
+            for t, (out, score) in zip(targets, pool.map(compare, targets), strict=True):
+                scores[t] = score
+                log.info("synthesized %s: %.2f dB", t, score)
+                if keep and t in keep:
+                    kept[t] = out
         return scores, kept
 
 
