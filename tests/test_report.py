@@ -18,22 +18,8 @@ import cv2
 import numpy as np
 import pytest
 
+from plenocal.artifacts import results as typed
 from plenocal.artifacts.reg_a import RegistrationA
-from plenocal.artifacts.results import (
-    TABLE1_ROWS,
-    ConvertQuality,
-    GroundTruthErrors,
-    PsnrTable,
-    ReprojectionTable,
-    SynthesisResult,
-    SynthImage,
-    read_reprojection_table,
-    read_synthesis,
-    write_convert_quality,
-    write_gt_errors,
-    write_reprojection_table,
-    write_synthesis,
-)
 from plenocal.artifacts.rig import write_rig
 from plenocal.artifacts.scale import ScaleResult, write_scale
 from plenocal.camera import PinholeCamera, intrinsics, pose, write_cameras
@@ -89,7 +75,7 @@ def make_results(root: Path) -> Path:
     write_cameras(res / "ground_truth" / "cameras.json", truth)
     write_cameras(res / "calibration" / "cameras.json", calib)
     # as plenocal.verify.reprojection and scripts/reprojection.py write it
-    write_reprojection_table(res / "eval" / "reprojection.json", ReprojectionTable({
+    typed.write_reprojection_table(res / "eval" / "reprojection.json", typed.ReprojectionTable({
         "reg_a": stats(0.61, 0.48, 10, array=6, hand=4),
         "reg_b": {"sets": {c: stats(0.40 + 0.01 * i, 0.30, 9) for i, c in enumerate(CAMS)},
                   "mean_px": 0.43, "median_px": 0.30, "num_sets": 7, "num_images": 9,
@@ -114,13 +100,15 @@ def make_results(root: Path) -> Path:
     write_scale(res / "merge" / "scale.json", ScaleResult(
         r=0.0201, r_median=0.0201, r_median_of_ratios=0.0201, estimator="mean",
         spread={"relative": 0.004, "n_shots": 7}))
-    write_gt_errors(res / "eval" / "gt_errors.json", GroundTruthErrors.from_dict(gt_errors(
+    errors = gt_errors(
         truth, reg_a=RegistrationA(focal_px=120.3, width=W, height=H, mapper="incremental",
                                    cameras={c: PinholeCamera(np.eye(3), M, W, H)
                                             for c, M in sfm.items()}),
-        rig=rig, r=0.0201, calib=calib)))
-    # as scripts/synthesis.py writes them: the runs of plenocal.verify.synthesis.experiment1..3 by
-    # (renderer, depth, cameras), flattened by psnr_tables
+        rig=rig, r=0.0201, calib=calib)
+    typed.write_gt_errors(res / "eval" / "gt_errors.json",
+                          typed.GroundTruthErrors.from_dict(errors))
+    # as scripts/synthesis.py writes them: the runs of experiment1..3
+    # (plenocal.verify.synthesis) by (renderer, depth, cameras), flattened by psnr_tables
     corners = ["x00_y00", "x02_y00", "x00_y01", "x02_y01"]
     array = [c for c in CAMS if c.startswith("x")]
 
@@ -155,13 +143,13 @@ def make_results(root: Path) -> Path:
             noisy = np.clip(cap.astype(int) + np.random.default_rng(k).integers(
                 -20, 20, cap.shape), 0, 255).astype(np.uint8)
             write_image(res / "eval" / "synth" / f"e{exp}" / f"kept{k}.png", noisy)
-            images.append(SynthImage(f"synth/e{exp}/kept{k}.png", f"{CENTRE_CAM}/1_1",
+            images.append(typed.SynthImage(f"synth/e{exp}/kept{k}.png", f"{CENTRE_CAM}/1_1",
                                      cameras_, run))
             k += 1
-        write_synthesis(res / "eval" / f"synthesis_exp{exp}.json", SynthesisResult(
+        typed.write_synthesis(res / "eval" / f"synthesis_exp{exp}.json", typed.SynthesisResult(
             experiment=exp, renderer="dibr", tables=tuple(psnr_tables(exp, runs, ["dibr"])),
             images=tuple(images), summary={"near_m": 0.4, "far_m": 0.8}))
-    write_convert_quality(res / "convert" / "quality.json", ConvertQuality.from_dict(
+    typed.write_convert_quality(res / "convert" / "quality.json", typed.ConvertQuality.from_dict(
         summarise({c: {v: {"psnr_db": 33.0 + 0.1 * k, "ssim": 0.95}
                        for k, v in enumerate(VIEWS)} for c in CAMS}, "1_1")
         | {"border_px": 6}))
@@ -186,7 +174,7 @@ def build(res: Path) -> str:
 
 
 def test_table1_rows_pair_measurements_with_the_paper():
-    table = ReprojectionTable({
+    table = typed.ReprojectionTable({
         "reg_a": stats(0.61, 0.48, 10, array=6, hand=4),
         "reg_b": {"sets": {"a": stats(0.4, 0.3, 9), "b": stats(0.5, 0.4, 9)},
                   "mean_px": 0.45, "median_px": 0.35, "num_images": 9},
@@ -200,17 +188,17 @@ def test_table1_rows_pair_measurements_with_the_paper():
     assert rows["baseline_sfm"].mean_px is None and rows["baseline_sfm"].paper_mean_px == 0.770
     assert rows["baseline_sfm"].note == "not in reprojection.json"
     assert "sfm_scratch" not in rows
-    assert tuple(PAPER_TABLE1) == TABLE1_ROWS  # every row of the file has its place
+    assert tuple(PAPER_TABLE1) == typed.TABLE1_ROWS  # every row of the file has its place
 
 
 def test_table1_refuses_unknown_rows():
     with pytest.raises(ValueError, match=r"unknown rows \['registration_a'\]"):
-        ReprojectionTable({"registration_a": stats(0.6, 0.5, 10)})
+        typed.ReprojectionTable({"registration_a": stats(0.6, 0.5, 10)})
 
 
 def test_psnr_layouts_follow_figs_7_to_9(tmp_path):
     res = make_results(tmp_path)
-    exp1 = read_synthesis(res / "eval" / "synthesis_exp1.json")
+    exp1 = typed.read_synthesis(res / "eval" / "synthesis_exp1.json")
     assert exp1.experiment == 1 and exp1.metric == "psnr_db"
     sets = {table_name(t, exp1.renderer): t for t in exp1.tables}
     assert sorted(sets) == ["complete", "ground_truth"]
@@ -225,13 +213,13 @@ def test_psnr_layouts_follow_figs_7_to_9(tmp_path):
     ((t, gt, lost, n),) = exp1.db_lost()
     assert (t.cameras, gt.cameras, n) == ("complete", "ground_truth", 2)
     assert lost == pytest.approx(0.3)
-    exp2 = read_synthesis(res / "eval" / "synthesis_exp2.json")
+    exp2 = typed.read_synthesis(res / "eval" / "synthesis_exp2.json")
     (s2,) = exp2.tables
     assert table_name(s2, exp2.renderer) == "complete/x01_y01" and exp2.db_lost() == []
     g2 = layout(s2, N, COLS, ROWS)
     assert g2.kind == "set" and g2.values.shape == (N, N) and g2.marks[0, 1] == "input"
     assert g2.values[0, 0] == pytest.approx(36.0) and g2.values[1, 1] == pytest.approx(37.0)
-    exp3 = read_synthesis(res / "eval" / "synthesis_exp3.json")
+    exp3 = typed.read_synthesis(res / "eval" / "synthesis_exp3.json")
     s3 = exp3.tables
     assert [table_name(t, exp3.renderer) for t in s3] == [
         "complete/central", "complete/lateral", "ground_truth/central", "ground_truth/lateral"]
@@ -242,7 +230,7 @@ def test_psnr_layouts_follow_figs_7_to_9(tmp_path):
     # x01_y01/2_2: after 8 + 9 + 8 + 8 targets of the shots before it, and 8 of its own
     assert g3.values[3 + 2, 3 + 2] == pytest.approx(29.0 + 0.5 * (8 + 9 + 8 + 8 + 8))
     # another renderer and the true depth are named by their fields
-    rvs = PsnrTable("rvs", "true", "complete", "lateral", (), {})
+    rvs = typed.PsnrTable("rvs", "true", "complete", "lateral", (), {})
     assert table_name(rvs, "dibr") == "rvs/true_depth/complete/lateral"
 
 
@@ -340,13 +328,13 @@ def test_absent_sources_are_named_with_their_rules(tmp_path):
 
 def _set_means(res: Path, complete: float, baseline: float, truth: float | None) -> None:
     path = res / "eval" / "reprojection.json"
-    rows = read_reprojection_table(path).rows
+    rows = typed.read_reprojection_table(path).rows
     rows["complete"]["mean_px"], rows["baseline_sfm"]["mean_px"] = complete, baseline
     if truth is None:
         rows.pop("ground_truth", None)
     else:
         rows["ground_truth"]["mean_px"] = truth
-    write_reprojection_table(path, ReprojectionTable(rows))
+    typed.write_reprojection_table(path, typed.ReprojectionTable(rows))
 
 
 def test_table1_verdict_judges_against_what_the_data_allow(tmp_path):
