@@ -149,11 +149,6 @@ class SynthesisContext:
                 View(self.camera(key), self.image(key), self.depth(key)), opt)
         return self._prepared[key]
 
-    def synthesize(self, inputs: list[str], target: str) -> tuple[np.ndarray, np.ndarray]:
-        opt = dibr_options(self.config)
-        views = [self.prepared(k, opt) for k in inputs]
-        return synthesize(views, self.camera(target), opt)
-
     def render(self, inputs: list[str], targets: list[str]) -> dict[str, np.ndarray]:
         """Every target rendered from the inputs by the configured renderer."""
         renderer = self.config.get("renderer", "dibr")
@@ -161,13 +156,9 @@ class SynthesisContext:
             opt = dibr_options(self.config)
             views = [self.prepared(k, opt) for k in inputs]
             cams = [self.camera(t) for t in targets]
-            workers = self.workers
-            if workers == 1 or len(targets) < 2:
-                return {t: synthesize(views, c, opt)[0] for t, c in zip(targets, cams,
-                                                                        strict=True)}
             # targets are independent: the job's cores share them (the compiled warp and
             # blend release the GIL); map keeps the order, so the result is the same
-            with ThreadPoolExecutor(workers) as pool:
+            with ThreadPoolExecutor(self.workers) as pool:
                 outs = pool.map(lambda c: synthesize(views, c, opt)[0], cams)
                 return dict(zip(targets, outs, strict=True))
         if renderer != "rvs":
