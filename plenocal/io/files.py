@@ -143,11 +143,18 @@ def write_npy(path: str | Path, array: np.ndarray) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
+#: zlib level of every PNG the workflow writes (:func:`write_image`). Measured on the
+#: default camera's 2048 x 1536 16-bit lenslet image: level 1 encodes in 0.66 s and
+#: 13.78 MB, level 3 in 1.25 s and 13.63 MB; a 500 x 376 view 14 ms against 24 ms.
+PNG_LEVEL = 1
+
+
 def write_image(path: str | Path, image: np.ndarray) -> None:
     """Write a PNG (uint8 or uint16, gray or RGB) deterministically and atomically.
 
     OpenCV's PNG encoder is used (fixed compression level, no timestamps), with RGB
-    input converted to OpenCV's BGR order.
+    input converted to OpenCV's BGR order. Level :data:`PNG_LEVEL` (zlib 1): on a 12-bit
+    lenslet image 1.9x faster to encode than level 3 for 1 % more bytes (issue 15).
     """
     import cv2  # noqa: PLC0415  (imported late: see DESIGN.md on cv2/pycolmap order)
 
@@ -156,7 +163,7 @@ def write_image(path: str | Path, image: np.ndarray) -> None:
         raise TypeError(f"write_image needs uint8 or uint16, got {image.dtype}")
     if image.ndim == 3 and image.shape[2] == 3:
         image = image[:, :, ::-1]
-    ok, enc = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 3])
+    ok, enc = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL])
     if not ok:
         raise OSError(f"PNG encoding failed for {path}")
     atomic_write_bytes(path, enc.tobytes())
