@@ -55,7 +55,7 @@ def psnr_by_samples(cfg: dict, dataset: str, out: Path, shots: list[str],
 
     As the workflow does it: the converter's set-up (rule convert_setup: tile, grid) is
     decided on the full-set shot's lenslet image of each count, the views' ground-truth
-    cameras (rule ground_truth_cam) follow that set-up, and the ideal renders (rule
+    cameras (rule ground_truth) follow that set-up, and the ideal renders (rule
     ground_truth_render) are the references; the views are scored by
     plenocal.convert.quality (rule convert_quality)."""
     import cv2  # noqa: F401, PLC0415  (before anything that may load pycolmap)
@@ -66,7 +66,7 @@ def psnr_by_samples(cfg: dict, dataset: str, out: Path, shots: list[str],
     from plenocal.convert.setup import decide_setup, read_setup, write_setup  # noqa: PLC0415
     from plenocal.convert.shot import load_calib, load_lenslet, read_sensor_size  # noqa: PLC0415
     from plenocal.io.files import read_json, to_uint8, write_image  # noqa: PLC0415
-    from plenocal.simulate.groundtruth import ground_truth_shot  # noqa: PLC0415
+    from plenocal.simulate.groundtruth import ground_truth_cameras  # noqa: PLC0415
     from plenocal.simulate.raytrace import render_pinhole  # noqa: PLC0415
     from plenocal.simulate.scene import scene_arrays  # noqa: PLC0415
     from plenocal.viewgeom import central_view  # noqa: PLC0415
@@ -97,7 +97,7 @@ def psnr_by_samples(cfg: dict, dataset: str, out: Path, shots: list[str],
         pairs = []
         for cam in shots:
             gt = run / "gt" / f"{cam}.json"
-            ground_truth_shot(data, cam, n, tile, conv.get("view_spacing_px"), gt,
+            ground_truth_cameras(data, [cam], n, tile, conv.get("view_spacing_px"), gt,
                               log=lambda m: None, even=bool(conv["even_size"]))
             shot = convert_files(run / f"{cam}.png", data / "calib.xml", data / "camera.yaml",
                                  n, settings, setup_json=run / "convert_setup.json")

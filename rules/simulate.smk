@@ -40,6 +40,7 @@ rule simulate:
         dataset=SYN,
     conda:
         "../envs/plenocal.yaml"
+    priority: PRIORITY["lenslet"]
     threads: 1
     resources:
         mem_mb=3000,
@@ -50,37 +51,11 @@ rule simulate:
         "../scripts/simulate.py"
 
 
-rule ground_truth_cam:
+rule ground_truth:
     input:
         TRUTH,
         calib="data/{dataset}/calib.xml",
         setup="results/{dataset}/views/convert_setup.json",
-    output:
-        "results/{dataset}/ground_truth/cams/{cam}.json",
-    log:
-        log_path("ground_truth_cam", "{cam}"),
-    benchmark:
-        bench_path("ground_truth_cam", "{cam}")
-    wildcard_constraints:
-        dataset=SYN,
-    conda:
-        "../envs/plenocal.yaml"
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=5,
-    params:
-        convert=view_geometry,
-        views=lambda wc: n_views(wc.dataset),
-    script:
-        "../scripts/ground_truth_cam.py"
-
-
-rule ground_truth:
-    input:
-        lambda wc: expand(
-            "results/{{dataset}}/ground_truth/cams/{cam}.json", cam=cams(wc.dataset)
-        ),
     output:
         "results/{dataset}/ground_truth/cameras.json",
     log:
@@ -93,8 +68,12 @@ rule ground_truth:
         "../envs/plenocal.yaml"
     threads: 1
     resources:
-        mem_mb=500,
-        runtime=5,
+        mem_mb=1000,
+        runtime=10,
+    params:
+        convert=view_geometry,
+        views=lambda wc: n_views(wc.dataset),
+        cams=lambda wc: cams(wc.dataset),
     script:
         "../scripts/ground_truth.py"
 
@@ -102,7 +81,7 @@ rule ground_truth:
 rule ground_truth_render:
     input:
         TRUTH,
-        cams="results/{dataset}/ground_truth/cams/{cam}.json",
+        cams="results/{dataset}/ground_truth/cameras.json",
     output:
         image="results/{dataset}/ground_truth/renders/{cam}/{view}.png",
         depth="results/{dataset}/ground_truth/depth/{cam}/{view}.npy",
@@ -141,7 +120,7 @@ for _i, (_n, _datasets) in enumerate(convert_groups()):
             _name
         input:
             TRUTH,
-            cams="results/{dataset}/ground_truth/cams/{cam}.json",
+            cams="results/{dataset}/ground_truth/cameras.json",
         output:
             image=[
                 f"results/{{dataset}}/ground_truth/renders/{{cam}}/{v}.png"

@@ -1,16 +1,17 @@
-"""Rule ground_truth: gather the per-shot cameras into the plain cameras.json."""
+"""Rule ground_truth: traced pinhole cameras of every view of every shot."""
+
+from pathlib import Path
 
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
-from plenocal.io.files import read_json, write_json
+from plenocal.convert.setup import read_setup
 from plenocal.rulelog import rule_logger
+from plenocal.simulate.groundtruth import ground_truth_cameras
 
 snakemake = globals()["snakemake"]
 log = rule_logger(snakemake, "ground_truth")
-cameras, worst = {}, 0.0
-for path in snakemake.input:
-    doc = read_json(path)
-    cameras.update(doc["cameras"])
-    worst = max(worst, doc["fit_residual_px"])
-write_json(snakemake.output[0], {"units": "m", "fit_residual_px": worst, "cameras": cameras})
-log.info("%d ground-truth cameras, worst fit residual %.2e px", len(cameras), worst)
+conv = snakemake.params.convert
+ground_truth_cameras(Path(snakemake.input.calib).parent, list(snakemake.params.cams),
+                     int(snakemake.params.views), read_setup(snakemake.input.setup).tile,
+                     conv["view_spacing_px"], snakemake.output[0],
+                     log=log.info, even=bool(conv["even_size"]))

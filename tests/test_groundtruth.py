@@ -18,7 +18,7 @@ from plenocal.optics import PlenopticOptics
 from plenocal.simulate.dataset import make_calib, nearest_lens_map, setup_dataset
 from plenocal.simulate.groundtruth import (
     fit_pinhole,
-    ground_truth_shot,
+    ground_truth_cameras,
     intersect_rays,
     shot_cameras,
 )
@@ -166,16 +166,22 @@ def test_lenslet_render_agrees_with_the_ground_truth_render():
                 assert errors[view, other] > 2 * errors[view, view], errors
 
 
-def test_ground_truth_shot_file(tmp_path: Path):
+def test_ground_truth_cameras_file(tmp_path: Path):
     sim = small_sim(320, 240)
     setup_dataset(sim, tmp_path)
-    out = tmp_path / "gt" / "hand00.json"
-    ground_truth_shot(tmp_path, "hand00", 3, 6, None, out, log=lambda m: None)
+    out = tmp_path / "gt" / "cameras.json"
+    ground_truth_cameras(tmp_path, ["hand00", "x00_y00"], 3, 6, None, out, log=lambda m: None)
     cams = read_cameras(out)
-    assert sorted(cams) == [f"hand00/{r}_{c}" for r in range(3) for c in range(3)]
+    assert sorted(cams) == sorted(f"{s}/{r}_{c}" for s in ("hand00", "x00_y00")
+                                  for r in range(3) for c in range(3))
     shots = yaml.safe_load((tmp_path / "truth" / "shots.json").read_text())
-    M = np.asarray(shots["hand00"]["cam_to_world"])
     # the central view's pose is the shot's (its centre is the main-lens centre)
-    np.testing.assert_allclose(cams["hand00/1_1"].cam_to_world, M, atol=1e-12)
+    for shot in ("hand00", "x00_y00"):
+        M = np.asarray(shots[shot]["cam_to_world"])
+        np.testing.assert_allclose(cams[f"{shot}/1_1"].cam_to_world, M, atol=1e-12)
+    # the worst chief-ray fit of all shots is the file's
+    doc = yaml.safe_load(out.read_text())
+    assert 0 <= doc["fit_residual_px"] < 1e-6
     with pytest.raises(KeyError, match="hand09"):
-        ground_truth_shot(tmp_path, "hand09", 3, 6, None, out, log=lambda m: None)
+        ground_truth_cameras(tmp_path, ["hand00", "hand09"], 3, 6, None, out,
+                             log=lambda m: None)

@@ -20,7 +20,7 @@ TARGETS = [
     "data/tiny/lenslet/x01_y00.png",
     "results/tiny/views/x00_y00/1_1.png",
     "results/tiny/views/x01_y00/disparity.json",
-    "results/tiny/ground_truth/cams/x01_y00.json",
+    "results/tiny/ground_truth/cameras.json",
 ]
 
 pytestmark = [pytest.mark.slurm, pytest.mark.workflow]

@@ -86,7 +86,7 @@ def test_every_until_builds_its_job_graph(real_run: Path, tmp_path: Path):
     rules = [ln.split()[0] for ln in snakemake(work, "--list-rules").stdout.splitlines()
              if ln.strip()]
     assert "report" in rules and "convert_quality" in rules
-    gt_rules = {"simulate", "simulate_setup", "ground_truth", "ground_truth_cam",
+    gt_rules = {"simulate", "simulate_setup", "ground_truth",
                 "ground_truth_render", "gt_errors", "convert_quality"}
     for rule in rules:
         proc = snakemake(work, "-n", "--until", rule)
