@@ -21,6 +21,22 @@ DATASETS = sorted(config["datasets"])
 SYNTHETIC = [d for d in DATASETS if "simulate" in config["datasets"][d]]
 
 
+#: Scheduling priorities (Snakemake runs the ready job of highest priority first). The
+#: longest chain of the full run is simulate -> convert -> view_features -> view_matches
+#: -> baseline_sfm -> the naive calibration's reprojection -> report (about 800 s of the
+#: default run's 1,000, BENCHMARKS.md "Full run"): its jobs go first, so that the two
+#: serial COLMAP jobs (matching, then the naive mapper) start as soon as they can and
+#: the rest of the work - depth, ground truth, synthesis - fills the other core beside
+#: them. Ground-truth renders, needed by the verification only, wait for the images that
+#: the chain needs (issue 15).
+PRIORITY = {"lenslet": 10, "chain": 20}
+
+
+def reprojection_priority(wildcards):
+    """The naive baseline's Table I row closes the critical chain; the others do not."""
+    return PRIORITY["chain"] if wildcards.calib == "baseline_sfm" else 0
+
+
 def ds_config(dataset):
     return config["datasets"][dataset]
 
@@ -141,7 +157,7 @@ def stage_config(name):
     return config[name]
 
 
-SFM_CORE = ("seed", "num_threads", "max_num_features")
+SFM_CORE = ("seed", "num_threads", "max_num_features", "sift")
 
 
 def sfm_params(*sections):

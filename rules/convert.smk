@@ -61,6 +61,7 @@ for _i, (_n, _datasets) in enumerate(convert_groups()):
             dataset="|".join(re.escape(d) for d in _datasets),
         conda:
             "../envs/plenocal.yaml"
+        priority: PRIORITY["chain"]
         threads: 1
         resources:
             mem_mb=2500,

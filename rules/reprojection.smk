@@ -17,6 +17,7 @@ rule reprojection_calib:
         calib="|".join(REPROJECTION_CALIB),
     conda:
         "../envs/plenocal.yaml"
+    priority: reprojection_priority
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=1500,  # peak 0.83 GB on the default data (700 views)

@@ -86,6 +86,7 @@ rule view_features:
         bench_path("view_features", "{dataset}_{cam}")
     conda:
         "../envs/plenocal.yaml"
+    priority: PRIORITY["chain"]
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=1000,
@@ -111,6 +112,7 @@ rule view_matches:
         bench_path("view_matches")
     conda:
         "../envs/plenocal.yaml"
+    priority: PRIORITY["chain"]
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=4000,
@@ -134,6 +136,7 @@ rule baseline_sfm:
         bench_path("baseline_sfm")
     conda:
         "../envs/plenocal.yaml"
+    priority: PRIORITY["chain"]
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=8000,
