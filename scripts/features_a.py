@@ -13,5 +13,6 @@ cfg = sm.params.sfm
 views = {Path(p).parent.name: p for p in sm.input.views}
 info = features_a(views, sm.output.images, sm.output.db,
                   max_num_features=cfg["max_num_features"], seed=cfg["seed"],
+                  extractor=cfg["sift"],
                   num_threads=sm.threads)
 write_json(sm.output.info, info)

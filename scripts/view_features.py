@@ -21,6 +21,7 @@ work = make_temp_dir(out_db.parent, f".{out_db.stem}.")
 try:
     viewdb.extract_view_features(views, work / "features.db", work,
                                  max_num_features=cfg["max_num_features"], seed=cfg["seed"],
+                                 extractor=cfg["sift"],
                                  num_threads=sm.threads)
     (work / "features.db").replace(out_db)
 finally:

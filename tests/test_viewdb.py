@@ -54,12 +54,74 @@ def test_first_octave_reaches_sift(views, tmp_path):
     first): fewer keypoints, none finer than the image's own scale."""
     paths, _ = views
     some = dict(sorted(paths.items())[:2])
-    fine = viewdb.extract_view_features(some, tmp_path / "a.db", tmp_path / "a")
+    fine = viewdb.extract_view_features(some, tmp_path / "a.db", tmp_path / "a",
+                                        extractor="colmap")
     coarse = viewdb.extract_view_features(some, tmp_path / "b.db", tmp_path / "b",
-                                          first_octave=0)
+                                          first_octave=0, extractor="colmap")
     assert fine["first_octave"] == -1 and coarse["first_octave"] == 0
     assert 0 < coarse["keypoints_mean"] < 0.8 * fine["keypoints_mean"]
     assert np.isfinite(coarse["features_s"])
+
+
+def test_opencv_and_colmap_sift_find_the_same_kind_of_features(views, tmp_path):
+    """The two extractors (config sfm.sift) on the same views: about as many keypoints,
+    the same sizes of image and camera, and OpenCV's keypoints where COLMAP's are
+    (COLMAP's pixel convention: a shift of 0.5 px would show as a median offset)."""
+    import pycolmap
+
+    paths, _ = views
+    some = dict(sorted(paths.items())[:3])
+    infos, kps = {}, {}
+    for ext in ("opencv", "colmap"):
+        db = tmp_path / f"{ext}.db"
+        infos[ext] = viewdb.extract_view_features(some, db, tmp_path / ext, extractor=ext)
+        with pycolmap.Database.open(str(db)) as d:
+            kps[ext] = {im.name: d.read_keypoints(im.image_id)[:, :2]
+                        for im in d.read_all_images()}
+            cams = d.read_all_cameras()
+        assert len(cams) == 1 and (cams[0].width, cams[0].height) == (240, 180)
+    assert infos["opencv"]["sift"] == "opencv" and infos["colmap"]["sift"] == "colmap"
+    ratio = infos["opencv"]["keypoints_mean"] / infos["colmap"]["keypoints_mean"]
+    assert 0.6 < ratio < 1.6, infos
+    offsets = []
+    for name, a in kps["opencv"].items():
+        b = kps["colmap"][name]
+        d = np.linalg.norm(a[:, None, :] - b[None, :, :], axis=2)
+        near = d.min(axis=1) < 0.5  # the same extremum found by both
+        assert near.mean() > 0.5, name
+        j = d.argmin(axis=1)[near]
+        offsets.append(a[near] - b[j])
+    med = np.median(np.concatenate(offsets), axis=0)
+    assert np.all(np.abs(med) < 0.05), med
+
+
+def test_opencv_sift_is_deterministic_and_refuses_other_octaves(views, tmp_path):
+    from plenocal.calib.reg_a import colmap as cm
+
+    paths, _ = views
+    gray = cv2.imread(str(next(iter(sorted(paths.values())))), cv2.IMREAD_GRAYSCALE)
+    kp1, d1 = cm.opencv_sift(gray)
+    kp2, d2 = cm.opencv_sift(gray)
+    assert kp1.shape[1] == 4 and d1.shape == (len(kp1), 128) and d1.dtype == np.uint8
+    assert kp1.tobytes() == kp2.tobytes() and d1.tobytes() == d2.tobytes()
+    with pytest.raises(ValueError, match="first octave"):
+        viewdb.extract_view_features(paths, tmp_path / "x.db", tmp_path / "x", first_octave=0)
+    with pytest.raises(ValueError, match="sfm.sift"):
+        viewdb.extract_view_features(paths, tmp_path / "y.db", tmp_path / "y",
+                                     extractor="surf")
+
+
+def test_root_sift_storage_by_hand():
+    """COLMAP's L1_ROOT and uint8 storage: d / |d|_1, square root, min(round(512 d), 255)."""
+    from plenocal.calib.reg_a.colmap import root_sift_uint8
+
+    flat = np.full((1, 128), 10.0)  # 1/128 each -> sqrt 0.08839 -> 45.25
+    two = np.zeros((1, 128))
+    two[0, :2] = (1.0, 4.0)  # 0.2, 0.8 -> 0.4472, 0.8944 -> 228.97, 457.9 (clamped)
+    assert np.all(root_sift_uint8(flat) == 45)
+    out = root_sift_uint8(two)
+    assert out[0, 0] == 229 and out[0, 1] == 255 and not out[0, 2:].any()
+    assert root_sift_uint8(np.zeros((1, 128))).sum() == 0
 
 
 def _dump(db):

@@ -58,6 +58,11 @@ def image_size(path: str | Path) -> tuple[int, int]:
 #: COLMAP's SIFT default: the scale space starts on the image upsampled 2x
 DEFAULT_FIRST_OCTAVE = -1
 
+#: SIFT implementations (config ``sfm.sift``): OpenCV's, set up as COLMAP's (the default:
+#: about 6x faster on one core), or COLMAP's own
+EXTRACTORS = ("opencv", "colmap")
+DEFAULT_EXTRACTOR = "opencv"
+
 
 def _extraction_options(max_num_features: int, num_threads: int,
                         first_octave: int = DEFAULT_FIRST_OCTAVE):
@@ -78,13 +83,22 @@ def extract_features(database: str | Path, image_dir: str | Path,
                      groups: list[tuple[list[str], PinholeCamera | None]], *,
                      model: str = "PINHOLE", max_num_features: int = 8192,
                      num_threads: int = 1, seed: int = 0,
-                     first_octave: int = DEFAULT_FIRST_OCTAVE) -> None:
+                     first_octave: int = DEFAULT_FIRST_OCTAVE,
+                     extractor: str = DEFAULT_EXTRACTOR) -> None:
     """SIFT into a new database. ``groups``: (image names, camera) pairs; all images of
     a group share one COLMAP camera. A group's camera, where given, is written with its
     intrinsics (``model`` PINHOLE or SIMPLE_PINHOLE, marked as a known focal length);
     where None, the camera gets COLMAP's default focal (1.2 max(W, H)) and the principal
     point at the image centre. ``first_octave``: SIFT's first octave
-    (:func:`_extraction_options`)."""
+    (:func:`_extraction_options`). ``extractor``: ``"opencv"`` (:func:`opencv_sift`,
+    COLMAP's settings, first octave -1 only) or ``"colmap"`` (COLMAP's own CPU SIFT);
+    the images, cameras and frames are COLMAP's import either way."""
+    if extractor not in EXTRACTORS:
+        raise ValueError(f"SIFT extractor {extractor!r}: use one of {', '.join(EXTRACTORS)} "
+                         "(config key sfm.sift)")
+    if extractor == "opencv" and first_octave != -1:
+        raise ValueError(f"OpenCV's SIFT starts on the image upsampled 2x (first octave -1),"
+                         f" not {first_octave}: use sfm.sift colmap for another first octave")
     import pycolmap  # noqa: PLC0415
 
     pycolmap.set_random_seed(seed)
@@ -111,13 +125,88 @@ def extract_features(database: str | Path, image_dir: str | Path,
             with pycolmap.Database.open(str(database)) as db:
                 cam_id = db.write_camera(camera)
             reader.existing_camera_id = cam_id
-        pycolmap.extract_features(str(database), str(image_dir), image_names=names,
-                                  camera_mode=pycolmap.CameraMode.SINGLE,
-                                  reader_options=reader,
-                                  extraction_options=_extraction_options(
-                                      max_num_features, num_threads, first_octave),
-                                  device=pycolmap.Device.cpu)
-        log.info("features: %d images of group %s", len(names), names[0])
+        if extractor == "colmap":
+            pycolmap.extract_features(str(database), str(image_dir), image_names=names,
+                                      camera_mode=pycolmap.CameraMode.SINGLE,
+                                      reader_options=reader,
+                                      extraction_options=_extraction_options(
+                                          max_num_features, num_threads, first_octave),
+                                      device=pycolmap.Device.cpu)
+        else:
+            with pycolmap.Database.open(str(database)):
+                pass  # created with COLMAP's schema: import_images needs the file
+            pycolmap.import_images(str(database), str(image_dir),
+                                   camera_mode=pycolmap.CameraMode.SINGLE, image_names=names,
+                                   options=reader)
+            _write_opencv_sift(database, Path(image_dir), set(names), max_num_features)
+        log.info("features (%s SIFT): %d images of group %s", extractor, len(names), names[0])
+
+
+def _write_opencv_sift(database: Path, image_dir: Path, names: set[str],
+                       max_num_features: int) -> None:
+    """:func:`opencv_sift` of the imported images ``names`` into ``database``."""
+    import cv2  # noqa: PLC0415
+    import pycolmap  # noqa: PLC0415
+
+    with pycolmap.Database.open(str(database)) as db:
+        for im in sorted(db.read_all_images(), key=lambda i: i.image_id):
+            if im.name not in names:
+                continue
+            gray = cv2.imread(str(image_dir / im.name), cv2.IMREAD_GRAYSCALE)
+            if gray is None:
+                raise OSError(f"{image_dir / im.name}: not a readable image")
+            kp, desc = opencv_sift(gray, max_num_features)
+            db.write_keypoints(im.image_id, kp)
+            db.write_descriptors(im.image_id, pycolmap.FeatureDescriptors(
+                pycolmap.FeatureExtractorType.SIFT, desc))
+
+
+def opencv_sift(gray: np.ndarray, max_num_features: int = 8192) -> tuple[np.ndarray,
+                                                                            np.ndarray]:
+    """SIFT (Lowe 2004) of an 8-bit grey image by OpenCV, set up as COLMAP's CPU SIFT:
+    3 scales per octave, first octave -1 (the image upsampled 2x, pixel-aligned as
+    VLFeat's: OpenCV's plain upscale would shift every keypoint by +0.25 px), sigma 1.6, DoG peak
+    threshold 0.02 / 3 (OpenCV's ``contrastThreshold`` 0.02 is that threshold), edge
+    threshold 10, RootSIFT descriptors (L1-normalised, square-rooted) stored as
+    ``round(512 d)`` in uint8 as COLMAP stores them, keypoints in COLMAP's pixel
+    convention (centre of pixel (0, 0) at (0.5, 0.5)). At most ``max_num_features``,
+    the strongest. Single-threaded and deterministic.
+
+    Returns (N, 4) float32 keypoints (x, y, scale, orientation in radians) and (N, 128)
+    uint8 descriptors, in OpenCV's order. On the default data's 500 x 376 views: about
+    6x faster than COLMAP's extractor (0.04 against 0.28 CPU s per view, issue 15)."""
+    import cv2  # noqa: PLC0415
+
+    if gray.dtype != np.uint8 or gray.ndim != 2:
+        raise TypeError(f"opencv_sift needs an 8-bit grey image, got {gray.dtype} "
+                        f"{gray.shape}")
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)  # OpenCV's parallel loops could reorder the keypoints
+    try:
+        sift = cv2.SIFT_create(nfeatures=int(max_num_features), nOctaveLayers=3,
+                               contrastThreshold=0.02, edgeThreshold=10.0, sigma=1.6,
+                               enable_precise_upscale=True)
+        keypoints, desc = sift.detectAndCompute(gray, None)
+    finally:
+        cv2.setNumThreads(threads)
+    kp = np.zeros((len(keypoints), 4), dtype=np.float32)
+    if not keypoints:
+        return kp, np.zeros((0, 128), dtype=np.uint8)
+    kp[:, 0] = [k.pt[0] + 0.5 for k in keypoints]
+    kp[:, 1] = [k.pt[1] + 0.5 for k in keypoints]
+    kp[:, 2] = [k.size / 2 for k in keypoints]
+    kp[:, 3] = [np.deg2rad(k.angle) for k in keypoints]
+    return kp, root_sift_uint8(desc)
+
+
+def root_sift_uint8(desc: np.ndarray) -> np.ndarray:
+    """COLMAP's L1_ROOT normalisation and uint8 storage of SIFT descriptors (N, 128):
+    ``d / |d|_1``, element-wise square root (unit L2 norm), then ``min(round(512 d),
+    255)``."""
+    d = np.asarray(desc, dtype=np.float64)
+    total = d.sum(axis=1, keepdims=True)
+    d = np.sqrt(d / np.where(total > 0, total, 1.0))
+    return np.minimum(np.rint(512.0 * d), 255).astype(np.uint8)
 
 
 def _verification_options(seed: int, max_error_px: float = 4.0):

@@ -63,7 +63,8 @@ MIN_KEYPOINTS = 100
 
 def features_a(views: Mapping[str, str | Path], image_dir: str | Path,
                database: str | Path, *, max_num_features: int = 8192, seed: int = 0,
-               num_threads: int = 1, first_octave: int = cm.DEFAULT_FIRST_OCTAVE) -> dict:
+               num_threads: int = 1, first_octave: int = cm.DEFAULT_FIRST_OCTAVE,
+               extractor: str = cm.DEFAULT_EXTRACTOR) -> dict:
     """Stage the central views (``views``: cam -> png) as ``<cam>.png`` in ``image_dir``
     and extract SIFT into a new ``database`` with one SIMPLE_PINHOLE camera for all
     (``first_octave``: the same SIFT setting as the view database's, so the naive
@@ -80,7 +81,7 @@ def features_a(views: Mapping[str, str | Path], image_dir: str | Path,
     names = cm.stage_images(views, image_dir)
     cm.extract_features(database, image_dir, [(names, None)], model="SIMPLE_PINHOLE",
                         max_num_features=max_num_features, num_threads=num_threads, seed=seed,
-                        first_octave=first_octave)
+                        first_octave=first_octave, extractor=extractor)
     import pycolmap  # noqa: PLC0415
 
     with pycolmap.Database.open(str(database)) as db:

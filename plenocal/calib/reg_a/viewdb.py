@@ -110,7 +110,8 @@ def view_pairs(names: Iterable[str], shot_centres: Mapping[str, np.ndarray] | No
 def extract_view_features(images: Mapping[str, str | Path], database: str | Path,
                           work_dir: str | Path, *, max_num_features: int = 8192,
                           seed: int = 0, num_threads: int = 1,
-                          first_octave: int = cm.DEFAULT_FIRST_OCTAVE) -> dict:
+                          first_octave: int = cm.DEFAULT_FIRST_OCTAVE,
+                          extractor: str = cm.DEFAULT_EXTRACTOR) -> dict:
     """SIFT of ``images`` (``"<cam>/<view>"`` -> png) into a new ``database``, one
     shared camera with no prior focal length; ``work_dir`` receives the staged images.
     Needs no calibration, so it runs while registration A is computed (rule
@@ -124,7 +125,7 @@ def extract_view_features(images: Mapping[str, str | Path], database: str | Path
                          "with the same settings")
     cm.extract_features(database, image_dir, [(names, None)], model="PINHOLE",
                         max_num_features=max_num_features, num_threads=num_threads,
-                        seed=seed, first_octave=first_octave)
+                        seed=seed, first_octave=first_octave, extractor=extractor)
     import pycolmap  # noqa: PLC0415
 
     with pycolmap.Database.open(str(database)) as db:
@@ -133,7 +134,7 @@ def extract_view_features(images: Mapping[str, str | Path], database: str | Path
     log.info("view features: %d images, %.0f keypoints per image, %.1f s", len(names),
              np.mean(kp), seconds)
     return {"num_images": len(names), "keypoints_mean": float(np.mean(kp)),
-            "keypoints_min": int(min(kp)), "first_octave": first_octave,
+            "keypoints_min": int(min(kp)), "first_octave": first_octave, "sift": extractor,
             "features_s": seconds}
 
 
@@ -234,7 +235,8 @@ def build_view_database(images: Mapping[str, str | Path], database: str | Path,
                         shot_neighbours: int | None = 4, view_radius: int | None = 1,
                         max_num_features: int = 8192, seed: int = 0,
                         num_threads: int = 1,
-                        first_octave: int = cm.DEFAULT_FIRST_OCTAVE) -> dict:
+                        first_octave: int = cm.DEFAULT_FIRST_OCTAVE,
+                        extractor: str = cm.DEFAULT_EXTRACTOR) -> dict:
     """:func:`extract_view_features` and :func:`match_view_database` in one go (the
     workflow runs them as two rules): SIFT of ``images`` and the matching of
     :func:`view_pairs` into a new ``database``; ``work_dir`` receives the staged images
@@ -242,7 +244,8 @@ def build_view_database(images: Mapping[str, str | Path], database: str | Path,
     features = Path(work_dir) / "features.db"
     info = extract_view_features(images, features, work_dir,
                                  max_num_features=max_num_features, seed=seed,
-                                 num_threads=num_threads, first_octave=first_octave)
+                                 num_threads=num_threads, first_octave=first_octave,
+                                 extractor=extractor)
     info.update(match_view_database(features, database, shot_centres=shot_centres,
                                     shot_neighbours=shot_neighbours,
                                     view_radius=view_radius, seed=seed,
