@@ -151,7 +151,10 @@ def make_results(root: Path) -> Path:
             k += 1
         typed.write_synthesis(res / "eval" / f"synthesis_exp{exp}.json", typed.SynthesisResult(
             experiment=exp, renderer="dibr", tables=tuple(psnr_tables(exp, runs, ["dibr"])),
-            images=tuple(images), summary={"near_m": 0.4, "far_m": 0.8}))
+            setup=typed.SynthesisSetup(near_m=0.4, far_m=0.8, psnr_border_px=8,
+                                       depth_method="sgm", depth_quality={},
+                                       view_stride=1 if exp == 3 else None),
+            images=tuple(images)))
     typed.write_convert_quality(res / "convert" / "quality.json", typed.ConvertQuality.from_dict(
         summarise({c: {v: {"psnr_db": 33.0 + 0.1 * k, "ssim": 0.95}
                        for k, v in enumerate(VIEWS)} for c in CAMS}, "1_1")
@@ -305,7 +308,7 @@ def test_a_file_of_another_version_is_named_on_the_page(tmp_path):
         doc = json.loads((res / rel).read_text())
         write_json(res / rel, {**doc, "version": 0})
     by = sections(build(res))
-    assert ("eval/synthesis_exp2.json: not a synthesis result of version 1 (format "
+    assert ("eval/synthesis_exp2.json: not a synthesis result of version 2 (format "
             "&#x27;plenocal.synthesis&#x27;, version 0); rerun rule synthesis_exp&lt;k&gt;"
             in by["exp2"])
     assert "not a Table I (reprojection.json) of version 1" in by["table1"]
