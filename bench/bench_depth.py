@@ -150,9 +150,9 @@ def synthesis_figures(root: Path, out: Lines) -> None:
                                 + _psnr_text(stats))
             est, true = ("estimated", "complete"), ("true", "complete")
             out.say(f"Exp. {k} {name:5s} dB lost to calibration (same depth): "
-                    f"{_db(res.lost_db(name, est, ('estimated', 'ground_truth')))}; with the "
-                    f"true depth: {_db(res.lost_db(name, true, ('true', 'ground_truth')))}; "
-                    f"to depth: {_db(res.lost_db(name, est, true))}")
+                    f"{_db(res.mean_db_lost(name, est, ('estimated', 'ground_truth')))}; with the "
+                    f"true depth: {_db(res.mean_db_lost(name, true, ('true', 'ground_truth')))}; "
+                    f"to depth: {_db(res.mean_db_lost(name, est, true))}")
 
 
 def _db(lost: dict[str, float]) -> str:

@@ -152,9 +152,9 @@ def test_synthesis_figures_are_derived_from_the_tables():
         "": PsnrStats(mean_db=32.0, min_db=30.0, max_db=34.0, count=3)}
     (gt,) = two.psnr_stats("dibr", "estimated", "ground_truth").values()
     assert (gt.mean_db, gt.count) == (pytest.approx((31.0 + 33.0 + 35.5) / 3), 3)
-    lost = two.lost_db("dibr", ("estimated", "complete"), ("estimated", "ground_truth"))
+    lost = two.mean_db_lost("dibr", ("estimated", "complete"), ("estimated", "ground_truth"))
     assert lost == {"": pytest.approx(99.5 / 3 - 32.0)}  # 1.1667 dB
-    assert two.lost_db("dibr", ("estimated", "complete"), ("true", "complete")) == {}
+    assert two.mean_db_lost("dibr", ("estimated", "complete"), ("true", "complete")) == {}
     assert two.psnr_stats("rvs", "estimated", "complete") == {}
 
     three = _result(3, "rvs", [
@@ -169,7 +169,7 @@ def test_synthesis_figures_are_derived_from_the_tables():
         30.0, 29.0, 31.0)
     assert stats["lateral"] == PsnrStats(27.0, 27.0, 27.0, 1)
     # to depth: the true depth's mean minus the estimated depth's, where both were run
-    assert three.lost_db("rvs", ("estimated", "complete"), ("true", "complete")) == {
+    assert three.mean_db_lost("rvs", ("estimated", "complete"), ("true", "complete")) == {
         "central": 1.5}
     assert three.psnr_stats("dibr", "estimated", "complete") == {
         "central": PsnrStats(28.0, 28.0, 28.0, 1)}

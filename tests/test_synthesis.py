@@ -120,11 +120,11 @@ def test_plan_and_shared_depth(dataset):
                           setup=SynthesisSetup(near_m=0.45, far_m=0.8, psnr_border_px=6,
                                                depth_method="given", depth_quality={}))
     assert res.renderers == ("dibr",)
-    lost = res.lost_db("dibr", ("estimated", "complete"), ("estimated", "ground_truth"))
-    assert lost == res.lost_db("dibr", ("true", "complete"), ("true", "ground_truth"))
+    lost = res.mean_db_lost("dibr", ("estimated", "complete"), ("estimated", "ground_truth"))
+    assert lost == res.mean_db_lost("dibr", ("true", "complete"), ("true", "ground_truth"))
     assert lost[""] > 0.5
     assert lost[""] == pytest.approx(good["mean_psnr"] - bad["mean_psnr"], abs=1e-12)
-    assert res.lost_db("dibr", ("estimated", "complete"), ("true", "complete")) == {"": 0.0}
+    assert res.mean_db_lost("dibr", ("estimated", "complete"), ("true", "complete")) == {"": 0.0}
     for cameras, r in (("complete", bad), ("ground_truth", good)):
         (s,) = res.psnr_stats("dibr", "estimated", cameras).values()
         assert (s.mean_db, s.min_db, s.max_db, s.count) == pytest.approx(

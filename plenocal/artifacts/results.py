@@ -150,7 +150,7 @@ def read_gt_errors(path: str | Path) -> GroundTruthErrors:
 SYNTHESIS_FORMAT = "plenocal.synthesis"
 #: 2: the figures that the PSNR tables hold are no longer repeated in a ``summary`` (they
 #: are derived where they are read: :meth:`SynthesisResult.psnr_stats`,
-#: :meth:`SynthesisResult.lost_db`); what the tables do not hold is the typed ``setup``
+#: :meth:`SynthesisResult.mean_db_lost`); what the tables do not hold is the typed ``setup``
 SYNTHESIS_VERSION = 2
 EXPERIMENTS = (1, 2, 3)
 #: the camera sets a synthesis is rendered with (``ground_truth`` on synthetic data only)
@@ -283,7 +283,7 @@ class SynthesisResult:
     """One view-synthesis experiment (Section III, Fig. 6): its PSNR tables, what it was
     run with (``setup``) and the images kept for Fig. 10. The figures per renderer,
     depth and camera set (means, the dB lost) are derived from the tables:
-    :meth:`psnr_stats`, :meth:`lost_db`, :meth:`db_lost`."""
+    :meth:`psnr_stats`, :meth:`mean_db_lost`, :meth:`db_lost`."""
 
     experiment: int
     renderer: str  # the primary renderer (verify.renderer)
@@ -318,12 +318,13 @@ class SynthesisResult:
         out = {p: PsnrStats.of(ts) for p, ts in parts.items()}
         return {p: s for p, s in out.items() if s is not None}
 
-    def lost_db(self, renderer: str, ours: tuple[str, str], ref: tuple[str, str]
-                ) -> dict[str, float]:
+    def mean_db_lost(self, renderer: str, ours: tuple[str, str], ref: tuple[str, str]
+                     ) -> dict[str, float]:
         """Part -> the mean PSNR of ``ref`` minus that of ``ours`` (each a (depth, cameras)
-        pair, the same renderer), where both have targets: with ``ours`` = (estimated,
-        complete) and ``ref`` = (estimated, ground_truth) the dB lost to calibration, with
-        ``ref`` = (true, complete) the dB lost to depth."""
+        pair, the same renderer), each over its own targets, where both have targets:
+        with ``ours`` = (estimated, complete) and ``ref`` = (estimated, ground_truth) the
+        dB lost to calibration, with ``ref`` = (true, complete) the dB lost to depth.
+        (:meth:`db_lost` compares the targets both tables scored, per run.)"""
         a = self.psnr_stats(renderer, *ours)
         b = self.psnr_stats(renderer, *ref)
         return {p: b[p].mean_db - a[p].mean_db for p in a if p in b}
