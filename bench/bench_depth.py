@@ -39,7 +39,12 @@ from synth.planes import (  # noqa: E402
     render_plane,
 )
 
-from plenocal.artifacts.results import read_synthesis  # noqa: E402
+from plenocal.artifacts.results import (  # noqa: E402
+    CAMERA_SETS,
+    DEPTHS,
+    PsnrStats,
+    read_synthesis,
+)
 from plenocal.camera import read_cameras  # noqa: E402
 from plenocal.depth.inputs import nearest_sources  # noqa: E402
 from plenocal.depth.planesweep import (  # noqa: E402
@@ -135,29 +140,35 @@ def synthesis_figures(root: Path, out: Lines) -> None:
         path = root / "eval" / f"synthesis_exp{k}.json"
         if not path.is_file():
             continue
-        doc = read_synthesis(path).summary
-        blocks = {doc["renderer"]: doc, **doc.get("renderers", {})}
-        for name, b in blocks.items():
-            for depth_name, key in (("estimated", "calibrations"), ("true", "true_depth")):
-                for cams, r in b.get(key, {}).items():
-                    out.say(f"Exp. {k} {name:5s} {depth_name:9s} depth, {cams:12s} cameras: "
-                            + _psnr_text(r))
+        res = read_synthesis(path)
+        for name in res.renderers:
+            for depth in DEPTHS:
+                for cams in CAMERA_SETS:
+                    stats = res.psnr_stats(name, depth, cams)
+                    if stats:
+                        out.say(f"Exp. {k} {name:5s} {depth:9s} depth, {cams:12s} cameras: "
+                                + _psnr_text(stats))
+            est, true = ("estimated", "complete"), ("true", "complete")
             out.say(f"Exp. {k} {name:5s} dB lost to calibration (same depth): "
-                    f"{_db(b.get('db_lost'))}; with the true depth: "
-                    f"{_db(b.get('db_lost_true_depth'))}; to depth: "
-                    f"{_db(b.get('db_lost_to_depth'))}")
+                    f"{_db(res.mean_db_lost(name, est, ('estimated', 'ground_truth')))}; with the "
+                    f"true depth: {_db(res.mean_db_lost(name, true, ('true', 'ground_truth')))}; "
+                    f"to depth: {_db(res.mean_db_lost(name, est, true))}")
 
 
-def _db(v) -> str:
-    if isinstance(v, dict):
-        return ", ".join(f"{k} {_db(x)}" for k, x in v.items())
-    return "-" if v is None else f"{v:.2f}"
+def _db(lost: dict[str, float]) -> str:
+    """The dB lost per part of the experiment ("" for the whole of Exps. 1-2)."""
+    if not lost:
+        return "-"
+    if set(lost) == {""}:
+        return f"{lost['']:.2f}"
+    return ", ".join(f"{part} {v:.2f}" for part, v in lost.items())
 
 
-def _psnr_text(r: dict) -> str:
-    if "mean_psnr" in r:
-        return f"{r['mean_psnr']:.2f} (min {r['min_psnr']:.2f}, {r['count']} views)"
-    return "; ".join(f"{v} {r[v]['mean_psnr']:.2f}" for v in ("central", "lateral") if v in r)
+def _psnr_text(stats: dict[str, PsnrStats]) -> str:
+    if set(stats) == {""}:
+        s = stats[""]
+        return f"{s.mean_db:.2f} (min {s.min_db:.2f}, {s.count} views)"
+    return "; ".join(f"{part} {s.mean_db:.2f}" for part, s in stats.items())
 
 
 def measure(a, out: Lines) -> None:

@@ -12,7 +12,13 @@ from pathlib import Path
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 import numpy as np
 
-from plenocal.artifacts.results import SynthesisResult, SynthImage, write_synthesis
+from plenocal.artifacts.results import (
+    DepthQuality,
+    SynthesisResult,
+    SynthesisSetup,
+    SynthImage,
+    write_synthesis,
+)
 from plenocal.artifacts.rig import read_rig
 from plenocal.camera import read_cameras
 from plenocal.depth.inputs import rig_bounds
@@ -24,7 +30,6 @@ from plenocal.verify.synthesis import (
     layout_from_cams,
     psnr_tables,
     run_experiment,
-    synthesis_summary,
 )
 
 snakemake = globals()["snakemake"]
@@ -70,13 +75,17 @@ for renderer in renderers:
             if dname == "estimated" and renderer == renderers[0]:
                 kept_all.update({(cname, k): img for k, img in kept.items()})
 
+border = int(cfg.get("psnr_border_px", 8))
 quality = {}
 if "true" in depths:
-    quality = {k: depth_quality(z, depths["true"][k], 0.01, int(cfg.get("psnr_border_px", 8)))
+    quality = {k: DepthQuality.from_dict(depth_quality(z, depths["true"][k], 0.01, border))
                for k, z in depths["estimated"].items() if k in depths["true"]}
-summary = {"near_m": near, "far_m": far, "psnr_border_px": int(cfg.get("psnr_border_px", 8)),
-           "depth_method": cfg["depth"].get("synthesis_method", "sgm"),
-           "depth_quality": quality, **synthesis_summary(exp, runs, renderers)}
+setup = SynthesisSetup(near_m=near, far_m=far, psnr_border_px=border,
+                       depth_method=cfg["depth"].get("synthesis_method", "sgm"),
+                       depth_quality=quality,
+                       # as experiment3 ran it (every run of Exp. 3 has the same)
+                       view_stride=next(iter(runs.values()))["view_stride"] if exp == 3
+                       else None)
 synth_dir = Path(snakemake.output.synth)
 kept_images = []
 for (cname, k), img in sorted(kept_all.items()):
@@ -90,4 +99,4 @@ for (cname, k), img in sorted(kept_all.items()):
 synth_dir.mkdir(parents=True, exist_ok=True)
 write_synthesis(snakemake.output.json, SynthesisResult(
     experiment=exp, renderer=renderers[0], tables=tuple(psnr_tables(exp, runs, renderers)),
-    images=tuple(kept_images), summary=summary))
+    setup=setup, images=tuple(kept_images)))

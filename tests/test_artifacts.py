@@ -7,10 +7,13 @@ import pytest
 from synth.lenslets import calib_for_optics, lenslet_from_patch_size, random_texture
 
 from plenocal.artifacts.disparity import FORMAT, VERSION, disparity_record, read_disparity
+from plenocal.artifacts.stage_warnings import read_warnings, warning_list, warnings_of
 from plenocal.convert import ConvertSettings, ShotConversion
+from plenocal.convert.setup import ConverterSetup, read_setup, write_setup
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_json, write_json
 from plenocal.optics import PlenopticOptics
+from plenocal.report.sources import WARNING_SOURCES
 
 
 def _shot() -> ShotConversion:
@@ -38,7 +41,7 @@ def test_disparity_round_trip(tmp_path):
     # the record is the writer's, whoever calls it
     again = disparity_record(shot.layout, shot.calib, shot.used_patch,
                              shot.patch.confident[shot.layout.lens_index],
-                             shot.settings.percentiles)
+                             shot.settings.percentiles, shot.warnings)
     assert {k: doc[k] for k in again} == again
 
 
@@ -58,6 +61,76 @@ def test_disparity_of_another_version_or_damaged_is_refused(tmp_path):
     with pytest.raises(FileNotFoundError, match="convert the shot"):
         read_disparity(tmp_path / "absent.json")
     assert read_json(tmp_path / "cut.json")["format"] == FORMAT
+
+
+# ---------------------------------------------------------------------------
+# The stages' warnings: one shape, a list of strings
+# ---------------------------------------------------------------------------
+
+REPORT_READS = dict(WARNING_SOURCES)  # what the report reads each output's warnings with
+
+
+def _setup(warnings) -> ConverterSetup:
+    return ConverterSetup(mla="keplerian", tile=6, grid_mode="auto", refined=False,
+                          lattice=None, decided_on="x01_y01.png", mla_source="setting",
+                          tile_source="setting", mla_match_scores=None, grid_check={},
+                          warnings=warnings)
+
+
+def test_producers_write_warnings_as_a_list_of_strings(tmp_path):
+    """Every producer of a ``warnings`` list writes it in the one shape, and the report's
+    reader of that output gives the messages back unchanged (registration A's
+    features.json: tests/test_sfm.py)."""
+    shot = _shot()
+    shot.warnings = ["lenslet.png: only 12 % of the micro images have a confident size"]
+    doc = shot.disparity()
+    assert doc["warnings"] == shot.warnings
+    write_json(tmp_path / "disparity.json", doc)
+    assert REPORT_READS["views/{cam}/disparity.json"](tmp_path / "disparity.json") == (
+        tuple(shot.warnings))
+    setup = _setup(("x01_y01.png: grid check: the calib.xml grid drifts up to 2.1 px",))
+    assert setup.to_dict()["warnings"] == list(setup.warnings)
+    write_setup(tmp_path / "convert_setup.json", setup)
+    assert read_setup(tmp_path / "convert_setup.json") == setup
+    assert REPORT_READS["views/convert_setup.json"](tmp_path / "convert_setup.json") == (
+        setup.warnings)
+    # another shape never reaches a file
+    for bad in ([{"message": "few features"}], ["  "], [None]):
+        with pytest.raises(TypeError, match="non-empty strings"):
+            warning_list(bad)
+        with pytest.raises(TypeError, match="non-empty strings"):
+            _setup(tuple(bad)).to_dict()
+        shot.warnings = bad
+        with pytest.raises(TypeError, match="non-empty strings"):
+            shot.disparity()
+
+
+def test_warnings_of_another_shape_are_refused_with_file_key_and_remedy(tmp_path):
+    doc = _shot().disparity()
+    assert warnings_of({"warnings": ["a", "b"]}, "x.json", "rerun") == ("a", "b")
+    for name, raw, what in (("dict.json", [{"message": "few features"}], "entry 0"),
+                            ("str.json", "few features", "is a str, not a list"),
+                            ("empty.json", ["ok", ""], "entry 1")):
+        write_json(tmp_path / name, {**doc, "warnings": raw})
+        with pytest.raises(ValueError, match=rf"{name}: key 'warnings'.*{what}.*convert the "
+                                             r"shot \(rule convert"):
+            REPORT_READS["views/{cam}/disparity.json"](tmp_path / name)
+        write_json(tmp_path / name, {"keypoints": {}, "warnings": raw})
+        with pytest.raises(ValueError, match=rf"{name}: key 'warnings'.*rerun rule features_a"):
+            REPORT_READS["reg_a/features.json"](tmp_path / name)
+    write_json(tmp_path / "none.json", {k: v for k, v in doc.items() if k != "warnings"})
+    with pytest.raises(ValueError, match=r"none\.json: no key 'warnings'.*convert the shot"):
+        REPORT_READS["views/{cam}/disparity.json"](tmp_path / "none.json")
+    setup = _setup(("a",)).to_dict()
+    write_json(tmp_path / "setup.json", {**setup, "warnings": [{"message": "a"}]})
+    with pytest.raises(ValueError, match=r"setup\.json: key 'warnings', entry 0.*rule "
+                                         "convert_setup"):
+        read_setup(tmp_path / "setup.json")
+    write_json(tmp_path / "setup.json", {k: v for k, v in setup.items() if k != "warnings"})
+    with pytest.raises(ValueError, match=r"setup\.json: no key 'warnings'"):
+        read_setup(tmp_path / "setup.json")
+    with pytest.raises(FileNotFoundError, match="features.json.*rerun rule features_a"):
+        read_warnings(tmp_path / "absent.json", "features.json", "rerun rule features_a")
 
 
 def test_scale_round_trip_and_estimator(tmp_path):
@@ -84,16 +157,19 @@ def test_scale_round_trip_and_estimator(tmp_path):
 def test_rig_round_trip_and_checks(tmp_path):
     import numpy as np
 
-    from plenocal.artifacts.rig import RigB, read_rig, write_rig
+    from plenocal.artifacts.rig import InverseCheck, RigB, read_rig, write_rig
 
     K = np.array([[100.0, 0, 50], [0, 100.0, 40], [0, 0, 1]])
     views = {f"{r}_{c}": {"K": K, "cam_to_central": np.eye(4)} for r in range(3) for c in range(3)}
     doc = {"model": "exact", "n_views": 3, "width": 101, "height": 81, "focal_px": 100.0,
            "depth_range_m": [0.4, 0.8], "symbols": {"X_n": 470.0, "X_f": 740.0},
-           "views": views}
+           "views": views, "check": {"verdict": "fail", "rel_diff_B": 0.12,
+                                     "rel_diff_alpha": None, "tolerance": 0.05}}
     write_rig(tmp_path / "rig.json", doc)
     rig = read_rig(tmp_path / "rig.json")
     assert isinstance(rig, RigB) and rig.depth_range_m == (0.4, 0.8) and rig.focal_px == 100.0
+    assert rig.check == InverseCheck("fail", rel_diff_B=0.12, tolerance=0.05)
+    assert rig.check.failed
     cams = rig.set_cameras("hand01")
     assert sorted(cams)[0] == "hand01/0_0" and cams["hand01/1_1"].width == 101
     write_json(tmp_path / "few.json", {**read_json(tmp_path / "rig.json"),
@@ -107,6 +183,46 @@ def test_rig_round_trip_and_checks(tmp_path):
     write_json(tmp_path / "cut.json", cut)
     with pytest.raises(ValueError, match="without key 'symbols'"):
         read_rig(tmp_path / "cut.json")
+
+
+def test_rig_check_is_typed_and_a_rename_is_an_error(tmp_path):
+    """The inverse check of Eqs. 2-3 (rig.json's ``check``) as build_rig writes it is read
+    into an InverseCheck; a key of it renamed or left out on the producing side is an
+    error when writing and when reading (the report would otherwise drop its warning)."""
+    import numpy as np
+
+    from plenocal.artifacts.rig import InverseCheck, read_rig, write_rig
+    from plenocal.calib.reg_b.paper_model import inverse_check
+
+    sym = {"P": 0.0055, "F": 35.0, "F_m_px": 6363.6, "D_max_px": -2.0, "D_min_px": -3.0}
+    judged = inverse_check(sym, 470.0, 740.0, 0.5, 0.001)
+    skipped = inverse_check(sym, None, None, 0.5, 0.001)
+    K = np.array([[100.0, 0, 50], [0, 100.0, 40], [0, 0, 1]])
+    doc = {"model": "paper", "n_views": 1, "width": 101, "height": 81, "focal_px": 100.0,
+           "depth_range_m": [0.4, 0.8], "symbols": sym,
+           "views": {"0_0": {"K": K, "cam_to_central": np.eye(4)}}}
+    path = tmp_path / "rig.json"
+    for check in (judged, skipped):
+        write_rig(path, {**doc, "check": check})
+        typed = read_rig(path).check
+        assert typed.verdict == check["verdict"]
+    assert typed == InverseCheck("skipped", reason=skipped["reason"])
+    write_rig(path, {**doc, "check": judged})
+    c = read_rig(path).check
+    assert (c.rel_diff_B, c.rel_diff_alpha, c.tolerance) == pytest.approx(
+        (judged["rel_diff_B"], judged["rel_diff_alpha"], judged["tolerance"]), rel=1e-11)
+    for key in ("verdict", "rel_diff_B", "rel_diff_alpha", "tolerance"):
+        renamed = {("result" if k == key else k): v for k, v in judged.items()}
+        with pytest.raises(ValueError, match=rf"new\.json: .*'check\.{key}'.*build_rig"):
+            write_rig(tmp_path / "new.json", {**doc, "check": renamed})
+        write_json(tmp_path / "old.json", {**read_json(path), "check": renamed})
+        with pytest.raises(ValueError, match=rf"old\.json: .*'check\.{key}'.*rule rig_b"):
+            read_rig(tmp_path / "old.json")
+    write_json(tmp_path / "old.json", {**read_json(path), "check": {**judged, "verdict": "FAIL"}})
+    with pytest.raises(ValueError, match=r"'check\.verdict' = 'FAIL' is not one of pass, fail"):
+        read_rig(tmp_path / "old.json")
+    with pytest.raises(ValueError, match="rig.json would lack key 'check'"):
+        write_rig(tmp_path / "new.json", doc)
 
 
 def test_reg_a_round_trip(tmp_path):

@@ -9,10 +9,13 @@ import pytest
 from plenocal.artifacts.results import (
     Check,
     ConvertQuality,
+    DepthQuality,
     GroundTruthErrors,
+    PsnrStats,
     PsnrTable,
     ReprojectionTable,
     SynthesisResult,
+    SynthesisSetup,
     SynthImage,
     read_convert_quality,
     read_gt_errors,
@@ -32,9 +35,11 @@ def _refuses_other_versions(path, read, name: str, remedy: str) -> None:
     """``read`` refuses the file at ``path`` as another version, as the unversioned layout
     of before, and without one of its keys, naming the file and the remedy."""
     doc = read_json(path)
-    write_json(path, {**doc, "version": doc["version"] + 1})
-    with pytest.raises(ValueError, match=rf"{path.name}: not a {name} of version 1 "
-                                         rf"\(format '{doc['format']}', version 2\); {remedy}"):
+    v = doc["version"]
+    write_json(path, {**doc, "version": v + 1})
+    with pytest.raises(ValueError, match=rf"{path.name}: not a {name} of version {v} "
+                                         rf"\(format '{doc['format']}', version {v + 1}\); "
+                                         rf"{remedy}"):
         read(path)
     write_json(path, {k: v for k, v in doc.items() if k not in ("format", "version")})
     with pytest.raises(ValueError, match=r"\(format None, version None\)"):
@@ -93,25 +98,81 @@ def test_synthesis_round_trip_db_lost_and_versions(tmp_path):
     # ordered by renderer, depth, cameras: the complete calibration before the truth
     assert [(t.depth, t.cameras) for t in tables] == [
         ("estimated", "complete"), ("estimated", "ground_truth"), ("true", "complete")]
+    quality = DepthQuality(pixels=900, valid_share=0.96, within_share=0.9,
+                           within_of_valid=0.9375, median_rel_error=0.0031, tolerance=0.01)
     result = SynthesisResult(experiment=1, renderer="dibr", tables=tables,
+                             setup=SynthesisSetup(near_m=0.4, far_m=0.8, psnr_border_px=8,
+                                                  depth_method="sgm",
+                                                  depth_quality={"x00_y00/1_1": quality}),
                              images=(SynthImage("synth/exp1/a.png", "x01_y01/1_1",
-                                                "complete", ""),),
-                             summary={"near_m": 0.4})
+                                                "complete", ""),))
     path = tmp_path / "synthesis_exp1.json"
     write_synthesis(path, result)
     doc = read_json(path)
+    assert (doc["format"], doc["version"]) == ("plenocal.synthesis", 2)
     assert (doc["experiment"], doc["metric"], doc["renderer"]) == (1, "psnr_db", "dibr")
+    # version 2: what the tables hold is not repeated
+    assert sorted(doc) == ["experiment", "format", "images", "metric", "renderer", "setup",
+                           "tables", "version"]
     back = read_synthesis(path)
     assert back == result
     ((ours, truth, lost, n),) = back.db_lost()  # the true depth has no ground-truth twin
     assert (ours.cameras, truth.cameras, n) == ("complete", "ground_truth", 2)
     assert lost == pytest.approx(0.75)
     with pytest.raises(ValueError, match="no experiment 4"):
-        SynthesisResult(experiment=4, renderer="dibr", tables=())
+        SynthesisResult(experiment=4, renderer="dibr", tables=(), setup=result.setup)
     with pytest.raises(ValueError, match="cameras 'truth'"):
         PsnrTable("dibr", "estimated", "truth", "", (), {})
     _refuses_other_versions(path, read_synthesis, "synthesis result",
                             "rerun rule synthesis_exp<k>")
+
+
+def _result(exp: int, renderer: str, tables: list[PsnrTable]) -> SynthesisResult:
+    return SynthesisResult(experiment=exp, renderer=renderer, tables=tuple(tables),
+                           setup=SynthesisSetup(near_m=0.4, far_m=0.8, psnr_border_px=8,
+                                                depth_method="sgm", depth_quality={},
+                                                view_stride=1 if exp == 3 else None))
+
+
+def test_synthesis_figures_are_derived_from_the_tables():
+    """The means per renderer, depth and camera set and the dB lost (what version 1
+    repeated in ``summary``), computed from the PSNR tables, against a hand-computed
+    case: Exp. 2's sets count together, Exp. 3's two input choices apart."""
+    def t(renderer, depth, cameras, run, psnr):
+        return PsnrTable(renderer, depth, cameras, run, (), psnr)
+
+    two = _result(2, "dibr", [
+        t("dibr", "estimated", "complete", "x00_y00", {"x00_y00/0_0": 30.0, "x00_y00/2_2": 32.0}),
+        t("dibr", "estimated", "complete", "x01_y00", {"x01_y00/0_0": 34.0}),
+        t("dibr", "estimated", "ground_truth", "x00_y00",
+          {"x00_y00/0_0": 31.0, "x00_y00/2_2": 33.0}),
+        t("dibr", "estimated", "ground_truth", "x01_y00", {"x01_y00/0_0": 35.5})])
+    assert two.renderers == ("dibr",)
+    assert two.psnr_stats("dibr", "estimated", "complete") == {
+        "": PsnrStats(mean_db=32.0, min_db=30.0, max_db=34.0, count=3)}
+    (gt,) = two.psnr_stats("dibr", "estimated", "ground_truth").values()
+    assert (gt.mean_db, gt.count) == (pytest.approx((31.0 + 33.0 + 35.5) / 3), 3)
+    lost = two.mean_db_lost("dibr", ("estimated", "complete"), ("estimated", "ground_truth"))
+    assert lost == {"": pytest.approx(99.5 / 3 - 32.0)}  # 1.1667 dB
+    assert two.mean_db_lost("dibr", ("estimated", "complete"), ("true", "complete")) == {}
+    assert two.psnr_stats("rvs", "estimated", "complete") == {}
+
+    three = _result(3, "rvs", [
+        t("dibr", "estimated", "complete", "central", {"x01_y00/0_0": 28.0}),
+        t("rvs", "estimated", "complete", "central", {"x01_y00/0_0": 29.0, "x01_y00/0_1": 31.0}),
+        t("rvs", "estimated", "complete", "lateral", {"x01_y00/0_0": 27.0}),
+        t("rvs", "true", "complete", "central", {"x01_y00/0_0": 30.0, "x01_y00/0_1": 33.0})])
+    assert three.renderers == ("rvs", "dibr")  # the primary one first
+    stats = three.psnr_stats("rvs", "estimated", "complete")
+    assert list(stats) == ["central", "lateral"]
+    assert (stats["central"].mean_db, stats["central"].min_db, stats["central"].max_db) == (
+        30.0, 29.0, 31.0)
+    assert stats["lateral"] == PsnrStats(27.0, 27.0, 27.0, 1)
+    # to depth: the true depth's mean minus the estimated depth's, where both were run
+    assert three.mean_db_lost("rvs", ("estimated", "complete"), ("true", "complete")) == {
+        "central": 1.5}
+    assert three.psnr_stats("dibr", "estimated", "complete") == {
+        "central": PsnrStats(28.0, 28.0, 28.0, 1)}
 
 
 def test_psnr_tables_name_the_runs_of_experiments_2_and_3():

@@ -19,6 +19,8 @@ import numpy as np
 import pytest
 
 from plenocal.artifacts import results as typed
+from plenocal.artifacts.disparity import FORMAT as DISPARITY_FORMAT
+from plenocal.artifacts.disparity import VERSION as DISPARITY_VERSION
 from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.artifacts.rig import write_rig
 from plenocal.artifacts.scale import ScaleResult, write_scale
@@ -95,7 +97,8 @@ def make_results(root: Path) -> Path:
                          "cam_to_central": pose(np.eye(3), [(int(v[2]) - 1) * 2e-4,
                                                             (int(v[0]) - 1) * 2e-4, 0])}
                      for v in VIEWS},
-           "exact": {"B": 0.2}, "check": {"verdict": "pass"}}
+           "exact": {"B": 0.2}, "check": {"verdict": "pass", "rel_diff_B": 0.004,
+                                          "rel_diff_alpha": -0.01, "tolerance": 0.05}}
     write_rig(res / "reg_b" / "rig.json", rig)
     write_scale(res / "merge" / "scale.json", ScaleResult(
         r=0.0201, r_median=0.0201, r_median_of_ratios=0.0201, estimator="mean",
@@ -148,7 +151,10 @@ def make_results(root: Path) -> Path:
             k += 1
         typed.write_synthesis(res / "eval" / f"synthesis_exp{exp}.json", typed.SynthesisResult(
             experiment=exp, renderer="dibr", tables=tuple(psnr_tables(exp, runs, ["dibr"])),
-            images=tuple(images), summary={"near_m": 0.4, "far_m": 0.8}))
+            setup=typed.SynthesisSetup(near_m=0.4, far_m=0.8, psnr_border_px=8,
+                                       depth_method="sgm", depth_quality={},
+                                       view_stride=1 if exp == 3 else None),
+            images=tuple(images)))
     typed.write_convert_quality(res / "convert" / "quality.json", typed.ConvertQuality.from_dict(
         summarise({c: {v: {"psnr_db": 33.0 + 0.1 * k, "ssim": 0.95}
                        for k, v in enumerate(VIEWS)} for c in CAMS}, "1_1")
@@ -302,7 +308,7 @@ def test_a_file_of_another_version_is_named_on_the_page(tmp_path):
         doc = json.loads((res / rel).read_text())
         write_json(res / rel, {**doc, "version": 0})
     by = sections(build(res))
-    assert ("eval/synthesis_exp2.json: not a synthesis result of version 1 (format "
+    assert ("eval/synthesis_exp2.json: not a synthesis result of version 2 (format "
             "&#x27;plenocal.synthesis&#x27;, version 0); rerun rule synthesis_exp&lt;k&gt;"
             in by["exp2"])
     assert "not a Table I (reprojection.json) of version 1" in by["table1"]
@@ -389,11 +395,12 @@ def test_stage_warnings_reach_the_first_screen(tmp_path):
     res = make_results(tmp_path)
     html = build(res)
     assert 'id="warnings"' in html and "No warnings" in html
+    # each output as its producer writes it: a list of messages
     write_json(res / "views" / "x01_y00" / "disparity.json", {
-        "D_min": 1.0, "D_max": 2.0,
+        "format": DISPARITY_FORMAT, "version": DISPARITY_VERSION, "D_min": 1.0, "D_max": 2.0,
         "warnings": ["only 12 % of the micro images have a confident patch size"]})
     write_json(res / "reg_a" / "features.json", {
-        "keypoints": {}, "warnings": [{"message": "few features in hand01"}]})
+        "keypoints": {}, "warnings": ["few features in hand01"]})
     rig = json.loads((res / "reg_b" / "rig.json").read_text())
     rig["check"] = {"verdict": "fail", "rel_diff_B": 0.12, "rel_diff_alpha": -0.01,
                     "tolerance": 0.05}
@@ -406,7 +413,30 @@ def test_stage_warnings_reach_the_first_screen(tmp_path):
     assert "Warnings (3)" in box
     assert "views/x01_y00/disparity.json" in box and "confident patch size" in box
     assert "reg_a/features.json" in box and "few features in hand01" in box
-    assert "Eqs. 2-3" in box and "+12.0 %" in box
+    assert ("the inverse check of Eqs. 2-3 failed: from the measured near/far distances "
+            "(camera.yaml scene.near_mm, far_mm) B differs by +12.0 %, alpha differs by "
+            "-1.0 % (tolerance 5 %); check those distances and the datasheet") in box
+
+
+def test_stage_warnings_of_another_shape_are_named_not_guessed(tmp_path):
+    """A warnings list of another shape, or rig.json's check with a renamed key, is not
+    read as well as it can be (nor dropped): the box says which file, which key and what
+    to do."""
+    res = make_results(tmp_path)
+    write_json(res / "reg_a" / "features.json", {
+        "keypoints": {}, "warnings": [{"message": "few features in hand01"}]})
+    rig = json.loads((res / "reg_b" / "rig.json").read_text())
+    rig["check"] = {"result": "fail", "rel_diff_B": 0.12, "rel_diff_alpha": -0.01,
+                    "tolerance": 0.05}
+    write_json(res / "reg_b" / "rig.json", rig)
+    box = re.search(r'<div class="warnbox" id="warnings">.*?</div>', build(res),
+                    flags=re.S).group(0)
+    assert "Warnings (2)" in box and "</a>: few features in hand01</li>" not in box
+    assert ("reg_a/features.json: key &#x27;warnings&#x27;, entry 0 = {&#x27;message&#x27;: "
+            "&#x27;few features in hand01&#x27;} is not a message (a non-empty string); "
+            "rerun rule features_a") in box
+    assert ("reg_b/rig.json: the inverse check of Eqs. 2-3 has no key "
+            "&#x27;check.verdict&#x27;; rerun rule rig_b") in box
 
 
 # ---------------------------------------------------------------------------

@@ -8,7 +8,8 @@ from synth.scenes import default_scene, render, rig_cameras
 
 from plenocal.calib.reg_a.sfm import RegistrationError, check_shots, features_a, map_a, match_a
 from plenocal.camera import rotation_angle_deg, umeyama
-from plenocal.io.files import dumps_json, write_image
+from plenocal.io.files import dumps_json, write_image, write_json
+from plenocal.report.sources import WARNING_SOURCES
 
 F, W, H, STEP = 600.0, 480, 360, 0.03
 
@@ -156,3 +157,7 @@ def test_few_features_warning_is_in_the_output(tmp_path):
     info = features_a(views, tmp_path / "images", tmp_path / "features.db")
     assert len(info["warnings"]) == 1, info["warnings"]
     assert "hand00 (" in info["warnings"][0] and "x00_y00" not in info["warnings"][0]
+    # written as rule features_a writes it, read as the report reads it: the same messages
+    write_json(tmp_path / "features.json", info)
+    read = dict(WARNING_SOURCES)["reg_a/features.json"]
+    assert read(tmp_path / "features.json") == tuple(info["warnings"])

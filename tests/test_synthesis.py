@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from synth.planes import camera_at, fronto_plane, photo_texture, render_plane
 
+from plenocal.artifacts.results import SynthesisResult, SynthesisSetup
 from plenocal.camera import PinholeCamera
 from plenocal.io.files import to_uint8, write_image
 from plenocal.verify.synthesis import (
@@ -16,8 +17,8 @@ from plenocal.verify.synthesis import (
     inner_corner_view,
     lateral_view,
     layout_from_cams,
+    psnr_tables,
     run_experiment,
-    synthesis_summary,
 )
 from plenocal.viewgeom import view_names
 
@@ -87,8 +88,8 @@ def test_bad_calibration_loses_db(dataset):
 
 def test_plan_and_shared_depth(dataset):
     """Depth maps given once serve every camera set (the dB lost to calibration with one
-    and the same depth); the plan lists what each experiment reads; the summary puts the
-    first renderer on top and the others under ``renderers``."""
+    and the same depth); the plan lists what each experiment reads; the means and the dB
+    lost derived from the result's PSNR tables are those of the runs."""
     root, cams = dataset
     layout = layout_from_cams(sorted({k.split("/")[0] for k in cams}), N)
     plane = fronto_plane(0.6, 0.8, photo_texture(384, noise=0.005), 20.0)
@@ -113,11 +114,21 @@ def test_plan_and_shared_depth(dataset):
     assert good["psnr"]["x01_y00/1_1"] > bad["psnr"]["x01_y00/1_1"] + 3.0
     # the other targets see the same cameras and the same depth: the same PSNR
     assert good["psnr"]["x01_y01/1_1"] == bad["psnr"]["x01_y01/1_1"]
-    out = synthesis_summary(1, runs, ["dibr"])
-    assert out["renderer"] == "dibr" and out["renderers"] == {}
-    assert out["db_lost"] == out["db_lost_true_depth"] > 0.5
-    assert out["db_lost_to_depth"] == 0.0
-    assert set(out["calibrations"]) == set(out["true_depth"]) == {"complete", "ground_truth"}
+    # the figures the report and bench/ derive from the result's PSNR tables
+    res = SynthesisResult(experiment=1, renderer="dibr",
+                          tables=tuple(psnr_tables(1, runs, ["dibr"])),
+                          setup=SynthesisSetup(near_m=0.45, far_m=0.8, psnr_border_px=6,
+                                               depth_method="given", depth_quality={}))
+    assert res.renderers == ("dibr",)
+    lost = res.mean_db_lost("dibr", ("estimated", "complete"), ("estimated", "ground_truth"))
+    assert lost == res.mean_db_lost("dibr", ("true", "complete"), ("true", "ground_truth"))
+    assert lost[""] > 0.5
+    assert lost[""] == pytest.approx(good["mean_psnr"] - bad["mean_psnr"], abs=1e-12)
+    assert res.mean_db_lost("dibr", ("estimated", "complete"), ("true", "complete")) == {"": 0.0}
+    for cameras, r in (("complete", bad), ("ground_truth", good)):
+        (s,) = res.psnr_stats("dibr", "estimated", cameras).values()
+        assert (s.mean_db, s.min_db, s.max_db, s.count) == pytest.approx(
+            (r["mean_psnr"], r["min_psnr"], r["max_psnr"], r["count"]), abs=1e-12)
 
 
 def test_threads_render_the_same_images(dataset):

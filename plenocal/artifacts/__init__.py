@@ -7,6 +7,8 @@ them without pulling in OpenCV or COLMAP.
 * :mod:`.disparity` - ``views/<shot>/disparity.json`` (convert -> registration B)
 * :mod:`.rig` - ``reg_b/rig.json`` (registration B -> depth, merge, Table I, synthesis)
 * :mod:`.scale` - ``merge/scale.json`` (scale, Eq. 5 -> merge, Eq. 6, and gt_errors)
+* :mod:`.stage_warnings` - the ``warnings`` list of a stage's output (convert set-up,
+  ``disparity.json``, ``features.json`` -> the report's first screen): one shape
 * :mod:`.results` - the evaluation results that the report reads: ``eval/reprojection.json``
   (Table I), ``eval/gt_errors.json``, ``eval/synthesis_exp<k>.json`` (Figs. 6-10) and
   ``convert/quality.json``

@@ -2,7 +2,8 @@
 
 One typed definition for the file: :func:`disparity_record` writes it (rule
 ``convert`` and ``plenocal convert``), :func:`read_disparity` reads the part that
-registration B uses into a :class:`Conversion`. The file carries its format name and
+registration B uses into a :class:`Conversion`, :func:`read_disparity_warnings` the
+conversion's warnings for the report. The file carries its format name and
 version; a file of another version is refused with the remedy (convert again), never
 guessed at.
 
@@ -15,11 +16,13 @@ lies beyond the plane conjugate to the MLA, where the views converge); Galilean:
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from plenocal.artifacts.stage_warnings import WARNINGS_KEY, warning_list, warnings_of
 from plenocal.artifacts.versioned import decode
 from plenocal.io.raytrix import RayCalib
 from plenocal.viewgeom import MLA_KINDS, ViewLayout
@@ -48,11 +51,12 @@ class Conversion:
 
 
 def disparity_record(layout: ViewLayout, calib: RayCalib, patch: np.ndarray,
-                     confident: np.ndarray, percentiles: tuple[float, float] = (2.0, 98.0)
-                     ) -> dict:
+                     confident: np.ndarray, percentiles: tuple[float, float] = (2.0, 98.0),
+                     warnings: Iterable[str] = ()) -> dict:
     """The content of ``disparity.json``: the disparity range between horizontally
-    adjacent views (Eq. 1), the geometry it refers to and the patch-size statistics
-    (``patch``/``confident``: per used lens). The range is taken between the given
+    adjacent views (Eq. 1), the geometry it refers to, the patch-size statistics
+    (``patch``/``confident``: per used lens) and the conversion's ``warnings``
+    (:mod:`plenocal.artifacts.stage_warnings`). The range is taken between the given
     percentiles of the patch sizes."""
     q, T = layout.q, layout.tile
     p_lo, p_hi = (float(x) for x in np.percentile(patch, percentiles))
@@ -94,13 +98,16 @@ def disparity_record(layout: ViewLayout, calib: RayCalib, patch: np.ndarray,
             "percentiles": pct,
             "confident_share": float(np.mean(confident)) if len(confident) else 0.0,
         },
+        WARNINGS_KEY: warning_list(warnings),
     }
+
+
+REMEDY = "convert the shot (rule convert, or plenocal convert)"
 
 
 def read_disparity(path: str | Path) -> Conversion:
     """Read one shot's ``disparity.json`` (this version only) into a :class:`Conversion`."""
-    return decode(path, FORMAT, VERSION, "disparity.json",
-                  "convert the shot (rule convert, or plenocal convert)",
+    return decode(path, FORMAT, VERSION, "disparity.json", REMEDY,
                   lambda doc: _conversion(doc, path))
 
 
@@ -115,3 +122,10 @@ def _conversion(doc: dict, path: str | Path) -> Conversion:
         pitch_px=float(doc["D_px"]), safe_diameter_px=float(doc["safe_diameter_px"]),
         width=int(doc["width"]), height=int(doc["height"]), n_views=int(doc["n_views"]),
         mla=mla)
+
+
+def read_disparity_warnings(path: str | Path) -> tuple[str, ...]:
+    """What the conversion of the shot warned about (the ``warnings`` of
+    ``disparity.json``, this version only): for the report's first screen."""
+    return decode(path, FORMAT, VERSION, "disparity.json", REMEDY,
+                  lambda doc: warnings_of(doc, path, REMEDY))

@@ -15,8 +15,8 @@ calibrations compared, the metric - is a field of the file, never parsed from it
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -148,7 +148,10 @@ def read_gt_errors(path: str | Path) -> GroundTruthErrors:
 # ---------------------------------------------------------------------------
 
 SYNTHESIS_FORMAT = "plenocal.synthesis"
-SYNTHESIS_VERSION = 1
+#: 2: the figures that the PSNR tables hold are no longer repeated in a ``summary`` (they
+#: are derived where they are read: :meth:`SynthesisResult.psnr_stats`,
+#: :meth:`SynthesisResult.mean_db_lost`); what the tables do not hold is the typed ``setup``
+SYNTHESIS_VERSION = 2
 EXPERIMENTS = (1, 2, 3)
 #: the camera sets a synthesis is rendered with (``ground_truth`` on synthetic data only)
 CAMERA_SETS = ("complete", "ground_truth")
@@ -185,6 +188,24 @@ class PsnrTable:
 
 
 @dataclass(frozen=True)
+class PsnrStats:
+    """The PSNR [dB] of a group of targets: mean, least, largest and how many."""
+
+    mean_db: float
+    min_db: float
+    max_db: float
+    count: int
+
+    @classmethod
+    def of(cls, tables: Iterable[PsnrTable]) -> PsnrStats | None:
+        """Over every target of ``tables`` (None when they have none)."""
+        vals = np.array([v for t in tables for v in t.psnr_db.values()], dtype=float)
+        if len(vals) == 0:
+            return None
+        return cls(float(vals.mean()), float(vals.min()), float(vals.max()), int(len(vals)))
+
+
+@dataclass(frozen=True)
 class SynthImage:
     """A synthesised view kept for Fig. 10: ``path`` relative to the folder of the
     synthesis file, ``view`` ``"<shot>/<view>"``, ``cameras`` and ``run`` as in
@@ -200,22 +221,113 @@ class SynthImage:
 
 
 @dataclass(frozen=True)
+class DepthQuality:
+    """The depth maps an experiment renders from, against the simulator's true depth
+    (:func:`plenocal.depth.quality.depth_quality`, one input view): the ground-truth
+    pixels, the shares with an estimate and within ``tolerance`` (relative), and the
+    median relative error of the estimates (None without any)."""
+
+    pixels: int
+    valid_share: float
+    within_share: float
+    within_of_valid: float
+    median_rel_error: float | None
+    tolerance: float
+
+    def to_dict(self) -> dict:
+        return {"pixels": self.pixels, "valid_share": self.valid_share,
+                "within_share": self.within_share, "within_of_valid": self.within_of_valid,
+                "median_rel_error": self.median_rel_error, "tolerance": self.tolerance}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> DepthQuality:
+        return cls(pixels=int(d["pixels"]), valid_share=float(d["valid_share"]),
+                   within_share=float(d["within_share"]),
+                   within_of_valid=float(d["within_of_valid"]),
+                   median_rel_error=(None if d["median_rel_error"] is None
+                                     else float(d["median_rel_error"])),
+                   tolerance=float(d["tolerance"]))
+
+
+@dataclass(frozen=True)
+class SynthesisSetup:
+    """What an experiment was run with that its PSNR tables do not hold: the depth range
+    of the renders (metres), the border left out of the PSNR, how the depth maps were
+    estimated, their quality against the true depth (``"<shot>/<view>"`` -> figures;
+    empty without true depth) and Exp. 3's view stride (None for Exps. 1-2)."""
+
+    near_m: float
+    far_m: float
+    psnr_border_px: int
+    depth_method: str
+    depth_quality: dict[str, DepthQuality]
+    view_stride: int | None = None
+
+    def to_dict(self) -> dict:
+        return {"near_m": self.near_m, "far_m": self.far_m,
+                "psnr_border_px": self.psnr_border_px, "depth_method": self.depth_method,
+                "depth_quality": {k: q.to_dict() for k, q in sorted(self.depth_quality.items())},
+                "view_stride": self.view_stride}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> SynthesisSetup:
+        return cls(near_m=float(d["near_m"]), far_m=float(d["far_m"]),
+                   psnr_border_px=int(d["psnr_border_px"]), depth_method=str(d["depth_method"]),
+                   depth_quality={k: DepthQuality.from_dict(q)
+                                  for k, q in d["depth_quality"].items()},
+                   view_stride=None if d["view_stride"] is None else int(d["view_stride"]))
+
+
+@dataclass(frozen=True)
 class SynthesisResult:
-    """One view-synthesis experiment (Section III, Fig. 6): its PSNR tables, the images
-    kept for Fig. 10, and ``summary``, the figures of
-    :func:`plenocal.verify.synthesis.synthesis_summary` per renderer, depth and camera set (means,
-    the dB lost, the depth's quality, the timings) for people and ``bench/``."""
+    """One view-synthesis experiment (Section III, Fig. 6): its PSNR tables, what it was
+    run with (``setup``) and the images kept for Fig. 10. The figures per renderer,
+    depth and camera set (means, the dB lost) are derived from the tables:
+    :meth:`psnr_stats`, :meth:`mean_db_lost`, :meth:`db_lost`."""
 
     experiment: int
     renderer: str  # the primary renderer (verify.renderer)
     tables: tuple[PsnrTable, ...]
+    setup: SynthesisSetup
     images: tuple[SynthImage, ...] = ()
-    summary: dict = field(default_factory=dict)
     metric: str = "psnr_db"
 
     def __post_init__(self) -> None:
         if self.experiment not in EXPERIMENTS:
             raise ValueError(f"synthesis: no experiment {self.experiment} (1, 2 or 3)")
+
+    @property
+    def renderers(self) -> tuple[str, ...]:
+        """The renderers of the tables, the primary one first."""
+        others = dict.fromkeys(t.renderer for t in self.tables if t.renderer != self.renderer)
+        return (self.renderer, *others)
+
+    def part(self, table: PsnrTable) -> str:
+        """The part of the experiment whose figures ``table`` counts in: Exp. 3's input
+        choice (``central``, ``lateral``: two experiments in one); "" for Exp. 1 and for
+        Exp. 2, whose sets are one experiment."""
+        return table.run if self.experiment == 3 else ""
+
+    def psnr_stats(self, renderer: str, depth: str, cameras: str) -> dict[str, PsnrStats]:
+        """Part (:meth:`part`) -> the PSNR over its targets rendered by ``renderer`` from
+        the ``depth`` maps with the ``cameras``; parts without targets are left out."""
+        parts: dict[str, list[PsnrTable]] = {}
+        for t in self.tables:
+            if (t.renderer, t.depth, t.cameras) == (renderer, depth, cameras):
+                parts.setdefault(self.part(t), []).append(t)
+        out = {p: PsnrStats.of(ts) for p, ts in parts.items()}
+        return {p: s for p, s in out.items() if s is not None}
+
+    def mean_db_lost(self, renderer: str, ours: tuple[str, str], ref: tuple[str, str]
+                     ) -> dict[str, float]:
+        """Part -> the mean PSNR of ``ref`` minus that of ``ours`` (each a (depth, cameras)
+        pair, the same renderer), each over its own targets, where both have targets:
+        with ``ours`` = (estimated, complete) and ``ref`` = (estimated, ground_truth) the
+        dB lost to calibration, with ``ref`` = (true, complete) the dB lost to depth.
+        (:meth:`db_lost` compares the targets both tables scored, per run.)"""
+        a = self.psnr_stats(renderer, *ours)
+        b = self.psnr_stats(renderer, *ref)
+        return {p: b[p].mean_db - a[p].mean_db for p in a if p in b}
 
     def db_lost(self) -> list[tuple[PsnrTable, PsnrTable, float, int]]:
         """(complete, ground truth, mean dB lost to calibration, views compared) for every
@@ -238,7 +350,7 @@ class SynthesisResult:
         return {"format": SYNTHESIS_FORMAT, "version": SYNTHESIS_VERSION,
                 "experiment": self.experiment, "metric": self.metric,
                 "renderer": self.renderer, "tables": [t.to_dict() for t in self.tables],
-                "images": [i.to_dict() for i in self.images], "summary": self.summary}
+                "images": [i.to_dict() for i in self.images], "setup": self.setup.to_dict()}
 
 
 def write_synthesis(path: str | Path, result: SynthesisResult) -> None:
@@ -255,10 +367,11 @@ def read_synthesis(path: str | Path) -> SynthesisResult:
                           str(t["run"]), tuple(t["inputs"]),
                           {k: float(v) for k, v in t["psnr_db"].items()})
                           for t in doc["tables"]),
+                      setup=SynthesisSetup.from_dict(doc["setup"]),
                       images=tuple(SynthImage(str(i["path"]), str(i["view"]),
                                               str(i["cameras"]), str(i["run"]))
                                    for i in doc["images"]),
-                      summary=dict(doc["summary"]), metric=str(doc["metric"])))
+                      metric=str(doc["metric"])))
 
 
 # ---------------------------------------------------------------------------

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from plenocal.artifacts.stage_warnings import WARNINGS_KEY, warning_list, warnings_of
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.gridcheck import GRID_MODES, GridCheck, grid_for_mode, round_floats
 from plenocal.convert.shot import ConvertSettings, ShotConversion, build_grid
@@ -73,7 +74,7 @@ class ConverterSetup:
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
-        d["warnings"] = list(self.warnings)
+        d[WARNINGS_KEY] = warning_list(self.warnings)
         d["lattice"] = None if self.lattice is None else {
             "origin_px": list(self.lattice[0]), "A_columns_px": [list(r) for r in self.lattice[1]]}
         return {"format": "plenocal.convert_setup", "version": FORMAT_VERSION, **d}
@@ -92,7 +93,7 @@ class ConverterSetup:
                    refined=bool(d["refined"]), lattice=lattice, decided_on=str(d["decided_on"]),
                    mla_source=str(d["mla_source"]), tile_source=str(d["tile_source"]),
                    mla_match_scores=d.get("mla_match_scores"), grid_check=dict(d["grid_check"]),
-                   warnings=tuple(d.get("warnings", ())))
+                   warnings=warnings_of(d, source, "rerun rule convert_setup"))
 
 
 def check_and_grid(image: np.ndarray, calib: RayCalib, mode: str

@@ -306,13 +306,12 @@ class ShotConversion:
     def disparity(self) -> dict:
         out = disparity_record(self.layout, self.calib, self.used_patch,
                                 self.patch.confident[self.layout.lens_index],
-                                self.settings.percentiles)
+                                self.settings.percentiles, self.warnings)
         out["mla_source"] = "image" if self.mla_scores is not None else "setting"
         if self.mla_scores is not None:
             out["mla_match_scores"] = dict(self.mla_scores)
         if self.grid_check is not None:
             out["grid_check"] = dict(self.grid_check)
-        out["warnings"] = list(self.warnings)
         out["tile_source"] = "auto" if self.settings.tile_size == "auto" else "setting"
         out["bit_depth"] = self.bits
         return out

@@ -31,7 +31,7 @@ from plenocal.artifacts.results import (
 )
 from plenocal.artifacts.rig import read_rig
 from plenocal.artifacts.scale import read_scale
-from plenocal.io.files import atomic_write_text, read_json
+from plenocal.io.files import atomic_write_text
 from plenocal.names import array_position, array_shot, central_view, key_shot, split_key
 from plenocal.report import figures as fg
 from plenocal.report import sources as src
@@ -558,11 +558,10 @@ def section_summary(page: Page) -> None:
                  f"shots {page.link(src.SOURCES['scale'][0], '[source]')}</span>")
     rig = _read(page, "rig", read_rig)
     if rig is not None:
-        chk = rig.doc.get("check") or {}
         page.add('<span class="kpi">registration B<b>' + escape(rig.model) + " model</b>"
                  f"B = {_fmt(rig.doc[rig.model].get('B'), 5)} mm, {rig.n_views} x "
                  f"{rig.n_views} views; Eqs. 2-3 check: "
-                 f"{escape(str(chk.get('verdict', '-')))} "
+                 f"{escape(rig.check.verdict)} "
                  f"{page.link(src.SOURCES['rig'][0], '[source]')}</span>")
     if sc is None and rig is None and _absent(page, "scale") and _absent(page, "rig"):
         page.missing("scale")
@@ -603,18 +602,9 @@ def section_overview(page: Page, synthetic: bool, cams: Sequence[str]) -> None:
                  "paper's ratio, the inverse check of Eqs. 2-3 against the measured "
                  "near/far distances, the view-synthesis PSNR against the captured views."
                  "</div>")
-    docs = {}
-    for pattern in src.WARNING_SOURCES:
-        for rel in ([pattern.format(cam=c) for c in cams] if "{cam}" in pattern
-                    else [pattern]):
-            if page.has(rel):
-                try:
-                    docs[rel] = read_json(page.path(rel))
-                except (OSError, ValueError) as err:
-                    docs[rel] = {"warnings": [f"unreadable: {err}"]}
-    warnings = src.stage_warnings(docs)
+    warnings, n_read = src.stage_warnings(page.results, cams)
     if not warnings:
-        page.add(f'<p class="okbox" id="warnings">No warnings from the stages ({len(docs)} '
+        page.add(f'<p class="okbox" id="warnings">No warnings from the stages ({n_read} '
                  "outputs read).</p>")
         return
     page.add(f'<div class="warnbox" id="warnings"><h3>Warnings ({len(warnings)})</h3><ul>'

@@ -9,12 +9,16 @@ sets and the metric are fields of a file, never guessed from its structure or it
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
+from plenocal.artifacts.disparity import read_disparity_warnings
 from plenocal.artifacts.results import PsnrTable, ReprojectionTable
+from plenocal.artifacts.rig import InverseCheck, read_rig
+from plenocal.artifacts.stage_warnings import read_warnings
 from plenocal.names import array_position, key_shot, key_view, parse_view, split_key
 
 #: source key -> (path under results/<d>/, the rule that makes it)
@@ -261,17 +265,44 @@ def shot_means(ps: PsnrTable) -> dict[str, float]:
 # Warnings of the stages
 # ---------------------------------------------------------------------------
 
-#: JSON outputs whose ``warnings`` list the report collects (paths under results/<d>/;
-#: ``{cam}`` is filled in with every shot): each stage writes what its log warns about
-#: into its output, so that it reaches the report's first screen.
-WARNING_SOURCES: tuple[str, ...] = (
-    "views/convert_setup.json",  # converter set-up: grid drift / foreign grid, MLA kind
-    "views/{cam}/disparity.json",  # converter: confident patch sizes
-    "reg_a/features.json",  # registration A: views with few features
-    "reg_a/reg_a.json",
-    "reg_b/rig.json",  # registration B: Eqs. 2-3 inverse check
-    "merge/scale.json",  # scale r (Eq. 5): spread between shots
-    "calibration/cameras.json",
+def _convert_setup_warnings(path: Path) -> tuple[str, ...]:
+    from plenocal.convert.setup import read_setup  # noqa: PLC0415  (OpenCV: only here)
+
+    return read_setup(path).warnings
+
+
+def _features_warnings(path: Path) -> tuple[str, ...]:
+    return read_warnings(path, "features.json (registration A's features)",
+                         "rerun rule features_a")
+
+
+def inverse_check_failure(check: InverseCheck) -> str:
+    """The warning of a failed inverse check of Eqs. 2-3 (rig.json's ``check``)."""
+    diffs = [f"{name} differs by {100 * v:+.1f} %"
+             for name, v in (("B", check.rel_diff_B), ("alpha", check.rel_diff_alpha))
+             if v is not None and math.isfinite(v)]
+    tol = check.tolerance
+    return ("the inverse check of Eqs. 2-3 failed: from the measured near/far distances "
+            "(camera.yaml scene.near_mm, far_mm) " + (", ".join(diffs) or "B and alpha differ")
+            + (f" (tolerance {100 * tol:.0f} %)" if tol else "")
+            + "; check those distances and the datasheet")
+
+
+def _rig_warnings(path: Path) -> tuple[str, ...]:
+    check = read_rig(path).check
+    return (inverse_check_failure(check),) if check.failed else ()
+
+
+#: the outputs whose warnings the report collects, in the order of the workflow (paths
+#: under results/<d>/; ``{cam}`` is filled in with every shot), each with the typed
+#: reader of its messages: each stage writes what its log warns about into its output
+#: (:mod:`plenocal.artifacts.stage_warnings`), so that it reaches the first screen
+WARNING_SOURCES: tuple[tuple[str, Callable[[Path], Sequence[str]]], ...] = (
+    # converter set-up: grid drift / foreign grid, MLA kind
+    ("views/convert_setup.json", _convert_setup_warnings),
+    ("views/{cam}/disparity.json", read_disparity_warnings),  # confident patch sizes
+    ("reg_a/features.json", _features_warnings),  # registration A: views with few features
+    ("reg_b/rig.json", _rig_warnings),  # registration B: Eqs. 2-3 inverse check failed
 )
 
 
@@ -281,41 +312,21 @@ class StageWarning:
     message: str
 
 
-def _messages(raw) -> list[str]:
-    """A ``warnings`` value as messages: a list of strings or of {"message": ...}."""
-    if raw is None:
-        return []
-    items = raw if isinstance(raw, list) else [raw]
-    out = []
-    for w in items:
-        if isinstance(w, Mapping):
-            text = w.get("message")
-            out.append(str(text) if text is not None else
-                       ", ".join(f"{k}: {w[k]}" for k in sorted(w)))
-        elif w is not None and str(w).strip():
-            out.append(str(w))
-    return out
-
-
-def stage_warnings(docs: Mapping[str, Mapping]) -> list[StageWarning]:
-    """Warnings from the stages' JSON documents (``docs``: path under results/<d>/ ->
-    parsed JSON), in the order of the workflow: each document's ``warnings`` list, and
-    a failed inverse check of Eqs. 2-3 in rig.json."""
-    out = []
-    for rel, doc in docs.items():
-        if not isinstance(doc, Mapping):
-            continue
-        out += [StageWarning(rel, m) for m in _messages(doc.get("warnings"))]
-        check = doc.get("check") if rel.endswith("rig.json") else None
-        if isinstance(check, Mapping) and str(check.get("verdict")).lower() in (
-                "fail", "failed"):
-            diffs = [f"{name} differs by {100 * _num(check.get(key)):+.1f} %"
-                     for name, key in (("B", "rel_diff_B"), ("alpha", "rel_diff_alpha"))
-                     if _num(check.get(key)) is not None]
-            tol = _num(check.get("tolerance"))
-            out.append(StageWarning(rel, "the inverse check of Eqs. 2-3 failed: from the "
-                                    "measured near/far distances (camera.yaml scene.near_mm, "
-                                    "far_mm) " + (", ".join(diffs) or "B and alpha differ")
-                                    + (f" (tolerance {100 * tol:.0f} %)" if tol else "")
-                                    + "; check those distances and the datasheet"))
-    return out
+def stage_warnings(results: Path, cams: Sequence[str]) -> tuple[list[StageWarning], int]:
+    """The warnings of the stages' outputs under ``results`` (= results/<d>/) in the
+    order of :data:`WARNING_SOURCES`, and how many outputs were read; an output that its
+    reader refuses (another version, another shape) is a warning with the reader's
+    error, which names the file, the key and the remedy."""
+    out, n = [], 0
+    for pattern, read in WARNING_SOURCES:
+        for rel in ([pattern.format(cam=c) for c in cams] if "{cam}" in pattern
+                    else [pattern]):
+            path = results / rel
+            if not path.exists():
+                continue
+            n += 1
+            try:
+                out += [StageWarning(rel, m) for m in read(path)]
+            except (OSError, ValueError) as err:
+                out.append(StageWarning(rel, f"unreadable: {err}"))
+    return out, n

@@ -316,13 +316,6 @@ def experiment3(ctx: SynthesisContext, stride: int = 1) -> tuple[dict, dict[str,
     return result, kept
 
 
-def lost_db(ours: dict, truth: dict) -> float | None:
-    """Mean PSNR with ground-truth cameras minus mean PSNR with the calibration."""
-    if ours.get("mean_psnr") is None or truth.get("mean_psnr") is None:
-        return None
-    return float(truth["mean_psnr"] - ours["mean_psnr"])
-
-
 def inner_corner_view(layout: ArrayLayout, cam: str) -> str:
     """The corner view of shot ``cam``'s set on the array's inner side by the view and
     shot numbering (view row/column grow with the shot row/column): what
@@ -360,41 +353,6 @@ def run_experiment(exp: int, cameras: dict[str, PinholeCamera],
     if exp == 3:
         return experiment3(ctx, int(config.get("exp3_view_stride", 1)))
     raise ValueError(f"synthesis: no experiment {exp} (1, 2 or 3)")
-
-
-def _lost(exp: int, ours: dict | None, truth: dict | None) -> float | dict | None:
-    if ours is None or truth is None:
-        return None
-    if exp == 3:
-        return {v: lost_db(ours[v], truth[v]) for v in ("central", "lateral")}
-    return lost_db(ours, truth)
-
-
-def _block(exp: int, runs: dict, renderer: str) -> dict:
-    """Results of one renderer: ``calibrations`` (the project's depth) and
-    ``true_depth`` by camera set, and the dB lost to calibration (same depth, same
-    renderer) with each depth and to depth (complete calibration)."""
-    est = {c: r for (rd, d, c), r in runs.items() if rd == renderer and d == "estimated"}
-    true = {c: r for (rd, d, c), r in runs.items() if rd == renderer and d == "true"}
-    out: dict = {"calibrations": est}
-    if "ground_truth" in est:
-        out["db_lost"] = _lost(exp, est.get("complete"), est["ground_truth"])
-    if true:
-        out["true_depth"] = true
-        if "ground_truth" in true:
-            out["db_lost_true_depth"] = _lost(exp, true.get("complete"), true["ground_truth"])
-        out["db_lost_to_depth"] = _lost(exp, est.get("complete"), true.get("complete"))
-    return out
-
-
-def synthesis_summary(exp: int, runs: dict[tuple[str, str, str], dict],
-                      renderers: list[str]) -> dict:
-    """The experiment's JSON body from ``runs[(renderer, depth, cameras)]`` (depth
-    ``estimated`` | ``true``, cameras ``complete`` | ``ground_truth``): the first
-    renderer's block at the top level, every renderer's under ``renderers``."""
-    out = {"renderer": renderers[0], **_block(exp, runs, renderers[0])}
-    out["renderers"] = {r: _block(exp, runs, r) for r in renderers[1:]}
-    return out
 
 
 def psnr_tables(exp: int, runs: dict[tuple[str, str, str], dict],

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocal.artifacts.reg_a import RegistrationA
+from plenocal.artifacts.stage_warnings import WARNINGS_KEY, warning_list
 from plenocal.calib.reg_a import colmap as cm
 from plenocal.io.files import atomic_write_dir, make_temp_dir
 from plenocal.names import is_handheld_shot
@@ -99,8 +100,8 @@ def features_a(views: Mapping[str, str | Path], image_dir: str | Path,
             + ", ".join(f"{n[:-4]} ({kp[n]})" for n in poor)
             + ": texture-poor views may not register (more texture, light or focus)")
         log.warning("%s", warnings[-1])
-    # warnings: read by the report's Warnings box (plenocal.report.html)
-    return {"num_images": len(kp), "keypoints": kp, "warnings": warnings}
+    # read by the report's Warnings box (plenocal.report.sources)
+    return {"num_images": len(kp), "keypoints": kp, WARNINGS_KEY: warning_list(warnings)}
 
 
 def match_a(database: str | Path, *, seed: int = 0, num_threads: int = 1) -> dict:
