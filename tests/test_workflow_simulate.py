@@ -4,6 +4,7 @@ directory, twice: the same seed gives byte-identical files."""
 from __future__ import annotations
 
 import hashlib
+import re
 import shutil
 import subprocess
 import sys
@@ -96,3 +97,39 @@ def test_bad_config_stops_before_any_job(tmp_path: Path):
     assert proc.returncode != 0
     assert "datasets.tiny.views = 4: must be an odd number" in proc.stdout + proc.stderr
     assert not (work / "results").exists() and not (work / "data").exists()
+
+
+def _planned_priorities(out: str) -> dict[str, set[int]]:
+    """rule (with its calib wildcard for reprojection_calib) -> the priorities of its
+    planned jobs, from a dry run's job list (a job without a priority line has 0)."""
+    prios: dict[str, set[int]] = {}
+    for block in re.split(r"\n(?=(?:local)?rule \w+:)", out):
+        m = re.match(r"(?:local)?rule (\w+):", block)
+        if not m:
+            continue
+        name = m.group(1)
+        calib = re.search(r"wildcards: .*calib=(\w+)", block)
+        if calib:
+            name += f"[{calib.group(1)}]"
+        p = re.search(r"^\s+priority: (\d+)", block, flags=re.M)
+        prios.setdefault(name, set()).add(int(p.group(1)) if p else 0)
+    return prios
+
+
+@pytest.mark.workflow
+def test_critical_chain_goes_first(tmp_path: Path):
+    """The longest chain of the run (simulate -> convert -> view_features -> view_matches
+    -> baseline_sfm -> its Table I row) is scheduled before the work that can wait
+    (ground-truth renders, depth, the other Table I rows): rules/common.smk PRIORITY."""
+    work = workflow_copy(tmp_path / "w")
+    proc = run(work, "-n")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    prios = _planned_priorities(proc.stdout + proc.stderr)
+    chain = ["convert", "view_features", "view_matches", "baseline_sfm",
+             "reprojection_calib[baseline_sfm]"]
+    for rule in chain:
+        assert prios.get(rule) == {20}, (rule, prios.get(rule))
+    assert prios["simulate"] == {10}
+    for rule in ("ground_truth_render", "depth", "reprojection_calib[complete]",
+                 "synthesis_exp3"):
+        assert prios.get(rule) == {0}, (rule, prios.get(rule))
