@@ -28,8 +28,16 @@ SYNTHETIC = [d for d in DATASETS if "simulate" in config["datasets"][d]]
 #: serial COLMAP jobs (matching, then the naive mapper) start as soon as they can and
 #: the rest of the work - depth, ground truth, synthesis - fills the other core beside
 #: them. Ground-truth renders, needed by the verification only, wait for the images that
-#: the chain needs (issue 15).
+#: the chain needs; the full-set shot and the converter's set-up, which every conversion
+#: waits for, go before the other lenslet images (issue 15).
 PRIORITY = {"lenslet": 10, "chain": 20}
+
+
+def simulate_priority(wildcards):
+    """The full-set shot's lenslet image first: the converter's set-up (rule convert_setup)
+    is decided on it, and every conversion waits for that set-up."""
+    full = full_set_cam(wildcards.dataset)
+    return PRIORITY["chain"] if wildcards.cam == full else PRIORITY["lenslet"]
 
 
 def reprojection_priority(wildcards):

@@ -22,6 +22,7 @@ rule convert_setup:
         bench_path("convert_setup")
     conda:
         "../envs/plenocal.yaml"
+    priority: PRIORITY["chain"]
     threads: 1
     resources:
         mem_mb=2500,

@@ -40,7 +40,7 @@ rule simulate:
         dataset=SYN,
     conda:
         "../envs/plenocal.yaml"
-    priority: PRIORITY["lenslet"]
+    priority: simulate_priority
     threads: 1
     resources:
         mem_mb=3000,
