@@ -22,8 +22,9 @@ SYNTHETIC = [d for d in DATASETS if "simulate" in config["datasets"][d]]
 
 
 #: Scheduling priorities (Snakemake runs the ready job of highest priority first). The
-#: longest chain of the full run is simulate -> convert -> view_features -> view_matches
-#: -> baseline_sfm -> the naive calibration's reprojection -> report (about 800 s of the
+#: longest chain of the full run is simulate -> convert -> registration A (whose poses
+#: choose the pairs of all views to match) and view_features -> view_matches ->
+#: baseline_sfm -> the naive calibration's reprojection -> report (about 800 s of the
 #: default run's 1,000, BENCHMARKS.md "Full run"): its jobs go first, so that the two
 #: serial COLMAP jobs (matching, then the naive mapper) start as soon as they can and
 #: the rest of the work - depth, ground truth, synthesis - fills the other core beside

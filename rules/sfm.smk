@@ -18,6 +18,7 @@ rule features_a:
         bench_path("features_a")
     conda:
         "../envs/plenocal.yaml"
+    priority: PRIORITY["chain"]
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=4000,
@@ -40,6 +41,7 @@ rule match_a:
         bench_path("match_a")
     conda:
         "../envs/plenocal.yaml"
+    priority: PRIORITY["chain"]
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=4000,
@@ -63,6 +65,7 @@ rule map_a:
         bench_path("map_a")
     conda:
         "../envs/plenocal.yaml"
+    priority: PRIORITY["chain"]
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=4000,

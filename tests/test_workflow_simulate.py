@@ -118,14 +118,16 @@ def _planned_priorities(out: str) -> dict[str, set[int]]:
 
 @pytest.mark.workflow
 def test_critical_chain_goes_first(tmp_path: Path):
-    """The longest chain of the run (simulate -> convert -> view_features -> view_matches
-    -> baseline_sfm -> its Table I row) is scheduled before the work that can wait
-    (ground-truth renders, depth, the other Table I rows): rules/common.smk PRIORITY."""
+    """The longest chain of the run (simulate -> convert -> registration A and
+    view_features -> view_matches -> baseline_sfm -> its Table I row) is scheduled
+    before the work that can wait (ground-truth renders, depth, the other Table I
+    rows): rules/common.smk PRIORITY."""
     work = workflow_copy(tmp_path / "w")
     proc = run(work, "-n")
     assert proc.returncode == 0, proc.stderr[-3000:]
     prios = _planned_priorities(proc.stdout + proc.stderr)
-    chain = ["convert_setup", "convert", "view_features", "view_matches", "baseline_sfm",
+    chain = ["convert_setup", "convert", "features_a", "match_a", "map_a",
+             "view_features", "view_matches", "baseline_sfm",
              "reprojection_calib[baseline_sfm]"]
     for rule in chain:
         assert prios.get(rule) == {20}, (rule, prios.get(rule))
