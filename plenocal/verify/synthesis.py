@@ -25,14 +25,24 @@ camera sets with one and the same depth maps.
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from plenocal.artifacts.results import CAMERA_SETS, DEPTHS, PsnrTable
+from plenocal.artifacts.results import (
+    CAMERA_SETS,
+    DEPTHS,
+    DepthQuality,
+    PsnrTable,
+    SynthesisResult,
+    SynthesisSetup,
+    SynthImage,
+)
 from plenocal.camera import PinholeCamera
+from plenocal.depth.quality import depth_quality
 from plenocal.depth.views import estimate_view_depth
 from plenocal.export.mpeg import mpeg_name
 from plenocal.io.files import read_image, to_float
@@ -41,6 +51,7 @@ from plenocal.names import (
     array_shot,
     central_view,
     is_array_shot,
+    key_shot,
     parse_view,
     split_key,
     view_name,
@@ -353,6 +364,68 @@ def run_experiment(exp: int, cameras: dict[str, PinholeCamera],
     if exp == 3:
         return experiment3(ctx, int(config.get("exp3_view_stride", 1)))
     raise ValueError(f"synthesis: no experiment {exp} (1, 2 or 3)")
+
+
+def synthesis_job(exp: int, cameras: dict[str, dict[str, PinholeCamera]],
+                  depths: dict[str, dict[str, np.ndarray]],
+                  image_path: Callable[[str, str], str], layout: ArrayLayout, near: float,
+                  far: float, config: dict, threads: int = 1, synth_rel: str = "synth"
+                  ) -> tuple[SynthesisResult, dict[str, np.ndarray]]:
+    """One experiment of Fig. 6 as rule ``synthesis_exp<k>`` runs it: with every camera
+    set of ``cameras`` (``complete``; on synthetic data also ``ground_truth``: the same
+    depth for both, so their difference is the dB lost to calibration) and every depth
+    of ``depths`` (``estimated``: the inputs' maps of rule depth_view; ``true``: the dB
+    lost to depth), by the configured renderer (``config["renderer"]``; RVS with the
+    project's DIBR beside it unless ``rvs_compare_dibr`` is false). ``config``: the
+    verify settings with the depth settings under ``"depth"``; ``threads``: the job's
+    cores.
+
+    Returns the typed result, whose images are named under ``synth_rel`` (the folder of
+    the images relative to the result file), and the images kept for Fig. 10 by file
+    name."""
+    renderers = [config.get("renderer", "dibr")]
+    if renderers[0] == "rvs" and config.get("rvs_compare_dibr", True):
+        renderers.append("dibr")
+    runs: dict[tuple[str, str, str], dict] = {}
+    kept_all: dict[tuple[str, str], np.ndarray] = {}
+    images: dict[str, np.ndarray] = {}  # the captured views, read once for every run
+    for renderer in renderers:
+        for dname, dmaps in depths.items():
+            for cname, cams in cameras.items():
+                t0 = time.perf_counter()
+                res, kept = run_experiment(exp, cams, image_path, layout, near, far,
+                                           {**config, "renderer": renderer,
+                                            "threads": int(threads)}, dict(dmaps), images)
+                runs[(renderer, dname, cname)] = res
+                # the time is logged only: the result file stays the same bits
+                log.info("%s, %s depth, %s cameras: experiment %d, %.1f s", renderer, dname,
+                         cname, exp, time.perf_counter() - t0)
+                if dname == "estimated" and renderer == renderers[0]:
+                    kept_all.update({(cname, k): img for k, img in kept.items()})
+    border = int(config.get("psnr_border_px", 8))
+    quality = {}
+    if "true" in depths:
+        quality = {k: DepthQuality.from_dict(depth_quality(z, depths["true"][k], 0.01, border))
+                   for k, z in depths["estimated"].items() if k in depths["true"]}
+    setup = SynthesisSetup(near_m=near, far_m=far, psnr_border_px=border,
+                           depth_method=config["depth"].get("synthesis_method", "sgm"),
+                           depth_quality=quality,
+                           # as experiment3 ran it (every run of Exp. 3 has the same)
+                           view_stride=next(iter(runs.values()))["view_stride"] if exp == 3
+                           else None)
+    files: dict[str, np.ndarray] = {}
+    kept_images = []
+    for (cname, k), img in sorted(kept_all.items()):
+        # Exp. 3 keeps "<central|lateral>:<shot>/<view>", Exp. 2 the views of a set
+        variant, _, view = k.rpartition(":")
+        name = f"{cname}_{k.replace('/', '_').replace(':', '_')}.png"
+        files[name] = img
+        kept_images.append(SynthImage(f"{synth_rel}/{name}", view, cname,
+                                      variant or (key_shot(view) if exp == 2 else "")))
+    result = SynthesisResult(experiment=exp, renderer=renderers[0],
+                             tables=tuple(psnr_tables(exp, runs, renderers)), setup=setup,
+                             images=tuple(kept_images))
+    return result, files
 
 
 def psnr_tables(exp: int, runs: dict[tuple[str, str, str], dict],
