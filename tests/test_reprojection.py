@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from synth.scenes import default_scene, render, render_view_sets, rig_cameras
 
+from plenocal.artifacts.cameras import write_cameras
 from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.artifacts.rig import RigB
 from plenocal.calib.reg_a import colmap as cm
@@ -15,10 +16,13 @@ from plenocal.calib.reg_a import viewdb
 from plenocal.camera import PinholeCamera, invert_pose, pose
 from plenocal.io.files import write_image
 from plenocal.verify.reprojection import (
+    evaluate,
+    evaluate_calibration,
     evaluate_sets,
     observation_errors,
     reg_a_views,
     reprojection_stats,
+    table_i,
     triangulate,
     triangulation_options,
 )
@@ -195,3 +199,32 @@ def test_observation_errors_match_the_bindings(sets, tmp_path):
     got = observation_errors(rec, cams, tmp_path)
     assert got.size > 300
     np.testing.assert_array_equal(got, np.concatenate(want))
+
+
+def test_evaluate_calibration_reads_a_cameras_file_as_evaluate(sets, tmp_path):
+    """Rule reprojection_calib's one call: a cameras.json evaluated as its cameras are."""
+    _, vs, paths = sets
+    imgs = {k: v for k, v in paths.items() if k.startswith("x00_y00")}
+    db = tmp_path / "views.db"
+    viewdb.build_view_database(imgs, db, tmp_path, max_num_features=2000)
+    cams = {k: v for k, v in vs.items() if k in imgs}
+    write_cameras(tmp_path / "cameras.json", cams)
+    doc = evaluate_calibration("complete", tmp_path / "cameras.json", db, "1_1")
+    assert doc.pop("calibration") == "complete"
+    assert doc == evaluate(cams, db)
+    assert doc["num_images"] == 9 and doc["median_px"] < 0.2
+
+
+def test_table_i_rows_by_hand():
+    evals = {"complete": {"num_images": 9, "mean_px": 0.3, "median_px": 0.2},
+             "baseline_sfm": {"num_images": 9, "mean_px": 0.4, "median_px": 0.3}}
+    doc = table_i(evals, {"a_sfm_registered": 8},
+                  {"num_images": 9, "registered_largest_model": 7, "num_models": 2,
+                   "focal_px": 601.5})
+    assert doc["baseline_sfm"] == {"num_images": 9, "mean_px": 0.4, "median_px": 0.3,
+                                   "num_registered": 8}
+    assert doc["sfm_scratch"] == {"num_images": 9, "num_registered": 7, "num_models": 2,
+                                  "focal_px": 601.5}
+    assert doc["complete"] == evals["complete"] and "num_registered" not in evals[
+        "baseline_sfm"]  # the inputs are left as they were
+    assert "sfm_scratch" not in table_i(evals, {"a_sfm_registered": 9})

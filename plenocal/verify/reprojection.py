@@ -51,8 +51,9 @@ from pathlib import Path
 
 import numpy as np
 
-from plenocal.artifacts.reg_a import RegistrationA
-from plenocal.artifacts.rig import RigB
+from plenocal.artifacts.cameras import read_cameras
+from plenocal.artifacts.reg_a import RegistrationA, read_reg_a
+from plenocal.artifacts.rig import RigB, read_rig
 from plenocal.calib.reg_a import colmap as cm
 from plenocal.calib.reg_a import viewdb
 from plenocal.camera import PinholeCamera
@@ -328,3 +329,39 @@ def evaluate_sets(rig: RigB, database: str | Path, **kwargs) -> dict:
             "num_images": int(np.median([s["num_images"] for s in sets.values()])) if sets
             else 0,
             "num_observations": int(sum(s["num_observations"] for s in sets.values()))}
+
+
+def table_i(evals: Mapping[str, dict], baseline: dict, scratch: dict | None = None) -> dict:
+    """The rows of Table I (rule reprojection): one calibration's evaluation each
+    (``evals``: name -> :func:`evaluate`'s document), the naive baseline's registered
+    count from its mapping (``baseline``: rule baseline_sfm's info), and, where SfM from
+    scratch ran (``scratch``: rule baseline_scratch's info), its row."""
+    doc = {k: dict(v) for k, v in evals.items()}
+    if scratch is not None:
+        doc["sfm_scratch"] = {"num_images": scratch["num_images"],
+                              "num_registered": scratch["registered_largest_model"],
+                              "num_models": scratch["num_models"],
+                              "focal_px": scratch.get("focal_px")}
+    doc["baseline_sfm"]["num_registered"] = baseline["a_sfm_registered"]
+    for name, row in doc.items():
+        log.info("Table I %-13s images %4s  mean %s px  median %s px", name,
+                 row.get("num_images"), row.get("mean_px"), row.get("median_px"))
+    return doc
+
+
+def evaluate_calibration(name: str, path: str | Path, database: str | Path, central: str,
+                         **kwargs) -> dict:
+    """The Table I row of calibration ``name`` (rule reprojection_calib), read from
+    ``path``: registration A's ``reg_a.json`` (its central views, ``central``),
+    registration B's ``rig.json`` (every shot's set by its own rig,
+    :func:`evaluate_sets`), or any ``cameras.json`` (the complete calibration, the naive
+    baseline, the ground truth). ``kwargs``: :func:`evaluate`'s options."""
+    log.info("reprojection of %s (%s) on the view database %s", name, path, database)
+    if name == "reg_a":
+        out = evaluate(reg_a_views(read_reg_a(path), central), database, **kwargs)
+    elif name == "reg_b":
+        out = evaluate_sets(read_rig(path), database, **kwargs)
+    else:
+        out = evaluate(read_cameras(path), database, **kwargs)
+    out["calibration"] = name
+    return out
