@@ -39,13 +39,13 @@ from synth.planes import (  # noqa: E402
     render_plane,
 )
 
+from plenocal.artifacts.cameras import read_cameras  # noqa: E402
 from plenocal.artifacts.results import (  # noqa: E402
     CAMERA_SETS,
     DEPTHS,
     PsnrStats,
     read_synthesis,
 )
-from plenocal.camera import read_cameras  # noqa: E402
 from plenocal.depth.inputs import nearest_sources  # noqa: E402
 from plenocal.depth.planesweep import (  # noqa: E402
     PlaneSweepOptions,

@@ -60,7 +60,7 @@ def psnr_by_samples(cfg: dict, dataset: str, out: Path, shots: list[str],
     plenocal.convert.quality (rule convert_quality)."""
     import cv2  # noqa: F401, PLC0415  (before anything that may load pycolmap)
 
-    from plenocal.camera import PinholeCamera  # noqa: PLC0415
+    from plenocal.artifacts.cameras import read_cameras  # noqa: PLC0415
     from plenocal.convert import ConvertSettings, convert_files  # noqa: PLC0415
     from plenocal.convert.quality import dataset_quality  # noqa: PLC0415
     from plenocal.convert.setup import decide_setup, read_setup, write_setup  # noqa: PLC0415
@@ -102,7 +102,7 @@ def psnr_by_samples(cfg: dict, dataset: str, out: Path, shots: list[str],
             shot = convert_files(run / f"{cam}.png", data / "calib.xml", data / "camera.yaml",
                                  n, settings, setup_json=run / "convert_setup.json")
             for name, img in shot.views():
-                c = PinholeCamera.from_dict(read_json(gt)["cameras"][f"{cam}/{name}"])
+                c = read_cameras(gt)[f"{cam}/{name}"]
                 ideal, _ = render_pinhole(scene, c.K, c.cam_to_world, c.width, c.height,
                                           sim["render"]["ideal_supersample"])
                 write_image(run / "gt" / cam / f"{name}.png", to_uint8(ideal))

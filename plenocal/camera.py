@@ -1,25 +1,18 @@
-"""Pinhole cameras in the project's internal convention, and the plain camera file.
+"""Pinhole cameras in the project's internal convention.
 
 Convention (DESIGN.md): OpenCV camera axes (x right, y down, z forward), metres,
 poses as 4x4 camera-to-world matrices, pixel centres at integer coordinates, so a
 point X_c in the camera frame projects to ``K @ X_c / z`` directly. COLMAP puts the
 centre of pixel (0, 0) at (0.5, 0.5) and stores cam_from_world: convert only at
-that boundary (:func:`k_to_colmap`, :func:`k_from_colmap`).
-
-The plain file ``cameras.json``::
-
-    {"units": "m", "cameras": {"<cam>/<view>": {"K": 3x3, "cam_to_world": 4x4,
-                                               "width": W, "height": H}}}
+that boundary (:func:`k_to_colmap`, :func:`k_from_colmap`). The plain camera file
+``cameras.json`` is :mod:`plenocal.artifacts.cameras`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
-
-from plenocal.io.files import read_json, write_json
 
 
 @dataclass(frozen=True)
@@ -118,20 +111,6 @@ def rotation_angle_deg(R1: np.ndarray, R2: np.ndarray) -> float:
     """Angle of the rotation between two rotation matrices, degrees."""
     c = (np.trace(R1.T @ R2) - 1.0) / 2.0
     return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
-
-
-def write_cameras(path: str | Path, cameras: dict[str, PinholeCamera], units: str = "m",
-                  extra: dict | None = None) -> None:
-    """Write the plain ``cameras.json`` (keys ``<cam>/<view>``)."""
-    doc = {"units": units, "cameras": {k: cameras[k].to_dict() for k in sorted(cameras)}}
-    if extra:
-        doc.update(extra)
-    write_json(path, doc)
-
-
-def read_cameras(path: str | Path) -> dict[str, PinholeCamera]:
-    doc = read_json(path)
-    return {k: PinholeCamera.from_dict(v) for k, v in doc["cameras"].items()}
 
 
 def umeyama(src: np.ndarray, dst: np.ndarray, with_scale: bool = True) -> tuple[float,

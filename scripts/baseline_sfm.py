@@ -2,8 +2,8 @@
 
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
+from plenocal.artifacts.cameras import write_cameras
 from plenocal.artifacts.reg_a import read_reg_a
-from plenocal.camera import write_cameras
 from plenocal.io.files import write_json
 from plenocal.rulelog import log_to_file
 from plenocal.verify.sfm_baselines import baseline_sfm

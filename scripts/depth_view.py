@@ -7,8 +7,8 @@ from pathlib import Path
 
 import cv2  # (first: see DESIGN.md on cv2/pycolmap)
 
+from plenocal.artifacts.cameras import read_cameras
 from plenocal.artifacts.rig import read_rig
-from plenocal.camera import read_cameras
 from plenocal.depth.inputs import preview, rig_bounds
 from plenocal.depth.views import estimate_view_depth
 from plenocal.io.files import read_image, write_image, write_json, write_npy

@@ -3,11 +3,11 @@
 
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
+from plenocal.artifacts.cameras import read_cameras
 from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.artifacts.results import GroundTruthErrors, write_gt_errors
 from plenocal.artifacts.rig import read_rig
 from plenocal.artifacts.scale import read_scale
-from plenocal.camera import read_cameras
 from plenocal.rulelog import rule_logger
 from plenocal.verify.gt_errors import gt_errors
 

@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 
 from plenocal import optics as o
+from plenocal.artifacts.cameras import read_camera_units, read_cameras, write_cameras
 from plenocal.camera import PinholeCamera, intrinsics
-from plenocal.export import colmap_model, depthmaps, mpeg, plain
+from plenocal.export import colmap_model, depthmaps, mpeg
 
 
 def cameras() -> dict[str, PinholeCamera]:
@@ -131,15 +132,43 @@ def test_colmap_model_round_trip(tmp_path):
 
 def test_plain_round_trip(tmp_path):
     cams = cameras()
-    plain.write_plain(tmp_path / "cameras.json", cams, extra={"source": "test"})
+    write_cameras(tmp_path / "cameras.json", cams, extra={"source": "test"})
     doc = json.loads((tmp_path / "cameras.json").read_text())
     assert doc["units"] == "m" and doc["source"] == "test"
-    back = plain.read_plain(tmp_path / "cameras.json")
+    assert (doc["format"], doc["version"]) == ("plenocal.cameras", 1)
+    back = read_cameras(tmp_path / "cameras.json")
+    assert read_camera_units(tmp_path / "cameras.json") == "m"
     for key, cam in cams.items():
         X = points(cam)
         np.testing.assert_allclose(back[key].project(X)[0], cam.project(X)[0], atol=1e-6)
-    with pytest.raises(ValueError, match="<cam>/<view>"):
-        plain.write_plain(tmp_path / "x.json", {"nokey": cams["hand01/2_2"]})
+    with pytest.raises(ValueError, match="view key"):
+        write_cameras(tmp_path / "x.json", {"nokey": cams["hand01/2_2"]})
+    with pytest.raises(ValueError, match="units"):
+        write_cameras(tmp_path / "x.json", cams, units="mm")
+    with pytest.raises(ValueError, match="overwrite"):
+        write_cameras(tmp_path / "x.json", cams, extra={"units": "sfm"})
+
+
+def test_camera_file_of_another_version_or_shape_is_refused(tmp_path):
+    """DESIGN.md's layout without the format (an older file), another version, an unknown
+    unit or a camera without its K: each an error naming the file and the remedy."""
+    cams = cameras()
+    path = tmp_path / "cameras.json"
+    write_cameras(path, cams)
+    doc = json.loads(path.read_text())
+    for change, match in ((lambda d: d.pop("format"), "version 1"),
+                          (lambda d: d.update(version=2), "version 1"),
+                          (lambda d: d.update(units="mm"), "units 'mm'"),
+                          (lambda d: d["cameras"]["hand01/2_2"].pop("K"), "'K'")):
+        bad = json.loads(json.dumps(doc))
+        change(bad)
+        p = tmp_path / "bad.json"
+        p.write_text(json.dumps(bad))
+        with pytest.raises(ValueError, match=match) as err:
+            read_cameras(p)
+        assert str(p) in str(err.value) and "rerun" in str(err.value)
+    with pytest.raises(FileNotFoundError, match="cameras.json"):
+        read_cameras(tmp_path / "missing" / "cameras.json")
 
 
 def test_depth16():

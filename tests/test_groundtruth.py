@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import yaml
 
-from plenocal.camera import read_cameras
+from plenocal.artifacts.cameras import read_cameras
 from plenocal.config import validate_config
 from plenocal.grid import MicrolensGrid
 from plenocal.optics import PlenopticOptics

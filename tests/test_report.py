@@ -19,12 +19,13 @@ import numpy as np
 import pytest
 
 from plenocal.artifacts import results as typed
+from plenocal.artifacts.cameras import write_cameras
 from plenocal.artifacts.disparity import FORMAT as DISPARITY_FORMAT
 from plenocal.artifacts.disparity import VERSION as DISPARITY_VERSION
 from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.artifacts.rig import write_rig
 from plenocal.artifacts.scale import ScaleResult, write_scale
-from plenocal.camera import PinholeCamera, intrinsics, pose, write_cameras
+from plenocal.camera import PinholeCamera, intrinsics, pose
 from plenocal.convert.quality import summarise
 from plenocal.io.files import write_image, write_json
 from plenocal.report.html import build_report

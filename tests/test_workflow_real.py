@@ -54,7 +54,7 @@ def real_run(tiny_complete_run, tmp_path_factory) -> Path:
 def test_real_capture_runs_the_default_target(real_run: Path):
     res = real_run / "results" / NAME
     shots = sorted(p.stem for p in (real_run / "data" / NAME / "lenslet").glob("*.png"))
-    from plenocal.camera import read_cameras
+    from plenocal.artifacts.cameras import read_cameras
 
     views = read_cameras(res / "calibration" / "cameras.json")
     assert sorted({k.split("/")[0] for k in views}) == shots and len(views) == 10 * 3 * 3

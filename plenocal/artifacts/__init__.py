@@ -6,6 +6,9 @@ them without pulling in OpenCV or COLMAP.
 * :mod:`.reg_a` - ``reg_a/reg_a.json`` (registration A -> B, depth, merge, baseline, Table I)
 * :mod:`.disparity` - ``views/<shot>/disparity.json`` (convert -> registration B)
 * :mod:`.rig` - ``reg_b/rig.json`` (registration B -> depth, merge, Table I, synthesis)
+* :mod:`.cameras` - ``cameras.json``, the plain camera file of every calibration and of
+  the ground truth (merge, baseline_sfm, ground_truth -> depth maps, synthesis, Table I,
+  gt_errors, the report)
 * :mod:`.scale` - ``merge/scale.json`` (scale, Eq. 5 -> merge, Eq. 6, and gt_errors)
 * :mod:`.stage_warnings` - the ``warnings`` list of a stage's output (convert set-up,
   ``disparity.json``, ``features.json`` -> the report's first screen): one shape

@@ -283,7 +283,7 @@ def section_gt(page: Page, synthetic: bool) -> None:
 
 
 def section_cameras(page: Page) -> None:
-    from plenocal.camera import read_cameras  # noqa: PLC0415
+    from plenocal.artifacts.cameras import read_cameras  # noqa: PLC0415
 
     page.section("array", "Camera array (complete calibration)")
     rel = src.SOURCES["calibration"][0]

@@ -17,9 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
+from plenocal.artifacts.cameras import read_cameras, write_cameras
 from plenocal.camera import PinholeCamera, pose
 from plenocal.grid import MicrolensGrid
-from plenocal.io.files import read_json, write_json
+from plenocal.io.files import read_json
 from plenocal.io.raytrix import read_calib
 from plenocal.optics import PlenopticOptics
 from plenocal.simulate.dataset import optics_from_truth
@@ -116,9 +117,9 @@ def ground_truth_cameras(data_dir: str | Path, shots: list[str], n_views: int, t
                                         np.asarray(truth[cam]["cam_to_world"]))
         log(f"{cam}: {len(cams)} view cameras, worst chief-ray fit residual "
             f"{shot_worst:.2e} px")
-        cameras.update({f"{cam}/{k}": v.to_dict() for k, v in cams.items()})
+        cameras.update({f"{cam}/{k}": v for k, v in cams.items()})
         worst = max(worst, shot_worst)
-    write_json(out_json, {"units": "m", "fit_residual_px": worst, "cameras": cameras})
+    write_cameras(out_json, cameras, extra={"fit_residual_px": worst})
     log(f"{len(cameras)} ground-truth cameras, worst fit residual {worst:.2e} px")
 
 
@@ -136,13 +137,13 @@ def render_views(scene_json: str | Path, cams_json: str | Path, cam: str, views:
     if not len(views) == len(images) == len(depths):
         raise ValueError(f"ground truth renders of {cam}: {len(views)} views, {len(images)} "
                          f"images, {len(depths)} depth maps")
-    cams = read_json(cams_json)["cameras"]
+    cams = read_cameras(cams_json)
     scene = scene_arrays(read_json(scene_json))
     for view, image, depth_path in zip(views, images, depths, strict=True):
         key = f"{cam}/{view}"
         if key not in cams:
             raise KeyError(f"{cams_json}: no camera {key}; rerun rule ground_truth")
-        c = PinholeCamera.from_dict(cams[key])
+        c = cams[key]
         img, depth = render_pinhole(scene, c.K, c.cam_to_world, c.width, c.height,
                                     int(supersample))
         write_image(image, to_uint8(img))
