@@ -24,12 +24,12 @@ SYNTHETIC = [d for d in DATASETS if "simulate" in config["datasets"][d]]
 #: Scheduling priorities (Snakemake runs the ready job of highest priority first). The
 #: longest chain of the full run is simulate -> convert -> registration A (whose poses
 #: choose the pairs of all views to match) and view_features -> view_matches ->
-#: baseline_sfm -> the naive calibration's reprojection -> report (about 800 s of the
-#: default run's 1,000, BENCHMARKS.md "Full run"): its jobs go first, so that the two
-#: serial COLMAP jobs (matching, then the naive mapper) start as soon as they can and
-#: the rest of the work - depth, ground truth, synthesis - fills the other core beside
-#: them. Ground-truth renders, needed by the verification only, wait for the images that
-#: the chain needs; the full-set shot and the converter's set-up, which every conversion
+#: baseline_sfm -> the naive calibration's reprojection -> report, and beside it the
+#: calibration (registration B, depth, scale, merge), which the synthesis depth maps and
+#: experiments wait for: these jobs go first, so that the two serial COLMAP jobs
+#: (matching, then the naive mapper) start as soon as they can and the depth maps fill
+#: the other core beside them. Ground-truth renders, the other Table I rows and the
+#: synthesis wait; the full-set shot and the converter's set-up, which every conversion
 #: waits for, go before the other lenslet images (issue 15).
 PRIORITY = {"lenslet": 10, "chain": 20}
 

@@ -24,6 +24,7 @@ rule depth:
         bench_path("depth", "{reg}_{cam}")
     conda:
         "../envs/plenocal.yaml"
+    priority: PRIORITY["chain"]
     threads: 1
     resources:
         mem_mb=3000,

@@ -18,6 +18,7 @@ rule scale:
         bench_path("scale")
     conda:
         "../envs/plenocal.yaml"
+    priority: PRIORITY["chain"]
     threads: 1
     resources:
         mem_mb=2000,
@@ -48,6 +49,7 @@ rule merge:
         bench_path("merge")
     conda:
         "../envs/plenocal.yaml"
+    priority: PRIORITY["chain"]
     threads: 1
     resources:
         mem_mb=1000,

@@ -16,6 +16,7 @@ rule rig_b:
         bench_path("rig_b")
     conda:
         "../envs/plenocal.yaml"
+    priority: PRIORITY["chain"]
     threads: 1
     resources:
         mem_mb=500,

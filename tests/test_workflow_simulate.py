@@ -120,19 +120,20 @@ def _planned_priorities(out: str) -> dict[str, set[int]]:
 def test_critical_chain_goes_first(tmp_path: Path):
     """The longest chain of the run (simulate -> convert -> registration A and
     view_features -> view_matches -> baseline_sfm -> its Table I row) is scheduled
-    before the work that can wait (ground-truth renders, depth, the other Table I
-    rows): rules/common.smk PRIORITY."""
+    with the calibration (B, depth, scale, merge), before the work that can wait
+    (ground-truth renders, synthesis depth, the other Table I rows): rules/common.smk
+    PRIORITY."""
     work = workflow_copy(tmp_path / "w")
     proc = run(work, "-n")
     assert proc.returncode == 0, proc.stderr[-3000:]
     prios = _planned_priorities(proc.stdout + proc.stderr)
     chain = ["convert_setup", "convert", "features_a", "match_a", "map_a",
              "view_features", "view_matches", "baseline_sfm",
-             "reprojection_calib[baseline_sfm]"]
+             "reprojection_calib[baseline_sfm]", "rig_b", "depth", "scale", "merge"]
     for rule in chain:
         assert prios.get(rule) == {20}, (rule, prios.get(rule))
     # the full-set shot (the converter's set-up is decided on it) with the chain
     assert prios["simulate"] == {10, 20}
-    for rule in ("ground_truth_render", "depth", "reprojection_calib[complete]",
+    for rule in ("ground_truth_render", "depth_view", "reprojection_calib[complete]",
                  "synthesis_exp3"):
         assert prios.get(rule) == {0}, (rule, prios.get(rule))
