@@ -207,6 +207,7 @@ def proposed_vs_naive(work: Path, rules: dict[str, dict[str, float]]) -> list[st
                             PROPOSED)
     t_naive = target_seconds(work, str((d / "baseline" / "cameras.json").relative_to(work)),
                              NAIVE)
+    t_prop_all = sum(rules.get(r, {"s": 0.0})["s"] for r in PROPOSED)
     c, b = table_i["complete"], table_i["baseline_sfm"]
     lines = [
         "| calibration | job seconds | mean px | median px | images |",
@@ -217,6 +218,9 @@ def proposed_vs_naive(work: Path, rules: dict[str, dict[str, float]]) -> list[st
         f"{b['mean_px']:.4f} | {b['median_px']:.4f} | {b['num_images']} |",
         "",
         f"* time ratio naive / proposed: **{t_naive / t_prop:.2f}x** (target >= 2.4)",
+        f"* counting every job of the proposed rules instead (the depth maps of the hand-held "
+        f"shots too, which only the report shows): {t_prop_all:.1f} s, "
+        f"{t_naive / t_prop_all:.2f}x",
         f"* reprojection error ratio proposed / naive: mean **{c['mean_px'] / b['mean_px']:.3f}**"
         f", median **{c['median_px'] / b['median_px']:.3f}** (target < 1; issue 6: <= 0.9)",
     ]
