@@ -20,9 +20,9 @@ rule convert_setup:
         log_path("convert_setup"),
     benchmark:
         bench_path("convert_setup")
+    priority: PRIORITY["chain"]
     conda:
         "../envs/plenocal.yaml"
-    priority: PRIORITY["chain"]
     threads: 1
     resources:
         mem_mb=2500,
@@ -60,9 +60,9 @@ for _i, (_n, _datasets) in enumerate(convert_groups()):
             bench_path("convert", "{cam}")
         wildcard_constraints:
             dataset="|".join(re.escape(d) for d in _datasets),
+        priority: PRIORITY["chain"]
         conda:
             "../envs/plenocal.yaml"
-        priority: PRIORITY["chain"]
         threads: 1
         resources:
             mem_mb=2500,

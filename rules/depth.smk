@@ -22,9 +22,9 @@ rule depth:
         log_path("depth", "{reg}_{cam}"),
     benchmark:
         bench_path("depth", "{reg}_{cam}")
+    priority: PRIORITY["chain"]
     conda:
         "../envs/plenocal.yaml"
-    priority: PRIORITY["chain"]
     threads: 1
     resources:
         mem_mb=3000,

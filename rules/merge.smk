@@ -16,9 +16,9 @@ rule scale:
         log_path("scale"),
     benchmark:
         bench_path("scale")
+    priority: PRIORITY["chain"]
     conda:
         "../envs/plenocal.yaml"
-    priority: PRIORITY["chain"]
     threads: 1
     resources:
         mem_mb=2000,
@@ -47,9 +47,9 @@ rule merge:
         log_path("merge"),
     benchmark:
         bench_path("merge")
+    priority: PRIORITY["chain"]
     conda:
         "../envs/plenocal.yaml"
-    priority: PRIORITY["chain"]
     threads: 1
     resources:
         mem_mb=1000,

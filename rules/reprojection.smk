@@ -15,9 +15,9 @@ rule reprojection_calib:
         bench_path("reprojection", "{dataset}_{calib}")
     wildcard_constraints:
         calib="|".join(REPROJECTION_CALIB),
+    priority: reprojection_priority
     conda:
         "../envs/plenocal.yaml"
-    priority: reprojection_priority
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=1500,  # peak 0.83 GB on the default data (700 views)

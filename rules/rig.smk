@@ -14,9 +14,9 @@ rule rig_b:
         log_path("rig_b"),
     benchmark:
         bench_path("rig_b")
+    priority: PRIORITY["chain"]
     conda:
         "../envs/plenocal.yaml"
-    priority: PRIORITY["chain"]
     threads: 1
     resources:
         mem_mb=500,

@@ -16,9 +16,9 @@ rule features_a:
         log_path("features_a"),
     benchmark:
         bench_path("features_a")
+    priority: PRIORITY["chain"]
     conda:
         "../envs/plenocal.yaml"
-    priority: PRIORITY["chain"]
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=4000,
@@ -39,9 +39,9 @@ rule match_a:
         log_path("match_a"),
     benchmark:
         bench_path("match_a")
+    priority: PRIORITY["chain"]
     conda:
         "../envs/plenocal.yaml"
-    priority: PRIORITY["chain"]
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=4000,
@@ -63,9 +63,9 @@ rule map_a:
         log_path("map_a"),
     benchmark:
         bench_path("map_a")
+    priority: PRIORITY["chain"]
     conda:
         "../envs/plenocal.yaml"
-    priority: PRIORITY["chain"]
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=4000,
@@ -87,9 +87,9 @@ rule view_features:
         log_path("view_features", "{dataset}_{cam}"),
     benchmark:
         bench_path("view_features", "{dataset}_{cam}")
+    priority: PRIORITY["chain"]
     conda:
         "../envs/plenocal.yaml"
-    priority: PRIORITY["chain"]
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=1000,
@@ -113,9 +113,9 @@ rule view_matches:
         log_path("view_matches"),
     benchmark:
         bench_path("view_matches")
+    priority: PRIORITY["chain"]
     conda:
         "../envs/plenocal.yaml"
-    priority: PRIORITY["chain"]
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=4000,
@@ -137,9 +137,9 @@ rule baseline_sfm:
         log_path("baseline_sfm"),
     benchmark:
         bench_path("baseline_sfm")
+    priority: PRIORITY["chain"]
     conda:
         "../envs/plenocal.yaml"
-    priority: PRIORITY["chain"]
     threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=8000,

@@ -38,9 +38,9 @@ rule simulate:
         bench_path("simulate", "{cam}")
     wildcard_constraints:
         dataset=SYN,
+    priority: simulate_priority
     conda:
         "../envs/plenocal.yaml"
-    priority: simulate_priority
     threads: 1
     resources:
         mem_mb=3000,
