@@ -16,6 +16,7 @@ from plenocal.calib.reg_a import viewdb
 from plenocal.camera import PinholeCamera, invert_pose, pose
 from plenocal.io.files import write_image
 from plenocal.verify.reprojection import (
+    adjust_points,
     evaluate,
     evaluate_calibration,
     evaluate_sets,
@@ -186,7 +187,7 @@ def test_observation_errors_match_the_bindings(sets, tmp_path):
     viewdb.subset_database(db, sub, names, {n: vs[n] for n in names})
     cams = {f"{n}.png": vs[n] for n in names}
     rec = cm.known_pose_reconstruction(sub, cams, update_intrinsics=False)
-    triangulate(rec, sub, triangulation_options(100.0, 0.1, 0, 1), 0)
+    triangulate(rec, sub, triangulation_options(100.0, 0.1, 0, 1), 0, cams, tmp_path)
     want = []
     for image_id in sorted(rec.reg_image_ids()):
         image = rec.image(image_id)
@@ -199,6 +200,50 @@ def test_observation_errors_match_the_bindings(sets, tmp_path):
     got = observation_errors(rec, cams, tmp_path)
     assert got.size > 300
     np.testing.assert_array_equal(got, np.concatenate(want))
+
+
+def test_adjust_points_as_colmaps_bundle_adjustment(sets, tmp_path):
+    """The points' refinement that replaces COLMAP's bundle adjustment in the triangulation
+    (cameras fixed) reaches what Ceres reaches, run to tight tolerances on the same
+    reconstruction with every point moved off its optimum."""
+    import pycolmap
+
+    _, vs, paths = sets
+    names = sorted(n for n in vs if n.startswith(("x00_y00", "x01_y00")))
+    db = tmp_path / "views.db"
+    viewdb.build_view_database({n: paths[n] for n in names}, db, tmp_path,
+                               max_num_features=1000)
+    sub = tmp_path / "sub.db"
+    viewdb.subset_database(db, sub, names, {n: vs[n] for n in names})
+    cams = {f"{n}.png": vs[n] for n in names}
+    rec = cm.known_pose_reconstruction(sub, cams, update_intrinsics=False)
+    triangulate(rec, sub, triangulation_options(100.0, 0.1, 0, 1), 0, cams, tmp_path)
+    rng = np.random.default_rng(0)
+    for pid in sorted(rec.point3D_ids()):
+        rec.point3D(pid).xyz = rec.point3D(pid).xyz + rng.normal(0, 2e-3, 3)
+    theirs = pycolmap.Reconstruction(rec)
+    assert adjust_points(rec, cams, tmp_path) == rec.num_points3D() > 200
+    config = pycolmap.BundleAdjustmentConfig()
+    for image_id in theirs.reg_image_ids():
+        config.add_image(image_id)
+        config.set_constant_rig_from_world_pose(theirs.image(image_id).frame_id)
+    for camera_id in theirs.cameras:
+        config.set_constant_cam_intrinsics(camera_id)
+    options = pycolmap.BundleAdjustmentOptions()
+    options.refine_focal_length = options.refine_extra_params = False
+    options.print_summary = False
+    solver = options.ceres.solver_options
+    solver.function_tolerance = solver.gradient_tolerance = solver.parameter_tolerance = 1e-14
+    solver.max_num_iterations = 500
+    solver.num_threads = 1
+    pycolmap.create_default_bundle_adjuster(options, config, theirs).solve()
+    ours_err = observation_errors(rec, cams, tmp_path)
+    their_err = observation_errors(theirs, cams, tmp_path)
+    assert ours_err.size == their_err.size > 1000
+    np.testing.assert_allclose(ours_err, their_err, rtol=0, atol=1e-5)
+    moved = max(np.abs(rec.point3D(p).xyz - theirs.point3D(p).xyz).max()
+                for p in rec.point3D_ids())
+    assert moved < 1e-6
 
 
 def test_evaluate_calibration_reads_a_cameras_file_as_evaluate(sets, tmp_path):
