@@ -394,3 +394,17 @@ def test_white_image_flat_fields_the_vignetting(tmp_path: Path):
     flat = shot / np.maximum(white, 1e-3)
     assert flat[edge].mean() == pytest.approx(flat[centre].mean(), rel=0.02)
     assert flat[centre].mean() == pytest.approx(0.7, rel=0.02)
+
+
+def test_texture_files_read_as_scikit_image_reads_them():
+    """The scenes' photographs, read from scikit-image's files with OpenCV (no skimage.io
+    import), have the pixels of ``skimage.data.<name>()``: the lenslet images stay the same."""
+    import skimage.data
+
+    from plenocal.simulate.scene import TEXTURE_FILES, texture_pixels
+
+    for name in TEXTURE_FILES:
+        want = getattr(skimage.data, name)()
+        got = texture_pixels(name)
+        assert got.dtype == np.uint8 and got.shape == want[:, :, :3].shape, name
+        np.testing.assert_array_equal(got, want[:, :, :3], err_msg=name)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from importlib import resources
 
 import numpy as np
 
@@ -34,12 +35,38 @@ class SceneArrays:
     tex_w: np.ndarray
 
 
+#: the photographs the scenes use: scikit-image's bundled files (``skimage/data/``)
+TEXTURE_FILES = {
+    "astronaut": "astronaut.png", "chelsea": "chelsea.png", "coffee": "coffee.png",
+    "colorwheel": "color.png", "hubble_deep_field": "hubble_deep_field.jpg",
+    "immunohistochemistry": "ihc.png", "retina": "retina.jpg", "rocket": "rocket.jpg",
+}
+
+
+def texture_pixels(name: str) -> np.ndarray:
+    """RGB uint8 pixels of scikit-image's bundled photograph ``name``: those of
+    ``skimage.data.<name>()``, read from its file with OpenCV - without importing
+    ``skimage.io``, which cost each simulate job 0.4 s (tests/test_simulate.py checks that
+    the pixels are the same)."""
+    import cv2  # noqa: PLC0415
+
+    if name not in TEXTURE_FILES:
+        import skimage.data  # noqa: PLC0415
+
+        return getattr(skimage.data, name)()
+    path = resources.files("skimage") / "data" / TEXTURE_FILES[name]
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise FileNotFoundError(f"{path}: scikit-image's texture {name!r} is missing; "
+                                "reinstall scikit-image (pyproject.toml pins it)")
+    return img if img.ndim == 2 else np.ascontiguousarray(img[:, :, 2::-1])
+
+
 def load_texture(name: str, blur: float = 1.0) -> np.ndarray:
     """An RGB float32 texture from scikit-image's bundled data, Gaussian pre-blurred."""
     import cv2  # noqa: PLC0415
-    import skimage.data  # noqa: PLC0415
 
-    img = getattr(skimage.data, name)()
+    img = texture_pixels(name)
     if img.ndim == 2:
         img = np.repeat(img[:, :, None], 3, axis=2)
     img = img[:, :, :3].astype(np.float32) / 255.0
