@@ -246,15 +246,15 @@ def convert_targets(dataset):
 
 
 def depth_inputs(wildcards):
+    """Registration A's sources are the central views of every shot, B's the views of
+    the shot's own set."""
     d = wildcards.dataset
-    if wildcards.reg == "a":
-        return {
-            "reg_a": res(d, "reg_a", "reg_a.json"),
-            "views": [res(d, "views", c, f"{centre(d)}.png") for c in cams(d)],
-        }
+    central = [res(d, "views", c, f"{centre(d)}.png") for c in cams(d)]
+    own = [res(d, "views", wildcards.cam, f"{v}.png") for v in views(d)]
     return {
+        "reg_a": res(d, "reg_a", "reg_a.json"),
         "rig": res(d, "reg_b", "rig.json"),
-        "views": [res(d, "views", wildcards.cam, f"{v}.png") for v in views(d)],
+        "views": central + [p for p in own if p not in central],
     }
 
 

@@ -1,34 +1,37 @@
 """Depth of the central view of every shot in registration A (central views of the
-nearest shots, SfM units) and in registration B (views of its own set, metres)."""
-
-
-wildcard_constraints:
-    reg="a|b",
+nearest shots, SfM units) and in registration B (views of its own set, metres): both in
+one job per shot (plenocal.depth.shot)."""
 
 
 rule depth:
     input:
         unpack(depth_inputs),
     output:
-        depth="results/{dataset}/depth/{reg}/{cam}.npy",
-        preview=report(
-            "results/{dataset}/depth/{reg}/{cam}.png",
-            caption="../report/depth.rst",
-            category="Depth",
-            subcategory="registration {reg}",
-        ),
-        info="results/{dataset}/depth/{reg}/{cam}.json",
+        **{
+            f"{kind}_{reg}": (
+                report(
+                    f"results/{{dataset}}/depth/{reg}/{{cam}}.png",
+                    caption="../report/depth.rst",
+                    category="Depth",
+                    subcategory=f"registration {reg}",
+                )
+                if kind == "preview"
+                else f"results/{{dataset}}/depth/{reg}/{{cam}}.{ext}"
+            )
+            for reg in ("a", "b")
+            for kind, ext in (("depth", "npy"), ("preview", "png"), ("info", "json"))
+        },
     log:
-        log_path("depth", "{reg}_{cam}"),
+        log_path("depth", "{cam}"),
     benchmark:
-        bench_path("depth", "{reg}_{cam}")
+        bench_path("depth", "{cam}")
     priority: PRIORITY["chain"]
     conda:
         "../envs/plenocal.yaml"
     threads: 1
     resources:
         mem_mb=3000,
-        runtime=30,
+        runtime=60,
         # COLMAP's patch-match stereo needs a GPU node; the plane sweep does not
         gpu=lambda wc: 1 if stage_config("depth")["backend"] == "colmap" else 0,
     params:
