@@ -1,5 +1,7 @@
-"""Rules ground_truth_render (one view) and ground_truth_render_set (the other views of
-the full-set shot, in one job): ideal pinhole renders and z-depth maps."""
+"""Rules ground_truth_render (one view), ground_truth_render_set (the other views of the
+full-set shot) and ground_truth_render_central (the central view of every shot): ideal
+pinhole renders and z-depth maps, the views named by the image paths
+(``.../renders/<cam>/<view>.png``)."""
 
 from pathlib import Path
 
@@ -19,6 +21,6 @@ def paths(x) -> list[str]:
 
 images = paths(snakemake.output.image)
 render_views([p for p in snakemake.input if p.endswith("scene.json")][0], snakemake.input.cams,
-             snakemake.wildcards.cam, [Path(p).stem for p in images],
+             [f"{Path(p).parent.name}/{Path(p).stem}" for p in images],
              int(snakemake.params.supersample), images, paths(snakemake.output.depth),
              log=log.info)

@@ -123,24 +123,23 @@ def ground_truth_cameras(data_dir: str | Path, shots: list[str], n_views: int, t
     log(f"{len(cameras)} ground-truth cameras, worst fit residual {worst:.2e} px")
 
 
-def render_views(scene_json: str | Path, cams_json: str | Path, cam: str, views: list[str],
+def render_views(scene_json: str | Path, cams_json: str | Path, keys: list[str],
                  supersample: int, images: list[str | Path], depths: list[str | Path],
                  log=print) -> None:
     """Ideal pinhole renders (box-filtered, ``supersample`` rays per pixel and axis) and
-    z-depth maps of views ``views`` of shot ``cam``, the scene's textures loaded once
-    for all of them (rule ground_truth_render: one view; ground_truth_render_set: the
-    rest of the full set)."""
+    z-depth maps of the views ``keys`` (``"<cam>/<view>"``), the scene's textures loaded
+    once for all of them (rule ground_truth_render: one view; ground_truth_render_set: the
+    rest of the full set; ground_truth_render_central: the central view of every shot)."""
     from plenocal.io.files import to_uint8, write_image, write_npy  # noqa: PLC0415
     from plenocal.simulate.raytrace import render_pinhole  # noqa: PLC0415
     from plenocal.simulate.scene import scene_arrays  # noqa: PLC0415
 
-    if not len(views) == len(images) == len(depths):
-        raise ValueError(f"ground truth renders of {cam}: {len(views)} views, {len(images)} "
-                         f"images, {len(depths)} depth maps")
+    if not len(keys) == len(images) == len(depths):
+        raise ValueError(f"ground truth renders: {len(keys)} views, {len(images)} images, "
+                         f"{len(depths)} depth maps")
     cams = read_cameras(cams_json)
     scene = scene_arrays(read_json(scene_json))
-    for view, image, depth_path in zip(views, images, depths, strict=True):
-        key = f"{cam}/{view}"
+    for key, image, depth_path in zip(keys, images, depths, strict=True):
         if key not in cams:
             raise KeyError(f"{cams_json}: no camera {key}; rerun rule ground_truth")
         c = cams[key]
