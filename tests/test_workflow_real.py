@@ -87,7 +87,8 @@ def test_every_until_builds_its_job_graph(real_run: Path, tmp_path: Path):
              if ln.strip()]
     assert "report" in rules and "convert_quality" in rules
     gt_rules = {"simulate", "simulate_setup", "ground_truth",
-                "ground_truth_render", "gt_errors", "convert_quality"}
+                "ground_truth_render", "ground_truth_render_set",
+                "ground_truth_render_central", "gt_errors", "convert_quality"}
     for rule in rules:
         proc = snakemake(work, "-n", "--until", rule)
         out = proc.stdout + proc.stderr

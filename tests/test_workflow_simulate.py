@@ -77,11 +77,15 @@ def test_simulate_from_clean_directory_is_reproducible(tmp_path: Path):
     log = (a / "results/tiny/logs/simulate/x00_y00.log").read_text()
     assert "x00_y00: tracing" in log and "done" in log
     # the full-set shot's other views come from one job (rule ground_truth_render_set),
-    # single views from rule ground_truth_render
+    # other single views from rule ground_truth_render
     full = array_shots(a)[len(array_shots(a)) // 2]
     log = (a / f"results/tiny/logs/ground_truth_render_set/{full}.log").read_text()
     assert f"{full}/0_0:" in log and f"{full}/2_2:" in log and f"{full}/1_1:" not in log
     assert (a / "results/tiny/logs/ground_truth_render/x01_y00_0_0.log").exists()
+    # and the central view of every shot from one job (rule ground_truth_render_central)
+    log = (a / "results/tiny/logs/ground_truth_render_central/tiny.log").read_text()
+    assert all(f"{c}/1_1:" in log for c in array_shots(a))
+    assert not (a / "results/tiny/logs/ground_truth_render/x01_y00_1_1.log").exists()
     # and nothing is left to do
     proc = run(a, "-n", *targets(a))
     assert "Nothing to be done" in proc.stdout + proc.stderr
