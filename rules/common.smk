@@ -41,6 +41,12 @@ def simulate_priority(wildcards):
     return PRIORITY["chain"] if wildcards.cam == full else PRIORITY["lenslet"]
 
 
+def depth_priority(wildcards):
+    """The depth maps the scale (Eq. 5) reads go with the calibration; the others (the
+    hand-held shots' by default, which only the report shows) wait."""
+    return PRIORITY["chain"] if wildcards.cam in scale_shots(wildcards.dataset) else 0
+
+
 def reprojection_priority(wildcards):
     """The naive baseline's Table I row closes the critical chain; the others do not."""
     return PRIORITY["chain"] if wildcards.calib == "baseline_sfm" else 0

@@ -25,7 +25,7 @@ rule depth:
         log_path("depth", "{cam}"),
     benchmark:
         bench_path("depth", "{cam}")
-    priority: PRIORITY["chain"]
+    priority: depth_priority
     conda:
         "../envs/plenocal.yaml"
     threads: 1
