@@ -56,6 +56,7 @@ rule depth_view:
         bench_path("depth_view", "{cam}_{view}")
     wildcard_constraints:
         view=r"\d+_\d+",
+    priority: PRIORITY["synthesis"]
     conda:
         "../envs/plenocal.yaml"
     threads: 1

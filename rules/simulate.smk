@@ -91,6 +91,7 @@ rule ground_truth_render:
         bench_path("ground_truth_render", "{cam}_{view}")
     wildcard_constraints:
         dataset=SYN,
+    priority: PRIORITY["synthesis"]
     conda:
         "../envs/plenocal.yaml"
     threads: 1
@@ -136,6 +137,7 @@ for _i, (_n, _datasets) in enumerate(convert_groups()):
         wildcard_constraints:
             dataset="|".join(re.escape(d) for d in _syn),
             cam="|".join(sorted({re.escape(full_set_cam(d)) for d in _syn})),
+        priority: PRIORITY["synthesis"]
         conda:
             "../envs/plenocal.yaml"
         threads: 1
@@ -181,6 +183,7 @@ for _i, _d in enumerate(SYNTHETIC):
             bench_path("ground_truth_render_central")
         wildcard_constraints:
             dataset=re.escape(_d),
+        priority: PRIORITY["synthesis"]
         conda:
             "../envs/plenocal.yaml"
         threads: 1

@@ -24,10 +24,12 @@ for _exp in (1, 2, 3):
             log_path(f"synthesis_exp{_exp}"),
         benchmark:
             bench_path(f"synthesis_exp{_exp}")
+        priority: PRIORITY["synthesis"]
         conda:
             "../envs/plenocal.yaml"
-        # Exp. 3 renders every view of the array four times: its targets share two cores
-        threads: 2 if _exp == 3 else 1
+        # one core: a two-core Exp. 3 (its targets share the job's cores) waited at the end
+        # of the full run until both cores were free, and kept 1.35 of them busy
+        threads: 1
         resources:
             mem_mb=4000,
             runtime=60,

@@ -127,9 +127,9 @@ def _planned_priorities(out: str) -> dict[str, set[int]]:
 def test_critical_chain_goes_first(tmp_path: Path):
     """The longest chain of the run (simulate -> convert -> registration A and
     view_features -> view_matches -> baseline_sfm -> its Table I row) is scheduled
-    with the calibration (B, depth, scale, merge), before the work that can wait
-    (ground-truth renders, synthesis depth, the other Table I rows): rules/common.smk
-    PRIORITY."""
+    with the calibration (B, depth, scale, merge), then the synthesis (ground-truth
+    renders, synthesis depth, the experiments), then what can wait (the other Table I
+    rows, the hand-held shots' depth maps): rules/common.smk PRIORITY."""
     work = workflow_copy(tmp_path / "w")
     proc = run(work, "-n")
     assert proc.returncode == 0, proc.stderr[-3000:]
@@ -141,6 +141,10 @@ def test_critical_chain_goes_first(tmp_path: Path):
         assert prios.get(rule) == {20}, (rule, prios.get(rule))
     # the full-set shot (the converter's set-up is decided on it) with the chain
     assert prios["simulate"] == {10, 20}
-    for rule in ("ground_truth_render", "depth_view", "reprojection_calib[complete]",
-                 "synthesis_exp3", "depth[hand]"):
+    # then the synthesis (its depth maps, the ideal renders, the experiments) ...
+    for rule in ("ground_truth_render", "ground_truth_render_central", "depth_view",
+                 "synthesis_exp3"):
+        assert prios.get(rule) == {5}, (rule, prios.get(rule))
+    # ... and last what only feeds short jobs
+    for rule in ("reprojection_calib[complete]", "depth[hand]", "convert_quality"):
         assert prios.get(rule) == {0}, (rule, prios.get(rule))
