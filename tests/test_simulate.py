@@ -408,3 +408,42 @@ def test_texture_files_read_as_scikit_image_reads_them():
         got = texture_pixels(name)
         assert got.dtype == np.uint8 and got.shape == want[:, :, :3].shape, name
         np.testing.assert_array_equal(got, want[:, :, :3], err_msg=name)
+
+
+def test_bounding_boxes_skip_nothing_that_a_ray_hits(tmp_path: Path):
+    """The tracer skips a box's faces where a ray misses the box (quad_groups): a lenslet
+    image and an ideal render with its depth are the same bits as with every quad tested
+    for every ray; the default scene's runs are the background, the slanted plane and
+    the three boxes."""
+    import json
+
+    from plenocal.simulate.dataset import optics_from_truth
+    from plenocal.simulate.raytrace import (
+        quad_groups,
+        quad_table,
+        render_pinhole,
+        single_quad_groups,
+    )
+
+    sim = small_sim(240, 180)
+    setup_dataset(sim, tmp_path)
+    truth = tmp_path / "truth"
+    scene = scene_arrays(json.loads((truth / "scene.json").read_text()))
+    quads = quad_table(scene)
+    groups = quad_groups(quads)
+    assert [(int(g[0]), int(g[1])) for g in groups] == [(0, 1), (1, 2), (2, 7), (7, 12),
+                                                        (12, 17)]
+    optics = optics_from_truth(truth / "optics.json")
+    grid = MicrolensGrid(read_calib(tmp_path / "calib.xml"), optics.width, optics.height)
+    lm = nearest_lens_map(grid)
+    shot = np.asarray(json.loads((truth / "shots.json").read_text())["hand01"]["cam_to_world"])
+    fast = render_lenslet(scene, optics, lm, shot, 4, 0)
+    every = render_lenslet(scene, optics, lm, shot, 4, 0, groups=single_quad_groups(len(quads)))
+    np.testing.assert_array_equal(fast, every)
+    assert fast.std() > 0.05
+    K = np.array([[300.0, 0, 119.5], [0, 300.0, 89.5], [0, 0, 1]])
+    img, z = render_pinhole(scene, K, shot, 240, 180, 2)
+    img1, z1 = render_pinhole(scene, K, shot, 240, 180, 2, groups=single_quad_groups(len(quads)))
+    np.testing.assert_array_equal(img, img1)
+    np.testing.assert_array_equal(z, z1)
+    assert (z > 0).mean() > 0.9
