@@ -210,7 +210,7 @@ def _check_semantics(config: dict) -> None:
         if why:
             raise _fail(f"{key}.main_lens.focus_distance_m", X_o, why)
     c = config["convert"]
-    if c.get("view_spacing_px") is not None and c["view_spacing_px"] <= 0:
+    if c["view_spacing_px"] is not None and c["view_spacing_px"] <= 0:
         raise _fail("convert.view_spacing_px", c["view_spacing_px"], "must be > 0")
     s = config["scale"]
     if not s["low_percentile"] < s["high_percentile"]:
