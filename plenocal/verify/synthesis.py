@@ -42,7 +42,7 @@ from plenocal.artifacts.results import (
     SynthImage,
 )
 from plenocal.camera import PinholeCamera
-from plenocal.config import with_defaults
+from plenocal.config import stage_defaults, with_defaults
 from plenocal.depth.quality import depth_quality
 from plenocal.depth.views import estimate_view_depth
 from plenocal.export.mpeg import mpeg_name
@@ -355,7 +355,8 @@ def inner_corner_view(layout: ArrayLayout, cam: str) -> str:
     return view_name(n if 2 * row < layout.rows - 1 else 0, n if 2 * col < layout.cols - 1 else 0)
 
 
-def experiment_input_views(layout: ArrayLayout, exp: int, exp2_sets: str = "middle") -> list[str]:
+def experiment_input_views(layout: ArrayLayout, exp: int,
+                           exp2_sets: str = stage_defaults("verify")["exp2_sets"]) -> list[str]:
     """The views whose depth maps experiment ``exp`` reads (Exp. 3's lateral views as
     :func:`inner_corner_view` predicts them)."""
     sets = [layout.middle_cam] if exp2_sets == "middle" else layout.cams
