@@ -166,32 +166,66 @@ def _schema_keys_with_default() -> set[str]:
     return keys
 
 
-# fields named like a schema key that are not that setting: the optics model's neutral
-# camera (optics_from_config passes both), a view layout's / a conversion record's
-# resolved MLA kind (the setting's default is auto), a result's optional section
+# fields and keyword arguments named like a schema key that are not that setting (owner,
+# name): the optics model's neutral camera (optics_from_config passes both), a resolved
+# MLA kind (the setting's default is auto), a result's optional section, COLMAP's camera
+# model and its RANSAC threshold (not the triangulation filter), a figure's text scale,
+# neighbour counts
 NOT_SETTINGS = {("PlenopticOptics", "aperture_scale"), ("PlenopticOptics", "kind"),
-                ("ViewLayout", "mla"), ("Conversion", "mla"), ("GroundTruthErrors", "scale")}
+                ("ViewLayout", "mla"), ("Conversion", "mla"), ("GroundTruthErrors", "scale"),
+                ("estimate_patch_size", "mla"), ("make_layout", "mla"),
+                ("extract_features", "model"), ("_verification_options", "max_error_px"),
+                ("_label", "scale"), ("nearest_lenses", "k"), ("nearest_slots", "k")}
+_LITERAL = (ast.Constant, ast.Tuple, ast.List, ast.UnaryOp)
+
+
+def _written_defaults(tree: ast.AST, keys: set[str]) -> list[tuple[int, str]]:
+    """(line, text) of every ``.get("<key>", default)``, and of every literal default of a
+    dataclass field or keyword argument named ``<key>``, in ``tree``."""
+    out = []
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                and node.func.attr == "get" and len(node.args) == 2
+                and isinstance(node.args[0], ast.Constant) and node.args[0].value in keys):
+            out.append((node.lineno, ast.unparse(node)))
+        if isinstance(node, ast.ClassDef):
+            for st in node.body:
+                if (isinstance(st, ast.AnnAssign) and isinstance(st.target, ast.Name)
+                        and st.target.id in keys and isinstance(st.value, _LITERAL)
+                        and (node.name, st.target.id) not in NOT_SETTINGS):
+                    out.append((st.lineno, f"{node.name}.{ast.unparse(st)}"))
+        if isinstance(node, ast.FunctionDef):
+            a = node.args
+            pos = a.posonlyargs + a.args
+            pairs = list(zip(pos[len(pos) - len(a.defaults):], a.defaults, strict=True))
+            pairs += [(x, d) for x, d in zip(a.kwonlyargs, a.kw_defaults, strict=True)
+                      if d is not None]
+            for arg, d in pairs:
+                if (arg.arg in keys and isinstance(d, _LITERAL)
+                        and not (isinstance(d, ast.Constant) and d.value is None)
+                        and (node.name, arg.arg) not in NOT_SETTINGS):
+                    out.append((node.lineno, f"{node.name}({arg.arg}={ast.unparse(d)})"))
+    return out
 
 
 def test_no_default_is_written_again_in_the_source():
     keys = _schema_keys_with_default()
-    found = []
-    for base in ("plenocal", "scripts"):
-        for path in sorted((ROOT / base).rglob("*.py")):
-            rel = path.relative_to(ROOT)
-            for node in ast.walk(ast.parse(path.read_text())):
-                if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
-                        and node.func.attr == "get" and len(node.args) == 2
-                        and isinstance(node.args[0], ast.Constant)
-                        and node.args[0].value in keys):
-                    found.append(f"{rel}:{node.lineno}: {ast.unparse(node)}")
-                if isinstance(node, ast.ClassDef):
-                    for st in node.body:
-                        if (isinstance(st, ast.AnnAssign) and isinstance(st.target, ast.Name)
-                                and st.target.id in keys and st.value is not None
-                                and isinstance(st.value, (ast.Constant, ast.Tuple, ast.List,
-                                                          ast.UnaryOp))
-                                and (node.name, st.target.id) not in NOT_SETTINGS):
-                            found.append(f"{rel}:{st.lineno}: {node.name}.{ast.unparse(st)}")
+    found = [f"{path.relative_to(ROOT)}:{line}: {text}"
+             for base in ("plenocal", "scripts") for path in sorted((ROOT / base).rglob("*.py"))
+             for line, text in _written_defaults(ast.parse(path.read_text()), keys)]
     assert not found, ("defaults written again - read them from the schema "
                        "(plenocal.config.with_defaults / stage_defaults):\n" + "\n".join(found))
+
+
+def test_the_source_check_finds_each_kind():
+    """The check above is not blind: each way of writing a default again is found."""
+    src = """
+class Options:
+    window: int = 7
+    mla: str = _D["mla"]
+def f(cfg, seed: int = 0, *, max_num_features=8192, view_radius=None):
+    return cfg.get("upsample", 1.5), cfg.get("unknown_key", 1)
+"""
+    found = [text for _, text in _written_defaults(ast.parse(src), _schema_keys_with_default())]
+    assert found == ["Options.window: int = 7", "f(seed=0)", "f(max_num_features=8192)",
+                     "cfg.get('upsample', 1.5)"]
