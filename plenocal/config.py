@@ -55,7 +55,7 @@ def _resolve(schema: dict, root: dict) -> dict:
     return schema
 
 
-def fill_defaults(schema: dict, instance: Any, root: dict) -> None:
+def _fill_defaults(schema: dict, instance: Any, root: dict) -> None:
     """Fill ``instance`` in place with the ``default`` of every property it lacks, at every
     depth (a property's own ``default``, not its ``$ref`` target's: a dataset without
     ``simulate`` stays a real capture), as a validator that sets defaults would."""
@@ -67,12 +67,12 @@ def fill_defaults(schema: dict, instance: Any, root: dict) -> None:
         if key not in instance and "default" in sub:
             instance[key] = copy.deepcopy(sub["default"])
         if key in instance:
-            fill_defaults(sub, instance[key], root)
+            _fill_defaults(sub, instance[key], root)
     extra = schema.get("additionalProperties")
     if isinstance(extra, dict):
         for key, value in instance.items():
             if key not in props:
-                fill_defaults(extra, value, root)
+                _fill_defaults(extra, value, root)
 
 
 def _block_schema(block: str) -> dict:
@@ -100,7 +100,7 @@ def with_defaults(block: str, cfg: Mapping[str, Any] | None) -> dict:
     are kept and not checked (:func:`validate_config` checks a whole config). ``None``:
     the block's defaults."""
     out = copy.deepcopy(dict(cfg)) if cfg is not None else {}
-    fill_defaults(_block_schema(block), out, _package_schema())
+    _fill_defaults(_block_schema(block), out, _package_schema())
     return out
 
 
@@ -144,7 +144,7 @@ def validate_config(config: dict, schema_path: str | Path | None = None) -> dict
     import jsonschema  # noqa: PLC0415 - see the TYPE_CHECKING import
 
     schema = load_schema(schema_path)
-    fill_defaults(schema, config, schema)
+    _fill_defaults(schema, config, schema)
     validator = jsonschema.validators.validator_for(schema)(schema)
     errors = sorted(validator.iter_errors(config), key=lambda e: list(e.absolute_path))
     if errors:
