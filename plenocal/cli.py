@@ -25,6 +25,7 @@ from pathlib import Path
 
 import yaml
 
+from plenocal.config import stage_defaults
 from plenocal.convert.errors import ConvertError
 
 EXIT_USAGE = 2
@@ -101,8 +102,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("-o", "--out", required=True, metavar="DIR",
                    help="output folder (created; files in it with the same names are "
                         "replaced)")
-    c.add_argument("--views", type=int, default=5, metavar="N",
-                   help="N x N views (default 5, as TLCT); N >= 1")
+    c.add_argument("--views", type=int, default=stage_defaults("dataset")["views"], metavar="N",
+                   help="N x N views (default %(default)s, a dataset's in config.schema.yaml, "
+                        "as TLCT); N >= 1")
     kind = c.add_mutually_exclusive_group()
     kind.add_argument("--galilean", action="store_const", const="galilean", dest="mla",
                       help="the MLA is Galilean (micro images upright: a point moves away "
@@ -147,8 +149,8 @@ def convert_config(args: argparse.Namespace) -> dict:
         cfg["tile_size"] = args.tile_size
     if args.bit_depth is not None:
         cfg["bit_depth"] = args.bit_depth
-    if args.grid is not None or "grid" not in cfg:
-        cfg["grid"] = args.grid or "auto"
+    if args.grid is not None:
+        cfg["grid"] = args.grid
     return cfg
 
 

@@ -4,21 +4,30 @@ cannot express (a focus distance inside the focal length, near beyond far, ...).
 Errors name the key by its dotted path and say why, e.g.::
 
     config: datasets.synthetic.views = 4: must be an odd number
+
+config.schema.yaml is the one source of every setting's default: :func:`validate_config`
+fills the workflow's config from it, :func:`with_defaults` fills a partial block (of a
+test, a benchmark, a library caller), and :func:`stage_defaults` gives a block's defaults
+to the settings dataclasses. The package writes no default of its own.
 """
 
 from __future__ import annotations
 
 import copy
-from collections.abc import Iterator
+import functools
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import jsonschema
 import yaml
 
-from plenocal.calib.reg_b.datasheet import virtual_depth_problem
+if TYPE_CHECKING:  # jsonschema is imported where a config is validated, not by every job
+    import jsonschema
 
 SCHEMA_PATH = Path(__file__).resolve().parent.parent / "config.schema.yaml"
+# libyaml's parser where PyYAML has it (the same constructors, a tenth of the time: the
+# settings dataclasses read their defaults from the schema when their module is imported)
+_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
 class ConfigError(ValueError):
@@ -27,25 +36,77 @@ class ConfigError(ValueError):
 
 def load_schema(path: str | Path | None = None) -> dict:
     with open(path or SCHEMA_PATH) as fh:
-        return yaml.safe_load(fh)
+        return yaml.load(fh, Loader=_LOADER)  # a safe loader (C or Python)
 
 
-def _with_defaults(validator_class: type) -> type:
-    validate_properties = validator_class.VALIDATORS["properties"]
+@functools.lru_cache(maxsize=1)
+def _package_schema() -> dict:
+    """config.schema.yaml, parsed once per process (read only: defaults are copied)."""
+    return load_schema()
 
-    def set_defaults(validator: Any, properties: dict, instance: Any,
-                     schema: dict) -> Iterator[Any]:
-        if isinstance(instance, dict):
-            for key, sub in properties.items():
-                if key in instance:
-                    continue
-                if "default" in sub:
-                    instance[key] = copy.deepcopy(sub["default"])
-                elif "$ref" in sub and "default" in sub:
-                    instance[key] = copy.deepcopy(sub["default"])
-        yield from validate_properties(validator, properties, instance, schema)
 
-    return jsonschema.validators.extend(validator_class, {"properties": set_defaults})
+def _resolve(schema: dict, root: dict) -> dict:
+    """``schema`` with its local ``$ref`` (``#/$defs/<name>``) followed."""
+    while "$ref" in schema:
+        target: Any = root
+        for part in schema["$ref"].removeprefix("#/").split("/"):
+            target = target[part]
+        schema = target
+    return schema
+
+
+def _fill_defaults(schema: dict, instance: Any, root: dict) -> None:
+    """Fill ``instance`` in place with the ``default`` of every property it lacks, at every
+    depth (a property's own ``default``, not its ``$ref`` target's: a dataset without
+    ``simulate`` stays a real capture), as a validator that sets defaults would."""
+    if not isinstance(instance, dict):
+        return
+    schema = _resolve(schema, root)
+    props = schema.get("properties", {})
+    for key, sub in props.items():
+        if key not in instance and "default" in sub:
+            instance[key] = copy.deepcopy(sub["default"])
+        if key in instance:
+            _fill_defaults(sub, instance[key], root)
+    extra = schema.get("additionalProperties")
+    if isinstance(extra, dict):
+        for key, value in instance.items():
+            if key not in props:
+                _fill_defaults(extra, value, root)
+
+
+def _block_schema(block: str) -> dict:
+    """The schema of config block ``block``: a ``$defs`` name, then property names
+    (``depth``, ``depth.sgm``, ``convert.blend``, ``simulate.sensor``)."""
+    root = _package_schema()
+    name, *rest = block.split(".")
+    schema = root["$defs"].get(name, {})
+    for part in rest:
+        schema = _resolve(schema, root).get("properties", {}).get(part, {})
+    schema = _resolve(schema, root)
+    if "properties" not in schema:
+        known = sorted(k for k, v in root["$defs"].items() if "properties" in v)
+        raise ConfigError(f"{SCHEMA_PATH}: no config block {block!r} (blocks: "
+                          f"{', '.join(known)}, and their sub-blocks as 'depth.sgm')")
+    return schema
+
+
+def with_defaults(block: str, cfg: Mapping[str, Any] | None) -> dict:
+    """A copy of ``cfg``, a (partial) config block, with the schema's defaults filled in.
+
+    ``block`` names the block in config.schema.yaml: its definition under ``$defs``
+    (``convert``, ``sfm``, ``rig``, ``depth``, ``scale``, ``verify``, or ``simulate``, a
+    dataset's), then, dotted, a sub-block (``depth.sgm``). Keys the schema does not know
+    are kept and not checked (:func:`validate_config` checks a whole config). ``None``:
+    the block's defaults."""
+    out = copy.deepcopy(dict(cfg)) if cfg is not None else {}
+    _fill_defaults(_block_schema(block), out, _package_schema())
+    return out
+
+
+def stage_defaults(block: str) -> dict:
+    """The schema's defaults of config block ``block`` (see :func:`with_defaults`)."""
+    return with_defaults(block, None)
 
 
 def _path(error: jsonschema.ValidationError) -> str:
@@ -80,9 +141,11 @@ def _fail(key: str, value: Any, why: str) -> ConfigError:
 
 def validate_config(config: dict, schema_path: str | Path | None = None) -> dict:
     """Validate ``config`` in place (defaults filled in) and return it."""
+    import jsonschema  # noqa: PLC0415 - see the TYPE_CHECKING import
+
     schema = load_schema(schema_path)
-    cls = _with_defaults(jsonschema.validators.validator_for(schema))
-    validator = cls(schema)
+    _fill_defaults(schema, config, schema)
+    validator = jsonschema.validators.validator_for(schema)(schema)
     errors = sorted(validator.iter_errors(config), key=lambda e: list(e.absolute_path))
     if errors:
         # the deepest error is the most specific one
@@ -116,6 +179,8 @@ def canonicalize(config: dict) -> dict:
 
 
 def _check_semantics(config: dict) -> None:
+    from plenocal.calib.reg_b.datasheet import virtual_depth_problem  # noqa: PLC0415
+
     for name, ds in config["datasets"].items():
         sim = ds.get("simulate")
         if sim is None:
@@ -145,7 +210,7 @@ def _check_semantics(config: dict) -> None:
         if why:
             raise _fail(f"{key}.main_lens.focus_distance_m", X_o, why)
     c = config["convert"]
-    if c.get("view_spacing_px") is not None and c["view_spacing_px"] <= 0:
+    if c["view_spacing_px"] is not None and c["view_spacing_px"] <= 0:
         raise _fail("convert.view_spacing_px", c["view_spacing_px"], "must be > 0")
     s = config["scale"]
     if not s["low_percentile"] < s["high_percentile"]:

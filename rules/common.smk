@@ -510,7 +510,7 @@ def view_geometry(wildcards):
     """The convert settings that fix the view geometry (never the image content)."""
     conv = stage_config("convert")
     return {
-        "view_spacing_px": conv.get("view_spacing_px"),
+        "view_spacing_px": conv["view_spacing_px"],
         "even_size": conv["even_size"],
     }
 

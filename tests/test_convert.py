@@ -398,18 +398,6 @@ def test_quality_summary():
         view_quality(a, np.zeros((10, 20, 3), np.uint8), 1)
 
 
-def test_schema_defaults_are_the_settings_defaults():
-    """The convert block of config.schema.yaml and ConvertSettings() agree: the rule, the
-    CLI and a script that builds ConvertSettings() convert alike."""
-    import yaml  # noqa: PLC0415
-
-    from plenocal.config import validate_config  # noqa: PLC0415
-
-    cfg = yaml.safe_load((Path(__file__).parents[1] / "config.yaml").read_text())
-    cfg["convert"] = {}
-    assert ConvertSettings.from_config(validate_config(cfg)["convert"]) == ConvertSettings()
-
-
 def test_views_reaching_the_rim_take_the_wide_blend():
     """rim_reach: 1 where |q_rc| + P / sqrt(2) passes D'/2, 2 where |q_rc| + P / 2 does too
     (hand-computed), and the shot renders each view with the blend of its reach (more

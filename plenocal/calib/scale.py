@@ -22,9 +22,13 @@ from pathlib import Path
 import numpy as np
 
 from plenocal.artifacts.scale import ScaleResult
+from plenocal.config import stage_defaults
+
+_SCALE = stage_defaults("scale")  # the defaults below: config.schema.yaml's scale block
+_LOW, _HIGH = float(_SCALE["low_percentile"]), float(_SCALE["high_percentile"])
 
 
-def valid_mask(depth: np.ndarray, low: float = 10.0, high: float = 90.0) -> np.ndarray:
+def valid_mask(depth: np.ndarray, low: float = _LOW, high: float = _HIGH) -> np.ndarray:
     """Pixels > 0, finite and within the [low, high] percentile of the map's valid depths."""
     d = np.asarray(depth, dtype=np.float64)
     ok = np.isfinite(d) & (d > 0)
@@ -34,7 +38,7 @@ def valid_mask(depth: np.ndarray, low: float = 10.0, high: float = 90.0) -> np.n
     return ok & (d >= lo) & (d <= hi)
 
 
-def shot_ratio(d1: np.ndarray, d2: np.ndarray, low: float = 10.0, high: float = 90.0,
+def shot_ratio(d1: np.ndarray, d2: np.ndarray, low: float = _LOW, high: float = _HIGH,
                name: str = "") -> dict:
     """Eq. 5 for one shot: r_i (mean of d2/d1), n pixels, and the median of the ratios."""
     d1 = np.asarray(d1)
@@ -84,8 +88,9 @@ def load_depth(path: str | Path) -> np.ndarray:
     return d
 
 
-def estimate_scale(pairs: Mapping[str, tuple[str | Path, str | Path]], low: float = 10.0,
-                   high: float = 90.0, estimator: str = "mean", log=None) -> ScaleResult:
+def estimate_scale(pairs: Mapping[str, tuple[str | Path, str | Path]], low: float = _LOW,
+                   high: float = _HIGH, estimator: str = _SCALE["estimator"],
+                   log=None) -> ScaleResult:
     """Eq. 5 from the depth files (:func:`scale_from_files`) as the typed result that
     ``scale.json`` holds, ``estimator`` naming the r that the merge uses."""
     out = scale_from_files(pairs, low, high, log=log)
@@ -96,8 +101,8 @@ def estimate_scale(pairs: Mapping[str, tuple[str | Path, str | Path]], low: floa
         method=out["method"])
 
 
-def scale_from_files(pairs: Mapping[str, tuple[str | Path, str | Path]], low: float = 10.0,
-                     high: float = 90.0, log=None) -> dict:
+def scale_from_files(pairs: Mapping[str, tuple[str | Path, str | Path]], low: float = _LOW,
+                     high: float = _HIGH, log=None) -> dict:
     """``pairs``: shot -> (depth of registration A, depth of registration B)."""
     ratios = {}
     for cam in sorted(pairs):

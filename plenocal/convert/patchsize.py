@@ -52,29 +52,34 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from plenocal.config import stage_defaults
 from plenocal.convert.errors import ConvertError
 from plenocal.grid import MicrolensGrid
 from plenocal.viewgeom import mla_sign
 
+_PATCH = stage_defaults("convert.patch_size")
+
 
 @dataclass(frozen=True)
 class PatchSizeSettings:
-    block_radius_px: float | None = None  # None: D' / 7
-    block_samples: int = 7  # samples per block side
-    step_px: float = 0.5
-    min_px: float = 2.0
-    max_fraction: float = 0.5  # largest candidate, fraction of D'
-    min_confidence: float = 0.25
-    smooth_iterations: int = 2
-    texture_scale: float = 0.02  # grey std (0..1) at which the texture factor saturates
-    search_range: str = "union"  # "type": each lens its type's range; "union": all types'
+    """The patch-size estimate's settings; defaults: ``convert.patch_size`` of
+    config.schema.yaml."""
+    block_radius_px: float | None = _PATCH["block_radius_px"]  # None: D' / 7
+    block_samples: int = _PATCH["block_samples"]  # samples per block side
+    step_px: float = _PATCH["step_px"]
+    min_px: float = _PATCH["min_px"]
+    max_fraction: float = _PATCH["max_fraction"]  # largest candidate, fraction of D'
+    min_confidence: float = _PATCH["min_confidence"]
+    smooth_iterations: int = _PATCH["smooth_iterations"]
+    texture_scale: float = _PATCH["texture_scale"]  # grey std (0..1) saturating the texture
+    search_range: str = _PATCH["search_range"]  # "type": its type's range; "union": all types'
     # measured on Fujita2 / Origami (README): neither changes the views (SSIM, sharpness,
     # blend disagreement within 0.01), aggregation costs the simulator 0.1 dB, the ring
     # 0.4-0.9 s per 4-megapixel frame; both off by default
-    aggregate: float = 0.0  # weight of each neighbour's costs against the lens's own 2
-    same_type_ring: bool = False  # also match the six lenses at sqrt(3) D (multi-focus)
-    focus_softness: float = 0.35  # log virtual-depth width of the focus weight's fall-off
-    focus_floor: float = 0.05  # focus weight of a lens far outside its type's range
+    aggregate: float = _PATCH["aggregate"]  # weight of each neighbour's costs (the lens's: 2)
+    same_type_ring: bool = _PATCH["same_type_ring"]  # the six lenses at sqrt(3) D (multi-focus)
+    focus_softness: float = _PATCH["focus_softness"]  # log virtual-depth width of the fall-off
+    focus_floor: float = _PATCH["focus_floor"]  # focus weight far outside the type's range
 
 
 @dataclass

@@ -35,6 +35,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
+from plenocal.config import stage_defaults
 from plenocal.convert.vignetting import BIN_PX
 from plenocal.viewgeom import ViewLayout, nearest_slots
 
@@ -42,21 +43,25 @@ _FLOOR = 1e-3
 LUT_STEP = 0.05  # pixels of radius between entries of the radial tables
 
 
+_BLEND = stage_defaults("convert.blend")
+
+
 @dataclass(frozen=True)
 class RenderSettings:
-    fade_radius: float = 1.0  # R_f, tile units
-    rim_px: float = 1.0  # samples closer than this to D'/2 get no weight
-    rim_ramp_px: float = 1.5  # width of the rim ramp
-    slots: int = 3  # candidate lenses blended per output pixel (a 4th is >= 0.87 tile away)
-    centre_power: float = 1.0  # weight (1 - (rho / (D'/2))^2)^power: samples near the centre
+    """The view renderer's blend; defaults: ``convert.blend`` of config.schema.yaml."""
+    fade_radius: float = _BLEND["fade_radius"]  # R_f, tile units
+    rim_px: float = _BLEND["rim_px"]  # samples closer than this to D'/2 get no weight
+    rim_ramp_px: float = _BLEND["rim_ramp_px"]  # width of the rim ramp
+    slots: int = _BLEND["slots"]  # lenses blended per output pixel (a 4th: >= 0.87 tile away)
+    centre_power: float = _BLEND["centre_power"]  # weight (1 - (rho / (D'/2))^2)^power
     # views whose patches reach past the micro image (rim_reach 1): a wide blend
-    wide_slots: int = 4
-    wide_fade_radius: float = 1.5
-    wide_centre_power: float = 3.0
+    wide_slots: int = _BLEND["wide_slots"]
+    wide_fade_radius: float = _BLEND["wide_fade_radius"]
+    wide_centre_power: float = _BLEND["wide_centre_power"]
     # views whose patches' sides pass the micro image (rim_reach 2): a wider one
-    wider_slots: int = 5
-    wider_fade_radius: float = 2.0
-    wider_centre_power: float = 4.0
+    wider_slots: int = _BLEND["wider_slots"]
+    wider_fade_radius: float = _BLEND["wider_fade_radius"]
+    wider_centre_power: float = _BLEND["wider_centre_power"]
 
     def wide(self) -> RenderSettings:
         """The blend of the views whose patches reach past the micro image."""

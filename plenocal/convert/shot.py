@@ -36,6 +36,7 @@ import numpy as np
 import yaml
 
 from plenocal.artifacts.disparity import disparity_record
+from plenocal.config import stage_defaults, with_defaults
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.levels import significant_bits, to_unit_float
 from plenocal.convert.patchsize import (
@@ -69,6 +70,13 @@ def _known_fields(cls, cfg: dict):
     return cls(**{k: v for k, v in cfg.items() if k in names})
 
 
+def _percentiles(pct: list) -> tuple[float, float]:
+    return float(pct[0]), float(pct[1])
+
+
+_CONVERT = stage_defaults("convert")
+
+
 @dataclass(frozen=True)
 class ConvertSettings:
     """The ``convert`` block of the config (config.schema.yaml documents every key).
@@ -79,17 +87,18 @@ class ConvertSettings:
     simulator: micro images inverted) or ``galilean`` (TSPC: upright). ``even_size``:
     crop the views' last column / row where odd (YUV 4:2:0). ``bit_depth``: ``"auto"``
     (16-bit images whose maximum fits 10, 12 or 14 bits are scaled to that range) or
-    the number of significant bits (8..16)."""
+    the number of significant bits (8..16). Defaults: the schema's (``percentiles``:
+    ``disparity_percentiles``, ``patch``: ``patch_size``, ``render``: ``blend``)."""
 
-    tile_size: int | str = "auto"
-    upsample: float = 1.5
-    view_spacing_px: float | None = None
-    percentiles: tuple[float, float] = (2.0, 98.0)
-    mla: str = "auto"
-    even_size: bool = True
-    bit_depth: int | str = "auto"
-    devignette: bool = True
-    grid: str = "auto"  # file | refine | auto (plenocal.convert.gridcheck)
+    tile_size: int | str = _CONVERT["tile_size"]
+    upsample: float = _CONVERT["upsample"]
+    view_spacing_px: float | None = _CONVERT["view_spacing_px"]
+    percentiles: tuple[float, float] = _percentiles(_CONVERT["disparity_percentiles"])
+    mla: str = _CONVERT["mla"]
+    even_size: bool = _CONVERT["even_size"]
+    bit_depth: int | str = _CONVERT["bit_depth"]
+    devignette: bool = _CONVERT["devignette"]
+    grid: str = _CONVERT["grid"]  # file | refine | auto (plenocal.convert.gridcheck)
     patch: PatchSizeSettings = field(default_factory=PatchSizeSettings)
     render: RenderSettings = field(default_factory=RenderSettings)
 
@@ -108,22 +117,22 @@ class ConvertSettings:
 
     @classmethod
     def from_config(cls, cfg: dict | None) -> ConvertSettings:
-        cfg = dict(cfg or {})
-        pct = cfg.get("disparity_percentiles", (2.0, 98.0))
-        tile = cfg.get("tile_size", "auto")
-        bits = cfg.get("bit_depth", "auto")
+        """The settings of the config's ``convert`` block, partial or whole (missing keys:
+        the schema's defaults)."""
+        cfg = with_defaults("convert", cfg)
+        tile, bits = cfg["tile_size"], cfg["bit_depth"]
         return cls(
             tile_size=tile if isinstance(tile, str) else int(tile),
-            upsample=float(cfg.get("upsample", 1.5)),
-            view_spacing_px=cfg.get("view_spacing_px"),
-            percentiles=(float(pct[0]), float(pct[1])),
-            mla=str(cfg.get("mla", "auto")),
-            even_size=bool(cfg.get("even_size", True)),
+            upsample=float(cfg["upsample"]),
+            view_spacing_px=cfg["view_spacing_px"],
+            percentiles=_percentiles(cfg["disparity_percentiles"]),
+            mla=str(cfg["mla"]),
+            even_size=bool(cfg["even_size"]),
             bit_depth=bits if isinstance(bits, str) else int(bits),
-            devignette=bool(cfg.get("devignette", True)),
-            grid=str(cfg.get("grid", "auto")),
-            patch=_known_fields(PatchSizeSettings, cfg.get("patch_size") or {}),
-            render=_known_fields(RenderSettings, cfg.get("blend") or {}),
+            devignette=bool(cfg["devignette"]),
+            grid=str(cfg["grid"]),
+            patch=_known_fields(PatchSizeSettings, cfg["patch_size"]),
+            render=_known_fields(RenderSettings, cfg["blend"]),
         )
 
 

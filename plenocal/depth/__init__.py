@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocal.camera import PinholeCamera
+from plenocal.config import with_defaults
 from plenocal.depth.colmap_mvs import (
     COLMAP_HINT,
     ColmapOptions,
@@ -25,14 +26,17 @@ __all__ = ["DepthBackendError", "estimate_depth", "planesweep_options", "resolve
 
 
 def planesweep_options(cfg: dict | None) -> PlaneSweepOptions:
-    """PlaneSweepOptions from the config's ``depth`` block (unknown keys ignored)."""
-    cfg = cfg or {}
+    """PlaneSweepOptions from the config's ``depth`` block, partial or whole (missing keys:
+    the schema's defaults; unknown keys ignored)."""
+    cfg = with_defaults("depth", cfg)
     names = {f.name for f in fields(PlaneSweepOptions)}
     return PlaneSweepOptions(**{k: v for k, v in cfg.items() if k in names})
 
 
 def colmap_options(cfg: dict | None) -> ColmapOptions:
-    cfg = dict((cfg or {}).get("colmap", {}) or {})
+    """ColmapOptions from the config's ``depth`` block (its ``colmap`` settings), partial or
+    whole."""
+    cfg = with_defaults("depth", cfg)["colmap"]
     names = {f.name for f in fields(ColmapOptions)}
     return ColmapOptions(**{k: v for k, v in cfg.items() if k in names})
 
@@ -58,10 +62,10 @@ def estimate_depth(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCa
                    workspace: str | Path | None = None) -> np.ndarray:
     """Z-depth of the reference view (float32, cameras' units, 0 = invalid).
 
-    ``cfg`` is the config's ``depth`` block; ``backend`` an already resolved backend
-    (default: resolve ``cfg['backend']``)."""
-    cfg = cfg or {}
-    backend = backend or resolve_backend(cfg.get("backend", "auto"))
+    ``cfg`` is the config's ``depth`` block (partial: the schema's defaults fill it);
+    ``backend`` an already resolved backend (default: resolve ``cfg['backend']``)."""
+    cfg = with_defaults("depth", cfg)
+    backend = backend or resolve_backend(cfg["backend"])
     if len(srcs) != len(src_imgs):
         raise ValueError("depth: as many source images as source cameras are needed")
     if backend == "planesweep":

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocal.camera import PinholeCamera, k_to_colmap
+from plenocal.config import stage_defaults
 from plenocal.io.files import atomic_write_text, to_float, to_uint8, write_image, write_json
 
 
@@ -36,14 +37,19 @@ COLMAP_HINT = ("install pycolmap-cuda12 and run on a GPU node, or use depth.back
                "planesweep")
 
 
+_COLMAP = stage_defaults("depth.colmap")
+
+
 @dataclass(frozen=True)
 class ColmapOptions:
-    window_radius: int = 5
-    num_iterations: int = 5
-    min_triangulation_angle_deg: float = 0.1  # default 1.0: too large for subaperture baselines
-    filter_min_triangulation_angle_deg: float = 0.05  # default 3.0
-    geom_consistency: bool = False  # needs depth maps of the sources too
-    filter_min_ncc: float = 0.1
+    """COLMAP patch-match settings; defaults: ``depth.colmap`` of config.schema.yaml."""
+    window_radius: int = _COLMAP["window_radius"]
+    num_iterations: int = _COLMAP["num_iterations"]
+    # COLMAP's own 1.0 is too large for subaperture baselines
+    min_triangulation_angle_deg: float = _COLMAP["min_triangulation_angle_deg"]
+    filter_min_triangulation_angle_deg: float = _COLMAP["filter_min_triangulation_angle_deg"]
+    geom_consistency: bool = _COLMAP["geom_consistency"]  # needs the sources' depth maps too
+    filter_min_ncc: float = _COLMAP["filter_min_ncc"]
     timeout_s: float = 1800.0
 
 

@@ -33,25 +33,29 @@ import cv2
 import numpy as np
 
 from plenocal.camera import PinholeCamera
+from plenocal.config import stage_defaults
 from plenocal.io.files import to_float
+
+_DEPTH = stage_defaults("depth")
 
 
 @dataclass(frozen=True)
 class PlaneSweepOptions:
-    num_depths: int | None = None  # None: from the widest source's disparity range
-    labels_per_px: float = 1.5  # auto label count: labels per pixel of disparity range
-    min_depths: int = 32
-    max_depths: int = 128
-    cost: str = "tad"  # tad | zncc
-    window: int = 7  # matching / aggregation window (odd)
-    best_fraction: float = 0.5  # share of sources averaged per pixel (occlusions)
-    max_cost: float = 0.5  # tad: normalised truncated difference; zncc: 1 - ncc
-    uniqueness: float = 0.98  # best / second-best cost above this: ambiguous
-    min_texture: float = 0.004  # std of the reference grey value in the window (0..1)
-    lr_check: bool = True  # left-right check against the nearest source
-    lr_tolerance: float = 0.01  # relative depth agreement of the left-right check
-    speckle_size: int = 60  # connected regions below this many pixels are removed
-    speckle_labels: float = 2.0  # label jump that separates regions
+    """The plane sweep's settings; defaults: the ``depth`` block of config.schema.yaml."""
+    num_depths: int | None = _DEPTH["num_depths"]  # None: from the sources' disparity range
+    labels_per_px: float = _DEPTH["labels_per_px"]  # auto label count per px of disparity
+    min_depths: int = _DEPTH["min_depths"]
+    max_depths: int = _DEPTH["max_depths"]
+    cost: str = _DEPTH["cost"]  # tad | zncc
+    window: int = _DEPTH["window"]  # matching / aggregation window (odd)
+    best_fraction: float = _DEPTH["best_fraction"]  # share of sources averaged (occlusions)
+    max_cost: float = _DEPTH["max_cost"]  # tad: normalised truncated difference; zncc: 1 - ncc
+    uniqueness: float = _DEPTH["uniqueness"]  # best / second-best cost above this: ambiguous
+    min_texture: float = _DEPTH["min_texture"]  # std of the reference grey in the window (0..1)
+    lr_check: bool = _DEPTH["lr_check"]  # left-right check against the nearest source
+    lr_tolerance: float = _DEPTH["lr_tolerance"]  # relative depth agreement of that check
+    speckle_size: int = _DEPTH["speckle_size"]  # connected regions below this many px removed
+    speckle_labels: float = _DEPTH["speckle_labels"]  # label jump that separates regions
 
 
 def _grey(img: np.ndarray) -> np.ndarray:

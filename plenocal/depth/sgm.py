@@ -37,6 +37,7 @@ import numba
 import numpy as np
 
 from plenocal.camera import PinholeCamera
+from plenocal.config import stage_defaults, with_defaults
 from plenocal.depth.planesweep import (
     PlaneSweepOptions,
     _grey,
@@ -53,33 +54,36 @@ from plenocal.io.files import to_float
 log = logging.getLogger(__name__)
 
 MIN_CONSISTENT = 0.01  # below this share of consistent pixels the check is not applied
+_SGM = stage_defaults("depth.sgm")
 
 
 @dataclass(frozen=True)
 class SgmOptions:
-    num_depths: int | None = None  # None: from the widest source's disparity range
-    labels_per_px: float = 3.0  # auto label count per pixel of disparity range
-    min_depths: int = 48
-    max_depths: int = 256
-    window: int = 5  # matching window (odd) of the per-source cost
-    best_fraction: float = 0.5  # share of the sources that see a pixel averaged (occlusions)
-    p1: float = 0.03  # penalty of a one-label change between neighbours (cost units, 0..1)
-    p2: float = 0.25  # penalty of a larger change, lowered at image edges
-    edge_contrast: float = 0.04  # grey difference (0..1) that halves P2
-    directions: int = 8  # 4 or 8 scanline directions
-    uniqueness: float = 0.995  # best/second-best aggregated cost above this: ambiguous
-    consistency: bool = True  # check against the nearest source's own SGM depth
-    consistency_tolerance: float = 0.02  # relative depth agreement of that check
-    speckle_size: int = 100  # connected regions below this many pixels are removed
-    speckle_labels: float = 2.0  # label jump that separates regions
-    fill: bool = True  # background-side hole filling (dense output)
-    median_radius: int = 3  # weighted-median window radius (0 = off)
-    median_sigma: float = 0.05  # colour difference (0..1) of the median's weights
+    """SGM's settings; defaults: ``depth.sgm`` of config.schema.yaml."""
+    num_depths: int | None = _SGM["num_depths"]  # None: from the sources' disparity range
+    labels_per_px: float = _SGM["labels_per_px"]  # auto label count per px of disparity range
+    min_depths: int = _SGM["min_depths"]
+    max_depths: int = _SGM["max_depths"]
+    window: int = _SGM["window"]  # matching window (odd) of the per-source cost
+    best_fraction: float = _SGM["best_fraction"]  # share of the sources seeing a pixel averaged
+    p1: float = _SGM["p1"]  # penalty of a one-label change between neighbours (cost, 0..1)
+    p2: float = _SGM["p2"]  # penalty of a larger change, lowered at image edges
+    edge_contrast: float = _SGM["edge_contrast"]  # grey difference (0..1) that halves P2
+    directions: int = _SGM["directions"]  # 4 or 8 scanline directions
+    uniqueness: float = _SGM["uniqueness"]  # best/second-best aggregated cost above: ambiguous
+    consistency: bool = _SGM["consistency"]  # check against the nearest source's SGM depth
+    consistency_tolerance: float = _SGM["consistency_tolerance"]  # relative agreement of it
+    speckle_size: int = _SGM["speckle_size"]  # connected regions below this many px removed
+    speckle_labels: float = _SGM["speckle_labels"]  # label jump that separates regions
+    fill: bool = _SGM["fill"]  # background-side hole filling (dense output)
+    median_radius: int = _SGM["median_radius"]  # weighted-median window radius (0 = off)
+    median_sigma: float = _SGM["median_sigma"]  # colour difference (0..1) of its weights
 
 
 def sgm_options(cfg: dict | None) -> SgmOptions:
-    """SgmOptions from a config block (unknown keys ignored)."""
-    cfg = cfg or {}
+    """SgmOptions from the config's ``depth.sgm`` block, partial or whole (missing keys: the
+    schema's defaults; unknown keys ignored)."""
+    cfg = with_defaults("depth.sgm", cfg)
     names = SgmOptions.__dataclass_fields__
     return SgmOptions(**{k: v for k, v in cfg.items() if k in names})
 

@@ -17,6 +17,7 @@ from collections.abc import Callable
 import numpy as np
 
 from plenocal.camera import PinholeCamera
+from plenocal.config import with_defaults
 from plenocal.depth import planesweep_options
 from plenocal.depth.inputs import nearest_sources
 from plenocal.depth.planesweep import plane_sweep_depth
@@ -27,9 +28,10 @@ METHODS = ("sgm", "planesweep")
 
 
 def view_depth_sources(key: str, cameras: dict[str, PinholeCamera], n_views: int,
-                       k_shots: int = 4, k_set: int = 4) -> list[str]:
-    """Source views of ``key``: the same view of the nearest array shots, then the
-    nearest views of its own set (each sorted by camera-centre distance, then name)."""
+                       k_shots: int, k_set: int) -> list[str]:
+    """Source views of ``key``: the same view of the ``k_shots`` nearest array shots, then
+    the ``k_set`` nearest views of its own set (each sorted by camera-centre distance,
+    then name; the config's ``verify.depth_sources_shots`` and ``depth_sources_set``)."""
     cam, view = split_key(key)
     shots = sorted({key_shot(k) for k in cameras if is_array_shot(key_shot(k))})
     same_view = [f"{c}/{view}" for c in shots if f"{c}/{view}" in cameras]
@@ -44,13 +46,13 @@ def view_depth_sources(key: str, cameras: dict[str, PinholeCamera], n_views: int
 
 def estimate_view_depth(key: str, cameras: dict[str, PinholeCamera],
                         image: Callable[[str], np.ndarray], near: float, far: float,
-                        n_views: int, depth_cfg: dict | None = None, k_shots: int = 4,
-                        k_set: int = 4) -> tuple[np.ndarray, list[str]]:
+                        n_views: int, depth_cfg: dict | None, k_shots: int,
+                        k_set: int) -> tuple[np.ndarray, list[str]]:
     """(z-depth float32, sources) of view ``key`` by ``depth_cfg['synthesis_method']``
     (``sgm`` with the ``depth_cfg['sgm']`` settings, or ``planesweep`` with the
-    plane-sweep settings of ``depth_cfg``)."""
-    cfg = depth_cfg or {}
-    method = cfg.get("synthesis_method", "sgm")
+    plane-sweep settings of ``depth_cfg``; partial: the schema's defaults fill it)."""
+    cfg = with_defaults("depth", depth_cfg)
+    method = cfg["synthesis_method"]
     if method not in METHODS:
         raise ValueError(f"config: depth.synthesis_method = {method!r}: must be one of "
                          f"{', '.join(METHODS)}")
@@ -60,5 +62,5 @@ def estimate_view_depth(key: str, cameras: dict[str, PinholeCamera],
     args = (cameras[key], image(key), [cameras[s] for s in srcs], [image(s) for s in srcs],
             near, far)
     if method == "sgm":
-        return sgm_depth(*args, sgm_options(cfg.get("sgm"))), srcs
+        return sgm_depth(*args, sgm_options(cfg["sgm"])), srcs
     return plane_sweep_depth(*args, planesweep_options(cfg)), srcs

@@ -10,6 +10,7 @@ import numpy as np
 import yaml
 
 from plenocal.camera import pose
+from plenocal.config import with_defaults
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import atomic_write_text, read_json, write_image, write_json
 from plenocal.io.raytrix import read_calib, write_calib
@@ -93,7 +94,9 @@ CAMERA_YAML_HEADER = """\
 
 
 def setup_dataset(sim: dict, out_dir: str | Path) -> None:
-    """Write truth/{scene,shots,optics}.json, calib.xml and camera.yaml."""
+    """Write truth/{scene,shots,optics}.json, calib.xml and camera.yaml (``sim``: a
+    dataset's ``simulate`` block, partial or whole)."""
+    sim = with_defaults("simulate", sim)
     out = Path(out_dir)
     optics = optics_from_config(sim)
     a = sim["array"]
@@ -126,26 +129,36 @@ def setup_dataset(sim: dict, out_dir: str | Path) -> None:
                                                           sort_keys=True))
 
 
+_TRUTH_OPTICS_KEYS = ("focal_length", "focus_distance", "mla_pitch", "mla_f_number", "k",
+                      "pixel_size", "width", "height", "aperture_scale", "kind",
+                      "type_focal_ratios")
+
+
 def optics_from_truth(path: str | Path) -> PlenopticOptics:
     d = read_json(path)
+    missing = [k for k in _TRUTH_OPTICS_KEYS if k not in d]
+    if missing:
+        raise ValueError(f"{path}: no {', '.join(missing)} (written by an older simulator); "
+                         "rerun rule simulate_setup")
     return PlenopticOptics(
         focal_length=d["focal_length"], focus_distance=d["focus_distance"],
         mla_pitch=d["mla_pitch"], mla_f_number=d["mla_f_number"], k=d["k"],
         pixel_size=d["pixel_size"], width=int(d["width"]), height=int(d["height"]),
-        aperture_scale=d["aperture_scale"], kind=d.get("kind", "keplerian"),
-        type_focal_ratios=tuple(d.get("type_focal_ratios", (1.0,))),
+        aperture_scale=d["aperture_scale"], kind=d["kind"],
+        type_focal_ratios=tuple(d["type_focal_ratios"]),
     )
 
 
 def sensor_truth(sim: dict) -> dict:
-    """The readout and vignetting settings a shot is rendered with (truth/optics.json)."""
-    sensor, vig = sim["sensor"], sim["main_lens"].get("vignetting", {})
-    return {"bit_depth": int(sensor.get("bit_depth", 8)),
+    """The readout and vignetting settings a shot is rendered with (truth/optics.json),
+    from a validated ``simulate`` block."""
+    sensor, vig = sim["sensor"], sim["main_lens"]["vignetting"]
+    return {"bit_depth": int(sensor["bit_depth"]),
             "noise_std": float(sensor["noise_std"]),
-            "full_well_e": sensor.get("full_well_e"),
-            "vignetting_cos4": bool(vig.get("cos4", False)),
-            "front_stop_distance_m": float(vig.get("stop_distance_mm", 0.0)) / 1000.0,
-            "front_stop_diameter_scale": float(vig.get("stop_diameter_scale", 1.0))}
+            "full_well_e": sensor["full_well_e"],
+            "vignetting_cos4": bool(vig["cos4"]),
+            "front_stop_distance_m": float(vig["stop_distance_mm"]) / 1000.0,
+            "front_stop_diameter_scale": float(vig["stop_diameter_scale"])}
 
 
 def nearest_lens_map(grid: MicrolensGrid) -> np.ndarray:
@@ -167,7 +180,8 @@ def render_white(sim: dict, data_dir: str | Path, out_png: str | Path) -> None:
     """The white image of the simulated camera, as Raytrix ships one with a calibration:
     a uniformly white scene through the same MLA, aperture and vignetting, without noise
     (a white image is the mean of many frames), quantised like the shots. Dividing a
-    shot by it removes the main lens's falloff (flat field)."""
+    shot by it removes the main lens's falloff (flat field). ``sim``: partial or whole."""
+    sim = with_defaults("simulate", sim)
     data_dir = Path(data_dir)
     optics = optics_from_truth(data_dir / "truth" / "optics.json")
     calib = read_calib(data_dir / "calib.xml")
@@ -196,7 +210,8 @@ def render_shot(sim: dict, data_dir: str | Path, cam: str, out_png: str | Path,
                 log=print) -> None:
     """Render the lenslet image of shot ``cam`` into ``out_png``: 8-bit RGB, or 12-bit
     data in a 16-bit PNG (``sensor.bit_depth``), with the vignetting and noise of the
-    ``simulate`` block."""
+    ``simulate`` block (partial or whole)."""
+    sim = with_defaults("simulate", sim)
     data_dir = Path(data_dir)
     optics = optics_from_truth(data_dir / "truth" / "optics.json")
     scene = scene_arrays(read_json(data_dir / "truth" / "scene.json"))

@@ -9,7 +9,7 @@ def type_focal_ratios(mla: dict) -> tuple[float, ...]:
     """Focal length of each lens type relative to ``mla.f_number``'s: (1,) for a
     single-focus MLA; (r0, 1, r2) for Raytrix's three types, ``mla.focal_ratios`` =
     [r0, r2] (type 1 is the middle one, whose F-number the paper's rule takes)."""
-    n = int(mla.get("lens_types", 1))
+    n = int(mla["lens_types"])
     if n == 1:
         return (1.0,)
     if n == 3:
@@ -34,7 +34,7 @@ def optics_from_config(sim: dict) -> PlenopticOptics:
         width=sim["sensor"]["width"],
         height=sim["sensor"]["height"],
         aperture_scale=sim["main_lens"]["aperture_scale"],
-        kind=sim["mla"].get("kind", "keplerian"),
+        kind=sim["mla"]["kind"],
         type_focal_ratios=type_focal_ratios(sim["mla"]),
     )
     sign = -1.0 if optics.galilean else 1.0

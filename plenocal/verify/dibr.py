@@ -38,21 +38,26 @@ import numba
 import numpy as np
 
 from plenocal.camera import PinholeCamera
+from plenocal.config import stage_defaults
 from plenocal.io.files import to_float
+
+_DIBR = stage_defaults("verify.dibr")
 
 
 @dataclass(frozen=True)
 class DibrOptions:
-    z_tolerance: float | None = None  # hard z-test: relative depth band of the nearest surface
-    occlusion_tolerance: float = 0.02  # backward check against the input's depth
-    edge_ratio: float = 1.03  # depth jump (max/min in 3x3) marking a discontinuity
-    edge_weight: float = 0.05  # weight of samples at discontinuities
-    filled_weight: float = 0.3  # weight of samples whose input depth was filled
+    """The DIBR's settings; defaults: ``verify.dibr`` of config.schema.yaml (but
+    ``distance_eps``, which the config does not set)."""
+    z_tolerance: float | None = _DIBR["z_tolerance"]  # hard z-test: relative depth band
+    occlusion_tolerance: float = _DIBR["occlusion_tolerance"]  # backward check, input depth
+    edge_ratio: float = _DIBR["edge_ratio"]  # depth jump (max/min in 3x3): a discontinuity
+    edge_weight: float = _DIBR["edge_weight"]  # weight of samples at discontinuities
+    filled_weight: float = _DIBR["filled_weight"]  # weight of samples of filled input depth
     distance_eps: float = 1e-3  # metres (or model units): weight regulariser
-    inpaint: bool = True
-    interpolation: str = "cubic"  # colour sampling in the input: cubic or linear (as RVS)
-    hole_fill: str = "rows"  # rows (interpolate along rows, as RVS) or pushpull
-    depth_exponent: float = 8.0  # soft z-test: weight times (z_nearest / z) ** depth_exponent
+    inpaint: bool = _DIBR["inpaint"]
+    interpolation: str = _DIBR["interpolation"]  # colour sampling: cubic or linear (as RVS)
+    hole_fill: str = _DIBR["hole_fill"]  # rows (along rows, as RVS) or pushpull
+    depth_exponent: float = _DIBR["depth_exponent"]  # soft z-test: (z_nearest / z) ** this
 
 
 _INTERPOLATION = {"linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC}

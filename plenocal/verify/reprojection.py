@@ -69,10 +69,13 @@ from plenocal.names import is_handheld_shot, key_shot, view_key
 from plenocal.verify import point_refinement
 
 log = logging.getLogger(__name__)
+_REPROJ = cm.SFM_DEFAULTS["reprojection"]  # the triangulation's defaults: the schema's
+_SEED, _THREADS = cm.SFM_DEFAULTS["seed"], cm.SFM_DEFAULTS["num_threads"]
 
 
 def triangulation_options(max_error_px: float, min_angle_deg: float, seed: int,
-                          num_threads: int, track_error_px: float = 4.0):
+                          num_threads: int,
+                          track_error_px: float = _REPROJ["track_error_px"]):
     """IncrementalPipelineOptions for triangulation with fixed poses: the observation
     filter at ``max_error_px``, track merging and completion at ``track_error_px``
     (module docstring)."""
@@ -252,8 +255,10 @@ def read_model(rec, work_dir: str | Path | None = None):
 
 
 def triangulated_stats(cameras: Mapping[str, PinholeCamera], database: str | Path, *,
-                       max_error_px: float = 100.0, min_angle_deg: float = 0.1,
-                       track_error_px: float = 4.0, seed: int = 0, num_threads: int = 1,
+                       max_error_px: float = _REPROJ["max_error_px"],
+                       min_angle_deg: float = _REPROJ["min_angle_deg"],
+                       track_error_px: float = _REPROJ["track_error_px"], seed: int = _SEED,
+                       num_threads: int = _THREADS,
                        work_dir: str | Path | None = None) -> dict:
     """Reprojection error of the calibration ``cameras`` (``"<cam>/<view>"`` ->
     PinholeCamera) on the verified matches of the view ``database``
@@ -316,7 +321,8 @@ def triangulated_stats(cameras: Mapping[str, PinholeCamera], database: str | Pat
 
 
 def reprojection_stats(cameras: Mapping[str, PinholeCamera], images: Mapping[str, str | Path],
-                       *, max_num_features: int = 8192, seed: int = 0, num_threads: int = 1,
+                       *, max_num_features: int = cm.SFM_DEFAULTS["max_num_features"],
+                       seed: int = _SEED, num_threads: int = _THREADS,
                        work_dir: str | Path | None = None, **kwargs) -> dict:
     """:func:`triangulated_stats` on a view database built here from ``images`` (same
     names as ``cameras``): every pair within a shot and the same view across every two

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -42,6 +42,7 @@ from plenocal.artifacts.results import (
     SynthImage,
 )
 from plenocal.camera import PinholeCamera
+from plenocal.config import stage_defaults, with_defaults
 from plenocal.depth.quality import depth_quality
 from plenocal.depth.views import estimate_view_depth
 from plenocal.export.mpeg import mpeg_name
@@ -103,9 +104,22 @@ def layout_from_cams(cams: list[str], n_views: int) -> ArrayLayout:
     return ArrayLayout(cols, rows, n_views)
 
 
+def synthesis_config(config: Mapping) -> dict:
+    """The settings of the synthesis experiments, partial or whole, with the schema's
+    defaults filled in: the config's ``verify`` block, its ``depth`` block under
+    ``"depth"``, and the job's cores under ``"threads"`` (kept as given; none: one)."""
+    verify = {k: v for k, v in config.items() if k not in ("depth", "threads")}
+    out = with_defaults("verify", verify)
+    out["depth"] = with_defaults("depth", config.get("depth"))
+    if "threads" in config:
+        out["threads"] = config["threads"]
+    return out
+
+
 @dataclass
 class SynthesisContext:
-    """What every experiment needs, for one calibration."""
+    """What every experiment needs, for one calibration (``config``: see
+    :func:`synthesis_config`, which fills it)."""
     cameras: dict[str, PinholeCamera]
     image_path: Callable[[str, str], str]
     layout: ArrayLayout
@@ -115,6 +129,9 @@ class SynthesisContext:
     depths: dict[str, np.ndarray] = field(default_factory=dict)
     _images: dict = field(default_factory=dict)
     _prepared: dict[str, PreparedView] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.config = synthesis_config(self.config)
 
     @property
     def workers(self) -> int:
@@ -146,8 +163,8 @@ class SynthesisContext:
         if key not in self.depths:
             d, srcs = estimate_view_depth(
                 key, self.cameras, self.image, self.near, self.far, self.layout.n_views,
-                self.config.get("depth", {}), int(self.config.get("depth_sources_shots", 4)),
-                int(self.config.get("depth_sources_set", 4)))
+                self.config["depth"], int(self.config["depth_sources_shots"]),
+                int(self.config["depth_sources_set"]))
             log.info("depth of %s estimated from %s", key, ", ".join(srcs))
             self.depths[key] = d
         return self.depths[key]
@@ -162,7 +179,7 @@ class SynthesisContext:
 
     def render(self, inputs: list[str], targets: list[str]) -> dict[str, np.ndarray]:
         """Every target rendered from the inputs by the configured renderer."""
-        renderer = self.config.get("renderer", "dibr")
+        renderer = self.config["renderer"]
         if renderer == "dibr":
             opt = dibr_options(self.config)
             views = [self.prepared(k, opt) for k in inputs]
@@ -176,7 +193,7 @@ class SynthesisContext:
             raise ValueError(f"config: verify.renderer = {renderer!r}: must be dibr or rvs")
         from plenocal.verify.rvs import RvsError, rvs_synthesize  # noqa: PLC0415
 
-        binary = self.config.get("rvs_binary")
+        binary = self.config["rvs_binary"]
         if not binary:
             raise RvsError("config: verify.renderer is rvs but verify.rvs_binary is not "
                            "set; give the path of an RVS 4.0 binary (README, 'MPEG exports "
@@ -184,12 +201,12 @@ class SynthesisContext:
         ins = [(mpeg_name(k), self.camera(k), self.image(k), self.depth(k)) for k in inputs]
         outs = rvs_synthesize(binary, ins, [(mpeg_name(t), self.camera(t)) for t in targets],
                               (self.near, self.far),
-                              float(self.config.get("rvs_blending_factor", 5.0)))
+                              float(self.config["rvs_blending_factor"]))
         return {t: outs[mpeg_name(t)] for t in targets}
 
     def score(self, inputs: list[str], targets: list[str],
               keep: set[str] | None = None) -> tuple[dict[str, float], dict[str, np.ndarray]]:
-        border = int(self.config.get("psnr_border_px", 8))
+        border = int(self.config["psnr_border_px"])
         scores, kept = {}, {}
         rendered = self.render(inputs, targets)
 
@@ -226,8 +243,10 @@ def _all_views(n: int) -> list[str]:
     return [view_name(r, c) for r in range(n) for c in range(n)]
 
 
-def dibr_options(cfg: dict) -> DibrOptions:
-    d = cfg.get("dibr", {}) or {}
+def dibr_options(cfg: Mapping) -> DibrOptions:
+    """DibrOptions from the config's ``verify`` block (its ``dibr`` settings), partial or
+    whole."""
+    d = with_defaults("verify", cfg)["dibr"]
     return DibrOptions(**{k: v for k, v in d.items() if k in DibrOptions.__dataclass_fields__})
 
 
@@ -336,7 +355,8 @@ def inner_corner_view(layout: ArrayLayout, cam: str) -> str:
     return view_name(n if 2 * row < layout.rows - 1 else 0, n if 2 * col < layout.cols - 1 else 0)
 
 
-def experiment_input_views(layout: ArrayLayout, exp: int, exp2_sets: str = "middle") -> list[str]:
+def experiment_input_views(layout: ArrayLayout, exp: int,
+                           exp2_sets: str = stage_defaults("verify")["exp2_sets"]) -> list[str]:
     """The views whose depth maps experiment ``exp`` reads (Exp. 3's lateral views as
     :func:`inner_corner_view` predicts them)."""
     sets = [layout.middle_cam] if exp2_sets == "middle" else layout.cams
@@ -358,11 +378,10 @@ def run_experiment(exp: int, cameras: dict[str, PinholeCamera],
     if exp == 1:
         return experiment1(ctx)
     if exp == 2:
-        sets = [layout.middle_cam] if config.get("exp2_sets", "middle") == "middle" \
-            else layout.cams
+        sets = [layout.middle_cam] if ctx.config["exp2_sets"] == "middle" else layout.cams
         return experiment2(ctx, sets)
     if exp == 3:
-        return experiment3(ctx, int(config.get("exp3_view_stride", 1)))
+        return experiment3(ctx, int(ctx.config["exp3_view_stride"]))
     raise ValueError(f"synthesis: no experiment {exp} (1, 2 or 3)")
 
 
@@ -383,8 +402,9 @@ def synthesis_job(exp: int, cameras: dict[str, dict[str, PinholeCamera]],
     Returns the typed result, whose images are named under ``synth_rel`` (the folder of
     the images relative to the result file), and the images kept for Fig. 10 by file
     name."""
-    renderers = [config.get("renderer", "dibr")]
-    if renderers[0] == "rvs" and config.get("rvs_compare_dibr", True):
+    config = synthesis_config(config)
+    renderers = [config["renderer"]]
+    if renderers[0] == "rvs" and config["rvs_compare_dibr"]:
         renderers.append("dibr")
     runs: dict[tuple[str, str, str], dict] = {}
     kept_all: dict[tuple[str, str], np.ndarray] = {}
@@ -402,13 +422,13 @@ def synthesis_job(exp: int, cameras: dict[str, dict[str, PinholeCamera]],
                          cname, exp, time.perf_counter() - t0)
                 if dname == "estimated" and renderer == renderers[0]:
                     kept_all.update({(cname, k): img for k, img in kept.items()})
-    border = int(config.get("psnr_border_px", 8))
+    border = int(config["psnr_border_px"])
     quality = {}
     if "true" in depths:
         quality = {k: DepthQuality.from_dict(depth_quality(z, depths["true"][k], 0.01, border))
                    for k, z in depths["estimated"].items() if k in depths["true"]}
     setup = SynthesisSetup(near_m=near, far_m=far, psnr_border_px=border,
-                           depth_method=config["depth"].get("synthesis_method", "sgm"),
+                           depth_method=config["depth"]["synthesis_method"],
                            depth_quality=quality,
                            # as experiment3 ran it (every run of Exp. 3 has the same)
                            view_stride=next(iter(runs.values()))["view_stride"] if exp == 3

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocal.camera import PinholeCamera, invert_pose, k_from_colmap, k_to_colmap
+from plenocal.config import stage_defaults
 
 log = logging.getLogger(__name__)
 
@@ -61,7 +62,10 @@ DEFAULT_FIRST_OCTAVE = -1
 #: SIFT implementations (config ``sfm.sift``): OpenCV's, set up as COLMAP's (the default:
 #: about 6x faster on one core), or COLMAP's own
 EXTRACTORS = ("opencv", "colmap")
-DEFAULT_EXTRACTOR = "opencv"
+#: the keyword defaults of the COLMAP steps: config.schema.yaml's sfm block
+SFM_DEFAULTS = stage_defaults("sfm")
+DEFAULT_EXTRACTOR = SFM_DEFAULTS["sift"]
+_SEED, _THREADS = SFM_DEFAULTS["seed"], SFM_DEFAULTS["num_threads"]
 
 
 def _extraction_options(max_num_features: int, num_threads: int,
@@ -81,8 +85,9 @@ def _extraction_options(max_num_features: int, num_threads: int,
 
 def extract_features(database: str | Path, image_dir: str | Path,
                      groups: list[tuple[list[str], PinholeCamera | None]], *,
-                     model: str = "PINHOLE", max_num_features: int = 8192,
-                     num_threads: int = 1, seed: int = 0,
+                     model: str = "PINHOLE",
+                     max_num_features: int = SFM_DEFAULTS["max_num_features"],
+                     num_threads: int = _THREADS, seed: int = _SEED,
                      first_octave: int = DEFAULT_FIRST_OCTAVE,
                      extractor: str = DEFAULT_EXTRACTOR) -> None:
     """SIFT into a new database. ``groups``: (image names, camera) pairs; all images of
@@ -161,8 +166,8 @@ def _write_opencv_sift(database: Path, image_dir: Path, names: set[str],
                 pycolmap.FeatureExtractorType.SIFT, desc))
 
 
-def opencv_sift(gray: np.ndarray, max_num_features: int = 8192) -> tuple[np.ndarray,
-                                                                            np.ndarray]:
+def opencv_sift(gray: np.ndarray, max_num_features: int = SFM_DEFAULTS["max_num_features"]
+                ) -> tuple[np.ndarray, np.ndarray]:
     """SIFT (Lowe 2004) of an 8-bit grey image by OpenCV, set up as COLMAP's CPU SIFT:
     3 scales per octave, first octave -1 (the image upsampled 2x, pixel-aligned as
     VLFeat's: OpenCV's plain upscale would shift every keypoint by +0.25 px), sigma 1.6, DoG peak
@@ -228,7 +233,8 @@ def _matching_options(num_threads: int):
 
 
 def match(database: str | Path, pairs: Iterable[tuple[str, str]] | None = None, *,
-          seed: int = 0, num_threads: int = 1, work_dir: str | Path | None = None) -> int:
+          seed: int = _SEED, num_threads: int = _THREADS,
+          work_dir: str | Path | None = None) -> int:
     """Match and geometrically verify: every pair (``pairs`` None: exhaustive) or the
     given image-name pairs. Returns the number of verified pairs."""
     import pycolmap  # noqa: PLC0415

@@ -37,6 +37,8 @@ from plenocal.calib.reg_a import colmap as cm
 from plenocal.io.files import atomic_write_dir, make_temp_dir
 from plenocal.names import is_handheld_shot
 
+_SEED, _THREADS = cm.SFM_DEFAULTS["seed"], cm.SFM_DEFAULTS["num_threads"]  # the schema's
+
 log = logging.getLogger(__name__)
 
 
@@ -63,8 +65,9 @@ MIN_KEYPOINTS = 100
 
 
 def features_a(views: Mapping[str, str | Path], image_dir: str | Path,
-               database: str | Path, *, max_num_features: int = 8192, seed: int = 0,
-               num_threads: int = 1, first_octave: int = cm.DEFAULT_FIRST_OCTAVE,
+               database: str | Path, *,
+               max_num_features: int = cm.SFM_DEFAULTS["max_num_features"], seed: int = _SEED,
+               num_threads: int = _THREADS, first_octave: int = cm.DEFAULT_FIRST_OCTAVE,
                extractor: str = cm.DEFAULT_EXTRACTOR) -> dict:
     """Stage the central views (``views``: cam -> png) as ``<cam>.png`` in ``image_dir``
     and extract SIFT into a new ``database`` with one SIMPLE_PINHOLE camera for all
@@ -104,7 +107,7 @@ def features_a(views: Mapping[str, str | Path], image_dir: str | Path,
     return {"num_images": len(kp), "keypoints": kp, WARNINGS_KEY: warning_list(warnings)}
 
 
-def match_a(database: str | Path, *, seed: int = 0, num_threads: int = 1) -> dict:
+def match_a(database: str | Path, *, seed: int = _SEED, num_threads: int = _THREADS) -> dict:
     """Exhaustive matching with geometric verification."""
     n = cm.match(database, None, seed=seed, num_threads=num_threads)
     if n == 0:
@@ -155,8 +158,9 @@ def global_options(seed: int, num_threads: int):
     return o
 
 
-def run_mapper(database: str | Path, image_dir: str | Path, *, mapper: str = "incremental",
-               seed: int = 0, num_threads: int = 1) -> dict:
+def run_mapper(database: str | Path, image_dir: str | Path, *,
+               mapper: str = cm.SFM_DEFAULTS["mapper"], seed: int = _SEED,
+               num_threads: int = _THREADS) -> dict:
     """Run the mapper; returns {model index: Reconstruction}."""
     import pycolmap  # noqa: PLC0415
 
@@ -249,7 +253,8 @@ def write_model(rec, folder: str | Path) -> None:
 
 
 def map_a(database: str | Path, image_dir: str | Path, model_dir: str | Path, *,
-          mapper: str = "incremental", seed: int = 0, num_threads: int = 1) -> dict:
+          mapper: str = cm.SFM_DEFAULTS["mapper"], seed: int = _SEED,
+          num_threads: int = _THREADS) -> dict:
     """Map, check that every view registered into one model, write the model; returns
     registration A (what ``reg_a.json`` holds)."""
     import pycolmap  # noqa: PLC0415

@@ -45,6 +45,10 @@ import numpy as np
 from plenocal.calib.reg_a import colmap as cm
 from plenocal.camera import PinholeCamera, k_to_colmap
 
+_MATCHING = cm.SFM_DEFAULTS["view_matching"]  # the pairs' defaults: the schema's
+_MAX_FEATURES = cm.SFM_DEFAULTS["max_num_features"]
+_SEED, _THREADS = cm.SFM_DEFAULTS["seed"], cm.SFM_DEFAULTS["num_threads"]
+
 log = logging.getLogger(__name__)
 
 _VIEW = re.compile(r"^(\d+)_(\d+)$")
@@ -78,7 +82,8 @@ def nearest_shots(centres: Mapping[str, np.ndarray], k: int) -> set[tuple[str, s
 
 
 def view_pairs(names: Iterable[str], shot_centres: Mapping[str, np.ndarray] | None = None,
-               *, shot_neighbours: int | None = 4, view_radius: int | None = 1
+               *, shot_neighbours: int | None = _MATCHING["shot_neighbours"],
+                  view_radius: int | None = _MATCHING["view_radius"]
                ) -> list[tuple[str, str]]:
     """Image pairs to match among ``<cam>/<view>.png`` names (module docstring).
 
@@ -108,8 +113,8 @@ def view_pairs(names: Iterable[str], shot_centres: Mapping[str, np.ndarray] | No
 
 
 def extract_view_features(images: Mapping[str, str | Path], database: str | Path,
-                          work_dir: str | Path, *, max_num_features: int = 8192,
-                          seed: int = 0, num_threads: int = 1,
+                          work_dir: str | Path, *, max_num_features: int = _MAX_FEATURES,
+                          seed: int = _SEED, num_threads: int = _THREADS,
                           first_octave: int = cm.DEFAULT_FIRST_OCTAVE,
                           extractor: str = cm.DEFAULT_EXTRACTOR) -> dict:
     """SIFT of ``images`` (``"<cam>/<view>"`` -> png) into a new ``database``, one
@@ -203,8 +208,9 @@ def merge_view_features(parts: Iterable[str | Path], database: str | Path) -> di
 
 def match_views(database: str | Path, *,
                 shot_centres: Mapping[str, np.ndarray] | None = None,
-                shot_neighbours: int | None = 4, view_radius: int | None = 1,
-                seed: int = 0, num_threads: int = 1,
+                shot_neighbours: int | None = _MATCHING["shot_neighbours"],
+                view_radius: int | None = _MATCHING["view_radius"],
+                seed: int = _SEED, num_threads: int = _THREADS,
                 work_dir: str | Path | None = None) -> dict:
     """Match and verify, in the SIFT ``database`` itself, the pairs of
     :func:`view_pairs`. Returns counts and the time taken."""
@@ -232,9 +238,10 @@ def match_view_database(features: str | Path, database: str | Path, **kwargs) ->
 def build_view_database(images: Mapping[str, str | Path], database: str | Path,
                         work_dir: str | Path, *,
                         shot_centres: Mapping[str, np.ndarray] | None = None,
-                        shot_neighbours: int | None = 4, view_radius: int | None = 1,
-                        max_num_features: int = 8192, seed: int = 0,
-                        num_threads: int = 1,
+                        shot_neighbours: int | None = _MATCHING["shot_neighbours"],
+                        view_radius: int | None = _MATCHING["view_radius"],
+                        max_num_features: int = _MAX_FEATURES, seed: int = _SEED,
+                        num_threads: int = _THREADS,
                         first_octave: int = cm.DEFAULT_FIRST_OCTAVE,
                         extractor: str = cm.DEFAULT_EXTRACTOR) -> dict:
     """:func:`extract_view_features` and :func:`match_view_database` in one go (the

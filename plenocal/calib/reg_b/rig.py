@@ -40,10 +40,12 @@ from plenocal.calib.reg_b.datasheet import Datasheet
 from plenocal.calib.reg_b.exact_model import exact_model
 from plenocal.calib.reg_b.paper_model import inverse_check, paper_symbols
 from plenocal.camera import intrinsics
+from plenocal.config import stage_defaults
 from plenocal.names import parse_view, view_names
 from plenocal.viewgeom import view_position
 
 RIG_MODELS = ("exact", "paper")
+_RIG = stage_defaults("rig")  # build_rig's defaults: config.schema.yaml's rig block
 
 
 def combine_conversions(convs: Sequence[Conversion], names: Sequence[str] | None = None
@@ -107,7 +109,7 @@ def depth_range_m(near_mm: float, far_mm: float, margin: float = 0.1) -> tuple[f
 
 
 def build_rig(ds: Datasheet, convs: Sequence[Conversion], F_m: float, n_views: int,
-              model: str = "exact", tolerance: float = 0.05,
+              model: str = _RIG["model"], tolerance: float = _RIG["check_tolerance"],
               shot_names: Sequence[str] | None = None) -> dict:
     """The content of ``rig.json`` (both models computed; ``model`` fills ``views``)."""
     if model not in RIG_MODELS:
