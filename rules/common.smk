@@ -288,14 +288,14 @@ def synthesis_depth_config():
 
 
 def synthesis_layout(dataset):
-    from plenocal.verify.synthesis import layout_from_cams
+    from plenocal.verify.experiments import layout_from_cams
 
     return layout_from_cams(array_cams(dataset), n_views(dataset))
 
 
 def experiment_views(dataset, exp):
     """The views whose depth maps experiment ``exp`` reads."""
-    from plenocal.verify.synthesis import experiment_input_views
+    from plenocal.verify.experiments import experiment_input_views
 
     return experiment_input_views(
         synthesis_layout(dataset), exp, stage_config("verify")["exp2_sets"]

@@ -10,7 +10,7 @@ import numpy as np
 from plenocal.export.mpeg_views import export_views
 from plenocal.io.files import read_image
 from plenocal.rulelog import rule_logger
-from plenocal.verify.synthesis import experiment_plan, layout_from_cams
+from plenocal.verify.experiments import experiment_plan, layout_from_cams
 
 snakemake = globals()["snakemake"]
 log = rule_logger(snakemake, "mpeg_views")

@@ -13,7 +13,8 @@ from plenocal.artifacts.rig import read_rig
 from plenocal.depth.inputs import rig_bounds
 from plenocal.io.files import to_uint8, write_image
 from plenocal.rulelog import rule_logger
-from plenocal.verify.synthesis import layout_from_cams, synthesis_job
+from plenocal.verify.experiments import layout_from_cams
+from plenocal.verify.synthesis import synthesis_job
 
 snakemake = globals()["snakemake"]
 log = rule_logger(snakemake, "synthesis")

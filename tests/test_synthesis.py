@@ -8,15 +8,17 @@ from synth.planes import camera_at, fronto_plane, photo_texture, render_plane
 from plenocal.artifacts.results import SynthesisResult, SynthesisSetup
 from plenocal.camera import PinholeCamera
 from plenocal.io.files import to_uint8, write_image
+from plenocal.verify.experiments import (
+    experiment_input_views,
+    inner_corner_view,
+    layout_from_cams,
+)
 from plenocal.verify.synthesis import (
     SynthesisContext,
     experiment1,
     experiment2,
     experiment3,
-    experiment_input_views,
-    inner_corner_view,
     lateral_view,
-    layout_from_cams,
     psnr_tables,
     run_experiment,
 )
