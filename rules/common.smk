@@ -561,5 +561,34 @@ def synthesis_exp_inputs(wildcards, exp):
     return out
 
 
+#: experiments whose camera sets run in jobs of their own (rule synthesis_exp<k>_part),
+#: joined by rule synthesis_exp<k>: Exp. 3 renders every view of the array four times
+SPLIT_EXPERIMENTS = (3,)
+
+
+def synthesis_camera_sets(dataset):
+    """The calibration under test and, on synthetic data, the ground-truth cameras."""
+    return ["complete"] + (["ground_truth"] if is_synthetic(dataset) else [])
+
+
+def synthesis_parts(wildcards, exp):
+    """The camera sets' runs of a split experiment (rule synthesis_exp<k>_part)."""
+    d = wildcards.dataset
+    base = res(d, "eval", f"synthesis_exp{exp}")
+    return {
+        "runs": [f"{base}/{c}.json" for c in synthesis_camera_sets(d)],
+        "kept": [f"{base}/{c}.npz" for c in synthesis_camera_sets(d)],
+    }
+
+
+def synthesis_exp_join_inputs(wildcards, exp):
+    """synthesis_exp<exp>: its runs (split experiments: the parts) and the depth maps
+    whose quality the result reports."""
+    out = synthesis_exp_inputs(wildcards, exp)
+    if exp in SPLIT_EXPERIMENTS:
+        out.update(synthesis_parts(wildcards, exp))
+    return out
+
+
 def synthesis_targets(dataset):
     return [res(dataset, "eval", f"synthesis_exp{e}.json") for e in (1, 2, 3)]

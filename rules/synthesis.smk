@@ -12,7 +12,7 @@ for _exp in (1, 2, 3):
         name:
             f"synthesis_exp{_exp}"
         input:
-            unpack(partial(synthesis_exp_inputs, exp=_exp)),
+            unpack(partial(synthesis_exp_join_inputs, exp=_exp)),
         output:
             json=report(
                 f"results/{{dataset}}/eval/synthesis_exp{_exp}.json",
@@ -29,6 +29,43 @@ for _exp in (1, 2, 3):
             "../envs/plenocal.yaml"
         # one core: a two-core Exp. 3 (its targets share the job's cores) waited at the end
         # of the full run until both cores were free, and kept 1.35 of them busy
+        threads: 1
+        resources:
+            mem_mb=4000,
+            runtime=60,
+        params:
+            experiment=_exp,
+            verify=lambda wc: stage_config("verify"),
+            depth=lambda wc: synthesis_depth_config(),
+            views_dir=lambda wc: res(wc.dataset, "views"),
+            array_cams=lambda wc: array_cams(wc.dataset),
+            n_views=lambda wc: n_views(wc.dataset),
+        script:
+            "../scripts/synthesis.py"
+
+
+# A split experiment's camera sets (the complete calibration, the ground-truth cameras)
+# render in jobs of their own, which the two cores run side by side; rule
+# synthesis_exp<k> joins their runs into the result.
+for _exp in SPLIT_EXPERIMENTS:
+
+    rule:
+        name:
+            f"synthesis_exp{_exp}_part"
+        input:
+            unpack(partial(synthesis_exp_inputs, exp=_exp)),
+        output:
+            runs=f"results/{{dataset}}/eval/synthesis_exp{_exp}/{{cameras}}.json",
+            kept=f"results/{{dataset}}/eval/synthesis_exp{_exp}/{{cameras}}.npz",
+        log:
+            log_path(f"synthesis_exp{_exp}_part", "{dataset}_{cameras}"),
+        benchmark:
+            bench_path(f"synthesis_exp{_exp}_part", "{dataset}_{cameras}")
+        wildcard_constraints:
+            cameras="complete|ground_truth",
+        priority: PRIORITY["synthesis"]
+        conda:
+            "../envs/plenocal.yaml"
         threads: 1
         resources:
             mem_mb=4000,

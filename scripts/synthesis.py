@@ -1,5 +1,7 @@
 """Rules synthesis_exp1..3: one view-synthesis experiment of Fig. 6 - read the inputs,
-run plenocal.verify.synthesis.synthesis_job, write the result and its images."""
+run plenocal.verify.synthesis.synthesis_job, write the result and its images; for a
+split experiment (Exp. 3), rule synthesis_exp<k>_part runs one camera set
+(synthesis_runs) and rule synthesis_exp<k> joins the parts (synthesis_result)."""
 
 import os
 from pathlib import Path
@@ -8,13 +10,17 @@ import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 import numpy as np
 
 from plenocal.artifacts.cameras import read_cameras
-from plenocal.artifacts.results import write_synthesis
+from plenocal.artifacts.results import (
+    read_synthesis_runs,
+    write_synthesis,
+    write_synthesis_runs,
+)
 from plenocal.artifacts.rig import read_rig
 from plenocal.depth.inputs import rig_bounds
 from plenocal.io.files import to_uint8, write_image
 from plenocal.rulelog import rule_logger
 from plenocal.verify.experiments import layout_from_cams
-from plenocal.verify.synthesis import synthesis_job
+from plenocal.verify.synthesis import synthesis_job, synthesis_result, synthesis_runs
 
 snakemake = globals()["snakemake"]
 log = rule_logger(snakemake, "synthesis")
@@ -36,14 +42,33 @@ if snakemake.input.get("true_depth"):
 cameras = {"complete": read_cameras(snakemake.input.calibration)}
 if snakemake.input.get("truth"):
     cameras["ground_truth"] = read_cameras(snakemake.input.truth)
-synth_dir = Path(snakemake.output.synth)
-result, files = synthesis_job(
-    int(snakemake.params.experiment), cameras, depths,
-    lambda c, v: str(views_dir / c / f"{v}.png"),
-    layout_from_cams(list(snakemake.params.array_cams), int(snakemake.params.n_views)),
-    near, far, cfg, int(snakemake.threads),
-    Path(os.path.relpath(synth_dir, Path(snakemake.output.json).parent)).as_posix())
-for name, img in files.items():
-    write_image(synth_dir / name, to_uint8(img))
-synth_dir.mkdir(parents=True, exist_ok=True)
-write_synthesis(snakemake.output.json, result)
+experiment = int(snakemake.params.experiment)
+layout = layout_from_cams(list(snakemake.params.array_cams), int(snakemake.params.n_views))
+
+
+def image_path(cam: str, view: str) -> str:
+    return str(views_dir / cam / f"{view}.png")
+
+
+if snakemake.rule.endswith("_part"):
+    part = snakemake.wildcards.cameras
+    write_synthesis_runs(snakemake.output.runs, snakemake.output.kept, synthesis_runs(
+        experiment, {part: cameras[part]}, depths, image_path, layout, near, far, cfg,
+        int(snakemake.threads)))
+else:
+    synth_dir = Path(snakemake.output.synth)
+    rel = Path(os.path.relpath(synth_dir, Path(snakemake.output.json).parent)).as_posix()
+    if snakemake.input.get("runs"):
+        parts = [read_synthesis_runs(j, k)
+                 for j, k in zip(snakemake.input.runs, snakemake.input.kept, strict=True)]
+        runs = parts[0]
+        for p in parts[1:]:
+            runs = runs.joined(p)
+        result, files = synthesis_result(runs, depths, near, far, cfg, rel)
+    else:
+        result, files = synthesis_job(experiment, cameras, depths, image_path, layout, near,
+                                      far, cfg, int(snakemake.threads), rel)
+    for name, img in files.items():
+        write_image(synth_dir / name, to_uint8(img))
+    synth_dir.mkdir(parents=True, exist_ok=True)
+    write_synthesis(snakemake.output.json, result)

@@ -148,3 +148,55 @@ def test_threads_render_the_same_images(dataset):
     for t in targets:
         np.testing.assert_array_equal(a[t], b[t])
     assert one.score(inputs, targets)[0] == two.score(inputs, targets)[0]
+
+
+def test_exp3_by_camera_set_joins_to_the_same_result(dataset, tmp_path):
+    """Exp. 3 as the workflow runs it - each camera set's runs in a job of its own
+    (synthesis_runs, written and read back as plenocal.synthesis_runs), then joined
+    (synthesis_result) - gives the result and images of one synthesis_job, file for
+    file; parts of another experiment or holding the same run are refused."""
+    from plenocal.artifacts.results import (
+        read_synthesis_runs,
+        write_synthesis,
+        write_synthesis_runs,
+    )
+    from plenocal.verify.synthesis import synthesis_job, synthesis_result, synthesis_runs
+
+    root, cams = dataset
+    layout = layout_from_cams(sorted({k.split("/")[0] for k in cams}), N)
+    plane = fronto_plane(0.6, 0.8, photo_texture(384, noise=0.005), 20.0)
+    keys = experiment_input_views(layout, 3)
+    true = {k: render_plane(cams[k], plane)[1] for k in keys}
+    depths = {"estimated": {k: z * 1.01 for k, z in true.items()}, "true": true}
+    bad = dict(cams)
+    M = cams["x01_y00/1_1"].cam_to_world.copy()
+    M[0, 3] += 0.001
+    bad["x01_y00/1_1"] = PinholeCamera(cams["x01_y00/1_1"].K, M, W, H)
+    sets = {"complete": bad, "ground_truth": cams}
+    cfg = {**CFG, "exp3_view_stride": 1}
+
+    def path(c, v):
+        return str(root / c / f"{v}.png")
+
+    whole, whole_files = synthesis_job(3, sets, depths, path, layout, 0.45, 0.8, cfg)
+    parts = []
+    for name in sets:
+        runs = synthesis_runs(3, {name: sets[name]}, depths, path, layout, 0.45, 0.8, cfg)
+        write_synthesis_runs(tmp_path / f"{name}.json", tmp_path / f"{name}.npz", runs)
+        parts.append(read_synthesis_runs(tmp_path / f"{name}.json", tmp_path / f"{name}.npz"))
+    joined, files = synthesis_result(parts[0].joined(parts[1]), depths, 0.45, 0.8, cfg)
+    write_synthesis(tmp_path / "whole.json", whole)
+    write_synthesis(tmp_path / "joined.json", joined)
+    assert (tmp_path / "whole.json").read_bytes() == (tmp_path / "joined.json").read_bytes()
+    assert list(files) == list(whole_files) and len(files) == 2  # lateral, both sets
+    for name in files:
+        np.testing.assert_array_equal(files[name], whole_files[name])
+    assert len(whole.tables) == 2 * 2 * 2  # depths x camera sets x (central, lateral)
+    with pytest.raises(ValueError, match="is in two parts"):
+        parts[0].joined(parts[0])
+    other = synthesis_runs(1, {"complete": bad}, depths, path, layout, 0.45, 0.8, cfg)
+    with pytest.raises(ValueError, match="cannot be joined"):
+        parts[0].joined(other)
+    (tmp_path / "old.json").write_text('{"format": "plenocal.synthesis_runs", "version": 0}')
+    with pytest.raises(ValueError, match="not a synthesis runs of version 1"):
+        read_synthesis_runs(tmp_path / "old.json", tmp_path / "complete.npz")

@@ -143,7 +143,7 @@ def test_critical_chain_goes_first(tmp_path: Path):
     assert prios["simulate"] == {10, 20}
     # then the synthesis (its depth maps, the ideal renders, the experiments) ...
     for rule in ("ground_truth_render", "ground_truth_render_central", "depth_view",
-                 "synthesis_exp3"):
+                 "synthesis_exp3_part", "synthesis_exp3"):
         assert prios.get(rule) == {5}, (rule, prios.get(rule))
     # ... and last what only feeds short jobs
     for rule in ("reprojection_calib[complete]", "depth[hand]", "convert_quality"):

@@ -38,6 +38,7 @@ from plenocal.artifacts.results import (
     DepthQuality,
     PsnrTable,
     SynthesisResult,
+    SynthesisRuns,
     SynthesisSetup,
     SynthImage,
 )
@@ -304,7 +305,19 @@ def synthesis_job(exp: int, cameras: dict[str, dict[str, PinholeCamera]],
 
     Returns the typed result, whose images are named under ``synth_rel`` (the folder of
     the images relative to the result file), and the images kept for Fig. 10 by file
-    name."""
+    name. :func:`synthesis_runs` and :func:`synthesis_result` are its two halves (Exp. 3
+    runs each camera set in a job of its own)."""
+    runs = synthesis_runs(exp, cameras, depths, image_path, layout, near, far, config,
+                          threads)
+    return synthesis_result(runs, depths, near, far, config, synth_rel)
+
+
+def synthesis_runs(exp: int, cameras: dict[str, dict[str, PinholeCamera]],
+                   depths: dict[str, dict[str, np.ndarray]],
+                   image_path: Callable[[str, str], str], layout: ArrayLayout, near: float,
+                   far: float, config: dict, threads: int = 1) -> SynthesisRuns:
+    """Every run of experiment ``exp`` (:func:`synthesis_job`'s arguments): the scores
+    of each (renderer, depth, camera set) and the images kept for the figures."""
     config = synthesis_config(config)
     renderers = [config["renderer"]]
     if renderers[0] == "rvs" and config["rvs_compare_dibr"]:
@@ -325,6 +338,17 @@ def synthesis_job(exp: int, cameras: dict[str, dict[str, PinholeCamera]],
                          cname, exp, time.perf_counter() - t0)
                 if dname == "estimated" and renderer == renderers[0]:
                     kept_all.update({(cname, k): img for k, img in kept.items()})
+    return SynthesisRuns(exp, tuple(renderers), runs, kept_all)
+
+
+def synthesis_result(runs: SynthesisRuns, depths: dict[str, dict[str, np.ndarray]],
+                     near: float, far: float, config: dict, synth_rel: str = "synth"
+                     ) -> tuple[SynthesisResult, dict[str, np.ndarray]]:
+    """The result of an experiment's runs (all camera sets: join the parts first,
+    :meth:`SynthesisRuns.joined`), as :func:`synthesis_job` returns it; ``depths`` for
+    the estimated maps' quality against the true ones."""
+    config = synthesis_config(config)
+    exp, renderers = runs.experiment, list(runs.renderers)
     border = int(config["psnr_border_px"])
     quality = {}
     if "true" in depths:
@@ -334,11 +358,11 @@ def synthesis_job(exp: int, cameras: dict[str, dict[str, PinholeCamera]],
                            depth_method=config["depth"]["synthesis_method"],
                            depth_quality=quality,
                            # as experiment3 ran it (every run of Exp. 3 has the same)
-                           view_stride=next(iter(runs.values()))["view_stride"] if exp == 3
-                           else None)
+                           view_stride=next(iter(runs.runs.values()))["view_stride"]
+                           if exp == 3 else None)
     files: dict[str, np.ndarray] = {}
     kept_images = []
-    for (cname, k), img in sorted(kept_all.items()):
+    for (cname, k), img in sorted(runs.kept.items()):
         # Exp. 3 keeps "<central|lateral>:<shot>/<view>", Exp. 2 the views of a set
         variant, _, view = k.rpartition(":")
         name = f"{cname}_{k.replace('/', '_').replace(':', '_')}.png"
@@ -346,8 +370,8 @@ def synthesis_job(exp: int, cameras: dict[str, dict[str, PinholeCamera]],
         kept_images.append(SynthImage(f"{synth_rel}/{name}", view, cname,
                                       variant or (key_shot(view) if exp == 2 else "")))
     result = SynthesisResult(experiment=exp, renderer=renderers[0],
-                             tables=tuple(psnr_tables(exp, runs, renderers)), setup=setup,
-                             images=tuple(kept_images))
+                             tables=tuple(psnr_tables(exp, runs.runs, renderers)),
+                             setup=setup, images=tuple(kept_images))
     return result, files
 
 
