@@ -175,11 +175,11 @@ def test_subset_database_sets_each_camera(sets, tmp_path):
         assert d.num_cameras() == 1 and d.num_images() == 9
 
 
-def test_observation_errors_match_the_bindings(sets, tmp_path):
-    """The errors read back from COLMAP's binary model equal those computed through the
-    Python bindings, observation by observation; every registered image keeps its pose."""
+def _triangulated(sets, shots: tuple[str, ...], tmp_path):
+    """The views of ``shots`` triangulated with their true cameras fixed (Table I's
+    triangulation): the reconstruction and the cameras by COLMAP image name."""
     _, vs, paths = sets
-    names = sorted(n for n in vs if n.startswith("x02_y01"))
+    names = sorted(n for n in vs if n.startswith(shots))
     db = tmp_path / "views.db"
     viewdb.build_view_database({n: paths[n] for n in names}, db, tmp_path,
                                max_num_features=1000)
@@ -188,6 +188,13 @@ def test_observation_errors_match_the_bindings(sets, tmp_path):
     cams = {f"{n}.png": vs[n] for n in names}
     rec = cm.known_pose_reconstruction(sub, cams, update_intrinsics=False)
     triangulate(rec, sub, triangulation_options(100.0, 0.1, 0, 1), 0, cams, tmp_path)
+    return rec, cams
+
+
+def test_observation_errors_match_the_bindings(sets, tmp_path):
+    """The errors read back from COLMAP's binary model equal those computed through the
+    Python bindings, observation by observation; every registered image keeps its pose."""
+    rec, cams = _triangulated(sets, ("x02_y01",), tmp_path)
     want = []
     for image_id in sorted(rec.reg_image_ids()):
         image = rec.image(image_id)
@@ -208,16 +215,7 @@ def test_adjust_points_as_colmaps_bundle_adjustment(sets, tmp_path):
     reconstruction with every point moved off its optimum."""
     import pycolmap
 
-    _, vs, paths = sets
-    names = sorted(n for n in vs if n.startswith(("x00_y00", "x01_y00")))
-    db = tmp_path / "views.db"
-    viewdb.build_view_database({n: paths[n] for n in names}, db, tmp_path,
-                               max_num_features=1000)
-    sub = tmp_path / "sub.db"
-    viewdb.subset_database(db, sub, names, {n: vs[n] for n in names})
-    cams = {f"{n}.png": vs[n] for n in names}
-    rec = cm.known_pose_reconstruction(sub, cams, update_intrinsics=False)
-    triangulate(rec, sub, triangulation_options(100.0, 0.1, 0, 1), 0, cams, tmp_path)
+    rec, cams = _triangulated(sets, ("x00_y00", "x01_y00"), tmp_path)
     rng = np.random.default_rng(0)
     for pid in sorted(rec.point3D_ids()):
         rec.point3D(pid).xyz = rec.point3D(pid).xyz + rng.normal(0, 2e-3, 3)
