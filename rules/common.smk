@@ -561,8 +561,8 @@ def synthesis_exp_inputs(wildcards, exp):
     return out
 
 
-#: experiments whose camera sets run in jobs of their own (rule synthesis_exp<k>_part),
-#: joined by rule synthesis_exp<k>: Exp. 3 renders every view of the array four times
+#: experiments whose camera sets run in jobs of their own (synthesis_exp<k>_part), which
+#: synthesis_exp<k> joins - Exp. 3 renders every view of the array four times
 SPLIT_EXPERIMENTS = (3,)
 
 
@@ -572,7 +572,7 @@ def synthesis_camera_sets(dataset):
 
 
 def synthesis_parts(wildcards, exp):
-    """The camera sets' runs of a split experiment (rule synthesis_exp<k>_part)."""
+    """The camera sets' runs of a split experiment (its _part jobs)."""
     d = wildcards.dataset
     base = res(d, "eval", f"synthesis_exp{exp}")
     return {

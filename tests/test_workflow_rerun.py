@@ -18,7 +18,8 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 FILES = ["Snakefile", "rules", "scripts", "config.schema.yaml", "report", "envs", "profiles"]
-VERIFY_RULES = {"synthesis_exp1", "synthesis_exp2", "synthesis_exp3", "report", "all"}
+VERIFY_RULES = {"synthesis_exp1", "synthesis_exp2", "synthesis_exp3_part", "synthesis_exp3",
+                "report", "all"}
 
 pytestmark = pytest.mark.workflow
 
