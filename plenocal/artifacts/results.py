@@ -376,6 +376,71 @@ def read_synthesis(path: str | Path) -> SynthesisResult:
 
 
 # ---------------------------------------------------------------------------
+# One camera set's runs of an experiment: eval/synthesis_exp<k>/<cameras>.json + .npz
+# ---------------------------------------------------------------------------
+
+SYNTHESIS_RUNS_FORMAT = "plenocal.synthesis_runs"
+SYNTHESIS_RUNS_VERSION = 1
+
+
+@dataclass(frozen=True)
+class SynthesisRuns:
+    """Runs of one view-synthesis experiment before they become its result (rule
+    synthesis_exp3_part, one per camera set; rule synthesis_exp3 joins them): each
+    run's scores by (renderer, depth, cameras) as the experiment function returns them,
+    and the synthesized images kept for the figures by (cameras, key)."""
+    experiment: int
+    renderers: tuple[str, ...]
+    runs: dict[tuple[str, str, str], dict]
+    kept: dict[tuple[str, str], np.ndarray]
+
+    def joined(self, other: SynthesisRuns) -> SynthesisRuns:
+        """Both parts' runs and images; they must be of one experiment and renderers, and
+        share no run."""
+        if (other.experiment, other.renderers) != (self.experiment, self.renderers):
+            raise ValueError(f"synthesis runs of experiment {self.experiment} "
+                             f"({', '.join(self.renderers)}) and {other.experiment} "
+                             f"({', '.join(other.renderers)}) cannot be joined")
+        both = sorted(set(self.runs) & set(other.runs))
+        if both:
+            raise ValueError(f"synthesis run {both[0]} is in two parts")
+        return SynthesisRuns(self.experiment, self.renderers, {**self.runs, **other.runs},
+                             {**self.kept, **other.kept})
+
+
+def write_synthesis_runs(json_path: str | Path, npz_path: str | Path,
+                         runs: SynthesisRuns) -> None:
+    """The runs as JSON (format plenocal.synthesis_runs) and their kept images as an
+    uncompressed .npz (``image<i>`` in the JSON's ``kept`` order)."""
+    kept = sorted(runs.kept)
+    buf = io.BytesIO()
+    np.savez(buf, **{f"image{i}": runs.kept[k] for i, k in enumerate(kept)})
+    atomic_write_bytes(npz_path, buf.getvalue())
+    write_json(json_path, {
+        "format": SYNTHESIS_RUNS_FORMAT, "version": SYNTHESIS_RUNS_VERSION,
+        "experiment": runs.experiment, "renderers": list(runs.renderers),
+        "runs": [{"renderer": r, "depth": d, "cameras": c, "result": res}
+                 for (r, d, c), res in sorted(runs.runs.items())],
+        "kept": [{"cameras": c, "key": k} for c, k in kept]})
+
+
+def read_synthesis_runs(json_path: str | Path, npz_path: str | Path) -> SynthesisRuns:
+    """Read what :func:`write_synthesis_runs` wrote (this version only)."""
+    remedy = "rerun rule synthesis_exp3_part"
+
+    def build(doc: dict) -> SynthesisRuns:
+        with np.load(npz_path) as z:
+            kept = {(str(e["cameras"]), str(e["key"])): z[f"image{i}"]
+                    for i, e in enumerate(doc["kept"])}
+        return SynthesisRuns(int(doc["experiment"]), tuple(doc["renderers"]),
+                             {(str(r["renderer"]), str(r["depth"]), str(r["cameras"])):
+                              r["result"] for r in doc["runs"]}, kept)
+
+    return decode(json_path, SYNTHESIS_RUNS_FORMAT, SYNTHESIS_RUNS_VERSION,
+                  "synthesis runs", remedy, build)
+
+
+# ---------------------------------------------------------------------------
 # Converter quality: convert/quality.json
 # ---------------------------------------------------------------------------
 
@@ -450,68 +515,3 @@ def read_convert_quality(path: str | Path) -> ConvertQuality:
     """Read ``convert/quality.json`` (this version only)."""
     return decode(path, QUALITY_FORMAT, QUALITY_VERSION, "converter quality (quality.json)",
                   "run rule convert_quality", ConvertQuality.from_dict)
-
-
-# ---------------------------------------------------------------------------
-# One camera set's runs of an experiment: eval/synthesis_exp<k>/<cameras>.json + .npz
-# ---------------------------------------------------------------------------
-
-SYNTHESIS_RUNS_FORMAT = "plenocal.synthesis_runs"
-SYNTHESIS_RUNS_VERSION = 1
-
-
-@dataclass(frozen=True)
-class SynthesisRuns:
-    """Runs of one view-synthesis experiment before they become its result (rule
-    synthesis_exp3_part, one per camera set; rule synthesis_exp3 joins them): each
-    run's scores by (renderer, depth, cameras) as the experiment function returns them,
-    and the synthesized images kept for the figures by (cameras, key)."""
-    experiment: int
-    renderers: tuple[str, ...]
-    runs: dict[tuple[str, str, str], dict]
-    kept: dict[tuple[str, str], np.ndarray]
-
-    def joined(self, other: SynthesisRuns) -> SynthesisRuns:
-        """Both parts' runs and images; they must be of one experiment and renderers, and
-        share no run."""
-        if (other.experiment, other.renderers) != (self.experiment, self.renderers):
-            raise ValueError(f"synthesis runs of experiment {self.experiment} "
-                             f"({', '.join(self.renderers)}) and {other.experiment} "
-                             f"({', '.join(other.renderers)}) cannot be joined")
-        both = sorted(set(self.runs) & set(other.runs))
-        if both:
-            raise ValueError(f"synthesis run {both[0]} is in two parts")
-        return SynthesisRuns(self.experiment, self.renderers, {**self.runs, **other.runs},
-                             {**self.kept, **other.kept})
-
-
-def write_synthesis_runs(json_path: str | Path, npz_path: str | Path,
-                         runs: SynthesisRuns) -> None:
-    """The runs as JSON (format plenocal.synthesis_runs) and their kept images as an
-    uncompressed .npz (``image<i>`` in the JSON's ``kept`` order)."""
-    kept = sorted(runs.kept)
-    buf = io.BytesIO()
-    np.savez(buf, **{f"image{i}": runs.kept[k] for i, k in enumerate(kept)})
-    atomic_write_bytes(npz_path, buf.getvalue())
-    write_json(json_path, {
-        "format": SYNTHESIS_RUNS_FORMAT, "version": SYNTHESIS_RUNS_VERSION,
-        "experiment": runs.experiment, "renderers": list(runs.renderers),
-        "runs": [{"renderer": r, "depth": d, "cameras": c, "result": res}
-                 for (r, d, c), res in sorted(runs.runs.items())],
-        "kept": [{"cameras": c, "key": k} for c, k in kept]})
-
-
-def read_synthesis_runs(json_path: str | Path, npz_path: str | Path) -> SynthesisRuns:
-    """Read what :func:`write_synthesis_runs` wrote (this version only)."""
-    remedy = "rerun rule synthesis_exp3_part"
-
-    def build(doc: dict) -> SynthesisRuns:
-        with np.load(npz_path) as z:
-            kept = {(str(e["cameras"]), str(e["key"])): z[f"image{i}"]
-                    for i, e in enumerate(doc["kept"])}
-        return SynthesisRuns(int(doc["experiment"]), tuple(doc["renderers"]),
-                             {(str(r["renderer"]), str(r["depth"]), str(r["cameras"])):
-                              r["result"] for r in doc["runs"]}, kept)
-
-    return decode(json_path, SYNTHESIS_RUNS_FORMAT, SYNTHESIS_RUNS_VERSION,
-                  "synthesis runs", remedy, build)
