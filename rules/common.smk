@@ -582,10 +582,12 @@ def synthesis_parts(wildcards, exp):
 
 
 def synthesis_exp_join_inputs(wildcards, exp):
-    """synthesis_exp<exp>: its runs (split experiments: the parts) and the depth maps
-    whose quality the result reports."""
+    """synthesis_exp<exp>: its inputs or, for a split experiment, its parts' runs with
+    the cameras, the bounds and the depth maps whose quality the result reports (no
+    views: the parts rendered them; each view is a file Snakemake looks up)."""
     out = synthesis_exp_inputs(wildcards, exp)
     if exp in SPLIT_EXPERIMENTS:
+        del out["views"]
         out.update(synthesis_parts(wildcards, exp))
     return out
 
