@@ -80,14 +80,15 @@ def quad_table(scene: SceneArrays) -> np.ndarray:
 
 
 @njit(cache=True)
-def _slab(o, d, lo, hi, t0, t1):
-    """The ray's parameter interval [t0, t1] clipped to the slab lo <= o + t d <= hi."""
-    if d == 0.0:
+def _slab(o, inv_d, lo, hi, t0, t1):
+    """The ray's parameter interval [t0, t1] clipped to the slab lo <= o + t d <= hi
+    (``inv_d`` = 1 / d, computed once per ray; d = 0: inf)."""
+    if math.isinf(inv_d):
         if o < lo or o > hi:
             return 1.0, 0.0
         return t0, t1
-    a = (lo - o) / d
-    b = (hi - o) / d
+    a = (lo - o) * inv_d
+    b = (hi - o) * inv_d
     if a > b:
         a, b = b, a
     return max(t0, a), min(t1, b)
@@ -105,14 +106,17 @@ def _trace(ox, oy, oz, dx, dy, dz, quads, groups, tex_id, texel, atlas, th, tw, 
     hit = -1
     ba = 0.0
     bb = 0.0
+    ix = 1.0 / dx if dx != 0.0 else math.inf
+    iy = 1.0 / dy if dy != 0.0 else math.inf
+    iz = 1.0 / dz if dz != 0.0 else math.inf
     for g in range(groups.shape[0]):
         grp = groups[g]
         q0 = int(grp[0])
         q1 = int(grp[1])
         if q1 - q0 > 1:
-            t0, t1 = _slab(ox, dx, grp[2], grp[5], -1e30, 1e30)
-            t0, t1 = _slab(oy, dy, grp[3], grp[6], t0, t1)
-            t0, t1 = _slab(oz, dz, grp[4], grp[7], t0, t1)
+            t0, t1 = _slab(ox, ix, grp[2], grp[5], -1e30, 1e30)
+            t0, t1 = _slab(oy, iy, grp[3], grp[6], t0, t1)
+            t0, t1 = _slab(oz, iz, grp[4], grp[7], t0, t1)
             if t1 < t0 or t1 < 0.0:
                 continue
         for q in range(q0, q1):
