@@ -155,6 +155,11 @@ def write_image(path: str | Path, image: np.ndarray) -> None:
     OpenCV's PNG encoder is used (fixed compression level, no timestamps), with RGB
     input converted to OpenCV's BGR order. Level :data:`PNG_LEVEL` (zlib 1): on a 12-bit
     lenslet image 1.9x faster to encode than level 3 for 1 % more bytes (issue 15).
+    zlib's Huffman-only strategy (PNG's row filters, no string matching; issue 15): the
+    noisy pixels of these images hold few repeated strings, so on a 12-bit lenslet image
+    it encodes in 0.42 s instead of 0.67 s and decodes in 0.17 s instead of 0.20 s with
+    2 % fewer bytes; on 25 subaperture views 0.44 / 0.19 s instead of 0.53 / 0.26 s, 13 %
+    fewer bytes.
     """
     import cv2  # noqa: PLC0415  (imported late: see DESIGN.md on cv2/pycolmap order)
 
@@ -163,7 +168,9 @@ def write_image(path: str | Path, image: np.ndarray) -> None:
         raise TypeError(f"write_image needs uint8 or uint16, got {image.dtype}")
     if image.ndim == 3 and image.shape[2] == 3:
         image = image[:, :, ::-1]
-    ok, enc = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL])
+    ok, enc = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL,
+                                           cv2.IMWRITE_PNG_STRATEGY,
+                                           cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY])
     if not ok:
         raise OSError(f"PNG encoding failed for {path}")
     atomic_write_bytes(path, enc.tobytes())
