@@ -19,7 +19,7 @@ verify = dict(snakemake.params.verify)
 layout = layout_from_cams(list(snakemake.params.array_cams), int(snakemake.params.n_views))
 depth_files = {f"{Path(p).parent.name}/{Path(p).stem}": p for p in snakemake.input.depth}
 view_files = {f"{Path(p).parent.name}/{Path(p).stem}": p for p in snakemake.input.views}
-sets = [layout.middle_cam] if verify["exp2_sets"] == "middle" else layout.cams
+sets = layout.exp2_cams(verify["exp2_sets"])
 plans = {}
 for exp in (1, 2, 3):
     plans.update(experiment_plan(layout, exp, sets, int(verify["exp3_view_stride"])))

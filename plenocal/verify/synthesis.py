@@ -282,8 +282,7 @@ def run_experiment(exp: int, cameras: dict[str, PinholeCamera],
     if exp == 1:
         return experiment1(ctx)
     if exp == 2:
-        sets = [layout.middle_cam] if ctx.config["exp2_sets"] == "middle" else layout.cams
-        return experiment2(ctx, sets)
+        return experiment2(ctx, layout.exp2_cams(ctx.config["exp2_sets"]))
     if exp == 3:
         return experiment3(ctx, int(ctx.config["exp3_view_stride"]))
     raise ValueError(f"synthesis: no experiment {exp} (1, 2 or 3)")
