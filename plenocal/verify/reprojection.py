@@ -70,7 +70,6 @@ from plenocal.verify import point_refinement
 
 log = logging.getLogger(__name__)
 _REPROJ = cm.SFM_DEFAULTS["reprojection"]  # the triangulation's defaults: the schema's
-_SEED, _THREADS = cm.SFM_DEFAULTS["seed"], cm.SFM_DEFAULTS["num_threads"]
 
 
 def triangulation_options(max_error_px: float, min_angle_deg: float, seed: int,
@@ -258,8 +257,8 @@ def read_model(rec, work_dir: str | Path | None = None):
 def triangulated_stats(cameras: Mapping[str, PinholeCamera], database: str | Path, *,
                        max_error_px: float = _REPROJ["max_error_px"],
                        min_angle_deg: float = _REPROJ["min_angle_deg"],
-                       track_error_px: float = _REPROJ["track_error_px"], seed: int = _SEED,
-                       num_threads: int = _THREADS,
+                       track_error_px: float = _REPROJ["track_error_px"],
+                       seed: int = cm.DEFAULT_SEED, num_threads: int = cm.DEFAULT_THREADS,
                        work_dir: str | Path | None = None) -> dict:
     """Reprojection error of the calibration ``cameras`` (``"<cam>/<view>"`` ->
     PinholeCamera) on the verified matches of the view ``database``
@@ -322,8 +321,8 @@ def triangulated_stats(cameras: Mapping[str, PinholeCamera], database: str | Pat
 
 
 def reprojection_stats(cameras: Mapping[str, PinholeCamera], images: Mapping[str, str | Path],
-                       *, max_num_features: int = cm.SFM_DEFAULTS["max_num_features"],
-                       seed: int = _SEED, num_threads: int = _THREADS,
+                       *, max_num_features: int = cm.DEFAULT_MAX_FEATURES,
+                       seed: int = cm.DEFAULT_SEED, num_threads: int = cm.DEFAULT_THREADS,
                        work_dir: str | Path | None = None, **kwargs) -> dict:
     """:func:`triangulated_stats` on a view database built here from ``images`` (same
     names as ``cameras``): every pair within a shot and the same view across every two
