@@ -56,6 +56,7 @@ from plenocal.depth.quality import depth_quality  # noqa: E402
 from plenocal.depth.sgbm import sgbm_depth  # noqa: E402
 from plenocal.depth.sgm import SgmOptions, sgm_depth  # noqa: E402
 from plenocal.io.files import read_image, read_json  # noqa: E402
+from plenocal.names import file_key  # noqa: E402
 
 
 def run_sweep(out, label, ref, img, srcs, simgs, near, far, gt, opt):
@@ -128,7 +129,7 @@ def main() -> None:
 def synthesis_figures(root: Path, out: Lines) -> None:
     """Depth quality of rule depth_view and the synthesis PSNR of every experiment."""
     for p in sorted((root / "depth" / "views").glob("*/*.npy")):
-        key = f"{p.parent.name}/{p.stem}"
+        key = file_key(p)
         gt = root / "ground_truth" / "depth" / p.parent.name / p.name
         if not gt.is_file():
             continue

@@ -23,7 +23,7 @@ confident, T = 4, against 67 %, T = 8). The table follows the detection: Raytrix
 (Fujita2, Origami, Boxer-IrishMan-Gladiator2, R42_klein_crop) ``galilean``, TSPC frames
 (Boys2, HandTools) ``keplerian``. ``--mla auto`` lets the converter read it instead; a
 frame not in the table gets the default. Everything else is config.schema.yaml's
-``convert`` defaults (:func:`plenocal.cli.with_defaults`, as the command line
+``convert`` defaults (:func:`plenocal.cli.validate_convert_block`, as the command line
 ``plenocal convert`` uses them).
 
 Pictures (``--pictures``, git-ignored bench/out/): ``<frame>.png`` side by side at the
@@ -51,7 +51,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmd import Lines, update_sections  # noqa: E402
 
-from plenocal.cli import with_defaults  # noqa: E402
+from plenocal.cli import validate_convert_block  # noqa: E402
 from plenocal.convert import ConvertSettings, ShotConversion  # noqa: E402
 from plenocal.convert.gridcheck import grid_for_mode, refine_grid  # noqa: E402
 from plenocal.convert.shot import build_grid, load_calib, load_lenslet  # noqa: E402
@@ -122,7 +122,7 @@ def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
     calib = load_calib(REAL / "frames" / f"{name}.xml")
     image = load_lenslet(lenslet)
     H, W = image.shape[:2]
-    cfg = with_defaults({"mla": MLA[name]} if name in MLA and mla_mode == "table" else {})
+    cfg = validate_convert_block({"mla": MLA[name]} if name in MLA and mla_mode == "table" else {})
     settings = ConvertSettings.from_config(cfg)
     t0 = time.perf_counter()
     file_grid = build_grid(calib, W, H)

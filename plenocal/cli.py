@@ -154,10 +154,11 @@ def convert_config(args: argparse.Namespace) -> dict:
     return cfg
 
 
-def with_defaults(block: dict) -> dict:
+def validate_convert_block(block: dict) -> dict:
     """A ``convert`` block checked against config.schema.yaml and completed with its
     defaults, as the workflow's rule ``convert`` gets it. Unknown keys and bad values
-    raise ConfigError naming the key."""
+    raise ConfigError naming the key (:func:`plenocal.config.with_defaults` fills a block
+    without checking it)."""
     from plenocal.config import validate_config  # noqa: PLC0415
 
     return validate_config({"datasets": {"cli": {}}, "convert": dict(block)})["convert"]
@@ -172,7 +173,7 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     t0 = time.perf_counter()
     if args.views < 1:
         raise ConvertError(f"--views: must be >= 1 (got {args.views})")
-    settings = ConvertSettings.from_config(with_defaults(convert_config(args)))
+    settings = ConvertSettings.from_config(validate_convert_block(convert_config(args)))
     for path, what in ((args.lenslet, "lenslet image"), (args.calib, "calib.xml")):
         if not Path(path).is_file():
             raise ConvertError(f"{path}: {what} not found")

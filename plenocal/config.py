@@ -14,10 +14,11 @@ to the settings dataclasses. The package writes no default of its own.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import functools
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import yaml
 
@@ -107,6 +108,17 @@ def with_defaults(block: str, cfg: Mapping[str, Any] | None) -> dict:
 def stage_defaults(block: str) -> dict:
     """The schema's defaults of config block ``block`` (see :func:`with_defaults`)."""
     return with_defaults(block, None)
+
+
+_Settings = TypeVar("_Settings")
+
+
+def settings_from(cls: type[_Settings], block: Mapping[str, Any]) -> _Settings:
+    """The settings dataclass ``cls`` from the keys of a config block that name its fields
+    (the others are ignored: one block may hold the settings of several dataclasses).
+    Fill a partial block first (:func:`with_defaults`)."""
+    names = {f.name for f in dataclasses.fields(cls)}
+    return cls(**{k: v for k, v in block.items() if k in names})
 
 
 def _path(error: jsonschema.ValidationError) -> str:

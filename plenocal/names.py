@@ -14,6 +14,7 @@ splitting strings, so that a malformed name fails with the name in the message.
 from __future__ import annotations
 
 import re
+from pathlib import PurePath
 
 SHOT_PATTERN = r"x\d{2}_y\d{2}|hand\d{2}"
 VIEW_PATTERN = r"\d+_\d+"
@@ -93,6 +94,13 @@ def central_view(n: int) -> str:
 def view_key(shot: str, view: str) -> str:
     """The dataset-wide key of a view: ``{shot}/{view}``."""
     return f"{shot}/{view}"
+
+
+def file_key(path: str | PurePath) -> str:
+    """The key of a view's file ``.../{shot}/{view}.<ext>`` (a view image, depth map or
+    render): :func:`view_key` of its folder's name and its stem."""
+    path = PurePath(path)
+    return view_key(path.parent.name, path.stem)
 
 
 def split_key(key: str) -> tuple[str, str]:

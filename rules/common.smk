@@ -566,6 +566,19 @@ def synthesis_exp_inputs(wildcards, exp):
 SPLIT_EXPERIMENTS = (3,)
 
 
+def synthesis_params(exp):
+    """The params of scripts/synthesis.py, the same for synthesis_exp<exp> and its _part
+    jobs (the script reads one set of params for both)."""
+    return {
+        "experiment": exp,
+        "verify": lambda wc: stage_config("verify"),
+        "depth": lambda wc: synthesis_depth_config(),
+        "views_dir": lambda wc: res(wc.dataset, "views"),
+        "array_cams": lambda wc: array_cams(wc.dataset),
+        "n_views": lambda wc: n_views(wc.dataset),
+    }
+
+
 def synthesis_camera_sets(dataset):
     """The calibration under test and, on synthetic data, the ground-truth cameras."""
     return ["complete"] + (["ground_truth"] if is_synthetic(dataset) else [])

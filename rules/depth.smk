@@ -7,20 +7,22 @@ rule depth:
     input:
         unpack(depth_inputs),
     output:
-        **{
-            f"{kind}_{reg}": (
-                report(
-                    f"results/{{dataset}}/depth/{reg}/{{cam}}.png",
-                    caption="../report/depth.rst",
-                    category="Depth",
-                    subcategory=f"registration {reg}",
-                )
-                if kind == "preview"
-                else f"results/{{dataset}}/depth/{reg}/{{cam}}.{ext}"
-            )
-            for reg in ("a", "b")
-            for kind, ext in (("depth", "npy"), ("preview", "png"), ("info", "json"))
-        },
+        depth_a="results/{dataset}/depth/a/{cam}.npy",
+        preview_a=report(
+            "results/{dataset}/depth/a/{cam}.png",
+            caption="../report/depth.rst",
+            category="Depth",
+            subcategory="registration a",
+        ),
+        info_a="results/{dataset}/depth/a/{cam}.json",
+        depth_b="results/{dataset}/depth/b/{cam}.npy",
+        preview_b=report(
+            "results/{dataset}/depth/b/{cam}.png",
+            caption="../report/depth.rst",
+            category="Depth",
+            subcategory="registration b",
+        ),
+        info_b="results/{dataset}/depth/b/{cam}.json",
     log:
         log_path("depth", "{cam}"),
     benchmark:

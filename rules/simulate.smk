@@ -106,9 +106,9 @@ rule ground_truth_render:
 
 # The other views of the full-set shot (the middle array shot, whose complete N x N set
 # of ideal renders is a target) in one job: the scene's textures are loaded once, and
-# N^2 - 2 job start-ups (about 2 s each) are saved. Other single views (the central
-# view of every shot, Exp. 3's lateral views) stay with ground_truth_render. One rule
-# per distinct N, as rule convert.
+# N^2 - 2 job start-ups (about 2 s each) are saved. The central view of every shot has
+# a job of its own below; other single views (Exp. 3's lateral views) stay with
+# ground_truth_render. One rule per distinct N, as rule convert.
 for _i, (_n, _datasets) in enumerate(convert_groups()):
     _syn = [d for d in _datasets if is_synthetic(d)]
     _set = [v for v in view_names(_n) if v != central_view(_n)]

@@ -34,12 +34,7 @@ for _exp in (1, 2, 3):
             mem_mb=4000,
             runtime=60,
         params:
-            experiment=_exp,
-            verify=lambda wc: stage_config("verify"),
-            depth=lambda wc: synthesis_depth_config(),
-            views_dir=lambda wc: res(wc.dataset, "views"),
-            array_cams=lambda wc: array_cams(wc.dataset),
-            n_views=lambda wc: n_views(wc.dataset),
+            **synthesis_params(_exp),
         script:
             "../scripts/synthesis.py"
 
@@ -71,12 +66,7 @@ for _exp in SPLIT_EXPERIMENTS:
             mem_mb=4000,
             runtime=60,
         params:
-            experiment=_exp,
-            verify=lambda wc: stage_config("verify"),
-            depth=lambda wc: synthesis_depth_config(),
-            views_dir=lambda wc: res(wc.dataset, "views"),
-            array_cams=lambda wc: array_cams(wc.dataset),
-            n_views=lambda wc: n_views(wc.dataset),
+            **synthesis_params(_exp),
         script:
             "../scripts/synthesis.py"
 

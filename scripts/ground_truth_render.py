@@ -3,10 +3,10 @@ full-set shot) and ground_truth_render_central (the central view of every shot):
 pinhole renders and z-depth maps, the views named by the image paths
 (``.../renders/<cam>/<view>.png``)."""
 
-from pathlib import Path
 
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 
+from plenocal.names import file_key
 from plenocal.rulelog import rule_logger
 from plenocal.simulate.groundtruth import render_views
 
@@ -15,12 +15,12 @@ log = rule_logger(snakemake, "ground_truth_render")
 
 
 def paths(x) -> list[str]:
-    """A named output as a list: one path (ground_truth_render) or several (_set)."""
+    """A named output as a list: one path (ground_truth_render) or several (_set, _central)."""
     return [x] if isinstance(x, str) else list(x)
 
 
 images = paths(snakemake.output.image)
 render_views([p for p in snakemake.input if p.endswith("scene.json")][0], snakemake.input.cams,
-             [f"{Path(p).parent.name}/{Path(p).stem}" for p in images],
+             [file_key(p) for p in images],
              int(snakemake.params.supersample), images, paths(snakemake.output.depth),
              log=log.info)

@@ -9,6 +9,7 @@ import numpy as np
 
 from plenocal.export.mpeg_views import export_views
 from plenocal.io.files import read_image
+from plenocal.names import file_key
 from plenocal.rulelog import rule_logger
 from plenocal.verify.experiments import experiment_plan, layout_from_cams
 
@@ -17,9 +18,9 @@ log = rule_logger(snakemake, "mpeg_views")
 
 verify = dict(snakemake.params.verify)
 layout = layout_from_cams(list(snakemake.params.array_cams), int(snakemake.params.n_views))
-depth_files = {f"{Path(p).parent.name}/{Path(p).stem}": p for p in snakemake.input.depth}
-view_files = {f"{Path(p).parent.name}/{Path(p).stem}": p for p in snakemake.input.views}
-sets = [layout.middle_cam] if verify["exp2_sets"] == "middle" else layout.cams
+depth_files = {file_key(p): p for p in snakemake.input.depth}
+view_files = {file_key(p): p for p in snakemake.input.views}
+sets = layout.exp2_cams(verify["exp2_sets"])
 plans = {}
 for exp in (1, 2, 3):
     plans.update(experiment_plan(layout, exp, sets, int(verify["exp3_view_stride"])))

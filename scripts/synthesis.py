@@ -18,6 +18,7 @@ from plenocal.artifacts.results import (
 from plenocal.artifacts.rig import read_rig
 from plenocal.depth.inputs import rig_bounds
 from plenocal.io.files import to_uint8, write_image
+from plenocal.names import file_key
 from plenocal.rulelog import rule_logger
 from plenocal.verify.experiments import layout_from_cams
 from plenocal.verify.synthesis import synthesis_job, synthesis_result, synthesis_runs
@@ -33,7 +34,7 @@ near, far = rig_bounds(read_rig(snakemake.input.rig), float(cfg["depth"]["bounds
 
 def load_depths(paths):
     """{"<cam>/<view>": z-depth} of results/.../<cam>/<view>.npy files."""
-    return {f"{Path(p).parent.name}/{Path(p).stem}": np.load(p) for p in paths}
+    return {file_key(p): np.load(p) for p in paths}
 
 
 depths = {"estimated": load_depths(snakemake.input.depth)}

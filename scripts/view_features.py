@@ -7,12 +7,13 @@ import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.calib.reg_a import viewdb
 from plenocal.io.files import make_temp_dir
+from plenocal.names import file_key
 from plenocal.rulelog import log_to_file
 
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821
 cfg = sm.params.sfm
-views = {f"{Path(p).parent.name}/{Path(p).stem}": p for p in sm.input.views}
+views = {file_key(p): p for p in sm.input.views}
 out_db = Path(sm.output[0])
 out_db.parent.mkdir(parents=True, exist_ok=True)
 # the database moves into place only once complete; a killed job's temporary folder is

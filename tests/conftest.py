@@ -30,11 +30,17 @@ def workflow_copy(dest: Path) -> Path:
     return dest
 
 
+def tiny_workflow(dest: Path) -> Path:
+    """The workflow's files with tests/tiny/config.yaml as its config, in ``dest``."""
+    work = workflow_copy(dest)
+    shutil.copy2(ROOT / "tests" / "tiny" / "config.yaml", work / "config.yaml")
+    return work
+
+
 @pytest.fixture(scope="session")
 def tiny_complete_run(tmp_path_factory) -> Path:
     """A folder in which the whole default target of tests/tiny/config.yaml has run."""
-    work = workflow_copy(tmp_path_factory.mktemp("complete"))
-    shutil.copy2(ROOT / "tests" / "tiny" / "config.yaml", work / "config.yaml")
+    work = tiny_workflow(tmp_path_factory.mktemp("complete"))
     proc = snakemake(work)
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-4000:]
     return work

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from synth.lenslets import lenslet_from_patch_size, random_texture
 
-from plenocal.cli import build_parser, convert_config, main, with_defaults
+from plenocal.cli import build_parser, convert_config, main, validate_convert_block
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_image, write_image
 from plenocal.io.raytrix import LensType, RayCalib, write_calib
@@ -82,7 +82,7 @@ def test_options_map_onto_the_convert_keys():
     a = p.parse_args(["convert", "l.png", "c.xml", "-o", "d", "--tile-size", "9"])
     cfg = convert_config(a)
     assert cfg == {"tile_size": 9}  # the rest: the schema's defaults (grid auto, mla auto)
-    assert with_defaults(cfg)["grid"] == with_defaults(cfg)["mla"] == "auto"
+    assert validate_convert_block(cfg)["grid"] == validate_convert_block(cfg)["mla"] == "auto"
     with pytest.raises(SystemExit):
         p.parse_args(["convert", "l.png", "c.xml", "-o", "d", "--tile-size", "big"])
     with pytest.raises(SystemExit):

@@ -18,7 +18,13 @@ import pytest
 import yaml
 
 from plenocal import config as config_module
-from plenocal.config import ConfigError, stage_defaults, validate_config, with_defaults
+from plenocal.config import (
+    ConfigError,
+    settings_from,
+    stage_defaults,
+    validate_config,
+    with_defaults,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 STAGES = ("convert", "sfm", "rig", "depth", "scale", "verify")
@@ -138,6 +144,9 @@ def test_dataclass_defaults_are_the_schema_defaults():
     cfg = _validated()
     assert ConvertSettings() == ConvertSettings.from_config(cfg["convert"])
     assert PlaneSweepOptions() == planesweep_options(cfg["depth"])
+    # a block's keys that are no field of the dataclass (sub-blocks, other stages') are left
+    assert settings_from(PlaneSweepOptions, {"window": 9, "sgm": {}, "backend": "auto"}) == \
+        PlaneSweepOptions(window=9)
     assert SgmOptions() == sgm_options(cfg["depth"]["sgm"])
     assert ColmapOptions() == colmap_options(cfg["depth"])
     assert DibrOptions() == dibr_options(cfg["verify"])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import pytest
 
@@ -31,6 +32,8 @@ def test_views_and_keys_round_trip():
     assert key == "hand02/4_1"
     assert names.split_key(key) == ("hand02", "4_1")
     assert names.key_shot(key) == "hand02" and names.key_view(key) == "4_1"
+    assert names.file_key("results/d/views/hand02/4_1.png") == key
+    assert names.file_key(Path("depth/views/x01_y00/10_3.npy")) == "x01_y00/10_3"
     for bad in ("hand02", "hand02/4-1", "x01_y00/2_2/x", "cam/2_2"):
         assert not names.is_key(bad)
         with pytest.raises(names.BadName, match=re.escape(repr(bad))):

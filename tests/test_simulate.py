@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import json
 import math
 from pathlib import Path
 
@@ -144,6 +145,15 @@ def test_dataset_files(tmp_path: Path):
     for f in ("calib.xml", "camera.yaml", "truth/scene.json", "truth/shots.json",
               "truth/optics.json"):
         assert (tmp_path / f).read_bytes() == (tmp_path / "again" / f).read_bytes(), f
+    # the optics read back are the optics written; a file without one of them is refused
+    from plenocal.simulate.dataset import optics_from_truth
+
+    assert optics_from_truth(tmp_path / "truth" / "optics.json") == optics
+    doc = json.loads((tmp_path / "truth" / "optics.json").read_text())
+    del doc["mla_f_number"]
+    (tmp_path / "old.json").write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match="old.json: no mla_f_number.*simulate_setup"):
+        optics_from_truth(tmp_path / "old.json")
 
 
 def test_shots_array_on_the_stage_and_hand_held_orbiting_the_scene():

@@ -101,6 +101,11 @@ def test_plan_and_shared_depth(dataset):
         f"{c}/{inner_corner_view(layout, c)}" for c in layout.corners]
     assert [lateral_view(_ctx(root, cams), c) for c in layout.corners] == [
         inner_corner_view(layout, c) for c in layout.corners]
+    # Exp. 2 reads the side views of the middle shot's set, or of every shot's
+    assert layout.exp2_cams("middle") == [layout.middle_cam]
+    assert layout.exp2_cams("all") == layout.cams and len(layout.cams) > 1
+    assert experiment_input_views(layout, 2, "all") == [
+        f"{c}/{v}" for c in layout.cams for v in layout.side_views()]
     true = {k: render_plane(cams[k], plane)[1] for k in keys}
     bad_cams = dict(cams)
     k = "x01_y00/1_1"  # a target off by 1 mm

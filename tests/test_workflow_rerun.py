@@ -15,19 +15,12 @@ from pathlib import Path
 
 import pytest
 import yaml
+from conftest import snakemake
 
-ROOT = Path(__file__).resolve().parents[1]
-FILES = ["Snakefile", "rules", "scripts", "config.schema.yaml", "report", "envs", "profiles"]
 VERIFY_RULES = {"synthesis_exp1", "synthesis_exp2", "synthesis_exp3_part", "synthesis_exp3",
                 "report", "all"}
 
 pytestmark = pytest.mark.workflow
-
-
-def snakemake(work: Path, *args: str, timeout: int = 1500) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "snakemake", "-j2", "--workflow-profile",
-                           "none", *args], cwd=work, capture_output=True, text=True,
-                          timeout=timeout)
 
 
 def planned(work: Path) -> dict[str, int]:

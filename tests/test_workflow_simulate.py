@@ -5,28 +5,12 @@ from __future__ import annotations
 
 import hashlib
 import re
-import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 import yaml
-
-ROOT = Path(__file__).resolve().parents[1]
-FILES = ["Snakefile", "rules", "scripts", "config.schema.yaml", "report", "envs", "profiles"]
-
-
-def workflow_copy(dest: Path) -> Path:
-    dest.mkdir(parents=True)
-    for name in FILES:
-        src = ROOT / name
-        if src.is_dir():
-            shutil.copytree(src, dest / name)
-        else:
-            shutil.copy2(src, dest / name)
-    shutil.copy2(ROOT / "tests" / "tiny" / "config.yaml", dest / "config.yaml")
-    return dest
+from conftest import snakemake, tiny_workflow
 
 
 def array_shots(work: Path) -> list[str]:
@@ -48,9 +32,7 @@ def targets(work: Path) -> list[str]:
 
 
 def run(work: Path, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "snakemake", "-j2", "--workflow-profile",
-                           "none", *args], cwd=work, capture_output=True, text=True,
-                          timeout=900)
+    return snakemake(work, *args, timeout=900)
 
 
 def digest(work: Path) -> dict[str, str]:
@@ -65,8 +47,8 @@ def digest(work: Path) -> dict[str, str]:
 
 @pytest.mark.workflow
 def test_simulate_from_clean_directory_is_reproducible(tmp_path: Path):
-    a = workflow_copy(tmp_path / "a")
-    b = workflow_copy(tmp_path / "b")
+    a = tiny_workflow(tmp_path / "a")
+    b = tiny_workflow(tmp_path / "b")
     for work in (a, b):
         proc = run(work, *targets(work))
         assert proc.returncode == 0, proc.stderr[-3000:]
@@ -93,7 +75,7 @@ def test_simulate_from_clean_directory_is_reproducible(tmp_path: Path):
 
 @pytest.mark.workflow
 def test_bad_config_stops_before_any_job(tmp_path: Path):
-    work = workflow_copy(tmp_path / "w")
+    work = tiny_workflow(tmp_path / "w")
     cfg = yaml.safe_load((work / "config.yaml").read_text())
     cfg["datasets"]["tiny"]["views"] = 4
     (work / "config.yaml").write_text(yaml.safe_dump(cfg))
@@ -130,7 +112,7 @@ def test_critical_chain_goes_first(tmp_path: Path):
     with the calibration (B, depth, scale, merge), then the synthesis (ground-truth
     renders, synthesis depth, the experiments), then what can wait (the other Table I
     rows, the hand-held shots' depth maps): rules/common.smk PRIORITY."""
-    work = workflow_copy(tmp_path / "w")
+    work = tiny_workflow(tmp_path / "w")
     proc = run(work, "-n")
     assert proc.returncode == 0, proc.stderr[-3000:]
     prios = _planned_priorities(proc.stdout + proc.stderr)

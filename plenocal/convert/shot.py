@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
@@ -36,7 +36,7 @@ import numpy as np
 import yaml
 
 from plenocal.artifacts.disparity import disparity_record
-from plenocal.config import stage_defaults, with_defaults
+from plenocal.config import settings_from, stage_defaults, with_defaults
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.levels import significant_bits, to_unit_float
 from plenocal.convert.patchsize import (
@@ -62,12 +62,6 @@ from plenocal.optics import view_spacing
 from plenocal.viewgeom import MLA_KINDS, ViewLayout, make_layout
 
 log = logging.getLogger("plenocal.convert")
-
-
-def _known_fields(cls, cfg: dict):
-    """A settings dataclass from the config keys that name its fields."""
-    names = {f.name for f in fields(cls)}
-    return cls(**{k: v for k, v in cfg.items() if k in names})
 
 
 def _percentiles(pct: list) -> tuple[float, float]:
@@ -131,8 +125,8 @@ class ConvertSettings:
             bit_depth=bits if isinstance(bits, str) else int(bits),
             devignette=bool(cfg["devignette"]),
             grid=str(cfg["grid"]),
-            patch=_known_fields(PatchSizeSettings, cfg["patch_size"]),
-            render=_known_fields(RenderSettings, cfg["blend"]),
+            patch=settings_from(PatchSizeSettings, cfg["patch_size"]),
+            render=settings_from(RenderSettings, cfg["blend"]),
         )
 
 

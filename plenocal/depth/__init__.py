@@ -6,13 +6,12 @@ patch-match stereo (:mod:`plenocal.depth.colmap_mvs`, GPU only)."""
 from __future__ import annotations
 
 import tempfile
-from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
 
 from plenocal.camera import PinholeCamera
-from plenocal.config import with_defaults
+from plenocal.config import settings_from, with_defaults
 from plenocal.depth.colmap_mvs import (
     COLMAP_HINT,
     ColmapOptions,
@@ -28,17 +27,13 @@ __all__ = ["DepthBackendError", "estimate_depth", "planesweep_options", "resolve
 def planesweep_options(cfg: dict | None) -> PlaneSweepOptions:
     """PlaneSweepOptions from the config's ``depth`` block, partial or whole (missing keys:
     the schema's defaults; unknown keys ignored)."""
-    cfg = with_defaults("depth", cfg)
-    names = {f.name for f in fields(PlaneSweepOptions)}
-    return PlaneSweepOptions(**{k: v for k, v in cfg.items() if k in names})
+    return settings_from(PlaneSweepOptions, with_defaults("depth", cfg))
 
 
 def colmap_options(cfg: dict | None) -> ColmapOptions:
     """ColmapOptions from the config's ``depth`` block (its ``colmap`` settings), partial or
     whole."""
-    cfg = with_defaults("depth", cfg)["colmap"]
-    names = {f.name for f in fields(ColmapOptions)}
-    return ColmapOptions(**{k: v for k, v in cfg.items() if k in names})
+    return settings_from(ColmapOptions, with_defaults("depth", cfg)["colmap"])
 
 
 def resolve_backend(name: str) -> str:

@@ -4,6 +4,7 @@ and the lenslet images (DESIGN.md "The simulator, and ground truth")."""
 from __future__ import annotations
 
 import math
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -129,24 +130,18 @@ def setup_dataset(sim: dict, out_dir: str | Path) -> None:
                                                           sort_keys=True))
 
 
-_TRUTH_OPTICS_KEYS = ("focal_length", "focus_distance", "mla_pitch", "mla_f_number", "k",
-                      "pixel_size", "width", "height", "aperture_scale", "kind",
-                      "type_focal_ratios")
-
-
 def optics_from_truth(path: str | Path) -> PlenopticOptics:
+    """The simulated camera's optics from ``truth/optics.json``: the fields of
+    :class:`PlenopticOptics` (its ``to_dict`` wrote them there, beside derived values)."""
     d = read_json(path)
-    missing = [k for k in _TRUTH_OPTICS_KEYS if k not in d]
+    names = [f.name for f in fields(PlenopticOptics)]
+    missing = [k for k in names if k not in d]
     if missing:
         raise ValueError(f"{path}: no {', '.join(missing)} (written by an older simulator); "
                          "rerun rule simulate_setup")
-    return PlenopticOptics(
-        focal_length=d["focal_length"], focus_distance=d["focus_distance"],
-        mla_pitch=d["mla_pitch"], mla_f_number=d["mla_f_number"], k=d["k"],
-        pixel_size=d["pixel_size"], width=int(d["width"]), height=int(d["height"]),
-        aperture_scale=d["aperture_scale"], kind=d["kind"],
-        type_focal_ratios=tuple(d["type_focal_ratios"]),
-    )
+    return PlenopticOptics(**{**{k: d[k] for k in names}, "width": int(d["width"]),
+                              "height": int(d["height"]),
+                              "type_focal_ratios": tuple(d["type_focal_ratios"])})
 
 
 def sensor_truth(sim: dict) -> dict:

@@ -40,6 +40,11 @@ class ArrayLayout:
         cams = self.cams
         return cams[len(cams) // 2]
 
+    def exp2_cams(self, exp2_sets: str) -> list[str]:
+        """The shots whose sets Exp. 2 runs on, by the config's ``verify.exp2_sets``:
+        ``middle`` (the middle shot's set, Fig. 8) or ``all`` (every array shot's)."""
+        return [self.middle_cam] if exp2_sets == "middle" else self.cams
+
     def side_views(self) -> list[str]:
         """Middle views of the four sides of the N x N set (Fig. 6b)."""
         n, h = self.n_views, (self.n_views - 1) // 2
@@ -59,15 +64,15 @@ def all_views(n: int) -> list[str]:
     return [view_name(r, c) for r in range(n) for c in range(n)]
 
 
-def experiment_plan(layout: ArrayLayout, exp: int, exp2_sets: list[str] | None = None,
+def experiment_plan(layout: ArrayLayout, exp: int, exp2_cams: list[str] | None = None,
                     stride: int = 1,
                     lateral: Callable[[str], str] | None = None) -> dict[str, tuple[list[str],
                                                                                    list[str]]]:
     """The (inputs, targets) of experiment ``exp`` by run name: ``exp1``;
-    ``exp2_<cam>`` per set of ``exp2_sets`` (default the middle shot's); ``exp3_central``
-    and ``exp3_lateral`` (every ``stride``-th view row/column, the centre always
-    included; ``lateral`` maps a corner shot to its lateral view, default
-    :func:`inner_corner_view`)."""
+    ``exp2_<cam>`` per set of ``exp2_cams`` (default the middle shot's; the config's
+    choice: :meth:`ArrayLayout.exp2_cams`); ``exp3_central`` and ``exp3_lateral`` (every
+    ``stride``-th view row/column, the centre always included; ``lateral`` maps a corner
+    shot to its lateral view, default :func:`inner_corner_view`)."""
     L = layout
     n, cv = L.n_views, L.centre_view
     corners = [f"{c}/{cv}" for c in L.corners]
@@ -75,7 +80,7 @@ def experiment_plan(layout: ArrayLayout, exp: int, exp2_sets: list[str] | None =
         return {"exp1": (corners, [f"{c}/{cv}" for c in L.cams if f"{c}/{cv}" not in corners])}
     if exp == 2:
         out = {}
-        for cam in exp2_sets or [L.middle_cam]:
+        for cam in exp2_cams or [L.middle_cam]:
             inputs = [f"{cam}/{v}" for v in L.side_views()]
             out[f"exp2_{cam}"] = (inputs, [f"{cam}/{v}" for v in all_views(n)
                                            if f"{cam}/{v}" not in inputs])
@@ -107,6 +112,5 @@ def experiment_input_views(layout: ArrayLayout, exp: int,
                            exp2_sets: str = stage_defaults("verify")["exp2_sets"]) -> list[str]:
     """The views whose depth maps experiment ``exp`` reads (Exp. 3's lateral views as
     :func:`inner_corner_view` predicts them)."""
-    sets = [layout.middle_cam] if exp2_sets == "middle" else layout.cams
-    plan = experiment_plan(layout, exp, sets)
+    plan = experiment_plan(layout, exp, layout.exp2_cams(exp2_sets))
     return list(dict.fromkeys(k for inputs, _ in plan.values() for k in inputs))

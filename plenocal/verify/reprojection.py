@@ -54,7 +54,7 @@ import logging
 import shutil
 import struct
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 
 import numpy as np
@@ -70,7 +70,6 @@ from plenocal.verify import point_refinement
 
 log = logging.getLogger(__name__)
 _REPROJ = cm.SFM_DEFAULTS["reprojection"]  # the triangulation's defaults: the schema's
-_SEED, _THREADS = cm.SFM_DEFAULTS["seed"], cm.SFM_DEFAULTS["num_threads"]
 
 
 def triangulation_options(max_error_px: float, min_angle_deg: float, seed: int,
@@ -145,16 +144,23 @@ def observation_errors(rec, cameras: Mapping[str, PinholeCamera],
     COLMAP's binary files (a million observations: 0.5 s, against 17 s through the
     Python bindings)."""
     obs, ids, xyz = read_model(rec, work_dir)
-    errs = []
-    for image_id in sorted(rec.reg_image_ids()):
-        name = rec.image(image_id).name
+    names = [rec.image(image_id).name for image_id in sorted(rec.reg_image_ids())]
+    errs = [np.linalg.norm(cameras[name].project(xyz[rows])[0] - uv, axis=1)
+            for name, rows, uv in _image_observations(obs, ids, names)]
+    return np.concatenate(errs) if errs else np.zeros(0)
+
+
+def _image_observations(obs: Mapping[str, tuple[np.ndarray, np.ndarray]], ids: np.ndarray,
+                       names: Iterable[str]) -> Iterator[tuple[str, np.ndarray, np.ndarray]]:
+    """The observations of a model read by :func:`read_model` (``obs``, point ``ids``),
+    image by image in the order of ``names``: (name, each observation's row in ``ids``,
+    its pixel in the internal convention: keypoint - 0.5); images without any are left
+    out."""
+    for name in names:
         kp, pid = obs[name]
         has = pid != _INVALID_POINT3D
-        if not has.any():
-            continue
-        uv, _ = cameras[name].project(xyz[np.searchsorted(ids, pid[has])])
-        errs.append(np.linalg.norm(uv - (kp[has] - 0.5), axis=1))
-    return np.concatenate(errs) if errs else np.zeros(0)
+        if has.any():
+            yield name, np.searchsorted(ids, pid[has]), kp[has] - 0.5
 
 
 def triangulate(rec, database: str | Path, options, seed: int,
@@ -222,21 +228,15 @@ def adjust_points(rec, cameras: Mapping[str, PinholeCamera],
     observations, the cameras (``cameras``: image name -> PinholeCamera) fixed. Returns the
     number of points."""
     obs, ids, xyz = read_model(rec, work_dir)
-    names = [n for n in sorted(obs) if (obs[n][1] != _INVALID_POINT3D).any()]
-    if not names:
+    seen = list(_image_observations(obs, ids, sorted(obs)))
+    if not seen:
         return 0
     P = np.stack([point_refinement.projection_matrices(cameras[n].K, cameras[n].world_to_cam)
-                  for n in names])
-    point, image, uv = [], [], []
-    for i, name in enumerate(names):
-        kp, pid = obs[name]
-        has = pid != _INVALID_POINT3D
-        point.append(np.searchsorted(ids, pid[has]))
-        image.append(np.full(int(has.sum()), i))
-        uv.append(kp[has] - 0.5)
-    refined, _ = point_refinement.refine_points(xyz, np.concatenate(point),
+                  for n, _, _ in seen])
+    image = [np.full(len(rows), i) for i, (_, rows, _) in enumerate(seen)]
+    refined, _ = point_refinement.refine_points(xyz, np.concatenate([r for _, r, _ in seen]),
                                                 np.concatenate(image), P,
-                                                np.concatenate(uv))
+                                                np.concatenate([uv for _, _, uv in seen]))
     points = rec.points3D
     for pid, x in zip(ids.tolist(), refined, strict=True):
         points[pid].xyz = x
@@ -257,8 +257,8 @@ def read_model(rec, work_dir: str | Path | None = None):
 def triangulated_stats(cameras: Mapping[str, PinholeCamera], database: str | Path, *,
                        max_error_px: float = _REPROJ["max_error_px"],
                        min_angle_deg: float = _REPROJ["min_angle_deg"],
-                       track_error_px: float = _REPROJ["track_error_px"], seed: int = _SEED,
-                       num_threads: int = _THREADS,
+                       track_error_px: float = _REPROJ["track_error_px"],
+                       seed: int = cm.DEFAULT_SEED, num_threads: int = cm.DEFAULT_THREADS,
                        work_dir: str | Path | None = None) -> dict:
     """Reprojection error of the calibration ``cameras`` (``"<cam>/<view>"`` ->
     PinholeCamera) on the verified matches of the view ``database``
@@ -321,8 +321,8 @@ def triangulated_stats(cameras: Mapping[str, PinholeCamera], database: str | Pat
 
 
 def reprojection_stats(cameras: Mapping[str, PinholeCamera], images: Mapping[str, str | Path],
-                       *, max_num_features: int = cm.SFM_DEFAULTS["max_num_features"],
-                       seed: int = _SEED, num_threads: int = _THREADS,
+                       *, max_num_features: int = cm.DEFAULT_MAX_FEATURES,
+                       seed: int = cm.DEFAULT_SEED, num_threads: int = cm.DEFAULT_THREADS,
                        work_dir: str | Path | None = None, **kwargs) -> dict:
     """:func:`triangulated_stats` on a view database built here from ``images`` (same
     names as ``cameras``): every pair within a shot and the same view across every two

@@ -34,7 +34,6 @@ from plenocal.camera import PinholeCamera
 from plenocal.names import view_key
 
 log = logging.getLogger(__name__)
-_SEED, _THREADS = cm.SFM_DEFAULTS["seed"], cm.SFM_DEFAULTS["num_threads"]  # the schema's
 
 
 def _large_scene_options(seed: int, num_threads: int):
@@ -75,8 +74,9 @@ def _continue_options(seed: int, num_threads: int, camera_ids: set[int]):
     return o
 
 
-def baseline_sfm(reg_a: RegistrationA, database: str | Path, central: str, *, seed: int = _SEED,
-                 num_threads: int = _THREADS, work_dir: str | Path | None = None
+def baseline_sfm(reg_a: RegistrationA, database: str | Path, central: str, *,
+                 seed: int = cm.DEFAULT_SEED, num_threads: int = cm.DEFAULT_THREADS,
+                 work_dir: str | Path | None = None
                  ) -> tuple[dict[str, PinholeCamera], dict]:
     """Register the views of the view ``database`` (:mod:`plenocal.calib.reg_a.viewdb`: SIFT
     and verified matches of every ``"<cam>/<view>"``) onto registration A (``reg_a``:
@@ -146,8 +146,9 @@ def baseline_sfm(reg_a: RegistrationA, database: str | Path, central: str, *, se
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def scratch_sfm(database: str | Path, *, seed: int = _SEED, num_threads: int = _THREADS,
-                work_dir: str | Path | None = None) -> dict:
+def scratch_sfm(database: str | Path, *, seed: int = cm.DEFAULT_SEED,
+                num_threads: int = cm.DEFAULT_THREADS, work_dir: str | Path | None = None
+                ) -> dict:
     """Plain incremental SfM of every view of the view ``database``, one shared camera
     at COLMAP's default focal guess: how many views register, in how many models, with
     which focal length."""

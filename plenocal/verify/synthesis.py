@@ -43,7 +43,7 @@ from plenocal.artifacts.results import (
     SynthImage,
 )
 from plenocal.camera import PinholeCamera
-from plenocal.config import with_defaults
+from plenocal.config import settings_from, with_defaults
 from plenocal.depth.quality import depth_quality
 from plenocal.depth.views import estimate_view_depth
 from plenocal.export.mpeg import mpeg_name
@@ -203,8 +203,7 @@ def lateral_view(ctx: SynthesisContext, cam: str) -> str:
 def dibr_options(cfg: Mapping) -> DibrOptions:
     """DibrOptions from the config's ``verify`` block (its ``dibr`` settings), partial or
     whole."""
-    d = with_defaults("verify", cfg)["dibr"]
-    return DibrOptions(**{k: v for k, v in d.items() if k in DibrOptions.__dataclass_fields__})
+    return settings_from(DibrOptions, with_defaults("verify", cfg)["dibr"])
 
 
 def _summary(scores: dict[str, float]) -> dict:
@@ -282,8 +281,7 @@ def run_experiment(exp: int, cameras: dict[str, PinholeCamera],
     if exp == 1:
         return experiment1(ctx)
     if exp == 2:
-        sets = [layout.middle_cam] if ctx.config["exp2_sets"] == "middle" else layout.cams
-        return experiment2(ctx, sets)
+        return experiment2(ctx, layout.exp2_cams(ctx.config["exp2_sets"]))
     if exp == 3:
         return experiment3(ctx, int(ctx.config["exp3_view_stride"]))
     raise ValueError(f"synthesis: no experiment {exp} (1, 2 or 3)")

@@ -65,7 +65,8 @@ EXTRACTORS = ("opencv", "colmap")
 #: the keyword defaults of the COLMAP steps: config.schema.yaml's sfm block
 SFM_DEFAULTS = stage_defaults("sfm")
 DEFAULT_EXTRACTOR = SFM_DEFAULTS["sift"]
-_SEED, _THREADS = SFM_DEFAULTS["seed"], SFM_DEFAULTS["num_threads"]
+DEFAULT_MAX_FEATURES = SFM_DEFAULTS["max_num_features"]
+DEFAULT_SEED, DEFAULT_THREADS = SFM_DEFAULTS["seed"], SFM_DEFAULTS["num_threads"]
 
 
 def _extraction_options(max_num_features: int, num_threads: int,
@@ -86,8 +87,8 @@ def _extraction_options(max_num_features: int, num_threads: int,
 def extract_features(database: str | Path, image_dir: str | Path,
                      groups: list[tuple[list[str], PinholeCamera | None]], *,
                      model: str = "PINHOLE",
-                     max_num_features: int = SFM_DEFAULTS["max_num_features"],
-                     num_threads: int = _THREADS, seed: int = _SEED,
+                     max_num_features: int = DEFAULT_MAX_FEATURES,
+                     num_threads: int = DEFAULT_THREADS, seed: int = DEFAULT_SEED,
                      first_octave: int = DEFAULT_FIRST_OCTAVE,
                      extractor: str = DEFAULT_EXTRACTOR) -> None:
     """SIFT into a new database. ``groups``: (image names, camera) pairs; all images of
@@ -166,7 +167,7 @@ def _write_opencv_sift(database: Path, image_dir: Path, names: set[str],
                 pycolmap.FeatureExtractorType.SIFT, desc))
 
 
-def opencv_sift(gray: np.ndarray, max_num_features: int = SFM_DEFAULTS["max_num_features"]
+def opencv_sift(gray: np.ndarray, max_num_features: int = DEFAULT_MAX_FEATURES
                 ) -> tuple[np.ndarray, np.ndarray]:
     """SIFT (Lowe 2004) of an 8-bit grey image by OpenCV, set up as COLMAP's CPU SIFT:
     3 scales per octave, first octave -1 (the image upsampled 2x, pixel-aligned as
@@ -233,7 +234,7 @@ def _matching_options(num_threads: int):
 
 
 def match(database: str | Path, pairs: Iterable[tuple[str, str]] | None = None, *,
-          seed: int = _SEED, num_threads: int = _THREADS,
+          seed: int = DEFAULT_SEED, num_threads: int = DEFAULT_THREADS,
           work_dir: str | Path | None = None) -> int:
     """Match and geometrically verify: every pair (``pairs`` None: exhaustive) or the
     given image-name pairs. Returns the number of verified pairs."""

@@ -37,8 +37,6 @@ from plenocal.calib.reg_a import colmap as cm
 from plenocal.io.files import atomic_write_dir, make_temp_dir
 from plenocal.names import is_handheld_shot
 
-_SEED, _THREADS = cm.SFM_DEFAULTS["seed"], cm.SFM_DEFAULTS["num_threads"]  # the schema's
-
 log = logging.getLogger(__name__)
 
 
@@ -66,8 +64,8 @@ MIN_KEYPOINTS = 100
 
 def features_a(views: Mapping[str, str | Path], image_dir: str | Path,
                database: str | Path, *,
-               max_num_features: int = cm.SFM_DEFAULTS["max_num_features"], seed: int = _SEED,
-               num_threads: int = _THREADS, first_octave: int = cm.DEFAULT_FIRST_OCTAVE,
+               max_num_features: int = cm.DEFAULT_MAX_FEATURES, seed: int = cm.DEFAULT_SEED,
+               num_threads: int = cm.DEFAULT_THREADS, first_octave: int = cm.DEFAULT_FIRST_OCTAVE,
                extractor: str = cm.DEFAULT_EXTRACTOR) -> dict:
     """Stage the central views (``views``: cam -> png) as ``<cam>.png`` in ``image_dir``
     and extract SIFT into a new ``database`` with one SIMPLE_PINHOLE camera for all
@@ -107,7 +105,8 @@ def features_a(views: Mapping[str, str | Path], image_dir: str | Path,
     return {"num_images": len(kp), "keypoints": kp, WARNINGS_KEY: warning_list(warnings)}
 
 
-def match_a(database: str | Path, *, seed: int = _SEED, num_threads: int = _THREADS) -> dict:
+def match_a(database: str | Path, *, seed: int = cm.DEFAULT_SEED,
+            num_threads: int = cm.DEFAULT_THREADS) -> dict:
     """Exhaustive matching with geometric verification."""
     n = cm.match(database, None, seed=seed, num_threads=num_threads)
     if n == 0:
@@ -159,8 +158,8 @@ def global_options(seed: int, num_threads: int):
 
 
 def run_mapper(database: str | Path, image_dir: str | Path, *,
-               mapper: str = cm.SFM_DEFAULTS["mapper"], seed: int = _SEED,
-               num_threads: int = _THREADS) -> dict:
+               mapper: str = cm.SFM_DEFAULTS["mapper"], seed: int = cm.DEFAULT_SEED,
+               num_threads: int = cm.DEFAULT_THREADS) -> dict:
     """Run the mapper; returns {model index: Reconstruction}."""
     import pycolmap  # noqa: PLC0415
 
@@ -253,8 +252,8 @@ def write_model(rec, folder: str | Path) -> None:
 
 
 def map_a(database: str | Path, image_dir: str | Path, model_dir: str | Path, *,
-          mapper: str = cm.SFM_DEFAULTS["mapper"], seed: int = _SEED,
-          num_threads: int = _THREADS) -> dict:
+          mapper: str = cm.SFM_DEFAULTS["mapper"], seed: int = cm.DEFAULT_SEED,
+          num_threads: int = cm.DEFAULT_THREADS) -> dict:
     """Map, check that every view registered into one model, write the model; returns
     registration A (what ``reg_a.json`` holds)."""
     import pycolmap  # noqa: PLC0415

@@ -46,8 +46,6 @@ from plenocal.calib.reg_a import colmap as cm
 from plenocal.camera import PinholeCamera, k_to_colmap
 
 _MATCHING = cm.SFM_DEFAULTS["view_matching"]  # the pairs' defaults: the schema's
-_MAX_FEATURES = cm.SFM_DEFAULTS["max_num_features"]
-_SEED, _THREADS = cm.SFM_DEFAULTS["seed"], cm.SFM_DEFAULTS["num_threads"]
 
 log = logging.getLogger(__name__)
 
@@ -113,8 +111,8 @@ def view_pairs(names: Iterable[str], shot_centres: Mapping[str, np.ndarray] | No
 
 
 def extract_view_features(images: Mapping[str, str | Path], database: str | Path,
-                          work_dir: str | Path, *, max_num_features: int = _MAX_FEATURES,
-                          seed: int = _SEED, num_threads: int = _THREADS,
+                          work_dir: str | Path, *, max_num_features: int = cm.DEFAULT_MAX_FEATURES,
+                          seed: int = cm.DEFAULT_SEED, num_threads: int = cm.DEFAULT_THREADS,
                           first_octave: int = cm.DEFAULT_FIRST_OCTAVE,
                           extractor: str = cm.DEFAULT_EXTRACTOR) -> dict:
     """SIFT of ``images`` (``"<cam>/<view>"`` -> png) into a new ``database``, one
@@ -210,7 +208,7 @@ def match_views(database: str | Path, *,
                 shot_centres: Mapping[str, np.ndarray] | None = None,
                 shot_neighbours: int | None = _MATCHING["shot_neighbours"],
                 view_radius: int | None = _MATCHING["view_radius"],
-                seed: int = _SEED, num_threads: int = _THREADS,
+                seed: int = cm.DEFAULT_SEED, num_threads: int = cm.DEFAULT_THREADS,
                 work_dir: str | Path | None = None) -> dict:
     """Match and verify, in the SIFT ``database`` itself, the pairs of
     :func:`view_pairs`. Returns counts and the time taken."""
@@ -240,8 +238,8 @@ def build_view_database(images: Mapping[str, str | Path], database: str | Path,
                         shot_centres: Mapping[str, np.ndarray] | None = None,
                         shot_neighbours: int | None = _MATCHING["shot_neighbours"],
                         view_radius: int | None = _MATCHING["view_radius"],
-                        max_num_features: int = _MAX_FEATURES, seed: int = _SEED,
-                        num_threads: int = _THREADS,
+                        max_num_features: int = cm.DEFAULT_MAX_FEATURES,
+                        seed: int = cm.DEFAULT_SEED, num_threads: int = cm.DEFAULT_THREADS,
                         first_octave: int = cm.DEFAULT_FIRST_OCTAVE,
                         extractor: str = cm.DEFAULT_EXTRACTOR) -> dict:
     """:func:`extract_view_features` and :func:`match_view_database` in one go (the
