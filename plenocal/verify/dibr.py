@@ -321,6 +321,13 @@ def _splat(points, K_t, R_t, t_t, zbuf):  # pragma: no cover - numba
                 continue  # behind, or no corner of the splat inside (also NaN / inf)
             x0 = int(math.floor(u))
             y0 = int(math.floor(v))
+            if x0 >= 0 and y0 >= 0 and x0 + 1 < Wt and y0 + 1 < Ht:
+                # the whole splat inside (nearly every point): minima without branches
+                for yy in range(y0, y0 + 2):
+                    for xx in range(x0, x0 + 2):
+                        cur = zbuf[yy, xx]
+                        zbuf[yy, xx] = zt if zt < cur else cur
+                continue
             for yy in range(max(y0, 0), min(y0 + 2, Ht)):
                 for xx in range(max(x0, 0), min(x0 + 2, Wt)):
                     if zt < zbuf[yy, xx]:
