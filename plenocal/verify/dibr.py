@@ -370,38 +370,37 @@ def _nearest_index(u, n):  # pragma: no cover - numba
 
 @numba.njit(cache=True, nogil=True)
 def _backward(zbuf, Kinv_t, R_t, C_t, K_s, R_s, t_s, aux, Ws, Hs, occlusion_tolerance,
-              edge_weight, filled_weight, mx, my, w, z):  # pragma: no cover - numba
+              edge_weight, filled_weight, mx, my, pos, w, z):  # pragma: no cover - numba
     """Per target pixel of depth ``zt`` (the z-buffer of :func:`_splat` as float32, 0
     where none): the pixel unprojected and projected into the input, which gives the
-    input's pixel (mx, my; -10 where zt = 0: the colour's sampling coordinates) and the
-    pixel's z-depth there (zs); the input's own aux (dense depth, discontinuity, filled)
-    at that pixel, nearest (as ``cv2.remap(aux, mx, my, INTER_NEAREST,
-    BORDER_CONSTANT)``); and the sample's weight ``w`` and depth ``z``. The sample is
+    input's pixel (u, v) and the pixel's z-depth there (zs); the input's own aux (dense
+    depth, discontinuity, filled) at that pixel, nearest (as ``cv2.remap(aux, u, v,
+    INTER_NEAREST, BORDER_CONSTANT)``); and the sample's weight ``w`` and depth ``z``. The sample is
     kept (``ok``) where the target has depth, the input pixel lies on the input (``Ws`` x
     ``Hs``, its camera's size) and the
     input's own depth there agrees with the warped one (within ``occlusion_tolerance``,
     relative); its weight is 1, times ``edge_weight`` at a depth discontinuity and
     ``filled_weight`` where the input's depth was filled (float32 products, as numpy's
-    on float32 arrays); ``z``: the target depth where kept, else 0. One pass for what
-    were a dozen array operations, a remap and two passes."""
+    on float32 arrays); ``z``: the target depth where kept, else 0. The coordinates of
+    the samples of positive weight (those blended) go to ``mx``, ``my`` (1-D, in pixel
+    order), their index there to ``pos`` (-1: none); returns their number. One pass for
+    what were a dozen array operations, a remap and two passes."""
     H, W = zbuf.shape
     Ha, Wa = aux.shape[0], aux.shape[1]
+    k = 0
     for y in range(H):
         for x in range(W):
             zb = zbuf[y, x]
             zt = np.float32(zb) if np.isfinite(zb) else np.float32(0.0)
             if not zt > 0:
-                mx[y, x] = -10.0
-                my[y, x] = -10.0
-                w[y, x] = 0.0  # no sample: no aux either (-10 is off the input)
+                pos[y, x] = -1
+                w[y, x] = 0.0
                 z[y, x] = 0.0
                 continue
             a, b, zs = _pixel_into(Kinv_t, R_t, C_t, R_s, t_s, x, y, np.float64(zt))
             d = K_s[2, 0] * a + K_s[2, 1] * b + K_s[2, 2] * zs
             u = np.float32((K_s[0, 0] * a + K_s[0, 1] * b + K_s[0, 2] * zs) / d)
             v = np.float32((K_s[1, 0] * a + K_s[1, 1] * b + K_s[1, 2] * zs) / d)
-            mx[y, x] = u
-            my[y, x] = v
             ix = _nearest_index(u, Wa)
             iy = _nearest_index(v, Ha)
             if ix >= 0 and iy >= 0:
@@ -419,6 +418,14 @@ def _backward(zbuf, Kinv_t, R_t, C_t, K_s, R_s, t_s, aux, Ws, Hs, occlusion_tole
                 wt = wt * filled_weight
             w[y, x] = wt
             z[y, x] = zt if ok else np.float32(0.0)
+            if wt > 0:
+                mx[k] = u
+                my[k] = v
+                pos[y, x] = k
+                k += 1
+            else:
+                pos[y, x] = -1
+    return k
 
 
 def depth_edges(depth: np.ndarray, ratio: float) -> np.ndarray:
@@ -458,48 +465,67 @@ def prepare_view(view: View | PreparedView, opt: DibrOptions) -> PreparedView:
 
 def warp_view(view: View | PreparedView, tgt: PinholeCamera,
               opt: DibrOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(colour (H, W, C), target depth (H, W), sample weight (H, W), 0 = no sample)."""
+    """(colour (H, W, C), target depth (H, W), sample weight (H, W), 0 = no sample:
+    there the colour is 0)."""
     pv = prepare_view(view, opt)
     channels = 1 if pv.image.ndim == 2 else pv.image.shape[2]
-    colour = np.empty((tgt.height, tgt.width, channels), np.float32)
-    z = np.empty((tgt.height, tgt.width), np.float32)
-    w = np.empty((tgt.height, tgt.width), np.float32)
-    _warp_into(pv, tgt, _geometry(tgt), opt, colour, z, w)
+    H, W = tgt.height, tgt.width
+    samples = np.empty((H * W, channels), np.float32)
+    pos = np.empty((H, W), np.int32)
+    z = np.empty((H, W), np.float32)
+    w = np.empty((H, W), np.float32)
+    _warp_into(pv, tgt, _geometry(tgt), opt, samples, pos, z, w)
+    colour = np.where((pos >= 0)[..., None], samples[np.maximum(pos, 0)], np.float32(0.0))
     return colour, z, w
 
 
 def _warp_into(pv: PreparedView, tgt: PinholeCamera, geometry: tuple[np.ndarray, ...],
-               opt: DibrOptions, colour: np.ndarray, z: np.ndarray, w: np.ndarray) -> None:
-    """:func:`warp_view` into the given arrays (C-contiguous float32: colour (H, W, C),
-    z and w (H, W)), so that :func:`synthesize` stacks the inputs without copies;
-    ``geometry``: the target's (:func:`_geometry`)."""
+               opt: DibrOptions, samples: np.ndarray, pos: np.ndarray, z: np.ndarray,
+               w: np.ndarray) -> None:
+    """:func:`warp_view` into the given arrays (C-contiguous: the colour samples
+    float32 (H * W, C), the first as many as the target has samples, pixel by pixel
+    in row order; ``pos`` int32 (H, W) their index there, -1 for none; z and w float32
+    (H, W)), so that :func:`synthesize` stacks the inputs without copies and samples
+    the colour only where it is blended; ``geometry``: the target's
+    (:func:`_geometry`). Each colour sample is the one ``cv2.remap`` of the whole image
+    gives at that pixel (a sample depends only on its coordinates)."""
     if opt.interpolation not in _INTERPOLATION:
         raise ValueError(f"config: verify.dibr.interpolation = {opt.interpolation!r}: must be "
                          f"one of {', '.join(_INTERPOLATION)}")
     zbuf = _zbuffer(pv.points, tgt, geometry)
     _, Kinv_t, R_t, C_t, _, _ = geometry
     K_s, _, _, _, R_s, t_s = pv.geometry
-    mx = np.empty(zbuf.shape, np.float32)
-    my = np.empty(zbuf.shape, np.float32)
-    _backward(zbuf, Kinv_t, R_t, C_t, K_s, R_s, t_s, pv.aux, pv.camera.width,
-              pv.camera.height, float(opt.occlusion_tolerance),
-              np.float32(opt.edge_weight), np.float32(opt.filled_weight), mx, my, w, z)
-    cv2.remap(pv.image, mx, my, _INTERPOLATION[opt.interpolation],
-              dst=colour[..., 0] if pv.image.ndim == 2 else colour,
+    H, W = zbuf.shape
+    mx = np.empty(H * W, np.float32)
+    my = np.empty(H * W, np.float32)
+    k = _backward(zbuf, Kinv_t, R_t, C_t, K_s, R_s, t_s, pv.aux, pv.camera.width,
+                  pv.camera.height, float(opt.occlusion_tolerance),
+                  np.float32(opt.edge_weight), np.float32(opt.filled_weight), mx, my, pos,
+                  w, z)
+    if k == 0:
+        return
+    rows = -(-k // W)  # the samples' coordinates as rows of the target's width
+    mx[k:rows * W] = -10.0
+    my[k:rows * W] = -10.0
+    dst = samples[:rows * W].reshape(rows, W, samples.shape[1])
+    cv2.remap(pv.image, mx[:rows * W].reshape(rows, W), my[:rows * W].reshape(rows, W),
+              _INTERPOLATION[opt.interpolation], dst=dst[..., 0] if pv.image.ndim == 2 else dst,
               borderMode=cv2.BORDER_REPLICATE)
 
 
 @numba.njit(cache=True, nogil=True)
-def _blend(colour, z, w, q, z_tolerance, depth_exponent):  # pragma: no cover - numba
-    """Per target pixel, the inputs' samples (colour (n, H, W, C), depth and weight
-    (n, H, W), float32) averaged with weights ``w q (z_near / z)^depth_exponent``
+def _blend(colour, pos, z, w, q, z_tolerance, depth_exponent):  # pragma: no cover - numba
+    """Per target pixel, the inputs' samples (colour (n, H * W, C) at ``pos`` (n, H, W),
+    depth and weight (n, H, W), float32; see :func:`_warp_into`) averaged with weights
+    ``w q (z_near / z)^depth_exponent``
     (the soft z-test; ``z_tolerance`` >= 0: only samples within that relative band of
     the nearest, the hard one). Returns the blend (float32, rounded from the float64
     average) and the total weight (float64; 0: no sample). The arithmetic is numpy's on
     the stacked arrays, input by input in order (float32 depth ratios and powers,
     float64 weights and sums); the power of a ratio of 1 (the nearest sample's) is 1
     and not computed."""
-    n, H, W, C = colour.shape
+    n, H, W = z.shape
+    C = colour.shape[2]
     out = np.empty((H, W, C), np.float32)
     tot = np.empty((H, W))
     band = np.float32(1.0 + z_tolerance)
@@ -528,7 +554,7 @@ def _blend(colour, z, w, q, z_tolerance, depth_exponent):  # pragma: no cover - 
                         wt = wt * np.float64(r ** exponent)
                 t += wt
                 for c in range(C):
-                    acc[c] += wt * np.float64(colour[i, y, x, c])
+                    acc[c] += wt * np.float64(colour[i, pos[i, y, x], c])
             tot[y, x] = t
             d = max(t, 1e-30)
             for c in range(C):
@@ -548,17 +574,18 @@ def synthesize(views: Sequence[View | PreparedView], target: PinholeCamera,
     if len(channels) != 1:
         raise ValueError(f"DIBR inputs differ in their channels ({sorted(channels)})")
     n, H, W = len(prepared), target.height, target.width
-    colour = np.empty((n, H, W, channels.pop()), np.float32)
+    colour = np.empty((n, H * W, channels.pop()), np.float32)
+    pos = np.empty((n, H, W), np.int32)
     z = np.empty((n, H, W), np.float32)
     w = np.empty((n, H, W), np.float32)
     geometry = _geometry(target)
     for i, pv in enumerate(prepared):
-        _warp_into(pv, target, geometry, opt, colour[i], z[i], w[i])
+        _warp_into(pv, target, geometry, opt, colour[i], pos[i], z[i], w[i])
     dist = np.array([np.linalg.norm(v.camera.centre - target.centre) for v in views])
     q = 1.0 / (dist ** 2 + opt.distance_eps ** 2)
     # float32 as the inpainting takes it; rounding first and clipping to [0, 1] after
     # gives the bits of clipping the float64 blend first (rounding keeps the order)
-    out, tot = _blend(colour, z, w, q,
+    out, tot = _blend(colour, pos, z, w, q,
                       -1.0 if opt.z_tolerance is None else float(opt.z_tolerance),
                       float(opt.depth_exponent))
     seen = tot > 0
