@@ -254,17 +254,6 @@ def _unproject(Kinv, R, C, x, y, z):  # pragma: no cover - numba
     return X0, X1, X2
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def _pixel_into(Kinv, R, C, R2, t2, x, y, z):  # pragma: no cover - numba
-    """Pixel (x, y) of a camera (see :func:`_unproject`) at z-depth ``z``, in the frame
-    of another camera (world-to-camera ``R2``, ``t2``): (a, b, c), c its z-depth there."""
-    X0, X1, X2 = _unproject(Kinv, R, C, x, y, z)
-    a = R2[0, 0] * X0 + R2[0, 1] * X1 + R2[0, 2] * X2 + t2[0]
-    b = R2[1, 0] * X0 + R2[1, 1] * X1 + R2[1, 2] * X2 + t2[1]
-    c = R2[2, 0] * X0 + R2[2, 1] * X1 + R2[2, 2] * X2 + t2[2]
-    return a, b, c
-
-
 @numba.njit(cache=True, nogil=True)
 def _world_points(depth, Kinv, R, C, points):  # pragma: no cover - numba
     """The world point (:func:`_unproject`) of every pixel of a z-depth map (float64)
@@ -369,24 +358,50 @@ def _nearest_index(u, n):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True, nogil=True)
-def _backward(zbuf, Kinv_t, R_t, C_t, K_s, R_s, t_s, aux, Ws, Hs, occlusion_tolerance,
+def _target_rays(Kinv, R, rays):  # pragma: no cover - numba
+    """Per target pixel the world direction of its ray (:func:`_unproject`'s ray
+    through the pixel rotated to the world, before the scaling by the depth), float64
+    (H, W, 3): the same for every input warped to the target, computed once."""
+    H, W = rays.shape[0], rays.shape[1]
+    for y in range(H):
+        for x in range(W):
+            cx = Kinv[0, 0] * x + Kinv[0, 1] * y + Kinv[0, 2]
+            cy = Kinv[1, 0] * x + Kinv[1, 1] * y + Kinv[1, 2]
+            cz = Kinv[2, 0] * x + Kinv[2, 1] * y + Kinv[2, 2]
+            rays[y, x, 0] = R[0, 0] * cx + R[0, 1] * cy + R[0, 2] * cz
+            rays[y, x, 1] = R[1, 0] * cx + R[1, 1] * cy + R[1, 2] * cz
+            rays[y, x, 2] = R[2, 0] * cx + R[2, 1] * cy + R[2, 2] * cz
+
+
+@numba.njit(cache=True, nogil=True)
+def _backward(zbuf, rays, C_t, K_s, R_s, t_s, aux, Ws, Hs, occlusion_tolerance,
               edge_weight, filled_weight, mx, my, pos, w, z):  # pragma: no cover - numba
     """Per target pixel of depth ``zt`` (the z-buffer of :func:`_splat` as float32, 0
-    where none): the pixel unprojected and projected into the input, which gives the
-    input's pixel (u, v) and the pixel's z-depth there (zs); the input's own aux (dense
-    depth, discontinuity, filled) at that pixel, nearest (as ``cv2.remap(aux, u, v,
-    INTER_NEAREST, BORDER_CONSTANT)``); and the sample's weight ``w`` and depth ``z``. The sample is
-    kept (``ok``) where the target has depth, the input pixel lies on the input (``Ws`` x
-    ``Hs``, its camera's size) and the
-    input's own depth there agrees with the warped one (within ``occlusion_tolerance``,
-    relative); its weight is 1, times ``edge_weight`` at a depth discontinuity and
-    ``filled_weight`` where the input's depth was filled (float32 products, as numpy's
-    on float32 arrays); ``z``: the target depth where kept, else 0. The coordinates of
-    the samples of positive weight (those blended) go to ``mx``, ``my`` (1-D, in pixel
-    order), their index there to ``pos`` (-1: none); returns their number. One pass for
-    what were a dozen array operations, a remap and two passes."""
+    where none): the pixel unprojected (its world ray ``rays``, :func:`_target_rays`,
+    times zt from the target's centre ``C_t``: the arithmetic of :func:`_unproject`) and
+    projected into the input, which gives the input's pixel (u, v) and the pixel's
+    z-depth there (zs); the input's own aux (dense depth, discontinuity, filled) at that
+    pixel, nearest (as ``cv2.remap(aux, u, v, INTER_NEAREST, BORDER_CONSTANT)``); and
+    the sample's weight ``w`` and depth ``z``. The sample is kept (``ok``) where the
+    target has depth, the input pixel lies on the input (``Ws`` x ``Hs``, its camera's
+    size) and the input's own depth there agrees with the warped one (within
+    ``occlusion_tolerance``, relative); its weight is 1, times ``edge_weight`` at a depth
+    discontinuity and ``filled_weight`` where the input's depth was filled (float32
+    products, as numpy's on float32 arrays); ``z``: the target depth where kept, else 0.
+    The coordinates of the samples of positive weight (those blended) go to ``mx``,
+    ``my`` (1-D, in pixel order), their index there to ``pos`` (-1: none); returns their
+    number. One pass for what were a dozen array operations, a remap and two passes; the
+    matrices' entries are read once, into locals."""
     H, W = zbuf.shape
     Ha, Wa = aux.shape[0], aux.shape[1]
+    c0, c1, c2 = C_t[0], C_t[1], C_t[2]
+    s00, s01, s02 = R_s[0, 0], R_s[0, 1], R_s[0, 2]
+    s10, s11, s12 = R_s[1, 0], R_s[1, 1], R_s[1, 2]
+    s20, s21, s22 = R_s[2, 0], R_s[2, 1], R_s[2, 2]
+    t0, t1, t2 = t_s[0], t_s[1], t_s[2]
+    k00, k01, k02 = K_s[0, 0], K_s[0, 1], K_s[0, 2]
+    k10, k11, k12 = K_s[1, 0], K_s[1, 1], K_s[1, 2]
+    k20, k21, k22 = K_s[2, 0], K_s[2, 1], K_s[2, 2]
     k = 0
     for y in range(H):
         for x in range(W):
@@ -397,10 +412,16 @@ def _backward(zbuf, Kinv_t, R_t, C_t, K_s, R_s, t_s, aux, Ws, Hs, occlusion_tole
                 w[y, x] = 0.0
                 z[y, x] = 0.0
                 continue
-            a, b, zs = _pixel_into(Kinv_t, R_t, C_t, R_s, t_s, x, y, np.float64(zt))
-            d = K_s[2, 0] * a + K_s[2, 1] * b + K_s[2, 2] * zs
-            u = np.float32((K_s[0, 0] * a + K_s[0, 1] * b + K_s[0, 2] * zs) / d)
-            v = np.float32((K_s[1, 0] * a + K_s[1, 1] * b + K_s[1, 2] * zs) / d)
+            zz = np.float64(zt)
+            X0 = c0 + rays[y, x, 0] * zz
+            X1 = c1 + rays[y, x, 1] * zz
+            X2 = c2 + rays[y, x, 2] * zz
+            a = s00 * X0 + s01 * X1 + s02 * X2 + t0
+            b = s10 * X0 + s11 * X1 + s12 * X2 + t1
+            zs = s20 * X0 + s21 * X1 + s22 * X2 + t2
+            d = k20 * a + k21 * b + k22 * zs
+            u = np.float32((k00 * a + k01 * b + k02 * zs) / d)
+            v = np.float32((k10 * a + k11 * b + k12 * zs) / d)
             ix = _nearest_index(u, Wa)
             iy = _nearest_index(v, Ha)
             if ix >= 0 and iy >= 0:
@@ -426,6 +447,14 @@ def _backward(zbuf, Kinv_t, R_t, C_t, K_s, R_s, t_s, aux, Ws, Hs, occlusion_tole
             else:
                 pos[y, x] = -1
     return k
+
+
+def _rays(tgt: PinholeCamera, geometry: tuple[np.ndarray, ...]) -> np.ndarray:
+    """The target's pixel rays (:func:`_target_rays`)."""
+    _, Kinv, R, _, _, _ = geometry
+    rays = np.empty((tgt.height, tgt.width, 3))
+    _target_rays(Kinv, R, rays)
+    return rays
 
 
 def depth_edges(depth: np.ndarray, ratio: float) -> np.ndarray:
@@ -474,14 +503,15 @@ def warp_view(view: View | PreparedView, tgt: PinholeCamera,
     pos = np.empty((H, W), np.int32)
     z = np.empty((H, W), np.float32)
     w = np.empty((H, W), np.float32)
-    _warp_into(pv, tgt, _geometry(tgt), opt, samples, pos, z, w)
+    geometry = _geometry(tgt)
+    _warp_into(pv, tgt, geometry, _rays(tgt, geometry), opt, samples, pos, z, w)
     colour = np.where((pos >= 0)[..., None], samples[np.maximum(pos, 0)], np.float32(0.0))
     return colour, z, w
 
 
 def _warp_into(pv: PreparedView, tgt: PinholeCamera, geometry: tuple[np.ndarray, ...],
-               opt: DibrOptions, samples: np.ndarray, pos: np.ndarray, z: np.ndarray,
-               w: np.ndarray) -> None:
+               rays: np.ndarray, opt: DibrOptions, samples: np.ndarray, pos: np.ndarray,
+               z: np.ndarray, w: np.ndarray) -> None:
     """:func:`warp_view` into the given arrays (C-contiguous: the colour samples
     float32 (H * W, C), the first as many as the target has samples, pixel by pixel
     in row order; ``pos`` int32 (H, W) their index there, -1 for none; z and w float32
@@ -493,12 +523,12 @@ def _warp_into(pv: PreparedView, tgt: PinholeCamera, geometry: tuple[np.ndarray,
         raise ValueError(f"config: verify.dibr.interpolation = {opt.interpolation!r}: must be "
                          f"one of {', '.join(_INTERPOLATION)}")
     zbuf = _zbuffer(pv.points, tgt, geometry)
-    _, Kinv_t, R_t, C_t, _, _ = geometry
+    C_t = geometry[3]
     K_s, _, _, _, R_s, t_s = pv.geometry
     H, W = zbuf.shape
     mx = np.empty(H * W, np.float32)
     my = np.empty(H * W, np.float32)
-    k = _backward(zbuf, Kinv_t, R_t, C_t, K_s, R_s, t_s, pv.aux, pv.camera.width,
+    k = _backward(zbuf, rays, C_t, K_s, R_s, t_s, pv.aux, pv.camera.width,
                   pv.camera.height, float(opt.occlusion_tolerance),
                   np.float32(opt.edge_weight), np.float32(opt.filled_weight), mx, my, pos,
                   w, z)
@@ -579,8 +609,9 @@ def synthesize(views: Sequence[View | PreparedView], target: PinholeCamera,
     z = np.empty((n, H, W), np.float32)
     w = np.empty((n, H, W), np.float32)
     geometry = _geometry(target)
+    rays = _rays(target, geometry)
     for i, pv in enumerate(prepared):
-        _warp_into(pv, target, geometry, opt, colour[i], pos[i], z[i], w[i])
+        _warp_into(pv, target, geometry, rays, opt, colour[i], pos[i], z[i], w[i])
     dist = np.array([np.linalg.norm(v.camera.centre - target.centre) for v in views])
     q = 1.0 / (dist ** 2 + opt.distance_eps ** 2)
     # float32 as the inpainting takes it; rounding first and clipping to [0, 1] after
