@@ -561,34 +561,41 @@ def _blend(colour, pos, z, w, q, z_tolerance, depth_exponent):  # pragma: no cov
     band = np.float32(1.0 + z_tolerance)
     exponent = np.float32(depth_exponent)
     one = np.float32(1.0)
-    acc = np.zeros(C)
-    for y in range(H):
+    zmin = np.empty(W, np.float32)
+    acc = np.empty((W, C))
+    for y in range(H):  # a row at a time, input by input (contiguous reads)
         for x in range(W):
-            zmin = np.float32(np.inf)
-            for i in range(n):
-                if w[i, y, x] > 0 and z[i, y, x] < zmin:
-                    zmin = z[i, y, x]
-            t = 0.0
-            acc[:] = 0.0
-            for i in range(n):
+            zmin[x] = np.inf
+        for i in range(n):
+            for x in range(W):
+                zi = z[i, y, x]
+                if w[i, y, x] > 0 and zi < zmin[x]:
+                    zmin[x] = zi
+        t = tot[y]
+        t[:] = 0.0
+        acc[:] = 0.0
+        for i in range(n):  # each pixel's sums in the inputs' order
+            qi = q[i]
+            for x in range(W):
                 wi = w[i, y, x]
                 if not wi > 0:
                     continue
                 zi = z[i, y, x]
-                if z_tolerance >= 0 and not zi <= np.float32(zmin * band):
+                if z_tolerance >= 0 and not zi <= np.float32(zmin[x] * band):
                     continue
-                wt = np.float64(wi) * q[i]
+                wt = np.float64(wi) * qi
                 if depth_exponent > 0:
-                    r = np.float32(zmin / zi)
+                    r = np.float32(zmin[x] / zi)
                     if r != one:  # pow(1, e) = 1 exactly
                         wt = wt * np.float64(r ** exponent)
-                t += wt
+                t[x] += wt
+                p = pos[i, y, x]
                 for c in range(C):
-                    acc[c] += wt * np.float64(colour[i, pos[i, y, x], c])
-            tot[y, x] = t
-            d = max(t, 1e-30)
+                    acc[x, c] += wt * np.float64(colour[i, p, c])
+        for x in range(W):
+            d = max(t[x], 1e-30)
             for c in range(C):
-                out[y, x, c] = acc[c] / d
+                out[y, x, c] = acc[x, c] / d
     return out, tot
 
 
