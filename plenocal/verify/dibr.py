@@ -134,35 +134,41 @@ def _push_first(v, w):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True, nogil=True)
-def _pull_holes(out, w, svs, sws):  # pragma: no cover - numba
-    """The pull of :func:`push_pull` at the pixels of ``out`` of zero weight ``w``
-    only: a level's own mean where it has weight, else the coarser level's, up to the
-    coarsest (``svs``, ``sws``: the levels above the first, fine to coarse) - the
-    values the full pull (:func:`_pull_up` level by level) gives there."""
-    H, W, C = out.shape
-    top = len(svs) - 1
+def _pull_up(mean, sv, sw):  # pragma: no cover - numba
+    """One pull level: the level's own mean where it has weight, else the coarser mean."""
+    H, W, C = sv.shape
+    out = np.empty((H, W, C), np.float32)
     eps = np.float32(1e-12)
     for y in range(H):
         for x in range(W):
-            if w[y, x] > 0:
-                continue
-            yy, xx = y // 2, x // 2
-            lev = 0
-            while lev < top and not sws[lev][yy, xx] > 0:
-                lev += 1
-                yy //= 2
-                xx //= 2
-            d = max(sws[lev][yy, xx], eps)
+            w = sw[y, x]
             for c in range(C):
-                out[y, x, c] = svs[lev][yy, xx, c] / d
+                if w > 0:
+                    out[y, x, c] = sv[y, x, c] / max(w, eps)
+                else:
+                    out[y, x, c] = mean[y // 2, x // 2, c]
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _pull_holes(out, w, mean):  # pragma: no cover - numba
+    """The last pull level at the pixels of zero weight only (the others keep their
+    values): the coarser level's mean."""
+    H, W, C = out.shape
+    for y in range(H):
+        for x in range(W):
+            if not w[y, x] > 0:
+                for c in range(C):
+                    out[y, x, c] = mean[y // 2, x // 2, c]
 
 
 def push_pull(values: np.ndarray, weight: np.ndarray) -> np.ndarray:
     """Fill pixels of zero weight by push-pull (pyramid) interpolation of the weighted
     ones; pixels of positive weight are returned unchanged. The pyramid's levels are the
-    2x2 sums of the weighted values and of the weights (float32); a pixel of zero
-    weight takes its coarser level's mean, the first coarser one with weight there (the
-    coarsest's in any case). Only the holes are pulled (:func:`_pull_holes`)."""
+    2x2 sums of the weighted values and of the weights (float32); pulling from the
+    coarsest, a pixel of zero weight takes the coarser level's mean. The first level is
+    summed without forming the weighted image (:func:`_push_first`) and the finest pull
+    only sets the holes (:func:`_pull_holes`)."""
     v = np.asarray(values, np.float32)
     squeeze = v.ndim == 2
     if squeeze:
@@ -170,13 +176,18 @@ def push_pull(values: np.ndarray, weight: np.ndarray) -> np.ndarray:
     v = np.ascontiguousarray(v)
     w = np.ascontiguousarray((np.asarray(weight, np.float32) > 0).astype(np.float32))
     out = v.copy()
-    if min(w.shape) > 1 and not w.all():
+    if w.all():
+        return out[..., 0] if squeeze else out
+    if min(w.shape) > 1:
         levels = [_push_first(v, w)]
         while min(levels[-1][1].shape) > 1:
             levels.append(_push_down(*levels[-1]))
-        _pull_holes(out, w, numba.typed.List([lv[0] for lv in levels]),
-                    numba.typed.List([lv[1] for lv in levels]))
-    elif not w.all():  # a single row or column: the pyramid's top is the image itself
+        cv_, cw = levels[-1]
+        mean = cv_ / np.maximum(cw, 1e-12)[..., None]
+        for sv, sw in reversed(levels[:-1]):
+            mean = _pull_up(np.ascontiguousarray(mean), sv, sw)
+        _pull_holes(out, w, np.ascontiguousarray(mean))
+    else:  # a single row or column: the pyramid's top is the image itself
         mean = (v * w[..., None]) / np.maximum(w, 1e-12)[..., None]
         out = np.where((w > 0)[..., None], v, mean)
     return out[..., 0] if squeeze else out
