@@ -6,7 +6,7 @@ split experiment (Exp. 3), rule synthesis_exp<k>_part runs one camera set
 import os
 from pathlib import Path
 
-import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
+import cv2  # first: see DESIGN.md on cv2/pycolmap
 import numpy as np
 
 from plenocal.artifacts.cameras import read_cameras
@@ -25,6 +25,7 @@ from plenocal.verify.synthesis import synthesis_job, synthesis_result, synthesis
 
 snakemake = globals()["snakemake"]
 log = rule_logger(snakemake, "synthesis")
+cv2.setNumThreads(max(1, int(snakemake.threads)))  # the job's cores only (the DIBR's remaps)
 
 cfg = dict(snakemake.params.verify)
 cfg["depth"] = dict(snakemake.params.depth)

@@ -25,6 +25,12 @@ Holes (pixels no input sees: disocclusions) are filled along the image rows by l
 interpolation between the seen pixels on either side - what RVS's triangles stretched
 across a depth discontinuity draw - and what remains (holes open to the image border)
 by push-pull interpolation.
+
+What does not depend on the target is computed once per input (:class:`PreparedView`:
+dense depth, its discontinuities, its world points) and the target's pixel rays once per
+target; the colour is sampled only where a sample is blended. Each step keeps the
+arithmetic and order of the straightforward version (tests/synth/dibr_previous.py), so
+the renders are the same bits.
 """
 
 from __future__ import annotations
@@ -103,6 +109,37 @@ def _push_down(sv, sw):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True, nogil=True)
+def _push_first(v, w):  # pragma: no cover - numba
+    """The first push level of ``(v * w, w)`` (``w`` 1 or 0) without forming the
+    products' image: each product is the float32 one numpy's ``v * w[..., None]``
+    gives, summed as :func:`_push_down` sums."""
+    H, W, C = v.shape
+    H2, W2 = (H + 1) // 2, (W + 1) // 2
+    dv = np.zeros((H2, W2, C), np.float32)
+    dw = np.zeros((H2, W2), np.float32)
+    zero = np.float32(0.0)
+    for y in range(H2):
+        y1 = 2 * y + 1
+        for x in range(W2):
+            x1 = 2 * x + 1
+            w00 = w[2 * y, 2 * x]
+            w01 = w[2 * y, x1] if x1 < W else zero
+            w10 = w[y1, 2 * x] if y1 < H else zero
+            w11 = w[y1, x1] if (y1 < H and x1 < W) else zero
+            dw[y, x] = (w00 + w01) + (w10 + w11)
+            for c in range(C):
+                a00 = v[2 * y, 2 * x, c] * w00
+                a01 = v[2 * y, x1, c] * w01 if x1 < W else zero
+                a10 = v[y1, 2 * x, c] * w10 if y1 < H else zero
+                a11 = v[y1, x1, c] * w11 if (y1 < H and x1 < W) else zero
+                if C == 1:
+                    dv[y, x, c] = (a00 + a01) + (a10 + a11)
+                else:
+                    dv[y, x, c] = ((a00 + a01) + a10) + a11
+    return dv, dw
+
+
+@numba.njit(cache=True, nogil=True)
 def _pull_up(mean, sv, sw):  # pragma: no cover - numba
     """One pull level: the level's own mean where it has weight, else the coarser mean."""
     H, W, C = sv.shape
@@ -119,23 +156,46 @@ def _pull_up(mean, sv, sw):  # pragma: no cover - numba
     return out
 
 
+@numba.njit(cache=True, nogil=True)
+def _pull_holes(out, w, mean):  # pragma: no cover - numba
+    """The last pull level at the pixels of zero weight only (the others keep their
+    values): the coarser level's mean."""
+    H, W, C = out.shape
+    for y in range(H):
+        for x in range(W):
+            if not w[y, x] > 0:
+                for c in range(C):
+                    out[y, x, c] = mean[y // 2, x // 2, c]
+
+
 def push_pull(values: np.ndarray, weight: np.ndarray) -> np.ndarray:
     """Fill pixels of zero weight by push-pull (pyramid) interpolation of the weighted
-    ones; pixels of positive weight are returned unchanged."""
+    ones; pixels of positive weight are returned unchanged. The pyramid's levels are the
+    2x2 sums of the weighted values and of the weights (float32); pulling from the
+    coarsest, a pixel of zero weight takes the coarser level's mean. The first level is
+    summed without forming the weighted image (:func:`_push_first`) and the finest pull
+    only sets the holes (:func:`_pull_holes`)."""
     v = np.asarray(values, np.float32)
     squeeze = v.ndim == 2
     if squeeze:
         v = v[..., None]
-    w = (np.asarray(weight, np.float32) > 0).astype(np.float32)
-    levels = [(np.ascontiguousarray(v * w[..., None]), np.ascontiguousarray(w))]
-    while min(levels[-1][1].shape) > 1:
-        levels.append(_push_down(*levels[-1]))
-    # pull: from coarse to fine, replace empty pixels by the coarser average
-    cv_, cw = levels[-1]
-    mean = cv_ / np.maximum(cw, 1e-12)[..., None]
-    for sv, sw in reversed(levels[:-1]):
-        mean = _pull_up(np.ascontiguousarray(mean), sv, sw)
-    out = np.where((w > 0)[..., None], v, mean)
+    v = np.ascontiguousarray(v)
+    w = np.ascontiguousarray((np.asarray(weight, np.float32) > 0).astype(np.float32))
+    out = v.copy()
+    if w.all():
+        return out[..., 0] if squeeze else out
+    if min(w.shape) > 1:
+        levels = [_push_first(v, w)]
+        while min(levels[-1][1].shape) > 1:
+            levels.append(_push_down(*levels[-1]))
+        cv_, cw = levels[-1]
+        mean = cv_ / np.maximum(cw, 1e-12)[..., None]
+        for sv, sw in reversed(levels[:-1]):
+            mean = _pull_up(np.ascontiguousarray(mean), sv, sw)
+        _pull_holes(out, w, np.ascontiguousarray(mean))
+    else:  # a single row or column: the pyramid's top is the image itself
+        mean = (v * w[..., None]) / np.maximum(w, 1e-12)[..., None]
+        out = np.where((w > 0)[..., None], v, mean)
     return out[..., 0] if squeeze else out
 
 
@@ -185,11 +245,6 @@ def densify_depth(depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return (1.0 / np.maximum(filled, 1e-12)).astype(np.float32), valid
 
 
-def _pixel_grid(H: int, W: int) -> np.ndarray:
-    ys, xs = np.mgrid[0:H, 0:W].astype(np.float64)
-    return np.stack([xs, ys], axis=-1)
-
-
 def _geometry(cam: PinholeCamera) -> tuple[np.ndarray, ...]:
     """(K, K^-1, camera-to-world R, centre C, world-to-camera R, t) as C-contiguous
     float64 arrays, the arguments of the compiled warps."""
@@ -203,83 +258,220 @@ def _geometry(cam: PinholeCamera) -> tuple[np.ndarray, ...]:
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _pixel_into(Kinv, R, C, R2, t2, x, y, z):  # pragma: no cover - numba
-    """Pixel (x, y) of a camera (``Kinv``, camera-to-world rotation ``R``, centre ``C``)
-    at z-depth ``z``, in the frame of another camera (world-to-camera ``R2``, ``t2``):
-    (a, b, c), c its z-depth there. Term by term as numpy's matrix products order them."""
-    # ray through the pixel (z_cam = 1), world point at z-depth z
+def _unproject(Kinv, R, C, x, y, z):  # pragma: no cover - numba
+    """World point of pixel (x, y) of a camera (``Kinv``, camera-to-world rotation
+    ``R``, centre ``C``) at z-depth ``z``: the ray through the pixel (z_cam = 1) scaled
+    by z. Term by term as numpy's matrix products order them."""
     cx = Kinv[0, 0] * x + Kinv[0, 1] * y + Kinv[0, 2]
     cy = Kinv[1, 0] * x + Kinv[1, 1] * y + Kinv[1, 2]
     cz = Kinv[2, 0] * x + Kinv[2, 1] * y + Kinv[2, 2]
     X0 = C[0] + (R[0, 0] * cx + R[0, 1] * cy + R[0, 2] * cz) * z
     X1 = C[1] + (R[1, 0] * cx + R[1, 1] * cy + R[1, 2] * cz) * z
     X2 = C[2] + (R[2, 0] * cx + R[2, 1] * cy + R[2, 2] * cz) * z
-    a = R2[0, 0] * X0 + R2[0, 1] * X1 + R2[0, 2] * X2 + t2[0]
-    b = R2[1, 0] * X0 + R2[1, 1] * X1 + R2[1, 2] * X2 + t2[1]
-    c = R2[2, 0] * X0 + R2[2, 1] * X1 + R2[2, 2] * X2 + t2[2]
-    return a, b, c
+    return X0, X1, X2
 
 
 @numba.njit(cache=True, nogil=True)
-def _splat(depth, Kinv_s, R_s, C_s, K_t, R_t, t_t, zbuf):  # pragma: no cover - numba
-    """Forward warp of every input pixel with depth > 0 (unproject with the input
-    camera, project into the target) as a 2x2 splat into the target z-buffer ``zbuf``
-    (min; +inf = none). The order of the points does not matter (min), so the result
-    is deterministic. The products are summed term by term in this order, not by BLAS:
-    where a point projects exactly onto a pixel boundary - with the ground-truth cameras
-    of an array one image coordinate is an integer for half the points - the last bit
-    decides which pixels the splat covers, so such renders differ from the earlier numpy
-    version (Exp. 1 with true depth and ground-truth cameras -0.026 dB, elsewhere at most
-    0.003 dB; with the calibration's cameras the same to 1e-7 dB)."""
+def _world_points(depth, Kinv, R, C, points):  # pragma: no cover - numba
+    """The world point (:func:`_unproject`) of every pixel of a z-depth map (float64)
+    into ``points`` (H, W, 3) float64; NaN where the depth is not > 0 (no point).
+    What a forward warp computes first for every target alike, computed once."""
     H, W = depth.shape
-    Ht, Wt = zbuf.shape
     for y in range(H):
         for x in range(W):
             z = depth[y, x]
-            if not z > 0:
-                continue
-            a, b, zt = _pixel_into(Kinv_s, R_s, C_s, R_t, t_t, x, y, z)
-            if not zt > 0:
-                continue
+            if z > 0:
+                X0, X1, X2 = _unproject(Kinv, R, C, x, y, z)
+            else:
+                X0 = X1 = X2 = np.nan
+            points[y, x, 0] = X0
+            points[y, x, 1] = X1
+            points[y, x, 2] = X2
+
+
+@numba.njit(cache=True, nogil=True)
+def _splat(points, K_t, R_t, t_t, zbuf):  # pragma: no cover - numba
+    """Forward warp of every input world point (:func:`_world_points`; NaN = none)
+    into the target (world-to-camera ``R_t``, ``t_t``, intrinsics ``K_t``) as a 2x2
+    splat into the target z-buffer ``zbuf`` (float64, min; +inf = none). The order of
+    the points does not matter (min), so the result is deterministic. Row by row: the
+    projections first (a loop without branches, which the compiler vectorises), then
+    the splats. The products are summed term by term in this order, not by BLAS: where
+    a point projects exactly onto a pixel boundary - with the ground-truth cameras of an
+    array one image coordinate is an integer for half the points - the last bit decides
+    which pixels the splat covers, so such renders differ from the earlier numpy
+    version (Exp. 1 with true depth and ground-truth cameras -0.026 dB, elsewhere at most
+    0.003 dB; with the calibration's cameras the same to 1e-7 dB)."""
+    H, W = points.shape[:2]
+    Ht, Wt = zbuf.shape
+    us = np.empty(W)
+    vs = np.empty(W)
+    zs = np.empty(W)
+    for y in range(H):
+        for x in range(W):
+            X0 = points[y, x, 0]
+            X1 = points[y, x, 1]
+            X2 = points[y, x, 2]
+            a = R_t[0, 0] * X0 + R_t[0, 1] * X1 + R_t[0, 2] * X2 + t_t[0]
+            b = R_t[1, 0] * X0 + R_t[1, 1] * X1 + R_t[1, 2] * X2 + t_t[1]
+            zt = R_t[2, 0] * X0 + R_t[2, 1] * X1 + R_t[2, 2] * X2 + t_t[2]
             w = K_t[2, 0] * a + K_t[2, 1] * b + K_t[2, 2] * zt
-            u = (K_t[0, 0] * a + K_t[0, 1] * b + K_t[0, 2] * zt) / w
-            v = (K_t[1, 0] * a + K_t[1, 1] * b + K_t[1, 2] * zt) / w
-            if not (u >= -1.0 and u < Wt and v >= -1.0 and v < Ht):
-                continue  # no corner of the splat inside (also NaN / inf)
+            us[x] = (K_t[0, 0] * a + K_t[0, 1] * b + K_t[0, 2] * zt) / w
+            vs[x] = (K_t[1, 0] * a + K_t[1, 1] * b + K_t[1, 2] * zt) / w
+            zs[x] = zt
+        for x in range(W):
+            zt = zs[x]
+            u = us[x]
+            v = vs[x]
+            if not (zt > 0 and u >= -1.0 and u < Wt and v >= -1.0 and v < Ht):
+                continue  # behind, or no corner of the splat inside (also NaN / inf)
             x0 = int(math.floor(u))
             y0 = int(math.floor(v))
+            if x0 >= 0 and y0 >= 0 and x0 + 1 < Wt and y0 + 1 < Ht:
+                # the whole splat inside (nearly every point): minima without branches
+                for yy in range(y0, y0 + 2):
+                    for xx in range(x0, x0 + 2):
+                        cur = zbuf[yy, xx]
+                        zbuf[yy, xx] = zt if zt < cur else cur
+                continue
             for yy in range(max(y0, 0), min(y0 + 2, Ht)):
                 for xx in range(max(x0, 0), min(x0 + 2, Wt)):
                     if zt < zbuf[yy, xx]:
                         zbuf[yy, xx] = zt
 
 
+def world_points(cam: PinholeCamera, depth: np.ndarray) -> np.ndarray:
+    """(H, W, 3) float64 world points of a z-depth map (NaN where depth <= 0)."""
+    _, Kinv, R, C, _, _ = _geometry(cam)
+    points = np.empty(np.shape(depth) + (3,))
+    _world_points(np.ascontiguousarray(depth, dtype=np.float64), Kinv, R, C, points)
+    return points
+
+
+def _zbuffer(points: np.ndarray, tgt: PinholeCamera, geometry: tuple[np.ndarray, ...]
+             ) -> np.ndarray:
+    """The target's z-buffer of the splatted points (float64, +inf = none)."""
+    K_t, _, _, _, R_t, t_t = geometry
+    zbuf = np.full((tgt.height, tgt.width), np.inf)
+    _splat(points, K_t, R_t, t_t, zbuf)
+    return zbuf
+
+
 def forward_depth(src: PinholeCamera, depth: np.ndarray, tgt: PinholeCamera) -> np.ndarray:
     """Target z-depth of the input's surface: 2x2 splats with a z-buffer (0 = none)."""
-    _, Kinv_s, R_s, C_s, _, _ = _geometry(src)
-    K_t, _, _, _, R_t, t_t = _geometry(tgt)
-    zbuf = np.full((tgt.height, tgt.width), np.inf)
-    _splat(np.ascontiguousarray(depth, dtype=np.float64), Kinv_s, R_s, C_s, K_t, R_t, t_t, zbuf)
+    zbuf = _zbuffer(world_points(src, depth), tgt, _geometry(tgt))
     return np.where(np.isfinite(zbuf), zbuf, 0.0).astype(np.float32)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _nearest_index(u, n):  # pragma: no cover - numba
+    """cv2.remap's INTER_NEAREST index of float32 coordinate ``u`` on an axis of ``n``
+    pixels: rounded half to even and saturated to int16 (as OpenCV converts the maps);
+    -1 when off the image (BORDER_CONSTANT: the sample is 0)."""
+    if not (u > -32768.5 and u < 32767.5):  # saturated (NaN too): off any image
+        return -1
+    i = int(np.rint(u))
+    return i if 0 <= i < n else -1
+
+
 @numba.njit(cache=True, nogil=True)
-def _backward(zt, Kinv_t, R_t, C_t, K_s, R_s, t_s, mx, my, zs):  # pragma: no cover - numba
-    """Every target pixel with depth zt > 0 unprojected and projected into the input:
-    the input's pixel (mx, my; -10 where zt = 0) and its z-depth there (zs)."""
-    H, W = zt.shape
+def _target_rays(Kinv, R, rays):  # pragma: no cover - numba
+    """Per target pixel the world direction of its ray (:func:`_unproject`'s ray
+    through the pixel rotated to the world, before the scaling by the depth), float64
+    (H, W, 3): the same for every input warped to the target, computed once."""
+    H, W = rays.shape[0], rays.shape[1]
     for y in range(H):
         for x in range(W):
-            z = zt[y, x]
-            a, b, c = _pixel_into(Kinv_t, R_t, C_t, R_s, t_s, x, y, z)
-            zs[y, x] = c
-            if z > 0:
-                w = K_s[2, 0] * a + K_s[2, 1] * b + K_s[2, 2] * c
-                mx[y, x] = (K_s[0, 0] * a + K_s[0, 1] * b + K_s[0, 2] * c) / w
-                my[y, x] = (K_s[1, 0] * a + K_s[1, 1] * b + K_s[1, 2] * c) / w
+            cx = Kinv[0, 0] * x + Kinv[0, 1] * y + Kinv[0, 2]
+            cy = Kinv[1, 0] * x + Kinv[1, 1] * y + Kinv[1, 2]
+            cz = Kinv[2, 0] * x + Kinv[2, 1] * y + Kinv[2, 2]
+            rays[y, x, 0] = R[0, 0] * cx + R[0, 1] * cy + R[0, 2] * cz
+            rays[y, x, 1] = R[1, 0] * cx + R[1, 1] * cy + R[1, 2] * cz
+            rays[y, x, 2] = R[2, 0] * cx + R[2, 1] * cy + R[2, 2] * cz
+
+
+@numba.njit(cache=True, nogil=True)
+def _backward(zbuf, rays, C_t, K_s, R_s, t_s, aux, Ws, Hs, occlusion_tolerance,
+              edge_weight, filled_weight, mx, my, pos, w, z):  # pragma: no cover - numba
+    """Per target pixel of depth ``zt`` (the z-buffer of :func:`_splat` as float32, 0
+    where none): the pixel unprojected (its world ray ``rays``, :func:`_target_rays`,
+    times zt from the target's centre ``C_t``: the arithmetic of :func:`_unproject`) and
+    projected into the input, which gives the input's pixel (u, v) and the pixel's
+    z-depth there (zs); the input's own aux (dense depth, discontinuity, filled) at that
+    pixel, nearest (as ``cv2.remap(aux, u, v, INTER_NEAREST, BORDER_CONSTANT)``); and
+    the sample's weight ``w`` and depth ``z``. The sample is kept (``ok``) where the
+    target has depth, the input pixel lies on the input (``Ws`` x ``Hs``, its camera's
+    size) and the input's own depth there agrees with the warped one (within
+    ``occlusion_tolerance``, relative); its weight is 1, times ``edge_weight`` at a depth
+    discontinuity and ``filled_weight`` where the input's depth was filled (float32
+    products, as numpy's on float32 arrays); ``z``: the target depth where kept, else 0.
+    The coordinates of the samples of positive weight (those blended) go to ``mx``,
+    ``my`` (1-D, in pixel order), their index there to ``pos`` (-1: none); returns their
+    number. One pass for what were a dozen array operations, a remap and two passes; the
+    matrices' entries are read once, into locals."""
+    H, W = zbuf.shape
+    Ha, Wa = aux.shape[0], aux.shape[1]
+    c0, c1, c2 = C_t[0], C_t[1], C_t[2]
+    s00, s01, s02 = R_s[0, 0], R_s[0, 1], R_s[0, 2]
+    s10, s11, s12 = R_s[1, 0], R_s[1, 1], R_s[1, 2]
+    s20, s21, s22 = R_s[2, 0], R_s[2, 1], R_s[2, 2]
+    t0, t1, t2 = t_s[0], t_s[1], t_s[2]
+    k00, k01, k02 = K_s[0, 0], K_s[0, 1], K_s[0, 2]
+    k10, k11, k12 = K_s[1, 0], K_s[1, 1], K_s[1, 2]
+    k20, k21, k22 = K_s[2, 0], K_s[2, 1], K_s[2, 2]
+    k = 0
+    for y in range(H):
+        for x in range(W):
+            zb = zbuf[y, x]
+            zt = np.float32(zb) if np.isfinite(zb) else np.float32(0.0)
+            if not zt > 0:
+                pos[y, x] = -1
+                w[y, x] = 0.0
+                z[y, x] = 0.0
+                continue
+            zz = np.float64(zt)
+            X0 = c0 + rays[y, x, 0] * zz
+            X1 = c1 + rays[y, x, 1] * zz
+            X2 = c2 + rays[y, x, 2] * zz
+            a = s00 * X0 + s01 * X1 + s02 * X2 + t0
+            b = s10 * X0 + s11 * X1 + s12 * X2 + t1
+            zs = s20 * X0 + s21 * X1 + s22 * X2 + t2
+            d = k20 * a + k21 * b + k22 * zs
+            u = np.float32((k00 * a + k01 * b + k02 * zs) / d)
+            v = np.float32((k10 * a + k11 * b + k12 * zs) / d)
+            ix = _nearest_index(u, Wa)
+            iy = _nearest_index(v, Ha)
+            if ix >= 0 and iy >= 0:
+                depth_s = aux[iy, ix, 0]
+                edge = aux[iy, ix, 1]
+                filled = aux[iy, ix, 2]
             else:
-                mx[y, x] = -10.0
-                my[y, x] = -10.0
+                depth_s = edge = filled = np.float32(0.0)
+            ok = (u >= -0.5 and u <= Ws - 0.5 and v >= -0.5 and v <= Hs - 0.5
+                  and abs(np.float64(depth_s) - zs) <= occlusion_tolerance * abs(zs))
+            wt = np.float32(1.0) if ok else np.float32(0.0)
+            if edge > 0:
+                wt = wt * edge_weight
+            if filled > 0:
+                wt = wt * filled_weight
+            w[y, x] = wt
+            z[y, x] = zt if ok else np.float32(0.0)
+            if wt > 0:
+                mx[k] = u
+                my[k] = v
+                pos[y, x] = k
+                k += 1
+            else:
+                pos[y, x] = -1
+    return k
+
+
+def _rays(tgt: PinholeCamera, geometry: tuple[np.ndarray, ...]) -> np.ndarray:
+    """The target's pixel rays (:func:`_target_rays`)."""
+    _, Kinv, R, _, _, _ = geometry
+    rays = np.empty((tgt.height, tgt.width, 3))
+    _target_rays(Kinv, R, rays)
+    return rays
 
 
 def depth_edges(depth: np.ndarray, ratio: float) -> np.ndarray:
@@ -299,124 +491,128 @@ class PreparedView:
     image: np.ndarray  # float32 (H, W) or (H, W, C), as to_float gives it
     dense: np.ndarray  # float32 z-depth, invalid pixels filled (densify_depth)
     aux: np.ndarray  # float32 (H, W, 3): dense depth, discontinuity (1/0), filled (1/0)
+    points: np.ndarray  # float64 (H, W, 3): world points of the dense depth (world_points)
+    geometry: tuple[np.ndarray, ...]  # the camera's (_geometry)
 
 
 def prepare_view(view: View | PreparedView, opt: DibrOptions) -> PreparedView:
     """The input's target-independent part of :func:`warp_view`: dense depth, its
-    discontinuities (``opt.edge_ratio``) and the mask of filled depth."""
+    discontinuities (``opt.edge_ratio``), the mask of filled depth and the world points."""
     if isinstance(view, PreparedView):
         return view
     dense, measured = densify_depth(view.depth)
     edge = depth_edges(dense, opt.edge_ratio)
     aux = np.ascontiguousarray(np.stack([dense, edge.astype(np.float32),
                                          (~measured).astype(np.float32)], axis=-1))
-    return PreparedView(view.camera, to_float(view.image), dense, aux)
+    image = np.ascontiguousarray(to_float(view.image), dtype=np.float32)
+    return PreparedView(view.camera, image, dense, aux, world_points(view.camera, dense),
+                        _geometry(view.camera))
 
 
 def warp_view(view: View | PreparedView, tgt: PinholeCamera,
               opt: DibrOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(colour (H, W, C), target depth (H, W), sample weight (H, W), 0 = no sample)."""
+    """(colour (H, W, C), target depth (H, W), sample weight (H, W), 0 = no sample:
+    there the colour is 0)."""
     pv = prepare_view(view, opt)
     channels = 1 if pv.image.ndim == 2 else pv.image.shape[2]
-    colour = np.empty((tgt.height, tgt.width, channels), np.float32)
-    z = np.empty((tgt.height, tgt.width), np.float32)
-    w = np.empty((tgt.height, tgt.width), np.float32)
-    _warp_into(pv, tgt, opt, colour, z, w)
+    H, W = tgt.height, tgt.width
+    samples = np.empty((H * W, channels), np.float32)
+    pos = np.empty((H, W), np.int32)
+    z = np.empty((H, W), np.float32)
+    w = np.empty((H, W), np.float32)
+    geometry = _geometry(tgt)
+    _warp_into(pv, tgt, geometry, _rays(tgt, geometry), opt, samples, pos, z, w)
+    colour = np.where((pos >= 0)[..., None], samples[np.maximum(pos, 0)], np.float32(0.0))
     return colour, z, w
 
 
-def _warp_into(pv: PreparedView, tgt: PinholeCamera, opt: DibrOptions, colour: np.ndarray,
+def _warp_into(pv: PreparedView, tgt: PinholeCamera, geometry: tuple[np.ndarray, ...],
+               rays: np.ndarray, opt: DibrOptions, samples: np.ndarray, pos: np.ndarray,
                z: np.ndarray, w: np.ndarray) -> None:
-    """:func:`warp_view` into the given arrays (C-contiguous float32: colour (H, W, C),
-    z and w (H, W)), so that :func:`synthesize` stacks the inputs without copies."""
+    """:func:`warp_view` into the given arrays (C-contiguous: the colour samples
+    float32 (H * W, C), the first as many as the target has samples, pixel by pixel
+    in row order; ``pos`` int32 (H, W) their index there, -1 for none; z and w float32
+    (H, W)), so that :func:`synthesize` stacks the inputs without copies and samples
+    the colour only where it is blended; ``geometry``: the target's
+    (:func:`_geometry`). Each colour sample is the one ``cv2.remap`` of the whole image
+    gives at that pixel (a sample depends only on its coordinates)."""
     if opt.interpolation not in _INTERPOLATION:
         raise ValueError(f"config: verify.dibr.interpolation = {opt.interpolation!r}: must be "
                          f"one of {', '.join(_INTERPOLATION)}")
-    zt = forward_depth(pv.camera, pv.dense, tgt)
-    _, Kinv_t, R_t, C_t, _, _ = _geometry(tgt)
-    K_s, _, _, _, R_s, t_s = _geometry(pv.camera)
-    mx = np.empty(zt.shape, np.float32)
-    my = np.empty(zt.shape, np.float32)
-    zs = np.empty(zt.shape, np.float64)
-    _backward(zt.astype(np.float64), Kinv_t, R_t, C_t, K_s, R_s, t_s, mx, my, zs)
-    image = pv.image.astype(np.float32, copy=False)
-    cv2.remap(image, mx, my, _INTERPOLATION[opt.interpolation],
-              dst=colour[..., 0] if image.ndim == 2 else colour,
+    zbuf = _zbuffer(pv.points, tgt, geometry)
+    C_t = geometry[3]
+    K_s, _, _, _, R_s, t_s = pv.geometry
+    H, W = zbuf.shape
+    mx = np.empty(H * W, np.float32)
+    my = np.empty(H * W, np.float32)
+    k = _backward(zbuf, rays, C_t, K_s, R_s, t_s, pv.aux, pv.camera.width,
+                  pv.camera.height, float(opt.occlusion_tolerance),
+                  np.float32(opt.edge_weight), np.float32(opt.filled_weight), mx, my, pos,
+                  w, z)
+    if k == 0:
+        return
+    rows = -(-k // W)  # the samples' coordinates as rows of the target's width
+    mx[k:rows * W] = -10.0
+    my[k:rows * W] = -10.0
+    dst = samples[:rows * W].reshape(rows, W, samples.shape[1])
+    cv2.remap(pv.image, mx[:rows * W].reshape(rows, W), my[:rows * W].reshape(rows, W),
+              _INTERPOLATION[opt.interpolation], dst=dst[..., 0] if pv.image.ndim == 2 else dst,
               borderMode=cv2.BORDER_REPLICATE)
-    # the input's own depth, discontinuities and filled mask at the sample (nearest)
-    aux = cv2.remap(pv.aux, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
-                    borderValue=0)
-    _sample_weights(zt, mx, my, zs, np.ascontiguousarray(aux), pv.camera.width,
-                    pv.camera.height, float(opt.occlusion_tolerance),
-                    np.float32(opt.edge_weight), np.float32(opt.filled_weight), w, z)
 
 
 @numba.njit(cache=True, nogil=True)
-def _sample_weights(zt, mx, my, zs, aux, W, H, occlusion_tolerance, edge_weight,
-                    filled_weight, w, z):  # pragma: no cover - numba
-    """Per target pixel: the sample is kept (``ok``) where the target has depth, the
-    input pixel (mx, my) lies on the input and the input's own depth there agrees with
-    the warped one (within ``occlusion_tolerance``, relative); its weight is 1, times
-    ``edge_weight`` at a depth discontinuity and ``filled_weight`` where the input's
-    depth was filled (float32 products, as numpy's on float32 arrays); ``z``: the
-    target depth where kept, else 0. One pass instead of a dozen array operations."""
-    for y in range(zt.shape[0]):
-        for x in range(zt.shape[1]):
-            u = mx[y, x]
-            v = my[y, x]
-            ok = (zt[y, x] > 0 and u >= -0.5 and u <= W - 0.5 and v >= -0.5
-                  and v <= H - 0.5
-                  and abs(np.float64(aux[y, x, 0]) - zs[y, x])
-                  <= occlusion_tolerance * abs(zs[y, x]))
-            wt = np.float32(1.0) if ok else np.float32(0.0)
-            if aux[y, x, 1] > 0:
-                wt = wt * edge_weight
-            if aux[y, x, 2] > 0:
-                wt = wt * filled_weight
-            w[y, x] = wt
-            z[y, x] = zt[y, x] if ok else np.float32(0.0)
-
-
-@numba.njit(cache=True, nogil=True)
-def _blend(colour, z, w, q, z_tolerance, depth_exponent):  # pragma: no cover - numba
-    """Per target pixel, the inputs' samples (colour (n, H, W, C), depth and weight
-    (n, H, W), float32) averaged with weights ``w q (z_near / z)^depth_exponent``
+def _blend(colour, pos, z, w, q, z_tolerance, depth_exponent):  # pragma: no cover - numba
+    """Per target pixel, the inputs' samples (colour (n, H * W, C) at ``pos`` (n, H, W),
+    depth and weight (n, H, W), float32; see :func:`_warp_into`) averaged with weights
+    ``w q (z_near / z)^depth_exponent``
     (the soft z-test; ``z_tolerance`` >= 0: only samples within that relative band of
-    the nearest, the hard one). Returns the blend (float64) and the total weight (0:
-    no sample). The arithmetic is numpy's on the stacked arrays, input by input in
-    order (float32 depth ratios and powers, float64 weights and sums)."""
-    n, H, W, C = colour.shape
-    out = np.zeros((H, W, C))
-    tot = np.zeros((H, W))
+    the nearest, the hard one). Returns the blend (float32, rounded from the float64
+    average) and the total weight (float64; 0: no sample). The arithmetic is numpy's on
+    the stacked arrays, input by input in order (float32 depth ratios and powers,
+    float64 weights and sums); the power of a ratio of 1 (the nearest sample's) is 1
+    and not computed."""
+    n, H, W = z.shape
+    C = colour.shape[2]
+    out = np.empty((H, W, C), np.float32)
+    tot = np.empty((H, W))
     band = np.float32(1.0 + z_tolerance)
     exponent = np.float32(depth_exponent)
-    acc = np.zeros(C)
-    for y in range(H):
+    one = np.float32(1.0)
+    zmin = np.empty(W, np.float32)
+    acc = np.empty((W, C))
+    for y in range(H):  # a row at a time, input by input (contiguous reads)
         for x in range(W):
-            zmin = np.float32(np.inf)
-            for i in range(n):
-                if w[i, y, x] > 0 and z[i, y, x] < zmin:
-                    zmin = z[i, y, x]
-            t = 0.0
-            acc[:] = 0.0
-            for i in range(n):
+            zmin[x] = np.inf
+        for i in range(n):
+            for x in range(W):
+                zi = z[i, y, x]
+                if w[i, y, x] > 0 and zi < zmin[x]:
+                    zmin[x] = zi
+        t = tot[y]
+        t[:] = 0.0
+        acc[:] = 0.0
+        for i in range(n):  # each pixel's sums in the inputs' order
+            qi = q[i]
+            for x in range(W):
                 wi = w[i, y, x]
                 if not wi > 0:
                     continue
                 zi = z[i, y, x]
-                if z_tolerance >= 0 and not zi <= np.float32(zmin * band):
+                if z_tolerance >= 0 and not zi <= np.float32(zmin[x] * band):
                     continue
-                wt = np.float64(wi) * q[i]
+                wt = np.float64(wi) * qi
                 if depth_exponent > 0:
-                    r = np.float32(zmin / zi)
-                    wt = wt * np.float64(r ** exponent)
-                t += wt
+                    r = np.float32(zmin[x] / zi)
+                    if r != one:  # pow(1, e) = 1 exactly
+                        wt = wt * np.float64(r ** exponent)
+                t[x] += wt
+                p = pos[i, y, x]
                 for c in range(C):
-                    acc[c] += wt * np.float64(colour[i, y, x, c])
-            tot[y, x] = t
-            d = max(t, 1e-30)
+                    acc[x, c] += wt * np.float64(colour[i, p, c])
+        for x in range(W):
+            d = max(t[x], 1e-30)
             for c in range(C):
-                out[y, x, c] = acc[c] / d
+                out[y, x, c] = acc[x, c] / d
     return out, tot
 
 
@@ -432,14 +628,19 @@ def synthesize(views: Sequence[View | PreparedView], target: PinholeCamera,
     if len(channels) != 1:
         raise ValueError(f"DIBR inputs differ in their channels ({sorted(channels)})")
     n, H, W = len(prepared), target.height, target.width
-    colour = np.empty((n, H, W, channels.pop()), np.float32)
+    colour = np.empty((n, H * W, channels.pop()), np.float32)
+    pos = np.empty((n, H, W), np.int32)
     z = np.empty((n, H, W), np.float32)
     w = np.empty((n, H, W), np.float32)
+    geometry = _geometry(target)
+    rays = _rays(target, geometry)
     for i, pv in enumerate(prepared):
-        _warp_into(pv, target, opt, colour[i], z[i], w[i])
+        _warp_into(pv, target, geometry, rays, opt, colour[i], pos[i], z[i], w[i])
     dist = np.array([np.linalg.norm(v.camera.centre - target.centre) for v in views])
     q = 1.0 / (dist ** 2 + opt.distance_eps ** 2)
-    out, tot = _blend(colour, z, w, q,
+    # float32 as the inpainting takes it; rounding first and clipping to [0, 1] after
+    # gives the bits of clipping the float64 blend first (rounding keeps the order)
+    out, tot = _blend(colour, pos, z, w, q,
                       -1.0 if opt.z_tolerance is None else float(opt.z_tolerance),
                       float(opt.depth_exponent))
     seen = tot > 0
@@ -450,20 +651,24 @@ def synthesize(views: Sequence[View | PreparedView], target: PinholeCamera,
         elif opt.hole_fill != "pushpull":
             raise ValueError(f"config: verify.dibr.hole_fill = {opt.hole_fill!r}: must be rows "
                              "or pushpull")
-        out = push_pull(out, have.astype(np.float32))
+        out = push_pull(out, have)
+    np.clip(out, 0.0, 1.0, out=out)
     if np.asarray(views[0].image).ndim == 2:
-        out = out[..., 0]
-    return np.clip(out, 0.0, 1.0).astype(np.float32), seen
+        out = np.ascontiguousarray(out[..., 0])
+    return out, seen
 
 
 def psnr(a: np.ndarray, b: np.ndarray, border: int = 0, peak: float = 1.0) -> float:
-    """PSNR (dB) of two float images in [0, peak], excluding ``border`` pixels."""
-    a = np.asarray(a, np.float64)
-    b = np.asarray(b, np.float64)
+    """PSNR (dB) of two float images in [0, peak], excluding ``border`` pixels; the
+    squared differences in float64, averaged as numpy averages a C-contiguous array."""
+    a = np.asarray(a)
+    b = np.asarray(b)
     if a.shape != b.shape:
         raise ValueError(f"PSNR of images of different shapes {a.shape} and {b.shape}")
     if border > 0:
         a = a[border:-border, border:-border]
         b = b[border:-border, border:-border]
-    mse = float(np.mean((a - b) ** 2))
+    d = np.subtract(a, b, dtype=np.float64)
+    np.square(d, out=d)
+    mse = float(np.mean(d))
     return float("inf") if mse == 0 else float(10.0 * np.log10(peak * peak / mse))
