@@ -496,7 +496,7 @@ class PreparedView:
 
 
 def prepare_view(view: View | PreparedView, opt: DibrOptions) -> PreparedView:
-    """The input's target-independent part of :func:`warp_view`: dense depth, its
+    """The input's target-independent part of its warp (:func:`_warp_into`): dense depth, its
     discontinuities (``opt.edge_ratio``), the mask of filled depth and the world points."""
     if isinstance(view, PreparedView):
         return view
@@ -509,27 +509,11 @@ def prepare_view(view: View | PreparedView, opt: DibrOptions) -> PreparedView:
                         _geometry(view.camera))
 
 
-def warp_view(view: View | PreparedView, tgt: PinholeCamera,
-              opt: DibrOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(colour (H, W, C), target depth (H, W), sample weight (H, W), 0 = no sample:
-    there the colour is 0)."""
-    pv = prepare_view(view, opt)
-    channels = 1 if pv.image.ndim == 2 else pv.image.shape[2]
-    H, W = tgt.height, tgt.width
-    samples = np.empty((H * W, channels), np.float32)
-    pos = np.empty((H, W), np.int32)
-    z = np.empty((H, W), np.float32)
-    w = np.empty((H, W), np.float32)
-    geometry = _geometry(tgt)
-    _warp_into(pv, tgt, geometry, _rays(tgt, geometry), opt, samples, pos, z, w)
-    colour = np.where((pos >= 0)[..., None], samples[np.maximum(pos, 0)], np.float32(0.0))
-    return colour, z, w
-
-
 def _warp_into(pv: PreparedView, tgt: PinholeCamera, geometry: tuple[np.ndarray, ...],
                rays: np.ndarray, opt: DibrOptions, samples: np.ndarray, pos: np.ndarray,
                z: np.ndarray, w: np.ndarray) -> None:
-    """:func:`warp_view` into the given arrays (C-contiguous: the colour samples
+    """One input warped onto the target ``tgt`` into the given arrays (colour samples,
+    target depth, sample weight; C-contiguous: the colour samples
     float32 (H * W, C), the first as many as the target has samples, pixel by pixel
     in row order; ``pos`` int32 (H, W) their index there, -1 for none; z and w float32
     (H, W)), so that :func:`synthesize` stacks the inputs without copies and samples
