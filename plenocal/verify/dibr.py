@@ -77,47 +77,19 @@ class View:
 
 
 @numba.njit(cache=True, nogil=True)
-def _push_down(sv, sw):  # pragma: no cover - numba
-    """One push level: 2x2 block sums of the weighted values and of the weights (odd
-    sizes padded with zeros), in float32 as the levels, summed in the order numpy's
-    ``reshape(H2, 2, W2, 2, C).sum(axis=(1, 3))`` takes (one channel: the two row
-    pairs, then their sum; more: the four values in row order)."""
-    H, W, C = sv.shape
-    H2, W2 = (H + 1) // 2, (W + 1) // 2
-    dv = np.zeros((H2, W2, C), np.float32)
-    dw = np.zeros((H2, W2), np.float32)
-    zero = np.float32(0.0)
-    for y in range(H2):
-        y1 = 2 * y + 1
-        for x in range(W2):
-            x1 = 2 * x + 1
-            w00 = sw[2 * y, 2 * x]
-            w01 = sw[2 * y, x1] if x1 < W else zero
-            w10 = sw[y1, 2 * x] if y1 < H else zero
-            w11 = sw[y1, x1] if (y1 < H and x1 < W) else zero
-            dw[y, x] = (w00 + w01) + (w10 + w11)
-            for c in range(C):
-                a00 = sv[2 * y, 2 * x, c]
-                a01 = sv[2 * y, x1, c] if x1 < W else zero
-                a10 = sv[y1, 2 * x, c] if y1 < H else zero
-                a11 = sv[y1, x1, c] if (y1 < H and x1 < W) else zero
-                if C == 1:
-                    dv[y, x, c] = (a00 + a01) + (a10 + a11)
-                else:
-                    dv[y, x, c] = ((a00 + a01) + a10) + a11
-    return dv, dw
-
-
-@numba.njit(cache=True, nogil=True)
-def _push_first(v, w):  # pragma: no cover - numba
-    """The first push level of ``(v * w, w)`` (``w`` 1 or 0) without forming the
-    products' image: each product is the float32 one numpy's ``v * w[..., None]``
-    gives, summed as :func:`_push_down` sums."""
+def _push(v, w, weigh):  # pragma: no cover - numba
+    """One push level: 2x2 block sums of the values (``weigh``: of the products ``v * w``,
+    each the float32 one numpy's ``v * w[..., None]`` gives, without forming their
+    image; ``w`` 1 or 0) and of the weights, odd sizes padded with zeros, in float32 as
+    the levels, summed in the order numpy's ``reshape(H2, 2, W2, 2, C).sum(axis=(1, 3))``
+    takes (one channel: the two row pairs, then their sum; more: the four values in row
+    order)."""
     H, W, C = v.shape
     H2, W2 = (H + 1) // 2, (W + 1) // 2
     dv = np.zeros((H2, W2, C), np.float32)
     dw = np.zeros((H2, W2), np.float32)
     zero = np.float32(0.0)
+    one = np.float32(1.0)
     for y in range(H2):
         y1 = 2 * y + 1
         for x in range(W2):
@@ -127,11 +99,12 @@ def _push_first(v, w):  # pragma: no cover - numba
             w10 = w[y1, 2 * x] if y1 < H else zero
             w11 = w[y1, x1] if (y1 < H and x1 < W) else zero
             dw[y, x] = (w00 + w01) + (w10 + w11)
+            m00, m01, m10, m11 = (w00, w01, w10, w11) if weigh else (one, one, one, one)
             for c in range(C):
-                a00 = v[2 * y, 2 * x, c] * w00
-                a01 = v[2 * y, x1, c] * w01 if x1 < W else zero
-                a10 = v[y1, 2 * x, c] * w10 if y1 < H else zero
-                a11 = v[y1, x1, c] * w11 if (y1 < H and x1 < W) else zero
+                a00 = v[2 * y, 2 * x, c] * m00
+                a01 = v[2 * y, x1, c] * m01 if x1 < W else zero
+                a10 = v[y1, 2 * x, c] * m10 if y1 < H else zero
+                a11 = v[y1, x1, c] * m11 if (y1 < H and x1 < W) else zero
                 if C == 1:
                     dv[y, x, c] = (a00 + a01) + (a10 + a11)
                 else:
@@ -173,7 +146,7 @@ def push_pull(values: np.ndarray, weight: np.ndarray) -> np.ndarray:
     ones; pixels of positive weight are returned unchanged. The pyramid's levels are the
     2x2 sums of the weighted values and of the weights (float32); pulling from the
     coarsest, a pixel of zero weight takes the coarser level's mean. The first level is
-    summed without forming the weighted image (:func:`_push_first`) and the finest pull
+    summed without forming the weighted image (:func:`_push` with ``weigh``) and the finest pull
     only sets the holes (:func:`_pull_holes`)."""
     v = np.asarray(values, np.float32)
     squeeze = v.ndim == 2
@@ -185,9 +158,9 @@ def push_pull(values: np.ndarray, weight: np.ndarray) -> np.ndarray:
     if w.all():
         return out[..., 0] if squeeze else out
     if min(w.shape) > 1:
-        levels = [_push_first(v, w)]
+        levels = [_push(v, w, True)]
         while min(levels[-1][1].shape) > 1:
-            levels.append(_push_down(*levels[-1]))
+            levels.append(_push(*levels[-1], False))
         cv_, cw = levels[-1]
         mean = cv_ / np.maximum(cw, 1e-12)[..., None]
         for sv, sw in reversed(levels[:-1]):

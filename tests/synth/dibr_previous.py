@@ -3,7 +3,8 @@
 over every target pixel, a nearest remap of the input's aux and a cubic remap of its
 whole image, a weights pass, the blend over full-size colour stacks (float64) and a
 push-pull with the full pull. The reference the faster kernels must reproduce bit for
-bit (tests/test_dibr_kernels.py); the input preparation (dense depth, aux) is shared."""
+bit (tests/test_dibr_kernels.py); the input preparation (dense depth, aux) and the
+unchanged push and pull levels are shared."""
 
 from __future__ import annotations
 
@@ -13,23 +14,14 @@ import cv2
 import numba
 import numpy as np
 
-from plenocal.verify.dibr import DibrOptions, _geometry, _push_down, fill_holes_rows, prepare_view
-
-
-@numba.njit(cache=True, nogil=True)
-def _pull_up(mean, sv, sw):  # pragma: no cover - numba
-    H, W, C = sv.shape
-    out = np.empty((H, W, C), np.float32)
-    eps = np.float32(1e-12)
-    for y in range(H):
-        for x in range(W):
-            w = sw[y, x]
-            for c in range(C):
-                if w > 0:
-                    out[y, x, c] = sv[y, x, c] / max(w, eps)
-                else:
-                    out[y, x, c] = mean[y // 2, x // 2, c]
-    return out
+from plenocal.verify.dibr import (
+    DibrOptions,
+    _geometry,
+    _pull_up,
+    _push,
+    fill_holes_rows,
+    prepare_view,
+)
 
 
 def push_pull(values: np.ndarray, weight: np.ndarray) -> np.ndarray:
@@ -40,7 +32,7 @@ def push_pull(values: np.ndarray, weight: np.ndarray) -> np.ndarray:
     w = (np.asarray(weight, np.float32) > 0).astype(np.float32)
     levels = [(np.ascontiguousarray(v * w[..., None]), np.ascontiguousarray(w))]
     while min(levels[-1][1].shape) > 1:
-        levels.append(_push_down(*levels[-1]))
+        levels.append(_push(*levels[-1], False))
     cv_, cw = levels[-1]
     mean = cv_ / np.maximum(cw, 1e-12)[..., None]
     for sv, sw in reversed(levels[:-1]):
