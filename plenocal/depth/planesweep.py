@@ -34,6 +34,7 @@ import numpy as np
 
 from plenocal.camera import PinholeCamera
 from plenocal.config import stage_defaults
+from plenocal.depth.costkernels import COVERED, mask_uncovered, mean_of_best, tad_pixels
 from plenocal.io.files import to_float
 
 _DEPTH = stage_defaults("depth")
@@ -134,37 +135,36 @@ def plane_homographies(ref: PinholeCamera, src: PinholeCamera,
 
 
 def _source_cost(ref_feat: np.ndarray, ref_stats: tuple, warped: np.ndarray,
-                 opt: PlaneSweepOptions, out: np.ndarray | None = None) -> np.ndarray:
+                 opt: PlaneSweepOptions, out: np.ndarray | None = None,
+                 scratch: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Cost of one warped source against the reference, +inf where the window leaves
-    the source image (written into ``out`` when given)."""
+    the source image (written into ``out`` when given; ``scratch``: two (H, W) float32
+    planes the tad cost may reuse)."""
     w = opt.window
-    invalid = _box(warped[..., 3], w) <= 0.999
-    if opt.cost == "zncc":
-        mr, sr = ref_stats
-        s = np.ascontiguousarray(warped[..., 0])
-        ms = _box(s, w)
-        vs = np.maximum(_box(s * s, w) - ms * ms, 0.0)
-        cov = _box(ref_feat[..., 0] * s, w) - mr * ms
-        ncc = cov / np.sqrt(np.maximum(sr * sr * vs, 1e-12))
-        cost = (1.0 - np.clip(ncc, -1.0, 1.0)).astype(np.float32)
-        if out is None:
-            out = cost
-        else:
-            out[...] = cost
-    elif opt.cost == "tad":
+    if opt.cost == "tad":
         # 0.3 min(|dI|, 0.08) / 0.08 + 0.7 min(|dIx| + |dIy|, 0.04) / 0.04, box-aggregated
-        diff = cv2.absdiff(ref_feat, warped)
-        dc = np.minimum(diff[..., 0], np.float32(0.08))
-        dc /= np.float32(0.08)
-        dg = np.add(diff[..., 1], diff[..., 2])
-        np.minimum(dg, np.float32(0.04), out=dg)
-        dg /= np.float32(0.04)
-        dc *= np.float32(0.3)
-        dg *= np.float32(0.7)
-        dc += dg
+        if scratch is None:
+            scratch = (np.empty(warped.shape[:2], np.float32),
+                       np.empty(warped.shape[:2], np.float32))
+        dc, cover = scratch
+        tad_pixels(ref_feat, warped, dc, cover)
         out = _box(dc, w, out)
-    else:
+        mask_uncovered(_box(cover, w, dc), out)  # (dc is free again)
+        return out
+    if opt.cost != "zncc":
         raise ValueError(f"depth: unknown matching cost {opt.cost!r} (use zncc or tad)")
+    invalid = _box(warped[..., 3], w) <= COVERED
+    mr, sr = ref_stats
+    s = np.ascontiguousarray(warped[..., 0])
+    ms = _box(s, w)
+    vs = np.maximum(_box(s * s, w) - ms * ms, 0.0)
+    cov = _box(ref_feat[..., 0] * s, w) - mr * ms
+    ncc = cov / np.sqrt(np.maximum(sr * sr * vs, 1e-12))
+    cost = (1.0 - np.clip(ncc, -1.0, 1.0)).astype(np.float32)
+    if out is None:
+        out = cost
+    else:
+        out[...] = cost
     np.copyto(out, np.float32(np.inf), where=invalid)
     return out
 
@@ -186,12 +186,13 @@ def source_costs(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCame
     size = (ref.width, ref.height)
     per = np.empty((len(srcs), ref.height, ref.width), dtype=np.float32)
     warped = np.empty((ref.height, ref.width, 4), dtype=np.float32)
+    scratch = (np.empty(per.shape[1:], np.float32), np.empty(per.shape[1:], np.float32))
     flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
     for i in range(len(depths)):
         for j, sf in enumerate(src_feat):
             cv2.warpPerspective(sf, homs[j][i], size, dst=warped, flags=flags,
                                 borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-            _source_cost(ref_feat, (mr, sr), warped, opt, out=per[j])
+            _source_cost(ref_feat, (mr, sr), warped, opt, out=per[j], scratch=scratch)
         yield per
 
 
@@ -219,12 +220,7 @@ def cost_volume(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamer
     k = max(1, int(math.ceil(S * opt.best_fraction)))
     vol = np.empty((len(depths), ref.height, ref.width), dtype=np.float32)
     for i, per in enumerate(source_costs(ref, ref_img, srcs, src_imgs, depths, opt)):
-        planes = smallest_first(per, k) if k < S else list(per)
-        acc = vol[i]
-        np.copyto(acc, planes[0])
-        for p in planes[1:k]:
-            acc += p
-        acc /= np.float32(k)
+        mean_of_best(per, k, vol[i])
     return vol
 
 

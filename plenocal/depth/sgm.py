@@ -137,18 +137,20 @@ def _mean_of_seen_best(per, k_of, k_max, out):  # pragma: no cover - numba
 
 def matching_cost(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
                   src_imgs: list[np.ndarray], depths: np.ndarray,
-                  opt: SgmOptions) -> np.ndarray:
+                  opt: SgmOptions, out: np.ndarray | None = None) -> np.ndarray:
     """Cost volume (H, W, D) float32 in [0, 1]: per label the mean of the best
-    ``ceil(S' * best_fraction)`` of the S' sources that see the pixel; 1 where none."""
+    ``ceil(S' * best_fraction)`` of the S' sources that see the pixel; 1 where none
+    (written into ``out`` when given)."""
     S = len(srcs)
     # k per pixel from the number of sources that see it, by table
     k_of = np.maximum(1, np.ceil(np.arange(S + 1) * opt.best_fraction)).astype(np.int64)
     k_max = int(k_of[-1])
-    vol = np.empty((len(depths), ref.height, ref.width), dtype=np.float32)
+    vol = _volume(out, (ref.height, ref.width, len(depths)))
     for i, per in enumerate(source_costs(ref, ref_img, srcs, src_imgs, depths,
                                          _sweep_options(opt))):
-        _mean_of_seen_best(per, k_of, k_max, vol[i])
-    return np.ascontiguousarray(vol.transpose(1, 2, 0))
+        # written straight into the label axis: no (D, H, W) volume and transposed copy
+        _mean_of_seen_best(per, k_of, k_max, vol[:, :, i])
+    return vol
 
 
 @numba.njit(cache=True)
@@ -221,14 +223,17 @@ def _aggregate_dir(cost, grey, dy, dx, p1, p2, contrast, out):  # pragma: no cov
         cur_min = tmp_m
 
 
-def sgm_aggregate(cost: np.ndarray, grey: np.ndarray, opt: SgmOptions) -> np.ndarray:
-    """Sum over the scanline directions of the SGM path costs (H, W, D)."""
+def sgm_aggregate(cost: np.ndarray, grey: np.ndarray, opt: SgmOptions,
+                  out: np.ndarray | None = None) -> np.ndarray:
+    """Sum over the scanline directions of the SGM path costs (H, W, D) (written into
+    ``out`` when given)."""
     if opt.directions not in (4, 8):
         raise ValueError(f"depth.sgm.directions = {opt.directions}: must be 4 or 8")
     dirs = [(0, 1), (0, -1), (1, 0), (-1, 0)]
     if opt.directions == 8:
         dirs += [(1, 1), (1, -1), (-1, 1), (-1, -1)]
-    out = np.zeros_like(cost, dtype=np.float32)
+    out = _volume(out, cost.shape)
+    out.fill(0.0)
     c = np.ascontiguousarray(cost, dtype=np.float32)
     g = np.ascontiguousarray(grey, dtype=np.float32)
     for dy, dx in dirs:
@@ -285,18 +290,30 @@ def _wta(agg: np.ndarray, near: float, far: float) -> tuple[np.ndarray, np.ndarr
     return depth, cont, ratio
 
 
+def _volume(buf: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray:
+    """``buf`` when it is a float32 C-contiguous volume of ``shape``, else a new one."""
+    if (buf is not None and buf.shape == tuple(shape) and buf.dtype == np.float32
+            and buf.flags.c_contiguous):
+        return buf
+    return np.empty(shape, np.float32)
+
+
 def _raw_sgm(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
              src_imgs: list[np.ndarray], near: float, far: float, n: int,
-             opt: SgmOptions) -> tuple[np.ndarray, np.ndarray]:
-    """SGM depth (0 where not unique or a speckle) and its continuous label map."""
+             opt: SgmOptions, work: tuple[np.ndarray, np.ndarray] | None = None,
+             ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """SGM depth (0 where not unique or a speckle), its continuous label map and the
+    two (H, W, n) volumes it used (cost, aggregate), which ``work`` passes to the next
+    call: two volumes of some 100 MB each are not allocated and page-faulted again."""
     depths = depth_labels(near, far, n)
-    cost = matching_cost(ref, ref_img, srcs, src_imgs, depths, opt)
+    cost_buf, agg_buf = work if work is not None else (None, None)
+    cost = matching_cost(ref, ref_img, srcs, src_imgs, depths, opt, cost_buf)
     grey = _grey(ref_img)
-    agg = sgm_aggregate(cost, grey, opt)
+    agg = sgm_aggregate(cost, grey, opt, agg_buf)
     depth, cont, ratio = _wta(agg, near, far)
     valid = (ratio <= opt.uniqueness) & np.isfinite(depth) & (depth > 0)
     valid = _remove_speckles(cont, valid, opt.speckle_size, opt.speckle_labels)
-    return np.where(valid, depth, 0.0).astype(np.float32), cont
+    return np.where(valid, depth, 0.0).astype(np.float32), cont, (cost, agg)
 
 
 @numba.njit(cache=True)
@@ -392,10 +409,11 @@ def sgm_depth(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera]
     opt = opt or SgmOptions()
     ref_img = check_sweep_inputs(ref, ref_img, srcs, near, far, "SGM depth")
     n = choose_num_depths(ref, srcs, near, far, _sweep_options(opt))
-    depth, _ = _raw_sgm(ref, ref_img, srcs, src_imgs, near, far, n, opt)
+    depth, _, work = _raw_sgm(ref, ref_img, srcs, src_imgs, near, far, n, opt)
     if opt.consistency:
         j, others, other_imgs = consistency_partner(ref, ref_img, srcs, src_imgs)
-        src_depth, _ = _raw_sgm(srcs[j], src_imgs[j], others, other_imgs, near, far, n, opt)
+        src_depth, _, _ = _raw_sgm(srcs[j], src_imgs[j], others, other_imgs, near, far, n,
+                                   opt, work)
         ok = left_right_check(ref, depth, srcs[j], src_depth, opt.consistency_tolerance)
         ok = _remove_speckles(_inv_labels(depth, near, far, n), ok, opt.speckle_size,
                               opt.speckle_labels)

@@ -1,0 +1,98 @@
+"""Compiled (numba) pieces of the plane sweep's inner loop (:mod:`plenocal.depth.planesweep`,
+shared with SGM): the per-pixel truncated colour + gradient difference, the mask of the
+windows a warped source does not cover, and the mean of the best-k source costs.
+
+Each replaces a chain of whole-image numpy passes (and their temporaries) by one pass and
+gives the same bits: the same float32 operations in the same order, no fast-math.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+#: the validity threshold of the box-filtered coverage channel (a window mean at or
+#: below it leaves the source image)
+COVERED = np.float32(0.999)
+
+
+@numba.njit(cache=True)
+def tad_pixels(ref_feat, warped, dc, cover):  # pragma: no cover - numba
+    """Per pixel ``0.3 min(|dI|, 0.08) / 0.08 + 0.7 min(|dIx| + |dIy|, 0.04) / 0.04``
+    (float32, in numpy's order of operations) into ``dc``, and the warped coverage
+    channel (``warped[..., 3]``) copied into the contiguous ``cover``.
+
+    ``ref_feat`` and ``warped`` are (H, W, 4) float32 and C-contiguous: grey, x and y
+    gradients, coverage. Row by row: the absolute differences of the whole interleaved
+    row first (one contiguous pass that vectorises), then the per-pixel terms."""
+    H, W = dc.shape
+    c08 = np.float32(0.08)
+    c04 = np.float32(0.04)
+    c3 = np.float32(0.3)
+    c7 = np.float32(0.7)
+    diff = np.empty(4 * W, np.float32)
+    rf = ref_feat.reshape(H, 4 * W)
+    wf = warped.reshape(H, 4 * W)
+    for y in range(H):
+        r = rf[y]
+        s = wf[y]
+        o = dc[y]
+        v = cover[y]
+        for i in range(4 * W):
+            diff[i] = abs(r[i] - s[i])
+        for x in range(W):
+            a = min(diff[4 * x], c08) / c08
+            b = min(diff[4 * x + 1] + diff[4 * x + 2], c04) / c04
+            o[x] = a * c3 + b * c7
+            v[x] = s[4 * x + 3]
+
+
+@numba.njit(cache=True)
+def mask_uncovered(box_cover, cost):  # pragma: no cover - numba
+    """+inf into ``cost`` where ``box_cover`` (the box-filtered coverage channel) is at or
+    below :data:`COVERED`: the window leaves the source image. One pass instead of
+    numpy's comparison and masked copy."""
+    H, W = cost.shape
+    thr = COVERED
+    inf = np.float32(np.inf)
+    for y in range(H):
+        b = box_cover[y]
+        o = cost[y]
+        for x in range(W):
+            if b[x] <= thr:
+                o[x] = inf
+
+
+@numba.njit(cache=True)
+def mean_of_best(per, k, out):  # pragma: no cover - numba
+    """Per pixel of ``per`` (S, H, W, overwritten): the mean of its ``k`` smallest costs,
+    summed in ascending order in float32 (+inf when one of them is) - what
+    :func:`plenocal.depth.planesweep.smallest_first` and the sum over its first ``k``
+    planes give. With ``k == S`` the sum keeps the sources' order (nothing is sorted)."""
+    S, H, W = per.shape
+    lo = np.empty(W, np.float32)
+    hi = np.empty(W, np.float32)
+    kf = np.float32(k)
+    for y in range(H):
+        if k < S:
+            for i in range(min(k, S - 1)):
+                for j in range(S - 1, i, -1):
+                    p = per[j - 1, y]
+                    q = per[j, y]
+                    for x in range(W):
+                        a = p[x]
+                        b = q[x]
+                        lo[x] = min(a, b)
+                        hi[x] = max(a, b)
+                    for x in range(W):
+                        p[x] = lo[x]
+                        q[x] = hi[x]
+        o = out[y]
+        for x in range(W):
+            o[x] = per[0, y, x]
+        for m in range(1, k):
+            p = per[m, y]
+            for x in range(W):
+                o[x] += p[x]
+        for x in range(W):
+            o[x] /= kf
