@@ -1,6 +1,7 @@
 """Compiled (numba) pieces of the plane sweep's inner loop (:mod:`plenocal.depth.planesweep`,
 shared with SGM): the per-pixel truncated colour + gradient difference, the mask of the
-windows a warped source does not cover, and the mean of the best-k source costs.
+windows a warped source does not cover, the mean of the best-k source costs and the
+winner-take-all over the labels.
 
 Each replaces a chain of whole-image numpy passes (and their temporaries) by one pass and
 gives the same bits: the same float32 operations in the same order, no fast-math.
@@ -96,3 +97,66 @@ def mean_of_best(per, k, out):  # pragma: no cover - numba
                 o[x] += p[x]
         for x in range(W):
             o[x] /= kf
+
+
+@numba.njit(cache=True)
+def wta_labels(vol, inv0, step, best, depth, c0, second):  # pragma: no cover - numba
+    """Per pixel of the cost volume ``vol`` (D, H, W; non-finite costs read as 1e6): the
+    first minimum over the labels ``best`` and its cost ``c0``, the parabolic sub-label
+    offset and the depth ``1 / (inv0 + (best + offset) step)``, and the second-best cost
+    outside +-1 label - with numpy's float32 / float64 arithmetic of
+    :func:`plenocal.depth.planesweep.winner_take_all`. Row by row over the labels (each
+    label row contiguous)."""
+    D, H, W = vol.shape
+    big = np.float32(1e6)
+    two = np.float32(2.0)
+    half = np.float32(0.5)
+    eps = np.float32(1e-9)
+    inf = np.float32(np.inf)
+    for y in range(H):
+        b = best[y]
+        c = c0[y]
+        s = second[y]
+        row = vol[0, y]
+        for x in range(W):
+            v = row[x]
+            c[x] = v if abs(v) < inf else big
+            b[x] = 0
+        for d in range(1, D):
+            row = vol[d, y]
+            for x in range(W):
+                v = row[x]
+                v = v if abs(v) < inf else big
+                if v < c[x]:
+                    c[x] = v
+                    b[x] = d
+        for x in range(W):
+            s[x] = big
+        for d in range(D):
+            row = vol[d, y]
+            for x in range(W):
+                v = row[x]
+                v = v if abs(v) < inf else big
+                bx = b[x]
+                lo = max(bx - 1, 0)
+                hi = min(bx + 1, D - 1)
+                if (d < lo or d > hi) and v < s[x]:
+                    s[x] = v
+        z = depth[y]
+        for x in range(W):
+            bx = b[x]
+            i = min(max(bx, 1), D - 2)
+            cm = vol[i - 1, y, x]
+            cc = vol[i, y, x]
+            cp = vol[i + 1, y, x]
+            cm = cm if abs(cm) < inf else big
+            cc = cc if abs(cc) < inf else big
+            cp = cp if abs(cp) < inf else big
+            off = np.float32(0.0)
+            if 1 <= bx <= D - 2:
+                denom = (cm - two * cc) + cp
+                if denom > eps:
+                    off = (half * (cm - cp)) / denom
+                    off = min(max(off, -half), half)
+            inv_d = inv0 + (np.float64(bx) + np.float64(off)) * step
+            z[x] = np.float32(1.0 / inv_d)

@@ -34,7 +34,13 @@ import numpy as np
 
 from plenocal.camera import PinholeCamera
 from plenocal.config import stage_defaults
-from plenocal.depth.costkernels import COVERED, mask_uncovered, mean_of_best, tad_pixels
+from plenocal.depth.costkernels import (
+    COVERED,
+    mask_uncovered,
+    mean_of_best,
+    tad_pixels,
+    wta_labels,
+)
 from plenocal.io.files import to_float
 
 _DEPTH = stage_defaults("depth")
@@ -226,41 +232,18 @@ def cost_volume(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamer
 
 def winner_take_all(vol: np.ndarray, depths: np.ndarray) -> tuple[np.ndarray, np.ndarray,
                                                                    np.ndarray, np.ndarray]:
-    """Best label, sub-label inverse depth -> depth, best cost and second-best cost
-    (outside +-1 label) per pixel. Overwrites ``vol``'s non-finite costs with 1e6."""
-    D = vol.shape[0]
-    v = vol
-    np.copyto(v, np.float32(1e6), where=~np.isfinite(v))
-    # first minimum over the labels, label by label (np.argmin's choice, without its
-    # slow strided reduction over the first axis)
-    best = np.zeros(v.shape[1:], np.int64)
-    c0 = v[0].copy()
-    for d in range(1, D):
-        better = v[d] < c0
-        best[better] = d
-        np.minimum(c0, v[d], out=c0)
-    ii = np.clip(best, 1, D - 2)
-    rows, cols = np.indices(best.shape)
-    cm = v[ii - 1, rows, cols]
-    cp = v[ii + 1, rows, cols]
-    cc = v[ii, rows, cols]
-    denom = cm - 2.0 * cc + cp
-    with np.errstate(divide="ignore", invalid="ignore"):
-        off = np.where(denom > 1e-9, 0.5 * (cm - cp) / denom, 0.0)
-    off = np.clip(off, -0.5, 0.5)
-    off = np.where((best >= 1) & (best <= D - 2), off, 0.0)
-    inv = 1.0 / depths
+    """Best label (the first minimum), sub-label inverse depth -> depth, best cost and
+    second-best cost (outside +-1 label) per pixel of the cost volume ``vol`` (D, H, W),
+    whose non-finite costs count as 1e6 (:func:`plenocal.depth.costkernels.wta_labels`)."""
+    D, H, W = vol.shape
+    inv = 1.0 / np.asarray(depths, np.float64)
     step = (inv[-1] - inv[0]) / (D - 1)
-    inv_d = inv[0] + (best + off) * step
-    depth = (1.0 / inv_d).astype(np.float32)
-    # second best outside the +-1 neighbourhood of the winner: masked in place, restored
-    around = [np.clip(best + o, 0, D - 1) for o in (-1, 0, 1)]
-    kept = [v[j, rows, cols] for j in around]
-    for j in around:
-        v[j, rows, cols] = np.float32(1e6)
-    second = v.min(axis=0)
-    for j, k in zip(around, kept, strict=True):
-        v[j, rows, cols] = k
+    best = np.empty((H, W), np.int64)
+    depth = np.empty((H, W), np.float32)
+    c0 = np.empty((H, W), np.float32)
+    second = np.empty((H, W), np.float32)
+    wta_labels(np.ascontiguousarray(vol, dtype=np.float32), float(inv[0]), float(step), best,
+               depth, c0, second)
     return best, depth, c0, second
 
 

@@ -54,6 +54,7 @@ from plenocal.io.files import to_float
 log = logging.getLogger(__name__)
 
 MIN_CONSISTENT = 0.01  # below this share of consistent pixels the check is not applied
+LABEL_BLOCK = 16  # cost planes moved into the (H, W, D) volume at once (16 floats: 64 bytes)
 _SGM = stage_defaults("depth.sgm")
 
 
@@ -145,12 +146,29 @@ def matching_cost(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCam
     # k per pixel from the number of sources that see it, by table
     k_of = np.maximum(1, np.ceil(np.arange(S + 1) * opt.best_fraction)).astype(np.int64)
     k_max = int(k_of[-1])
-    vol = _volume(out, (ref.height, ref.width, len(depths)))
+    D = len(depths)
+    vol = _volume(out, (ref.height, ref.width, D))
+    # labels in blocks of LABEL_BLOCK planes, each block moved into the label axis at once
+    # (a (D, H, W) volume and its transposed copy cost 100 MB more and a slow strided pass)
+    block = np.empty((min(LABEL_BLOCK, D), ref.height, ref.width), np.float32)
     for i, per in enumerate(source_costs(ref, ref_img, srcs, src_imgs, depths,
                                          _sweep_options(opt))):
-        # written straight into the label axis: no (D, H, W) volume and transposed copy
-        _mean_of_seen_best(per, k_of, k_max, vol[:, :, i])
+        b = i % LABEL_BLOCK
+        _mean_of_seen_best(per, k_of, k_max, block[b])
+        if b == len(block) - 1 or i == D - 1:
+            _to_label_axis(block[:b + 1], vol, i - b)
     return vol
+
+
+@numba.njit(cache=True)
+def _to_label_axis(block, vol, first):  # pragma: no cover - numba
+    """``vol[:, :, first:first + B] = block.transpose(1, 2, 0)`` for a (B, H, W) block."""
+    B, H, W = block.shape
+    for y in range(H):
+        for x in range(W):
+            o = vol[y, x]
+            for b in range(B):
+                o[first + b] = block[b, y, x]
 
 
 @numba.njit(cache=True)
