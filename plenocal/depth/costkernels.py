@@ -64,6 +64,33 @@ def mask_uncovered(box_cover, cost):  # pragma: no cover - numba
                 o[x] = inf
 
 
+@numba.njit(cache=True, fastmath={"nnan", "nsz"})
+def bubble_smallest(per, y, passes, run):  # pragma: no cover - numba
+    """``passes`` bubble passes over row ``y`` of the planes of ``per`` (S, H, W): after
+    pass i plane i holds the i-th smallest value (the first ``passes`` ascending, the
+    rest a permutation of the others). Each pass carries the running minimum from the
+    last plane down in the row buffer ``run``: per plane one load and one store (the
+    pairwise exchange of :func:`plenocal.depth.planesweep.smallest_first`, same values).
+    Costs are never NaN nor -0 (the fastmath flags that let min/max vectorise)."""
+    S = per.shape[0]
+    W = per.shape[2]
+    for i in range(passes):
+        last = per[S - 1, y]
+        for x in range(W):
+            run[x] = last[x]
+        for j in range(S - 1, i, -1):
+            p = per[j - 1, y]
+            q = per[j, y]
+            for x in range(W):
+                a = p[x]
+                m = run[x]
+                q[x] = max(a, m)
+                run[x] = min(a, m)
+        first = per[i, y]
+        for x in range(W):
+            first[x] = run[x]
+
+
 @numba.njit(cache=True)
 def mean_of_best(per, k, out):  # pragma: no cover - numba
     """Per pixel of ``per`` (S, H, W, overwritten): the mean of its ``k`` smallest costs,
@@ -71,26 +98,15 @@ def mean_of_best(per, k, out):  # pragma: no cover - numba
     :func:`plenocal.depth.planesweep.smallest_first` and the sum over its first ``k``
     planes give. With ``k == S`` the sum keeps the sources' order (nothing is sorted)."""
     S, H, W = per.shape
-    lo = np.empty(W, np.float32)
-    hi = np.empty(W, np.float32)
+    run = np.empty(W, np.float32)
     kf = np.float32(k)
     for y in range(H):
         if k < S:
-            for i in range(min(k, S - 1)):
-                for j in range(S - 1, i, -1):
-                    p = per[j - 1, y]
-                    q = per[j, y]
-                    for x in range(W):
-                        a = p[x]
-                        b = q[x]
-                        lo[x] = min(a, b)
-                        hi[x] = max(a, b)
-                    for x in range(W):
-                        p[x] = lo[x]
-                        q[x] = hi[x]
+            bubble_smallest(per, y, min(k, S - 1), run)
         o = out[y]
+        first = per[0, y]
         for x in range(W):
-            o[x] = per[0, y, x]
+            o[x] = first[x]
         for m in range(1, k):
             p = per[m, y]
             for x in range(W):
