@@ -1,7 +1,7 @@
 """Depth: the plane sweep recovers textured planes from synthetic pinhole renders;
 the colmap backend fails clearly without a GPU; the workspace it would run on is
 well formed; 16-bit disparity round trip; SGBM baseline runs; the vectorised pieces of
-the sweep (best-k of the sources, winner-take-all) against their plain definitions."""
+the sweep (best-k of the seen sources, winner-take-all) against their plain definitions."""
 
 import cv2  # (before pycolmap)
 import numpy as np
@@ -16,7 +16,6 @@ from plenocal.depth.planesweep import (
     plane_homographies,
     plane_homography,
     plane_sweep_depth,
-    smallest_first,
     winner_take_all,
 )
 from plenocal.depth.quality import depth_quality
@@ -183,15 +182,6 @@ def _costs(shape, seed):
     per[rng.random(shape) < 0.2] = np.inf
     per[:, 0, :3] = np.inf
     return per
-
-
-def test_smallest_first_gives_the_k_smallest_ascending():
-    per = _costs((7, 9, 11), 0)
-    ref = np.sort(per, axis=0)
-    for k in range(1, 7):
-        planes = smallest_first(per.copy(), k)
-        assert np.array_equal(np.stack(planes[:k]), ref[:k])
-        assert np.array_equal(np.sort(np.stack(planes), axis=0), ref)  # a permutation
 
 
 def test_sgm_source_mean_is_the_mean_of_the_best_seen():

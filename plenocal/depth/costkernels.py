@@ -70,7 +70,8 @@ def bubble_smallest(per, y, passes, run):  # pragma: no cover - numba
     pass i plane i holds the i-th smallest value (the first ``passes`` ascending, the
     rest a permutation of the others). Each pass carries the running minimum from the
     last plane down in the row buffer ``run``: per plane one load and one store (the
-    pairwise exchange of :func:`plenocal.depth.planesweep.smallest_first`, same values).
+    values of exchanging neighbouring planes pairwise, from the last to plane i, by
+    element-wise min/max).
     Costs are never NaN nor -0 (the fastmath flags that let min/max vectorise)."""
     S = per.shape[0]
     W = per.shape[2]
@@ -94,9 +95,8 @@ def bubble_smallest(per, y, passes, run):  # pragma: no cover - numba
 @numba.njit(cache=True)
 def mean_of_best(per, k, out):  # pragma: no cover - numba
     """Per pixel of ``per`` (S, H, W, overwritten): the mean of its ``k`` smallest costs,
-    summed in ascending order in float32 (+inf when one of them is) - what
-    :func:`plenocal.depth.planesweep.smallest_first` and the sum over its first ``k``
-    planes give. With ``k == S`` the sum keeps the sources' order (nothing is sorted)."""
+    summed in ascending order in float32 (+inf when one of them is), divided by ``k``
+    in float32. With ``k == S`` the sum keeps the sources' order (nothing is sorted)."""
     S, H, W = per.shape
     run = np.empty(W, np.float32)
     kf = np.float32(k)

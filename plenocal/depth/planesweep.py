@@ -202,22 +202,6 @@ def source_costs(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCame
         yield per
 
 
-def smallest_first(per: np.ndarray, k: int) -> list[np.ndarray]:
-    """The S planes of ``per`` (S, H, W) reordered per pixel so that the first ``k``
-    hold the k smallest values, ascending (k bubble passes of element-wise min/max:
-    a few whole-image operations instead of a per-pixel partition). Overwrites
-    ``per``; the returned planes are views of it or one scratch plane."""
-    planes = list(per)
-    scratch = np.empty_like(planes[0])
-    for i in range(min(k, len(planes) - 1)):
-        for j in range(len(planes) - 1, i, -1):
-            a, b = planes[j - 1], planes[j]
-            np.minimum(a, b, out=scratch)
-            np.maximum(a, b, out=b)
-            planes[j - 1], scratch = scratch, a
-    return planes
-
-
 def cost_volume(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
                 src_imgs: list[np.ndarray], depths: np.ndarray,
                 opt: PlaneSweepOptions) -> np.ndarray:
