@@ -10,6 +10,7 @@ from synth.planes import camera_at, fronto_plane, photo_texture, render_plane
 
 from plenocal.depth import DepthBackendError, estimate_depth, resolve_backend
 from plenocal.depth.colmap_mvs import colmap_available, prepare_workspace, read_colmap_array
+from plenocal.depth.costkernels import mean_of_seen_best
 from plenocal.depth.inputs import nearest_sources
 from plenocal.depth.planesweep import (
     PlaneSweepOptions,
@@ -20,7 +21,7 @@ from plenocal.depth.planesweep import (
 )
 from plenocal.depth.quality import depth_quality
 from plenocal.depth.sgbm import sgbm_depth
-from plenocal.depth.sgm import SgmOptions, _mean_of_seen_best, _wta, fill_background, sgm_depth
+from plenocal.depth.sgm import SgmOptions, _wta, fill_background, sgm_depth
 
 W, H, F = 320, 240, 500.0
 
@@ -189,7 +190,7 @@ def test_sgm_source_mean_is_the_mean_of_the_best_seen():
     S, fraction = per.shape[0], 0.5
     k_of = np.maximum(1, np.ceil(np.arange(S + 1) * fraction)).astype(np.int64)
     out = np.empty(per.shape[1:], np.float32)
-    _mean_of_seen_best(per.copy(), k_of, int(k_of[-1]), out)
+    mean_of_seen_best(per.copy(), k_of, int(k_of[-1]), out)
     for y, x in np.ndindex(out.shape):
         seen = np.sort(per[:, y, x][np.isfinite(per[:, y, x])])
         if len(seen) == 0:

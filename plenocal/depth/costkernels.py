@@ -1,7 +1,9 @@
 """Compiled (numba) pieces of the plane sweep's inner loop (:mod:`plenocal.depth.planesweep`,
 shared with SGM): the per-pixel truncated colour + gradient difference, the mask of the
-windows a warped source does not cover, the mean of the best-k source costs and the
-winner-take-all over the labels.
+windows a warped source does not cover, the mean of the best-k source costs (of all
+sources: the plane sweep; of those that see the pixel: SGM) and the winner-take-all over
+the labels. (Kept in one file: numba's cache tracks a kernel's own file only, so a kernel
+here calls no compiled function of another module.)
 
 Each replaces a chain of whole-image numpy passes (and their temporaries) by one pass and
 gives the same bits: the same float32 operations in the same order, no fast-math.
@@ -65,7 +67,7 @@ def mask_uncovered(box_cover, cost):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True, fastmath={"nnan", "nsz"})
-def bubble_smallest(per, y, passes, run):  # pragma: no cover - numba
+def _bubble_smallest(per, y, passes, run):  # pragma: no cover - numba
     """``passes`` bubble passes over row ``y`` of the planes of ``per`` (S, H, W): after
     pass i plane i holds the i-th smallest value (the first ``passes`` ascending, the
     rest a permutation of the others). Each pass carries the running minimum from the
@@ -102,7 +104,7 @@ def mean_of_best(per, k, out):  # pragma: no cover - numba
     kf = np.float32(k)
     for y in range(H):
         if k < S:
-            bubble_smallest(per, y, min(k, S - 1), run)
+            _bubble_smallest(per, y, min(k, S - 1), run)
         o = out[y]
         first = per[0, y]
         for x in range(W):
@@ -113,6 +115,40 @@ def mean_of_best(per, k, out):  # pragma: no cover - numba
                 o[x] += p[x]
         for x in range(W):
             o[x] /= kf
+
+
+@numba.njit(cache=True, fastmath={"nnan", "nsz"})
+def mean_of_seen_best(per, k_of, k_max, out):  # pragma: no cover - numba
+    """Per pixel of ``per`` (S, H, W, overwritten): the mean of the ``k_of[S']`` smallest
+    of the S' finite costs (summed in ascending order, float32), 1 where no source sees
+    it. Row by row, ``k_max`` bubble passes (unseen +inf last; each pass carries the
+    running minimum down in a row buffer: one load and one store per plane), then the sum
+    plane by plane, masked by each pixel's k. The costs are never NaN nor -0 (the
+    fastmath flags that let the min/max vectorise), and the sums keep their order (no
+    reassociation)."""
+    S, H, W = per.shape
+    seen = np.empty(W, np.int32)
+    k = np.empty(W, np.int32)
+    run = np.empty(W, np.float32)
+    for y in range(H):
+        seen[:] = 0
+        for s in range(S):
+            row = per[s, y]
+            for x in range(W):
+                seen[x] += np.int32(row[x] < np.inf)
+        _bubble_smallest(per, y, min(k_max, S - 1), run)
+        o = out[y]
+        first = per[0, y]
+        for x in range(W):
+            k[x] = k_of[seen[x]]
+            o[x] = first[x]
+        for m in range(1, k_max):
+            p = per[m, y]
+            for x in range(W):
+                if m < k[x]:
+                    o[x] += p[x]
+        for x in range(W):
+            o[x] = o[x] / np.float32(k[x]) if seen[x] > 0 else np.float32(1.0)
 
 
 @numba.njit(cache=True)

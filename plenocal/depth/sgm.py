@@ -38,7 +38,7 @@ import numpy as np
 
 from plenocal.camera import PinholeCamera
 from plenocal.config import stage_defaults, with_defaults
-from plenocal.depth.costkernels import bubble_smallest
+from plenocal.depth.costkernels import mean_of_seen_best
 from plenocal.depth.planesweep import (
     PlaneSweepOptions,
     _grey,
@@ -96,40 +96,6 @@ def _sweep_options(opt: SgmOptions) -> PlaneSweepOptions:
                              cost="tad", window=opt.window, best_fraction=opt.best_fraction)
 
 
-@numba.njit(cache=True, fastmath={"nnan", "nsz"})
-def _mean_of_seen_best(per, k_of, k_max, out):  # pragma: no cover - numba
-    """Per pixel of ``per`` (S, H, W, overwritten): the mean of the ``k_of[S']`` smallest
-    of the S' finite costs (summed in ascending order, float32), 1 where no source sees
-    it. Row by row, ``k_max`` bubble passes (unseen +inf last; each pass carries the
-    running minimum down in a row buffer: one load and one store per plane), then the sum
-    plane by plane, masked by each pixel's k. The costs are never NaN nor -0 (the
-    fastmath flags that let the min/max vectorise), and the sums keep their order (no
-    reassociation)."""
-    S, H, W = per.shape
-    seen = np.empty(W, np.int32)
-    k = np.empty(W, np.int32)
-    run = np.empty(W, np.float32)
-    for y in range(H):
-        seen[:] = 0
-        for s in range(S):
-            row = per[s, y]
-            for x in range(W):
-                seen[x] += np.int32(row[x] < np.inf)
-        bubble_smallest(per, y, min(k_max, S - 1), run)
-        o = out[y]
-        first = per[0, y]
-        for x in range(W):
-            k[x] = k_of[seen[x]]
-            o[x] = first[x]
-        for m in range(1, k_max):
-            p = per[m, y]
-            for x in range(W):
-                if m < k[x]:
-                    o[x] += p[x]
-        for x in range(W):
-            o[x] = o[x] / np.float32(k[x]) if seen[x] > 0 else np.float32(1.0)
-
-
 def matching_cost(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
                   src_imgs: list[np.ndarray], depths: np.ndarray,
                   opt: SgmOptions, out: np.ndarray | None = None) -> np.ndarray:
@@ -148,7 +114,7 @@ def matching_cost(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCam
     for i, per in enumerate(source_costs(ref, ref_img, srcs, src_imgs, depths,
                                          _sweep_options(opt))):
         b = i % LABEL_BLOCK
-        _mean_of_seen_best(per, k_of, k_max, block[b])
+        mean_of_seen_best(per, k_of, k_max, block[b])
         if b == len(block) - 1 or i == D - 1:
             _to_label_axis(block[:b + 1], vol, i - b)
     return vol
