@@ -1,4 +1,5 @@
-"""Fronto-parallel plane sweep stereo on the CPU (vectorised with OpenCV/numpy).
+"""Fronto-parallel plane sweep stereo on the CPU (OpenCV warps and box filters, the
+per-pixel passes compiled in :mod:`plenocal.depth.costkernels`).
 
 For every depth label ``d`` (uniform in inverse depth between ``near`` and ``far``)
 each source image is warped onto the reference by the homography induced by the
