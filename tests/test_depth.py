@@ -1,7 +1,7 @@
 """Depth: the plane sweep recovers textured planes from synthetic pinhole renders;
 the colmap backend fails clearly without a GPU; the workspace it would run on is
 well formed; 16-bit disparity round trip; SGBM baseline runs; the vectorised pieces of
-the sweep (best-k of the sources, winner-take-all) against their plain definitions."""
+the sweep (best-k of the seen sources, winner-take-all) against their plain definitions."""
 
 import cv2  # (before pycolmap)
 import numpy as np
@@ -10,18 +10,18 @@ from synth.planes import camera_at, fronto_plane, photo_texture, render_plane
 
 from plenocal.depth import DepthBackendError, estimate_depth, resolve_backend
 from plenocal.depth.colmap_mvs import colmap_available, prepare_workspace, read_colmap_array
+from plenocal.depth.costkernels import mean_of_seen_best
 from plenocal.depth.inputs import nearest_sources
 from plenocal.depth.planesweep import (
     PlaneSweepOptions,
     plane_homographies,
     plane_homography,
     plane_sweep_depth,
-    smallest_first,
     winner_take_all,
 )
 from plenocal.depth.quality import depth_quality
 from plenocal.depth.sgbm import sgbm_depth
-from plenocal.depth.sgm import SgmOptions, _mean_of_seen_best, _wta, fill_background, sgm_depth
+from plenocal.depth.sgm import SgmOptions, _wta, fill_background, sgm_depth
 
 W, H, F = 320, 240, 500.0
 
@@ -185,21 +185,12 @@ def _costs(shape, seed):
     return per
 
 
-def test_smallest_first_gives_the_k_smallest_ascending():
-    per = _costs((7, 9, 11), 0)
-    ref = np.sort(per, axis=0)
-    for k in range(1, 7):
-        planes = smallest_first(per.copy(), k)
-        assert np.array_equal(np.stack(planes[:k]), ref[:k])
-        assert np.array_equal(np.sort(np.stack(planes), axis=0), ref)  # a permutation
-
-
 def test_sgm_source_mean_is_the_mean_of_the_best_seen():
     per = _costs((8, 9, 11), 1)
     S, fraction = per.shape[0], 0.5
     k_of = np.maximum(1, np.ceil(np.arange(S + 1) * fraction)).astype(np.int64)
     out = np.empty(per.shape[1:], np.float32)
-    _mean_of_seen_best(per.copy(), k_of, int(k_of[-1]), out)
+    mean_of_seen_best(per.copy(), k_of, int(k_of[-1]), out)
     for y, x in np.ndindex(out.shape):
         seen = np.sort(per[:, y, x][np.isfinite(per[:, y, x])])
         if len(seen) == 0:

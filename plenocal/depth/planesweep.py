@@ -1,4 +1,5 @@
-"""Fronto-parallel plane sweep stereo on the CPU (vectorised with OpenCV/numpy).
+"""Fronto-parallel plane sweep stereo on the CPU (OpenCV warps and box filters, the
+per-pixel passes compiled in :mod:`plenocal.depth.costkernels`).
 
 For every depth label ``d`` (uniform in inverse depth between ``near`` and ``far``)
 each source image is warped onto the reference by the homography induced by the
@@ -34,6 +35,13 @@ import numpy as np
 
 from plenocal.camera import PinholeCamera
 from plenocal.config import stage_defaults
+from plenocal.depth.costkernels import (
+    COVERED,
+    mask_uncovered,
+    mean_of_best,
+    tad_pixels,
+    wta_labels,
+)
 from plenocal.io.files import to_float
 
 _DEPTH = stage_defaults("depth")
@@ -134,37 +142,36 @@ def plane_homographies(ref: PinholeCamera, src: PinholeCamera,
 
 
 def _source_cost(ref_feat: np.ndarray, ref_stats: tuple, warped: np.ndarray,
-                 opt: PlaneSweepOptions, out: np.ndarray | None = None) -> np.ndarray:
+                 opt: PlaneSweepOptions, out: np.ndarray | None = None,
+                 scratch: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Cost of one warped source against the reference, +inf where the window leaves
-    the source image (written into ``out`` when given)."""
+    the source image (written into ``out`` when given; ``scratch``: two (H, W) float32
+    planes the tad cost may reuse)."""
     w = opt.window
-    invalid = _box(warped[..., 3], w) <= 0.999
-    if opt.cost == "zncc":
-        mr, sr = ref_stats
-        s = np.ascontiguousarray(warped[..., 0])
-        ms = _box(s, w)
-        vs = np.maximum(_box(s * s, w) - ms * ms, 0.0)
-        cov = _box(ref_feat[..., 0] * s, w) - mr * ms
-        ncc = cov / np.sqrt(np.maximum(sr * sr * vs, 1e-12))
-        cost = (1.0 - np.clip(ncc, -1.0, 1.0)).astype(np.float32)
-        if out is None:
-            out = cost
-        else:
-            out[...] = cost
-    elif opt.cost == "tad":
+    if opt.cost == "tad":
         # 0.3 min(|dI|, 0.08) / 0.08 + 0.7 min(|dIx| + |dIy|, 0.04) / 0.04, box-aggregated
-        diff = cv2.absdiff(ref_feat, warped)
-        dc = np.minimum(diff[..., 0], np.float32(0.08))
-        dc /= np.float32(0.08)
-        dg = np.add(diff[..., 1], diff[..., 2])
-        np.minimum(dg, np.float32(0.04), out=dg)
-        dg /= np.float32(0.04)
-        dc *= np.float32(0.3)
-        dg *= np.float32(0.7)
-        dc += dg
+        if scratch is None:
+            scratch = (np.empty(warped.shape[:2], np.float32),
+                       np.empty(warped.shape[:2], np.float32))
+        dc, cover = scratch
+        tad_pixels(ref_feat, warped, dc, cover)
         out = _box(dc, w, out)
-    else:
+        mask_uncovered(_box(cover, w, dc), out)  # (dc is free again)
+        return out
+    if opt.cost != "zncc":
         raise ValueError(f"depth: unknown matching cost {opt.cost!r} (use zncc or tad)")
+    invalid = _box(warped[..., 3], w) <= COVERED
+    mr, sr = ref_stats
+    s = np.ascontiguousarray(warped[..., 0])
+    ms = _box(s, w)
+    vs = np.maximum(_box(s * s, w) - ms * ms, 0.0)
+    cov = _box(ref_feat[..., 0] * s, w) - mr * ms
+    ncc = cov / np.sqrt(np.maximum(sr * sr * vs, 1e-12))
+    cost = (1.0 - np.clip(ncc, -1.0, 1.0)).astype(np.float32)
+    if out is None:
+        out = cost
+    else:
+        out[...] = cost
     np.copyto(out, np.float32(np.inf), where=invalid)
     return out
 
@@ -186,29 +193,14 @@ def source_costs(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCame
     size = (ref.width, ref.height)
     per = np.empty((len(srcs), ref.height, ref.width), dtype=np.float32)
     warped = np.empty((ref.height, ref.width, 4), dtype=np.float32)
+    scratch = (np.empty(per.shape[1:], np.float32), np.empty(per.shape[1:], np.float32))
     flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
     for i in range(len(depths)):
         for j, sf in enumerate(src_feat):
             cv2.warpPerspective(sf, homs[j][i], size, dst=warped, flags=flags,
                                 borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-            _source_cost(ref_feat, (mr, sr), warped, opt, out=per[j])
+            _source_cost(ref_feat, (mr, sr), warped, opt, out=per[j], scratch=scratch)
         yield per
-
-
-def smallest_first(per: np.ndarray, k: int) -> list[np.ndarray]:
-    """The S planes of ``per`` (S, H, W) reordered per pixel so that the first ``k``
-    hold the k smallest values, ascending (k bubble passes of element-wise min/max:
-    a few whole-image operations instead of a per-pixel partition). Overwrites
-    ``per``; the returned planes are views of it or one scratch plane."""
-    planes = list(per)
-    scratch = np.empty_like(planes[0])
-    for i in range(min(k, len(planes) - 1)):
-        for j in range(len(planes) - 1, i, -1):
-            a, b = planes[j - 1], planes[j]
-            np.minimum(a, b, out=scratch)
-            np.maximum(a, b, out=b)
-            planes[j - 1], scratch = scratch, a
-    return planes
 
 
 def cost_volume(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
@@ -219,52 +211,24 @@ def cost_volume(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamer
     k = max(1, int(math.ceil(S * opt.best_fraction)))
     vol = np.empty((len(depths), ref.height, ref.width), dtype=np.float32)
     for i, per in enumerate(source_costs(ref, ref_img, srcs, src_imgs, depths, opt)):
-        planes = smallest_first(per, k) if k < S else list(per)
-        acc = vol[i]
-        np.copyto(acc, planes[0])
-        for p in planes[1:k]:
-            acc += p
-        acc /= np.float32(k)
+        mean_of_best(per, k, vol[i])
     return vol
 
 
 def winner_take_all(vol: np.ndarray, depths: np.ndarray) -> tuple[np.ndarray, np.ndarray,
                                                                    np.ndarray, np.ndarray]:
-    """Best label, sub-label inverse depth -> depth, best cost and second-best cost
-    (outside +-1 label) per pixel. Overwrites ``vol``'s non-finite costs with 1e6."""
-    D = vol.shape[0]
-    v = vol
-    np.copyto(v, np.float32(1e6), where=~np.isfinite(v))
-    # first minimum over the labels, label by label (np.argmin's choice, without its
-    # slow strided reduction over the first axis)
-    best = np.zeros(v.shape[1:], np.int64)
-    c0 = v[0].copy()
-    for d in range(1, D):
-        better = v[d] < c0
-        best[better] = d
-        np.minimum(c0, v[d], out=c0)
-    ii = np.clip(best, 1, D - 2)
-    rows, cols = np.indices(best.shape)
-    cm = v[ii - 1, rows, cols]
-    cp = v[ii + 1, rows, cols]
-    cc = v[ii, rows, cols]
-    denom = cm - 2.0 * cc + cp
-    with np.errstate(divide="ignore", invalid="ignore"):
-        off = np.where(denom > 1e-9, 0.5 * (cm - cp) / denom, 0.0)
-    off = np.clip(off, -0.5, 0.5)
-    off = np.where((best >= 1) & (best <= D - 2), off, 0.0)
-    inv = 1.0 / depths
+    """Best label (the first minimum), sub-label inverse depth -> depth, best cost and
+    second-best cost (outside +-1 label) per pixel of the cost volume ``vol`` (D, H, W),
+    whose non-finite costs count as 1e6 (:func:`plenocal.depth.costkernels.wta_labels`)."""
+    D, H, W = vol.shape
+    inv = 1.0 / np.asarray(depths, np.float64)
     step = (inv[-1] - inv[0]) / (D - 1)
-    inv_d = inv[0] + (best + off) * step
-    depth = (1.0 / inv_d).astype(np.float32)
-    # second best outside the +-1 neighbourhood of the winner: masked in place, restored
-    around = [np.clip(best + o, 0, D - 1) for o in (-1, 0, 1)]
-    kept = [v[j, rows, cols] for j in around]
-    for j in around:
-        v[j, rows, cols] = np.float32(1e6)
-    second = v.min(axis=0)
-    for j, k in zip(around, kept, strict=True):
-        v[j, rows, cols] = k
+    best = np.empty((H, W), np.int64)
+    depth = np.empty((H, W), np.float32)
+    c0 = np.empty((H, W), np.float32)
+    second = np.empty((H, W), np.float32)
+    wta_labels(np.ascontiguousarray(vol, dtype=np.float32), float(inv[0]), float(step), best,
+               depth, c0, second)
     return best, depth, c0, second
 
 

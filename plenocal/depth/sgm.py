@@ -38,6 +38,7 @@ import numpy as np
 
 from plenocal.camera import PinholeCamera
 from plenocal.config import stage_defaults, with_defaults
+from plenocal.depth.costkernels import mean_of_seen_best
 from plenocal.depth.planesweep import (
     PlaneSweepOptions,
     _grey,
@@ -54,6 +55,7 @@ from plenocal.io.files import to_float
 log = logging.getLogger(__name__)
 
 MIN_CONSISTENT = 0.01  # below this share of consistent pixels the check is not applied
+LABEL_BLOCK = 16  # cost planes moved into the (H, W, D) volume at once (16 floats: 64 bytes)
 _SGM = stage_defaults("depth.sgm")
 
 
@@ -94,61 +96,39 @@ def _sweep_options(opt: SgmOptions) -> PlaneSweepOptions:
                              cost="tad", window=opt.window, best_fraction=opt.best_fraction)
 
 
-@numba.njit(cache=True, fastmath={"nnan", "nsz"})
-def _mean_of_seen_best(per, k_of, k_max, out):  # pragma: no cover - numba
-    """Per pixel of ``per`` (S, H, W, overwritten): the mean of the ``k_of[S']`` smallest
-    of the S' finite costs (summed in ascending order, float32), 1 where no source sees
-    it. Row by row, ``k_max`` bubble passes of min/max (unseen +inf last); the costs are
-    never NaN nor -0 (the fastmath flags that let the min/max vectorise), and the sums
-    keep their order (no reassociation)."""
-    S, H, W = per.shape
-    seen = np.empty(W, np.int64)
-    lo = np.empty(W, np.float32)
-    hi = np.empty(W, np.float32)
-    for y in range(H):
-        seen[:] = 0
-        for s in range(S):
-            row = per[s, y]
-            for x in range(W):
-                seen[x] += row[x] < np.inf
-        for i in range(min(k_max, S - 1)):
-            for j in range(S - 1, i, -1):
-                p = per[j - 1, y]
-                q = per[j, y]
-                for x in range(W):
-                    a = p[x]
-                    b = q[x]
-                    lo[x] = min(a, b)
-                    hi[x] = max(a, b)
-                for x in range(W):
-                    p[x] = lo[x]
-                    q[x] = hi[x]
-        for x in range(W):
-            n = seen[x]
-            if n == 0:
-                out[y, x] = np.float32(1.0)
-            else:
-                k = k_of[n]
-                acc = per[0, y, x]
-                for m in range(1, k):
-                    acc += per[m, y, x]
-                out[y, x] = acc / np.float32(k)
-
-
 def matching_cost(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
                   src_imgs: list[np.ndarray], depths: np.ndarray,
-                  opt: SgmOptions) -> np.ndarray:
+                  opt: SgmOptions, out: np.ndarray | None = None) -> np.ndarray:
     """Cost volume (H, W, D) float32 in [0, 1]: per label the mean of the best
-    ``ceil(S' * best_fraction)`` of the S' sources that see the pixel; 1 where none."""
+    ``ceil(S' * best_fraction)`` of the S' sources that see the pixel; 1 where none
+    (written into ``out`` when given)."""
     S = len(srcs)
     # k per pixel from the number of sources that see it, by table
     k_of = np.maximum(1, np.ceil(np.arange(S + 1) * opt.best_fraction)).astype(np.int64)
     k_max = int(k_of[-1])
-    vol = np.empty((len(depths), ref.height, ref.width), dtype=np.float32)
+    D = len(depths)
+    vol = _volume(out, (ref.height, ref.width, D))
+    # labels in blocks of LABEL_BLOCK planes, each block moved into the label axis at once
+    # (a (D, H, W) volume and its transposed copy cost 100 MB more and a slow strided pass)
+    block = np.empty((min(LABEL_BLOCK, D), ref.height, ref.width), np.float32)
     for i, per in enumerate(source_costs(ref, ref_img, srcs, src_imgs, depths,
                                          _sweep_options(opt))):
-        _mean_of_seen_best(per, k_of, k_max, vol[i])
-    return np.ascontiguousarray(vol.transpose(1, 2, 0))
+        b = i % LABEL_BLOCK
+        mean_of_seen_best(per, k_of, k_max, block[b])
+        if b == len(block) - 1 or i == D - 1:
+            _to_label_axis(block[:b + 1], vol, i - b)
+    return vol
+
+
+@numba.njit(cache=True)
+def _to_label_axis(block, vol, first):  # pragma: no cover - numba
+    """``vol[:, :, first:first + B] = block.transpose(1, 2, 0)`` for a (B, H, W) block."""
+    B, H, W = block.shape
+    for y in range(H):
+        for x in range(W):
+            o = vol[y, x]
+            for b in range(B):
+                o[first + b] = block[b, y, x]
 
 
 @numba.njit(cache=True)
@@ -166,11 +146,40 @@ def _path_step(lp, lmin, pp2, p1, c, d):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
+def _path_pixel(c, lp, lmin, pp2, p1, step):  # pragma: no cover - numba
+    """``step[d] = L_r(p, d)`` for every label from the previous pixel's path costs ``lp``
+    (their minimum ``lmin``) and the pixel's P2 ``pp2``; returns min_d L_r(p, d). The
+    inner label loop has no branches (the end labels are done apart), so that it
+    vectorises; the arithmetic (float64 from the penalty on, rounded to float32 per
+    label) is the plain recursion's."""
+    D = c.shape[0]
+    jump = lmin + pp2
+    step[0] = _path_step(lp, lmin, pp2, p1, c, 0)
+    for d in range(1, D - 1):
+        near = min(lp[d], min(lp[d - 1] + p1, lp[d + 1] + p1))
+        step[d] = c[d] + min(np.float64(near), jump) - lmin
+    if D > 1:
+        step[D - 1] = _path_step(lp, lmin, pp2, p1, c, D - 1)
+    m = step[0]
+    for d in range(1, D):
+        m = min(m, step[d])
+    return m
+
+
+@numba.njit(cache=True)
+def _edge_p2(grey, y, x, py, px, p1, p2, contrast):  # pragma: no cover - numba
+    """P2 between pixel (y, x) and the previous one on the path (py, px), lowered by the
+    grey difference (edges), not below P1."""
+    g = abs(grey[y, x] - grey[py, px])
+    pp2 = p2 / (1.0 + g / contrast)
+    if pp2 < p1:
+        pp2 = p1
+    return pp2
+
+
+@numba.njit(cache=True)
 def _aggregate_dir(cost, grey, dy, dx, p1, p2, contrast, out):  # pragma: no cover - numba
-    """One direction's path costs added into ``out``. The inner label loop has no
-    branches (the end labels are done apart), so that it vectorises; the arithmetic
-    (float64 from the penalty on, rounded to float32 per label) is the plain
-    recursion's."""
+    """One direction's path costs added into ``out``."""
     H, W, D = cost.shape
     prev = np.zeros((W, D), np.float32)
     cur = np.zeros((W, D), np.float32)
@@ -186,6 +195,9 @@ def _aggregate_dir(cost, grey, dy, dx, p1, p2, contrast, out):  # pragma: no cov
             if py < 0 or py >= H or px < 0 or px >= W:
                 for d in range(D):
                     step[d] = c[d]
+                m = step[0]
+                for d in range(1, D):
+                    m = min(m, step[d])
             else:
                 if dy == 0:
                     lp = cur[px]
@@ -193,20 +205,8 @@ def _aggregate_dir(cost, grey, dy, dx, p1, p2, contrast, out):  # pragma: no cov
                 else:
                     lp = prev[px]
                     lmin = prev_min[px]
-                g = abs(grey[y, x] - grey[py, px])
-                pp2 = p2 / (1.0 + g / contrast)
-                if pp2 < p1:
-                    pp2 = p1
-                jump = lmin + pp2
-                step[0] = _path_step(lp, lmin, pp2, p1, c, 0)
-                for d in range(1, D - 1):
-                    near = min(lp[d], min(lp[d - 1] + p1, lp[d + 1] + p1))
-                    step[d] = c[d] + min(np.float64(near), jump) - lmin
-                if D > 1:
-                    step[D - 1] = _path_step(lp, lmin, pp2, p1, c, D - 1)
-            m = step[0]
-            for d in range(1, D):
-                m = min(m, step[d])
+                pp2 = _edge_p2(grey, y, x, py, px, p1, p2, contrast)
+                m = _path_pixel(c, lp, lmin, pp2, p1, step)
             cur_min[x] = m
             row = cur[x]
             o = out[y, x]
@@ -221,19 +221,64 @@ def _aggregate_dir(cost, grey, dy, dx, p1, p2, contrast, out):  # pragma: no cov
         cur_min = tmp_m
 
 
-def sgm_aggregate(cost: np.ndarray, grey: np.ndarray, opt: SgmOptions) -> np.ndarray:
-    """Sum over the scanline directions of the SGM path costs (H, W, D)."""
+@numba.njit(cache=True)
+def _aggregate_rows(cost, grey, p1, p2, contrast, out):  # pragma: no cover - numba
+    """The two horizontal directions, (0, 1) then (0, -1), row by row, written into
+    ``out`` as ``L_(0,1) + L_(0,-1)`` - the bits of adding them in turn onto zeros (no
+    path cost is -0) with one pass over the volumes instead of a zero fill and two."""
+    H, W, D = cost.shape
+    fwd = np.empty((W, D), np.float32)
+    fwd_min = np.empty(W, np.float32)
+    prev = np.empty(D, np.float32)
+    step = np.empty(D, np.float32)
+    for y in range(H):
+        c = cost[y, 0]
+        f = fwd[0]
+        for d in range(D):
+            f[d] = c[d]
+        m = f[0]
+        for d in range(1, D):
+            m = min(m, f[d])
+        fwd_min[0] = m
+        for x in range(1, W):
+            pp2 = _edge_p2(grey, y, x, y, x - 1, p1, p2, contrast)
+            fwd_min[x] = _path_pixel(cost[y, x], fwd[x - 1], fwd_min[x - 1], pp2, p1, fwd[x])
+        lmin = np.float32(0.0)
+        for x in range(W - 1, -1, -1):
+            c = cost[y, x]
+            if x == W - 1:
+                for d in range(D):
+                    step[d] = c[d]
+                m = step[0]
+                for d in range(1, D):
+                    m = min(m, step[d])
+            else:
+                pp2 = _edge_p2(grey, y, x, y, x + 1, p1, p2, contrast)
+                m = _path_pixel(c, prev, lmin, pp2, p1, step)
+            lmin = m
+            o = out[y, x]
+            f = fwd[x]
+            for d in range(D):
+                prev[d] = step[d]
+                o[d] = f[d] + step[d]
+
+
+def sgm_aggregate(cost: np.ndarray, grey: np.ndarray, opt: SgmOptions,
+                  out: np.ndarray | None = None) -> np.ndarray:
+    """Sum over the scanline directions of the SGM path costs (H, W, D) (written into
+    ``out`` when given)."""
     if opt.directions not in (4, 8):
         raise ValueError(f"depth.sgm.directions = {opt.directions}: must be 4 or 8")
     dirs = [(0, 1), (0, -1), (1, 0), (-1, 0)]
     if opt.directions == 8:
         dirs += [(1, 1), (1, -1), (-1, 1), (-1, -1)]
-    out = np.zeros_like(cost, dtype=np.float32)
+    out = _volume(out, cost.shape)
     c = np.ascontiguousarray(cost, dtype=np.float32)
     g = np.ascontiguousarray(grey, dtype=np.float32)
-    for dy, dx in dirs:
-        _aggregate_dir(c, g, dy, dx, np.float32(opt.p1), np.float32(opt.p2),
-                       np.float32(opt.edge_contrast), out)
+    pen = (np.float32(opt.p1), np.float32(opt.p2), np.float32(opt.edge_contrast))
+    _aggregate_rows(c, g, *pen, out)  # dirs[0] and dirs[1], the horizontal pair, at once
+    for dy, dx in dirs[2:]:
+        _aggregate_dir(c, g, dy, dx, *pen, out)
     return out
 
 
@@ -285,18 +330,30 @@ def _wta(agg: np.ndarray, near: float, far: float) -> tuple[np.ndarray, np.ndarr
     return depth, cont, ratio
 
 
+def _volume(buf: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray:
+    """``buf`` when it is a float32 C-contiguous volume of ``shape``, else a new one."""
+    if (buf is not None and buf.shape == tuple(shape) and buf.dtype == np.float32
+            and buf.flags.c_contiguous):
+        return buf
+    return np.empty(shape, np.float32)
+
+
 def _raw_sgm(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
              src_imgs: list[np.ndarray], near: float, far: float, n: int,
-             opt: SgmOptions) -> tuple[np.ndarray, np.ndarray]:
-    """SGM depth (0 where not unique or a speckle) and its continuous label map."""
+             opt: SgmOptions, work: tuple[np.ndarray, np.ndarray] | None = None,
+             ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """SGM depth (0 where not unique or a speckle), its continuous label map and the
+    two (H, W, n) volumes it used (cost, aggregate), which ``work`` passes to the next
+    call: two volumes of some 100 MB each are not allocated and page-faulted again."""
     depths = depth_labels(near, far, n)
-    cost = matching_cost(ref, ref_img, srcs, src_imgs, depths, opt)
+    cost_buf, agg_buf = work if work is not None else (None, None)
+    cost = matching_cost(ref, ref_img, srcs, src_imgs, depths, opt, cost_buf)
     grey = _grey(ref_img)
-    agg = sgm_aggregate(cost, grey, opt)
+    agg = sgm_aggregate(cost, grey, opt, agg_buf)
     depth, cont, ratio = _wta(agg, near, far)
     valid = (ratio <= opt.uniqueness) & np.isfinite(depth) & (depth > 0)
     valid = _remove_speckles(cont, valid, opt.speckle_size, opt.speckle_labels)
-    return np.where(valid, depth, 0.0).astype(np.float32), cont
+    return np.where(valid, depth, 0.0).astype(np.float32), cont, (cost, agg)
 
 
 @numba.njit(cache=True)
@@ -392,10 +449,11 @@ def sgm_depth(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera]
     opt = opt or SgmOptions()
     ref_img = check_sweep_inputs(ref, ref_img, srcs, near, far, "SGM depth")
     n = choose_num_depths(ref, srcs, near, far, _sweep_options(opt))
-    depth, _ = _raw_sgm(ref, ref_img, srcs, src_imgs, near, far, n, opt)
+    depth, _, work = _raw_sgm(ref, ref_img, srcs, src_imgs, near, far, n, opt)
     if opt.consistency:
         j, others, other_imgs = consistency_partner(ref, ref_img, srcs, src_imgs)
-        src_depth, _ = _raw_sgm(srcs[j], src_imgs[j], others, other_imgs, near, far, n, opt)
+        src_depth, _, _ = _raw_sgm(srcs[j], src_imgs[j], others, other_imgs, near, far, n,
+                                   opt, work)
         ok = left_right_check(ref, depth, srcs[j], src_depth, opt.consistency_tolerance)
         ok = _remove_speckles(_inv_labels(depth, near, far, n), ok, opt.speckle_size,
                               opt.speckle_labels)

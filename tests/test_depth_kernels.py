@@ -1,0 +1,103 @@
+"""The compiled pieces of the plane sweep and SGM (plenocal/depth/costkernels.py and the
+SGM aggregation) give the bits of the numpy / OpenCV definitions they replaced: the tad
+cost, the uncovered-window mask, the best-k mean, the label-axis block move and the fused
+horizontal path pair."""
+
+import cv2  # (before pycolmap)
+import numpy as np
+
+from plenocal.depth.costkernels import COVERED, mask_uncovered, mean_of_best, tad_pixels
+from plenocal.depth.planesweep import _box
+from plenocal.depth.sgm import SgmOptions, _aggregate_dir, _to_label_axis, sgm_aggregate
+
+
+def _features(rng, shape):
+    """Grey, gradients and a coverage channel with 0, 1 and bilinear-border values."""
+    f = rng.random((*shape, 4), np.float32)
+    f[..., 1:3] = (f[..., 1:3] - 0.5) * np.float32(0.1)  # gradients: small, signed
+    cover = np.ones(shape, np.float32)
+    cover[:, :5] = 0.0
+    cover[:, 5] = np.float32(0.29998779)
+    cover[:3] = 0.0
+    f[..., 3] = cover
+    return np.ascontiguousarray(f)
+
+
+def test_tad_pixels_is_the_numpy_definition():
+    rng = np.random.default_rng(0)
+    ref, warped = _features(rng, (13, 17)), _features(rng, (13, 17))
+    warped[2:6, 3:9, 0] = ref[2:6, 3:9, 0]  # exact matches: zero differences
+    diff = cv2.absdiff(ref, warped)
+    want = np.minimum(diff[..., 0], np.float32(0.08))
+    want /= np.float32(0.08)
+    dg = np.add(diff[..., 1], diff[..., 2])
+    np.minimum(dg, np.float32(0.04), out=dg)
+    dg /= np.float32(0.04)
+    want *= np.float32(0.3)
+    dg *= np.float32(0.7)
+    want += dg
+    dc = np.empty((13, 17), np.float32)
+    cover = np.empty((13, 17), np.float32)
+    tad_pixels(ref, warped, dc, cover)
+    assert dc.tobytes() == want.tobytes()
+    assert cover.tobytes() == np.ascontiguousarray(warped[..., 3]).tobytes()
+
+
+def test_mask_uncovered_is_the_box_threshold():
+    rng = np.random.default_rng(1)
+    cover = _features(rng, (13, 17))[..., 3].copy()
+    cost = rng.random((13, 17), np.float32)
+    box = _box(cover, 5)
+    want = cost.copy()
+    np.copyto(want, np.float32(np.inf), where=box <= 0.999)
+    mask_uncovered(box, cost)
+    assert cost.tobytes() == want.tobytes()
+    assert np.isinf(cost[:, :4]).all() and np.isfinite(cost[6:, 10:]).all()
+    assert COVERED == np.float32(0.999)
+
+
+def _costs(shape, seed):
+    """Random float32 costs with ties and +inf (window outside a source)."""
+    rng = np.random.default_rng(seed)
+    per = np.round(rng.random(shape), 2).astype(np.float32)
+    per[rng.random(shape) < 0.2] = np.inf
+    per[:, 0, :3] = np.inf
+    return per
+
+
+def test_mean_of_best_sums_the_k_smallest_ascending():
+    per = _costs((7, 9, 11), 0)
+    ascending = np.sort(per, axis=0)
+    for k in range(1, 8):
+        out = np.empty(per.shape[1:], np.float32)
+        mean_of_best(per.copy(), k, out)
+        # k == S: the sources' own order (nothing sorted)
+        planes = ascending if k < per.shape[0] else per
+        want = planes[0].copy()
+        for p in planes[1:k]:
+            want += p
+        want /= np.float32(k)
+        assert out.tobytes() == want.tobytes(), k
+
+
+def test_to_label_axis_moves_a_block_into_the_label_axis():
+    rng = np.random.default_rng(2)
+    vol = rng.random((5, 6, 40), np.float32)
+    want = vol.copy()
+    block = rng.random((16, 5, 6), np.float32)
+    want[:, :, 20:36] = block.transpose(1, 2, 0)
+    _to_label_axis(block, vol, 20)
+    assert vol.tobytes() == want.tobytes()
+
+
+def test_sgm_aggregate_adds_the_directions_in_turn():
+    """The fused horizontal pair: the bits of each direction added onto zeros in turn."""
+    rng = np.random.default_rng(3)
+    cost = rng.random((9, 12, 7), np.float32)
+    grey = rng.random((9, 12), np.float32)
+    opt = SgmOptions()
+    pen = (np.float32(opt.p1), np.float32(opt.p2), np.float32(opt.edge_contrast))
+    want = np.zeros_like(cost)
+    for dy, dx in [(0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1)]:
+        _aggregate_dir(cost, grey, dy, dx, *pen, want)
+    assert sgm_aggregate(cost, grey, opt).tobytes() == want.tobytes()
