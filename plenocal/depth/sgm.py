@@ -37,7 +37,7 @@ import numba
 import numpy as np
 
 from plenocal.camera import PinholeCamera
-from plenocal.config import stage_defaults, with_defaults
+from plenocal.config import settings_from, stage_defaults, with_defaults
 from plenocal.depth.costkernels import mean_of_seen_best
 from plenocal.depth.planesweep import (
     PlaneSweepOptions,
@@ -85,9 +85,7 @@ class SgmOptions:
 def sgm_options(cfg: dict | None) -> SgmOptions:
     """SgmOptions from the config's ``depth.sgm`` block, partial or whole (missing keys: the
     schema's defaults; unknown keys ignored)."""
-    cfg = with_defaults("depth.sgm", cfg)
-    names = SgmOptions.__dataclass_fields__
-    return SgmOptions(**{k: v for k, v in cfg.items() if k in names})
+    return settings_from(SgmOptions, with_defaults("depth.sgm", cfg))
 
 
 def _sweep_options(opt: SgmOptions) -> PlaneSweepOptions:
