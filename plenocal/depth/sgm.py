@@ -130,6 +130,19 @@ def _to_label_axis(block, vol, first):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
+def _path_start(c, step):  # pragma: no cover - numba
+    """A path's first pixel: its path costs are its matching costs ``c``, copied into
+    ``step``; returns their minimum."""
+    D = c.shape[0]
+    for d in range(D):
+        step[d] = c[d]
+    m = step[0]
+    for d in range(1, D):
+        m = min(m, step[d])
+    return m
+
+
+@numba.njit(cache=True)
 def _path_step(lp, lmin, pp2, p1, c, d):  # pragma: no cover - numba
     """L_r(p, d) of one label from the previous pixel's path costs ``lp`` (any d)."""
     D = lp.shape[0]
@@ -191,11 +204,7 @@ def _aggregate_dir(cost, grey, dy, dx, p1, p2, contrast, out):  # pragma: no cov
             py, px = y - dy, x - dx
             c = cost[y, x]
             if py < 0 or py >= H or px < 0 or px >= W:
-                for d in range(D):
-                    step[d] = c[d]
-                m = step[0]
-                for d in range(1, D):
-                    m = min(m, step[d])
+                m = _path_start(c, step)
             else:
                 if dy == 0:
                     lp = cur[px]
@@ -230,14 +239,7 @@ def _aggregate_rows(cost, grey, p1, p2, contrast, out):  # pragma: no cover - nu
     prev = np.empty(D, np.float32)
     step = np.empty(D, np.float32)
     for y in range(H):
-        c = cost[y, 0]
-        f = fwd[0]
-        for d in range(D):
-            f[d] = c[d]
-        m = f[0]
-        for d in range(1, D):
-            m = min(m, f[d])
-        fwd_min[0] = m
+        fwd_min[0] = _path_start(cost[y, 0], fwd[0])
         for x in range(1, W):
             pp2 = _edge_p2(grey, y, x, y, x - 1, p1, p2, contrast)
             fwd_min[x] = _path_pixel(cost[y, x], fwd[x - 1], fwd_min[x - 1], pp2, p1, fwd[x])
@@ -245,11 +247,7 @@ def _aggregate_rows(cost, grey, p1, p2, contrast, out):  # pragma: no cover - nu
         for x in range(W - 1, -1, -1):
             c = cost[y, x]
             if x == W - 1:
-                for d in range(D):
-                    step[d] = c[d]
-                m = step[0]
-                for d in range(1, D):
-                    m = min(m, step[d])
+                m = _path_start(c, step)
             else:
                 pp2 = _edge_p2(grey, y, x, y, x + 1, p1, p2, contrast)
                 m = _path_pixel(c, prev, lmin, pp2, p1, step)
