@@ -6,6 +6,7 @@ the sweep (best-k of the seen sources, winner-take-all) against their plain defi
 import cv2  # (before pycolmap)
 import numpy as np
 import pytest
+from synth.costs import random_costs
 from synth.planes import camera_at, fronto_plane, photo_texture, render_plane
 
 from plenocal.depth import DepthBackendError, estimate_depth, resolve_backend
@@ -175,18 +176,8 @@ def test_background_fill_takes_the_far_side():
     np.testing.assert_allclose(fill_background(z), [[0.6, 0.6, 0.6]])
 
 
-def _costs(shape, seed):
-    """Random float32 costs with ties, +inf (window outside a source) and pixels no
-    source sees."""
-    rng = np.random.default_rng(seed)
-    per = np.round(rng.random(shape), 2).astype(np.float32)
-    per[rng.random(shape) < 0.2] = np.inf
-    per[:, 0, :3] = np.inf
-    return per
-
-
 def test_sgm_source_mean_is_the_mean_of_the_best_seen():
-    per = _costs((8, 9, 11), 1)
+    per = random_costs((8, 9, 11), 1)
     S, fraction = per.shape[0], 0.5
     k_of = np.maximum(1, np.ceil(np.arange(S + 1) * fraction)).astype(np.int64)
     out = np.empty(per.shape[1:], np.float32)
@@ -201,7 +192,7 @@ def test_sgm_source_mean_is_the_mean_of_the_best_seen():
 
 
 def test_winner_take_all_is_the_first_minimum_and_the_second_outside_its_neighbours():
-    vol = _costs((6, 9, 11), 2)
+    vol = random_costs((6, 9, 11), 2)
     v = np.where(np.isfinite(vol), vol, np.float32(1e6))
     best, depth, c0, second = winner_take_all(vol.copy(), np.linspace(1.0, 2.0, 6))
     assert np.array_equal(best, np.argmin(v, axis=0))
@@ -212,7 +203,7 @@ def test_winner_take_all_is_the_first_minimum_and_the_second_outside_its_neighbo
 
 
 def test_sgm_wta_matches_its_definition():
-    agg = _costs((9, 11, 7), 3).transpose(1, 2, 0).copy()
+    agg = random_costs((9, 11, 7), 3).transpose(1, 2, 0).copy()
     agg[~np.isfinite(agg)] = 5.0
     near, far = 0.4, 0.9
     depth, cont, ratio = _wta(agg, near, far)

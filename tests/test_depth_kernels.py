@@ -5,6 +5,7 @@ horizontal path pair."""
 
 import cv2  # (before pycolmap)
 import numpy as np
+from synth.costs import random_costs
 
 from plenocal.depth.costkernels import COVERED, mask_uncovered, mean_of_best, tad_pixels
 from plenocal.depth.planesweep import _box
@@ -56,17 +57,8 @@ def test_mask_uncovered_is_the_box_threshold():
     assert COVERED == np.float32(0.999)
 
 
-def _costs(shape, seed):
-    """Random float32 costs with ties and +inf (window outside a source)."""
-    rng = np.random.default_rng(seed)
-    per = np.round(rng.random(shape), 2).astype(np.float32)
-    per[rng.random(shape) < 0.2] = np.inf
-    per[:, 0, :3] = np.inf
-    return per
-
-
 def test_mean_of_best_sums_the_k_smallest_ascending():
-    per = _costs((7, 9, 11), 0)
+    per = random_costs((7, 9, 11), 0)
     ascending = np.sort(per, axis=0)
     for k in range(1, 8):
         out = np.empty(per.shape[1:], np.float32)
