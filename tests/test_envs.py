@@ -33,3 +33,13 @@ def test_every_rule_uses_the_env():
     for smk in sorted((ROOT / "rules").glob("*.smk")):
         text = smk.read_text()
         assert text.count("script:") == text.count('"../envs/plenocal.yaml"'), smk.name
+
+
+def test_executor_plugins_are_extras():
+    """An installed executor plugin is imported by every Snakemake start (the SLURM one
+    brings pandas and runs `scontrol`): a workstation's install must not carry one."""
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    base = _pins(project["dependencies"])
+    assert not [n for n in base if n.startswith("snakemake-executor-plugin-")]
+    assert "snakemake-executor-plugin-slurm" in _pins(project["optional-dependencies"]["slurm"])
+    assert "plenocal[slurm]" in project["optional-dependencies"]["test"]
