@@ -2,6 +2,7 @@
 paths, and per-stage config slices (passed as ``params`` so that a change of one
 stage's settings reruns that stage and what depends on it, nothing else)."""
 
+import os
 import re
 from pathlib import Path
 
@@ -159,8 +160,9 @@ def data(dataset, *parts):
 
 
 def res(dataset, *parts):
-    """results/<dataset>/<parts...> (joined as text: the DAG calls this ~7,000 times)."""
-    return "/".join(("results", dataset, *parts))
+    """results/<dataset>/<parts...> (os.path.join: the DAG calls this ~7,000 times,
+    pathlib takes 3x as long)."""
+    return os.path.join("results", dataset, *parts)
 
 
 def log_path(rule, name="{dataset}"):
