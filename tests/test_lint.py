@@ -45,7 +45,9 @@ def test_profiles_use_known_options_and_no_site_settings():
     proc = _run(sys.executable, "-m", "snakemake", "--help")
     assert proc.returncode == 0, proc.stderr
     options = set(re.findall(r"--([a-z0-9][a-z0-9-]*)", proc.stdout))
-    assert "slurm-status-command" in options, "the SLURM executor plugin is not installed"
+    assert "slurm-status-command" in options, (
+        "the SLURM executor plugin is not installed: it comes with the test extra "
+        '(pip install -e ".[test]") or the slurm extra (pip install -e ".[slurm]")')
     profiles = sorted((ROOT / "profiles").glob("*/config.yaml"))
     assert {p.parent.name for p in profiles} >= {"default", "slurm"}
     for path in profiles:
