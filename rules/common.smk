@@ -220,10 +220,6 @@ def convert_settings(dataset):
     return out
 
 
-def convert_view_paths(dataset, cam):
-    return [res(dataset, "views", cam, f"{v}.png") for v in views(dataset)]
-
-
 def convert_quality_truth(wildcards):
     d = wildcards.dataset
     gt = Path(res(d, "ground_truth", "renders"))
@@ -246,7 +242,8 @@ def convert_quality_views(wildcards):
 def convert_targets(dataset):
     """One output per conversion job (its disparity.json): Snakemake reruns a job when
     any of its outputs is missing, so the default target still brings back every view,
-    while the DAG matches 28 paths instead of 728 (the no-op's time, issue 15)."""
+    while the DAG matches one path per shot instead of N x N + 1 (the no-op's time,
+    issue 15)."""
     out = [res(dataset, "views", c, "disparity.json") for c in cams(dataset)]
     if is_synthetic(dataset):
         out.append(res(dataset, "convert", "quality.json"))
