@@ -421,10 +421,13 @@ def test_texture_files_read_as_scikit_image_reads_them():
 
 
 def test_bounding_boxes_skip_nothing_that_a_ray_hits(tmp_path: Path):
-    """The tracer skips a box's faces where a ray misses the box (quad_groups): a lenslet
-    image and an ideal render with its depth are the same bits as with every quad tested
-    for every ray; the default scene's runs are the background, the slanted plane and
-    the three boxes."""
+    """The tracers skip what no ray of theirs can hit - a lenslet pixel's rays test only
+    the quads its microlens's bundle reaches (_bundle_candidates), an ideal render's
+    rays skip a box's faces where they miss the box (quad_groups) - and give the same
+    bits as with every quad tested for every ray: lenslet images of a hand-held and an
+    array shot (Keplerian and Galilean, with and without a front stop) and an ideal
+    render with its depth; the default scene's runs are the background, the slanted
+    plane and the three boxes."""
     import json
 
     from plenocal.simulate.dataset import optics_from_truth
@@ -446,14 +449,48 @@ def test_bounding_boxes_skip_nothing_that_a_ray_hits(tmp_path: Path):
     optics = optics_from_truth(truth / "optics.json")
     grid = MicrolensGrid(read_calib(tmp_path / "calib.xml"), optics.width, optics.height)
     lm = nearest_lens_map(grid)
-    shot = np.asarray(json.loads((truth / "shots.json").read_text())["hand01"]["cam_to_world"])
-    fast = render_lenslet(scene, optics, lm, shot, 4, 0)
-    every = render_lenslet(scene, optics, lm, shot, 4, 0, groups=single_quad_groups(len(quads)))
-    np.testing.assert_array_equal(fast, every)
-    assert fast.std() > 0.05
+    shots = json.loads((truth / "shots.json").read_text())
+    galilean = dataclasses.replace(optics, kind="galilean")
+    for name, opt, stop in [("hand01", optics, 0.0), ("x00_y00", optics, 0.0),
+                            ("hand03", optics, 0.01), ("x01_y00", galilean, 0.0)]:
+        shot = np.asarray(shots[name]["cam_to_world"])
+        kw = {"stop_distance": stop, "stop_diameter": 0.8 * opt.aperture if stop else 0.0}
+        fast = render_lenslet(scene, opt, lm, shot, 4, 0, **kw)
+        every = render_lenslet(scene, opt, lm, shot, 4, 0, cull=False, **kw)
+        np.testing.assert_array_equal(fast, every, err_msg=name)
+        assert fast.std() > 0.05, name
+    shot = np.asarray(shots["hand01"]["cam_to_world"])
     K = np.array([[300.0, 0, 119.5], [0, 300.0, 89.5], [0, 0, 1]])
     img, z = render_pinhole(scene, K, shot, 240, 180, 2)
     img1, z1 = render_pinhole(scene, K, shot, 240, 180, 2, groups=single_quad_groups(len(quads)))
     np.testing.assert_array_equal(img, img1)
     np.testing.assert_array_equal(z, z1)
     assert (z > 0).mean() > 0.9
+
+
+def test_bundle_culling_keeps_the_reachable_quads_only():
+    """A hand-computed case of _bundle_candidates: L = 40 mm, F = 35 mm (kappa = 1/L -
+    1/F = -1/280 per mm), main-lens aperture radius 5 mm, microlens radius 0.1 mm. At
+    z = 280 mm the bundle of the lens at (lx, ly) = (0.4, 0) mm is the disc of centre
+    -(z / L) lx = -2.8 mm and radius 0 * 5 + 7 * 0.1 = 0.7 mm (x in [-3.5, -2.1] mm): a
+    quad over x in [-2.15, 10] mm is reached, one over [-2.0, 10] mm is not; one behind
+    the camera never is; a deep quad is kept when its far end's disc reaches it."""
+    from plenocal.simulate.raytrace import _bundle_candidates
+
+    def boxes(*rows):
+        return np.array(rows, dtype=np.float64)
+
+    mm = 1e-3
+    args = (0.4 * mm, 0.0, 40 * mm, 1 / (40 * mm) - 1 / (35 * mm), 5 * mm, 0.1 * mm)
+    z = 280 * mm
+    b = boxes([-2.15 * mm, 10 * mm, -1 * mm, 1 * mm, z, z],  # reached (edge at -2.1)
+              [-2.0 * mm, 10 * mm, -1 * mm, 1 * mm, z, z],  # 0.1 mm beyond the edge
+              [-10 * mm, 10 * mm, -10 * mm, 10 * mm, -0.5, -0.1],  # behind the camera
+              [-2.0 * mm, 10 * mm, -1 * mm, 1 * mm, z, 0.6])  # the far end reaches it
+    cand = np.full(4, -1, dtype=np.int64)
+    n = _bundle_candidates(*args, b, cand)
+    assert n == 2 and list(cand[:2]) == [0, 3]
+    # at z = 600 mm: centre -6 mm, radius |1 - 600/280| 5 + 15 * 0.1 = 7.214 mm
+    far = boxes([0.8 * mm, 10 * mm, -1 * mm, 1 * mm, 0.6, 0.6],
+                [1.3 * mm, 10 * mm, -1 * mm, 1 * mm, 0.6, 0.6])
+    assert _bundle_candidates(*args, far, cand) == 1 and cand[0] == 0

@@ -16,6 +16,12 @@ Multi-focus MLAs: every pixel carries its lens's type, and ``t`` is that type's
 (signed: negative for a Galilean MLA, whose conjugate point lies behind it) sharp
 distance, so each type blurs a given depth differently.
 
+A lenslet pixel's rays test only the quads that its microlens's bundle of rays can
+reach (:func:`_bundle_candidates`, recomputed where the lens changes along a row): on the
+default scene a ray tests 1-3 of 17 quads instead of the background, the slanted plane,
+three bounding boxes and the faces of the boxes it enters - a lenslet image's tracing
+2.83 -> 2.05 s, the same bits as with every quad tested (issue 15).
+
 Numba compiles the per-pixel loops (the default dataset traces about 40 million
 rays per shot); the arithmetic is plain IEEE double, so results are deterministic. The
 per-ray helpers are inlined into the loops at Numba's level (``inline="always"``): called,
@@ -99,6 +105,43 @@ def _slab(o, inv_d, lo, hi, t0, t1):
 
 
 @njit(cache=True, inline="always")
+def _hit(row, ox, oy, oz, dx, dy, dz, best):
+    """The ray's hit of one quad (a row of :func:`quad_table`) nearer than ``best``:
+    (distance along the ray, texel coordinates along U and V in metres), or a distance
+    of -1 where it misses the quad or hits it no nearer than ``best``."""
+    den = row[3] * dx + row[4] * dy + row[5] * dz
+    if abs(den) < 1e-12:
+        return -1.0, 0.0, 0.0
+    tt = (row[3] * (row[0] - ox) + row[4] * (row[1] - oy) + row[5] * (row[2] - oz)) / den
+    if tt <= 1e-9 or tt >= best:
+        return -1.0, 0.0, 0.0
+    rx = ox + tt * dx - row[0]
+    ry = oy + tt * dy - row[1]
+    rz = oz + tt * dz - row[2]
+    a = (rx * row[6] + ry * row[7] + rz * row[8]) / row[12]
+    if a < 0.0 or a > 1.0:
+        return -1.0, 0.0, 0.0
+    b = (rx * row[9] + ry * row[10] + rz * row[11]) / row[13]
+    if b < 0.0 or b > 1.0:
+        return -1.0, 0.0, 0.0
+    return tt, a * row[14], b * row[15]
+
+
+@njit(cache=True, inline="always")
+def _shade(hit, best, ba, bb, tex_id, texel, atlas, th, tw, rgb):
+    """The colour of the nearest hit (quad ``hit`` at texel coordinates ``ba``, ``bb``)
+    into rgb, or the background where nothing was hit (``hit`` < 0); returns the hit's
+    distance, -1 for none."""
+    if hit < 0:
+        rgb[0] = BACKGROUND
+        rgb[1] = BACKGROUND
+        rgb[2] = BACKGROUND
+        return -1.0
+    _texel(atlas, th, tw, tex_id[hit], ba / texel[hit], bb / texel[hit], rgb)
+    return best
+
+
+@njit(cache=True, inline="always")
 def _trace(ox, oy, oz, dx, dy, dz, quads, groups, tex_id, texel, atlas, th, tw, rgb):
     """Nearest hit of the ray among ``quads`` (:func:`quad_table`); writes its colour
     into rgb and returns the distance along the ray (in units of the direction
@@ -124,34 +167,84 @@ def _trace(ox, oy, oz, dx, dy, dz, quads, groups, tex_id, texel, atlas, th, tw, 
             if t1 < t0 or t1 < 0.0:
                 continue
         for q in range(q0, q1):
-            row = quads[q]
-            den = row[3] * dx + row[4] * dy + row[5] * dz
-            if abs(den) < 1e-12:
-                continue
-            tt = (row[3] * (row[0] - ox) + row[4] * (row[1] - oy)
-                  + row[5] * (row[2] - oz)) / den
-            if tt <= 1e-9 or tt >= best:
-                continue
-            rx = ox + tt * dx - row[0]
-            ry = oy + tt * dy - row[1]
-            rz = oz + tt * dz - row[2]
-            a = (rx * row[6] + ry * row[7] + rz * row[8]) / row[12]
-            if a < 0.0 or a > 1.0:
-                continue
-            b = (rx * row[9] + ry * row[10] + rz * row[11]) / row[13]
-            if b < 0.0 or b > 1.0:
-                continue
+            tt, a, b = _hit(quads[q], ox, oy, oz, dx, dy, dz, best)
+            if tt > 0.0:
+                best = tt
+                hit = q
+                ba = a
+                bb = b
+    return _shade(hit, best, ba, bb, tex_id, texel, atlas, th, tw, rgb)
+
+
+@njit(cache=True, inline="always")
+def _trace_candidates(ox, oy, oz, dx, dy, dz, quads, cand, ncand, tex_id, texel, atlas, th,
+                      tw, rgb):
+    """:func:`_trace` over the quads ``cand[:ncand]`` only (in increasing order: the
+    candidates of the ray's bundle, :func:`_bundle_candidates`)."""
+    best = 1e30
+    hit = -1
+    ba = 0.0
+    bb = 0.0
+    for i in range(ncand):
+        q = cand[i]
+        tt, a, b = _hit(quads[q], ox, oy, oz, dx, dy, dz, best)
+        if tt > 0.0:
             best = tt
             hit = q
-            ba = a * row[14]
-            bb = b * row[15]
-    if hit < 0:
-        rgb[0] = BACKGROUND
-        rgb[1] = BACKGROUND
-        rgb[2] = BACKGROUND
-        return -1.0
-    _texel(atlas, th, tw, tex_id[hit], ba / texel[hit], bb / texel[hit], rgb)
-    return best
+            ba = a
+            bb = b
+    return _shade(hit, best, ba, bb, tex_id, texel, atlas, th, tw, rgb)
+
+
+def camera_boxes(quads: np.ndarray, cam_to_world: np.ndarray) -> np.ndarray:
+    """(n, 6) bounding box of every quad (:func:`quad_table`) in the camera frame:
+    [x min, x max, y min, y max, z min, z max] (metres)."""
+    p0, u, v = quads[:, None, 0:3], quads[:, None, 6:9], quads[:, None, 9:12]
+    corners = np.concatenate([p0, p0 + u, p0 + v, p0 + u + v], axis=1)  # (n, 4, 3)
+    R = np.asarray(cam_to_world, dtype=np.float64)[:3, :3]
+    C = np.asarray(cam_to_world, dtype=np.float64)[:3, 3]
+    cam = (corners - C) @ R  # R^T (p - C)
+    lo, hi = cam.min(axis=1), cam.max(axis=1)
+    return np.ascontiguousarray(np.stack([lo[:, 0], hi[:, 0], lo[:, 1], hi[:, 1], lo[:, 2],
+                                          hi[:, 2]], axis=1))
+
+
+@njit(cache=True, inline="always")
+def _bundle_candidates(lx, ly, L, kappa, half_ap, half_lens, boxes, cand):
+    """The quads that a ray through the microlens centred at (lx, ly) can hit, into
+    ``cand`` in increasing order; returns their count.
+
+    Every ray of the lens leaves a point m of the microlens disc (radius ``half_lens``,
+    plane z = -L) and crosses the main lens at h, |h| <= ``half_ap``; past the thin lens
+    (``u' = (h - m) / L - h / F``) it is at camera depth z at
+    ``h (1 + z kappa) - (z / L) m`` with ``kappa = 1 / L - 1 / F``: inside the disc of
+    centre ``-(z / L) (lx, ly)`` and radius ``|1 + z kappa| half_ap + (z / L) half_lens``. Over a
+    quad's depth range [z0, z1] the centre moves linearly and the radius is convex, so the
+    discs lie inside the bounding box of the two end discs; a quad whose camera-frame box
+    misses it cannot be hit by the lens's rays (the front stop only removes rays). The
+    boxes are padded by a micrometre and 1e-6 of the distance, far above round-off."""
+    n = 0
+    for q in range(boxes.shape[0]):
+        z1 = boxes[q, 5]
+        if z1 <= 0.0:
+            continue
+        z0 = max(boxes[q, 4], 0.0)
+        pad = 1e-6 * (1.0 + z1)
+        ca = -z0 / L
+        cb = -z1 / L
+        ra = abs(1.0 + z0 * kappa) * half_ap + (z0 / L) * half_lens + pad
+        rb = abs(1.0 + z1 * kappa) * half_ap + (z1 / L) * half_lens + pad
+        if min(ca * lx - ra, cb * lx - rb) > boxes[q, 1]:
+            continue
+        if max(ca * lx + ra, cb * lx + rb) < boxes[q, 0]:
+            continue
+        if min(ca * ly - ra, cb * ly - rb) > boxes[q, 3]:
+            continue
+        if max(ca * ly + ra, cb * ly + rb) < boxes[q, 2]:
+            continue
+        cand[n] = q
+        n += 1
+    return n
 
 
 def _groups(quads: np.ndarray, groups: np.ndarray | None) -> np.ndarray:
@@ -201,16 +294,25 @@ def quad_groups(quads: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def _render_lenslet(height, width, pix_size, L, s, t_types, lens_type, F, half_ap, stop_z,
-                    stop_half, lens_x, lens_y, half_lens, jitter, disk, R, C, quads, groups,
+                    stop_half, lens_x, lens_y, half_lens, jitter, disk, R, C, quads, boxes,
                     tex_id, texel, atlas, th, tw, out):
     ns = jitter.shape[0]
     cxs = (width - 1) / 2.0
     cys = (height - 1) / 2.0
+    kappa = 1.0 / L - 1.0 / F
     rgb = np.empty(3)
+    cand = np.empty(quads.shape[0], dtype=np.int64)
+    ncand = 0
+    plx = math.nan
+    ply = math.nan
     for row in range(height):
         for col in range(width):
             lx = lens_x[row, col]
             ly = lens_y[row, col]
+            if lx != plx or ly != ply:  # a new lens: its bundle's candidate quads
+                ncand = _bundle_candidates(lx, ly, L, kappa, half_ap, half_lens, boxes, cand)
+                plx = lx
+                ply = ly
             t = t_types[lens_type[row, col]]
             t_s = t / s
             acc0 = 0.0
@@ -250,7 +352,8 @@ def _render_lenslet(height, width, pix_size, L, s, t_types, lens_type, F, half_a
                 dx = R[0, 0] * ux + R[0, 1] * uy + R[0, 2]
                 dy = R[1, 0] * ux + R[1, 1] * uy + R[1, 2]
                 dz = R[2, 0] * ux + R[2, 1] * uy + R[2, 2]
-                _trace(ox, oy, oz, dx, dy, dz, quads, groups, tex_id, texel, atlas, th, tw, rgb)
+                _trace_candidates(ox, oy, oz, dx, dy, dz, quads, cand, ncand, tex_id, texel,
+                                  atlas, th, tw, rgb)
                 acc0 += rgb[0]
                 acc1 += rgb[1]
                 acc2 += rgb[2]
@@ -354,15 +457,15 @@ def sample_pattern(samples: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
 def render_lenslet(scene: SceneArrays, optics, lens_centres_px: np.ndarray,
                    cam_to_world: np.ndarray, samples: int, seed: int,
                    lens_types: np.ndarray | None = None, stop_distance: float = 0.0,
-                   stop_diameter: float = 0.0, groups: np.ndarray | None = None
-                   ) -> np.ndarray:
+                   stop_diameter: float = 0.0, cull: bool = True) -> np.ndarray:
     """Render a lenslet image (float32 RGB in [0, 1]) of one shot.
 
     ``lens_centres_px`` (H, W, 2) gives, per sensor pixel, the micro-image centre of
     the microlens it lies under (pixels); ``lens_types`` (H, W) its lens type (None:
     every lens of type 0). ``stop_diameter`` > 0: a front stop of that diameter
-    ``stop_distance`` in front of the main lens (metres). ``groups``: the quads' runs
-    (:func:`quad_groups`, by default; one quad per run tests every quad for every ray).
+    ``stop_distance`` in front of the main lens (metres). ``cull``: each ray tests only
+    the quads its microlens's bundle can reach (:func:`_bundle_candidates`; the same
+    image as ``cull=False``, which tests every quad for every ray).
     """
     L, s, F = optics.L, optics.s, optics.focal_length
     t_types = np.array([optics.type_t(i) for i in range(optics.lens_types)])
@@ -382,9 +485,14 @@ def render_lenslet(scene: SceneArrays, optics, lens_centres_px: np.ndarray,
     _render_lenslet(optics.height, optics.width, optics.pixel_size, L, s, t_types, lens_types,
                     F, optics.aperture / 2, float(stop_distance), float(stop_diameter) / 2,
                     lens_x, lens_y, optics.mla_pitch / 2, jitter, disk, R, C, quads,
-                    _groups(quads, groups), scene.tex_id, scene.texel, scene.atlas,
-                    scene.tex_h, scene.tex_w, out)
+                    camera_boxes(quads, cam_to_world) if cull else _unbounded(len(quads)),
+                    scene.tex_id, scene.texel, scene.atlas, scene.tex_h, scene.tex_w, out)
     return out
+
+
+def _unbounded(n: int) -> np.ndarray:
+    """(n, 6) camera boxes that every bundle reaches (no culling)."""
+    return np.tile(np.array([-np.inf, np.inf, -np.inf, np.inf, 0.0, np.inf]), (n, 1))
 
 
 def render_pinhole(scene: SceneArrays, K: np.ndarray, cam_to_world: np.ndarray, width: int,
