@@ -21,7 +21,7 @@ from plenocal.optics import PlenopticOptics
 from plenocal.simulate.dataset import make_calib, nearest_lens_map, render_shot, setup_dataset
 from plenocal.simulate.mla import lens_type_map
 from plenocal.simulate.raytrace import render_lenslet
-from plenocal.simulate.scene import SceneArrays, scene_arrays
+from plenocal.simulate.scene import SceneArrays, pack_textures, scene_arrays
 from plenocal.simulate.sensor import natural_vignetting, read_out
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -197,12 +197,12 @@ def texture_plane(z: float, texel: float, texture: np.ndarray | None = None) -> 
     if texture is None:
         rng = np.random.default_rng(0)
         texture = cv2.GaussianBlur(rng.random((256, 256)).astype(np.float32), (0, 0), 1.0)
-    tex = np.ascontiguousarray(np.repeat(texture[:, :, None], 3, axis=2)[None])
+    tex = np.repeat(texture[:, :, None], 3, axis=2)
     w = 0.4
     return SceneArrays(p0=np.array([[-w / 2, -w / 2, z]]), u=np.array([[w, 0.0, 0.0]]),
                        v=np.array([[0.0, w, 0.0]]), normal=np.array([[0.0, 0.0, 1.0]]),
-                       tex_id=np.array([0]), texel=np.array([texel]), atlas=tex,
-                       tex_h=np.array([tex.shape[1]]), tex_w=np.array([tex.shape[2]]))
+                       tex_id=np.array([0]), texel=np.array([texel]),
+                       **pack_textures([tex]))
 
 
 def test_calib_xml_is_written_as_raytrix_writes_a_turned_multi_focus_mla(tmp_path: Path):

@@ -20,7 +20,7 @@ from plenocal.optics import PlenopticOptics
 from plenocal.simulate.mla import lens_type_map, make_calib
 from plenocal.simulate.optics_setup import optics_from_config
 from plenocal.simulate.raytrace import nearest_lens_centres, render_lenslet
-from plenocal.simulate.scene import SceneArrays, make_scene, scene_arrays
+from plenocal.simulate.scene import SceneArrays, make_scene, pack_textures, scene_arrays
 from plenocal.simulate.sensor import natural_vignetting, read_out
 
 
@@ -167,8 +167,7 @@ def white_scene() -> SceneArrays:
     return SceneArrays(p0=np.array([[-w / 2, -w / 2, z]]), u=np.array([[w, 0.0, 0.0]]),
                        v=np.array([[0.0, w, 0.0]]), normal=np.array([[0.0, 0.0, 1.0]]),
                        tex_id=np.array([0]), texel=np.array([w / 7]),
-                       atlas=np.ones((1, 8, 8, 3), dtype=np.float32), tex_h=np.array([8]),
-                       tex_w=np.array([8]))
+                       **pack_textures([np.ones((8, 8, 3), dtype=np.float32)]))
 
 
 def render_white(sim: dict, data_dir: str | Path, out_png: str | Path) -> None:

@@ -43,8 +43,10 @@ BACKGROUND = 0.5
 
 
 @njit(cache=True, inline="always")
-def _texel(atlas, th, tw, k, s, t, out):
-    """Bilinear lookup with mirrored repetition into ``out`` (3,); s, t in texels."""
+def _texel(atlas, toff, th, tw, k, s, t, out):
+    """Bilinear lookup with mirrored repetition into ``out`` (3,); s, t in texels, texture
+    ``k`` the rows ``toff[k]`` on of the packed ``atlas`` (:func:`plenocal.simulate.scene.
+    pack_textures`)."""
     h = th[k]
     w = tw[k]
     period = 2.0 * (w - 1)
@@ -63,9 +65,13 @@ def _texel(atlas, th, tw, k, s, t, out):
     j1 = min(j0 + 1, w - 1)
     fy = t - i0
     fx = s - j0
+    r00 = toff[k] + i0 * w + j0
+    r01 = toff[k] + i0 * w + j1
+    r10 = toff[k] + i1 * w + j0
+    r11 = toff[k] + i1 * w + j1
     for c in range(3):
-        a = atlas[k, i0, j0, c] * (1 - fx) + atlas[k, i0, j1, c] * fx
-        b = atlas[k, i1, j0, c] * (1 - fx) + atlas[k, i1, j1, c] * fx
+        a = atlas[r00, c] * (1 - fx) + atlas[r01, c] * fx
+        b = atlas[r10, c] * (1 - fx) + atlas[r11, c] * fx
         out[c] = a * (1 - fy) + b * fy
     return out
 
@@ -128,7 +134,7 @@ def _hit(row, ox, oy, oz, dx, dy, dz, best):
 
 
 @njit(cache=True, inline="always")
-def _shade(hit, best, ba, bb, tex_id, texel, atlas, th, tw, rgb):
+def _shade(hit, best, ba, bb, tex_id, texel, atlas, toff, th, tw, rgb):
     """The colour of the nearest hit (quad ``hit`` at texel coordinates ``ba``, ``bb``)
     into rgb, or the background where nothing was hit (``hit`` < 0); returns the hit's
     distance, -1 for none."""
@@ -137,12 +143,12 @@ def _shade(hit, best, ba, bb, tex_id, texel, atlas, th, tw, rgb):
         rgb[1] = BACKGROUND
         rgb[2] = BACKGROUND
         return -1.0
-    _texel(atlas, th, tw, tex_id[hit], ba / texel[hit], bb / texel[hit], rgb)
+    _texel(atlas, toff, th, tw, tex_id[hit], ba / texel[hit], bb / texel[hit], rgb)
     return best
 
 
 @njit(cache=True, inline="always")
-def _trace(ox, oy, oz, dx, dy, dz, quads, groups, tex_id, texel, atlas, th, tw, rgb):
+def _trace(ox, oy, oz, dx, dy, dz, quads, groups, tex_id, texel, atlas, toff, th, tw, rgb):
     """Nearest hit of the ray among ``quads`` (:func:`quad_table`); writes its colour
     into rgb and returns the distance along the ray (in units of the direction
     vector), or -1 for no hit. The quads are tested in order, in the runs of ``groups``
@@ -173,12 +179,12 @@ def _trace(ox, oy, oz, dx, dy, dz, quads, groups, tex_id, texel, atlas, th, tw, 
                 hit = q
                 ba = a
                 bb = b
-    return _shade(hit, best, ba, bb, tex_id, texel, atlas, th, tw, rgb)
+    return _shade(hit, best, ba, bb, tex_id, texel, atlas, toff, th, tw, rgb)
 
 
 @njit(cache=True, inline="always")
-def _trace_candidates(ox, oy, oz, dx, dy, dz, quads, cand, ncand, tex_id, texel, atlas, th,
-                      tw, rgb):
+def _trace_candidates(ox, oy, oz, dx, dy, dz, quads, cand, ncand, tex_id, texel, atlas, toff,
+                      th, tw, rgb):
     """:func:`_trace` over the quads ``cand[:ncand]`` only (in increasing order: the
     candidates of the ray's bundle, :func:`_bundle_candidates`)."""
     best = 1e30
@@ -193,7 +199,7 @@ def _trace_candidates(ox, oy, oz, dx, dy, dz, quads, cand, ncand, tex_id, texel,
             hit = q
             ba = a
             bb = b
-    return _shade(hit, best, ba, bb, tex_id, texel, atlas, th, tw, rgb)
+    return _shade(hit, best, ba, bb, tex_id, texel, atlas, toff, th, tw, rgb)
 
 
 def camera_boxes(quads: np.ndarray, cam_to_world: np.ndarray) -> np.ndarray:
@@ -295,7 +301,7 @@ def quad_groups(quads: np.ndarray) -> np.ndarray:
 @njit(cache=True)
 def _render_lenslet(height, width, pix_size, L, s, t_types, lens_type, F, half_ap, stop_z,
                     stop_half, lens_x, lens_y, half_lens, jitter, disk, R, C, quads, boxes,
-                    tex_id, texel, atlas, th, tw, out):
+                    tex_id, texel, atlas, toff, th, tw, out):
     ns = jitter.shape[0]
     cxs = (width - 1) / 2.0
     cys = (height - 1) / 2.0
@@ -353,7 +359,7 @@ def _render_lenslet(height, width, pix_size, L, s, t_types, lens_type, F, half_a
                 dy = R[1, 0] * ux + R[1, 1] * uy + R[1, 2]
                 dz = R[2, 0] * ux + R[2, 1] * uy + R[2, 2]
                 _trace_candidates(ox, oy, oz, dx, dy, dz, quads, cand, ncand, tex_id, texel,
-                                  atlas, th, tw, rgb)
+                                  atlas, toff, th, tw, rgb)
                 acc0 += rgb[0]
                 acc1 += rgb[1]
                 acc2 += rgb[2]
@@ -375,8 +381,8 @@ def _pixel_ray(Kinv, R, u, v):
 
 
 @njit(cache=True)
-def _render_pinhole(height, width, Kinv, R, C, ss, quads, groups, tex_id, texel, atlas, th,
-                    tw, out, depth):
+def _render_pinhole(height, width, Kinv, R, C, ss, quads, groups, tex_id, texel, atlas, toff,
+                    th, tw, out, depth):
     rgb = np.empty(3)
     for row in range(height):
         for col in range(width):
@@ -387,8 +393,8 @@ def _render_pinhole(height, width, Kinv, R, C, ss, quads, groups, tex_id, texel,
                 for j in range(ss):
                     dx, dy, dz, _ = _pixel_ray(Kinv, R, col - 0.5 + (j + 0.5) / ss,
                                                row - 0.5 + (i + 0.5) / ss)
-                    _trace(C[0], C[1], C[2], dx, dy, dz, quads, groups, tex_id, texel, atlas, th,
-                           tw, rgb)
+                    _trace(C[0], C[1], C[2], dx, dy, dz, quads, groups, tex_id, texel, atlas,
+                           toff, th, tw, rgb)
                     a0 += rgb[0]
                     a1 += rgb[1]
                     a2 += rgb[2]
@@ -398,8 +404,8 @@ def _render_pinhole(height, width, Kinv, R, C, ss, quads, groups, tex_id, texel,
             out[row, col, 2] = a2 / n
             # z-depth of the pixel centre's ray (direction has z_cam = 1 by K^-1)
             dx, dy, dz, cz = _pixel_ray(Kinv, R, float(col), float(row))
-            tt = _trace(C[0], C[1], C[2], dx, dy, dz, quads, groups, tex_id, texel, atlas, th, tw,
-                        rgb)
+            tt = _trace(C[0], C[1], C[2], dx, dy, dz, quads, groups, tex_id, texel, atlas, toff,
+                        th, tw, rgb)
             depth[row, col] = tt * cz if tt > 0 else 0.0
 
 
@@ -486,7 +492,8 @@ def render_lenslet(scene: SceneArrays, optics, lens_centres_px: np.ndarray,
                     F, optics.aperture / 2, float(stop_distance), float(stop_diameter) / 2,
                     lens_x, lens_y, optics.mla_pitch / 2, jitter, disk, R, C, quads,
                     camera_boxes(quads, cam_to_world) if cull else _unbounded(len(quads)),
-                    scene.tex_id, scene.texel, scene.atlas, scene.tex_h, scene.tex_w, out)
+                    scene.tex_id, scene.texel, scene.atlas, scene.tex_off, scene.tex_h,
+                    scene.tex_w, out)
     return out
 
 
@@ -508,5 +515,5 @@ def render_pinhole(scene: SceneArrays, K: np.ndarray, cam_to_world: np.ndarray, 
     quads = quad_table(scene)
     _render_pinhole(height, width, Kinv, R, C, int(supersample), quads,
                     _groups(quads, groups), scene.tex_id, scene.texel, scene.atlas,
-                    scene.tex_h, scene.tex_w, out, depth)
+                    scene.tex_off, scene.tex_h, scene.tex_w, out, depth)
     return out, depth

@@ -30,9 +30,25 @@ class SceneArrays:
     normal: np.ndarray  # (n, 3) unit
     tex_id: np.ndarray  # (n,) int64
     texel: np.ndarray  # (n,) metres per texel
-    atlas: np.ndarray  # (n_tex, Hmax, Wmax, 3) float32 in [0, 1]
+    atlas: np.ndarray  # (sum of H W, 3) float32 in [0, 1]: the textures' rows, packed
     tex_h: np.ndarray  # (n_tex,) int64
     tex_w: np.ndarray
+    tex_off: np.ndarray  # (n_tex,) int64: texture k's first texel in ``atlas``
+
+
+def pack_textures(textures: list[np.ndarray]) -> dict[str, np.ndarray]:
+    """The (H, W, 3) float32 textures as :class:`SceneArrays` holds them: every texel
+    in one (sum of H W, 3) array, texture k from row ``tex_off[k]`` on, row-major. (A
+    (n, H max, W max, 3) block padded to the largest texture held 191 MB for the default
+    scene's 50 MB and cost each simulate job 0.15 s to fill.)"""
+    tex_h = np.array([t.shape[0] for t in textures], dtype=np.int64)
+    tex_w = np.array([t.shape[1] for t in textures], dtype=np.int64)
+    sizes = tex_h * tex_w
+    tex_off = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    atlas = np.empty((int(sizes.sum()), 3), dtype=np.float32)
+    for t, o, n in zip(textures, tex_off, sizes, strict=True):
+        atlas[o:o + n] = np.asarray(t, dtype=np.float32).reshape(-1, 3)
+    return {"atlas": atlas, "tex_h": tex_h, "tex_w": tex_w, "tex_off": tex_off}
 
 
 #: the photographs the scenes use: scikit-image's bundled files (``skimage/data/``)
@@ -141,12 +157,6 @@ def make_scene(centre_xy: tuple[float, float], near: float, far: float, seed: in
 def scene_arrays(scene: dict) -> SceneArrays:
     quads = scene["quads"]
     names = sorted({q["texture"] for q in quads})
-    textures = [load_texture(n) for n in names]
-    hmax = max(t.shape[0] for t in textures)
-    wmax = max(t.shape[1] for t in textures)
-    atlas = np.zeros((len(textures), hmax, wmax, 3), dtype=np.float32)
-    for i, t in enumerate(textures):
-        atlas[i, : t.shape[0], : t.shape[1]] = t
     p0 = np.array([q["p0"] for q in quads], dtype=np.float64)
     u = np.array([q["u"] for q in quads], dtype=np.float64)
     v = np.array([q["v"] for q in quads], dtype=np.float64)
@@ -155,7 +165,6 @@ def scene_arrays(scene: dict) -> SceneArrays:
     return SceneArrays(
         p0=p0, u=u, v=v, normal=n,
         tex_id=np.array([names.index(q["texture"]) for q in quads], dtype=np.int64),
-        texel=np.array([q["texel_m"] for q in quads], dtype=np.float64), atlas=atlas,
-        tex_h=np.array([t.shape[0] for t in textures], dtype=np.int64),
-        tex_w=np.array([t.shape[1] for t in textures], dtype=np.int64),
+        texel=np.array([q["texel_m"] for q in quads], dtype=np.float64),
+        **pack_textures([load_texture(n) for n in names]),
     )
