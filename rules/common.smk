@@ -29,19 +29,12 @@ SYNTHETIC = [d for d in DATASETS if "simulate" in config["datasets"][d]]
 #: calibration (registration B, depth, scale, merge), which the synthesis depth maps and
 #: experiments wait for: these jobs go first, so that the two serial COLMAP jobs
 #: (matching, then the naive mapper) start as soon as they can and the depth maps fill
-#: the other core beside them. The full-set shot and the converter's set-up, which every
-#: conversion waits for, go before the other lenslet images. Then the synthesis (its depth
-#: maps, the ideal renders it compares with, the experiments: Exp. 3 is the longest job of
-#: the tail), and last the other Table I rows and the hand-held shots' depth maps, which
-#: only feed short jobs (issue 15).
-PRIORITY = {"synthesis": 5, "lenslet": 10, "chain": 20}
-
-
-def simulate_priority(wildcards):
-    """The full-set shot's lenslet image first: the converter's set-up (rule convert_setup)
-    is decided on it, and every conversion waits for that set-up."""
-    full = full_set_cam(wildcards.dataset)
-    return PRIORITY["chain"] if wildcards.cam == full else PRIORITY["lenslet"]
+#: the other core beside them. The lenslet images (one job on every core) come first of
+#: all, then the converter's set-up, which every conversion waits for. Then the synthesis
+#: (its depth maps, the ideal renders it compares with, the experiments: Exp. 3 is the
+#: longest job of the tail), and last the other Table I rows and the hand-held shots'
+#: depth maps, which only feed short jobs (issue 15).
+PRIORITY = {"synthesis": 5, "chain": 20}
 
 
 def depth_priority(wildcards):

@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from plenocal.simulate.scene import SceneArrays
 
@@ -298,7 +298,7 @@ def quad_groups(quads: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _render_lenslet(height, width, pix_size, L, s, t_types, lens_type, F, half_ap, stop_z,
                     stop_half, lens_x, lens_y, half_lens, jitter, disk, R, C, quads, boxes,
                     tex_id, texel, atlas, toff, th, tw, out):
@@ -306,12 +306,12 @@ def _render_lenslet(height, width, pix_size, L, s, t_types, lens_type, F, half_a
     cxs = (width - 1) / 2.0
     cys = (height - 1) / 2.0
     kappa = 1.0 / L - 1.0 / F
-    rgb = np.empty(3)
-    cand = np.empty(quads.shape[0], dtype=np.int64)
-    ncand = 0
-    plx = math.nan
-    ply = math.nan
-    for row in range(height):
+    for row in prange(height):  # rows on numba's threads: every pixel on its own
+        rgb = np.empty(3)
+        cand = np.empty(quads.shape[0], dtype=np.int64)
+        ncand = 0
+        plx = math.nan
+        ply = math.nan
         for col in range(width):
             lx = lens_x[row, col]
             ly = lens_y[row, col]
