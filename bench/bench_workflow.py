@@ -180,7 +180,7 @@ def verification_change(work: Path, config: dict) -> tuple[float, int]:
     return wall, jobs
 
 
-PROPOSED = ("features_a", "match_a", "map_a", "rig_b", "depth", "scale", "merge")
+PROPOSED = ("features_a", "match_a", "map_a", "rig_b", "depth_a", "depth_b", "scale", "merge")
 NAIVE = ("features_a", "match_a", "map_a", "view_features", "view_matches", "baseline_sfm")
 
 

@@ -37,12 +37,6 @@ SYNTHETIC = [d for d in DATASETS if "simulate" in config["datasets"][d]]
 PRIORITY = {"synthesis": 5, "chain": 20}
 
 
-def depth_priority(wildcards):
-    """The depth maps the scale (Eq. 5) reads go with the calibration; the others (the
-    hand-held shots' by default, which only the report shows) wait."""
-    return PRIORITY["chain"] if wildcards.cam in scale_shots(wildcards.dataset) else 0
-
-
 def reprojection_priority(wildcards):
     """The naive baseline's Table I row closes the critical chain; the others do not."""
     return PRIORITY["chain"] if wildcards.calib == "baseline_sfm" else 0
@@ -246,17 +240,26 @@ def convert_targets(dataset):
 # --- helpers of rules/depth.smk -------------------------------------------------------
 
 
-def depth_inputs(wildcards):
-    """Registration A's sources are the central views of every shot, B's the views of
-    the shot's own set."""
-    d = wildcards.dataset
-    central = [res(d, "views", c, f"{centre(d)}.png") for c in cams(d)]
-    own = [res(d, "views", wildcards.cam, f"{v}.png") for v in views(d)]
-    return {
-        "reg_a": res(d, "reg_a", "reg_a.json"),
-        "rig": res(d, "reg_b", "rig.json"),
-        "views": central + [p for p in own if p not in central],
-    }
+def depth_groups(dataset):
+    """[(rule-name suffix, shots, priority)]: the scale's shots with the calibration, the
+    others last; empty groups left out."""
+    scale = scale_shots(dataset)
+    other = [c for c in cams(dataset) if c not in scale]
+    return [
+        (sfx, shots, prio)
+        for sfx, shots, prio in (("", scale, PRIORITY["chain"]), ("_other", other, 0))
+        if shots
+    ]
+
+
+def depth_b_priority(wildcards):
+    """Registration B's maps that the scale reads go with the calibration, the others
+    last."""
+    return PRIORITY["chain"] if wildcards.cam in scale_shots(wildcards.dataset) else 0
+
+
+def depth_shots(dataset, suffix):
+    return dict((sfx, shots) for sfx, shots, _ in depth_groups(dataset))[suffix]
 
 
 # depth settings of the synthesis depth maps only (rule depth_view)
@@ -404,7 +407,7 @@ def report_inputs(wildcards):
         out["convert_setup"] = res(d, "views", "convert_setup.json")
     if have("features_a"):
         out["features"] = res(d, "reg_a", "features.json")
-    if have("depth"):
+    if have("depth_a") and have("depth_b"):
         out["depth"] = [
             res(d, "depth", r, f"{c}.png") for r in ("a", "b") for c in cams(d)
         ]

@@ -1,46 +1,101 @@
 """Depth of the central view of every shot in registration A (central views of the
-nearest shots, SfM units) and in registration B (views of its own set, metres): both in
-one job per shot (plenocal.depth.shot)."""
+nearest shots, SfM units; rule depth_a) and in registration B (views of its own set,
+metres; rule depth_b), the inputs of the scale (Eq. 5) - plenocal.depth.shot.
+
+A's maps are checked against each other (each against its nearest source's), so they are
+made together: one job for the shots the scale reads (config scale.shots), one for the
+others (the hand-held shots by default, which only the report shows: rule
+depth_a_other, run last); a second dataset's rules carry its index (depth_a_1, ...).
+B's maps are made one job per shot: a job with all of them would declare every view of
+every set as its inputs, and Snakemake checksums a job's inputs again for each of its
+outputs (525 views x 63 outputs: 7.5 s in the scheduler, the cores idle)."""
+
+for _i, _d in enumerate(DATASETS):
+    for _sfx, _shots, _prio in depth_groups(_d):
+        _name = f"{_sfx}" if _i == 0 else f"{_sfx}_{_i}"
+
+        rule:
+            name:
+                f"depth_a{_name}"
+            input:
+                reg_a="results/{dataset}/reg_a/reg_a.json",
+                views=lambda wc: [
+                    res(wc.dataset, "views", c, f"{centre(wc.dataset)}.png")
+                    for c in cams(wc.dataset)
+                ],
+            output:
+                depth=[f"results/{{dataset}}/depth/a/{c}.npy" for c in _shots],
+                preview=[
+                    report(
+                        f"results/{{dataset}}/depth/a/{c}.png",
+                        caption="../report/depth.rst",
+                        category="Depth",
+                        subcategory="registration a",
+                    )
+                    for c in _shots
+                ],
+                info=[f"results/{{dataset}}/depth/a/{c}.json" for c in _shots],
+            log:
+                log_path(f"depth_a{_sfx}"),
+            benchmark:
+                bench_path(f"depth_a{_sfx}")
+            wildcard_constraints:
+                dataset=re.escape(_d),
+            priority: _prio
+            conda:
+                "../envs/plenocal.yaml"
+            threads: 1
+            resources:
+                mem_mb=3000,
+                runtime=60,
+                # COLMAP's patch-match stereo needs a GPU node; the plane sweep does not
+                gpu=lambda wc: 1 if stage_config("depth")["backend"] == "colmap" else 0,
+            params:
+                depth=lambda wc: registration_depth_config(),
+                registration="a",
+                cams=lambda wc, sfx=_sfx: depth_shots(wc.dataset, sfx),
+                centre=lambda wc: centre(wc.dataset),
+                views_dir=lambda wc: res(wc.dataset, "views"),
+                model_dir=lambda wc: res(wc.dataset, "reg_a", "model"),
+            script:
+                "../scripts/depth.py"
 
 
-rule depth:
+rule depth_b:
     input:
-        unpack(depth_inputs),
+        rig="results/{dataset}/reg_b/rig.json",
+        views=lambda wc: [
+            res(wc.dataset, "views", wc.cam, f"{v}.png") for v in views(wc.dataset)
+        ],
     output:
-        depth_a="results/{dataset}/depth/a/{cam}.npy",
-        preview_a=report(
-            "results/{dataset}/depth/a/{cam}.png",
-            caption="../report/depth.rst",
-            category="Depth",
-            subcategory="registration a",
-        ),
-        info_a="results/{dataset}/depth/a/{cam}.json",
-        depth_b="results/{dataset}/depth/b/{cam}.npy",
-        preview_b=report(
-            "results/{dataset}/depth/b/{cam}.png",
-            caption="../report/depth.rst",
-            category="Depth",
-            subcategory="registration b",
-        ),
-        info_b="results/{dataset}/depth/b/{cam}.json",
+        depth=["results/{dataset}/depth/b/{cam}.npy"],
+        preview=[
+            report(
+                "results/{dataset}/depth/b/{cam}.png",
+                caption="../report/depth.rst",
+                category="Depth",
+                subcategory="registration b",
+            )
+        ],
+        info=["results/{dataset}/depth/b/{cam}.json"],
     log:
-        log_path("depth", "{cam}"),
+        log_path("depth_b", "{cam}"),
     benchmark:
-        bench_path("depth", "{cam}")
-    priority: depth_priority
+        bench_path("depth_b", "{cam}")
+    priority: depth_b_priority
     conda:
         "../envs/plenocal.yaml"
     threads: 1
     resources:
         mem_mb=3000,
-        runtime=60,
-        # COLMAP's patch-match stereo needs a GPU node; the plane sweep does not
+        runtime=30,
         gpu=lambda wc: 1 if stage_config("depth")["backend"] == "colmap" else 0,
     params:
         depth=lambda wc: registration_depth_config(),
+        registration="b",
+        cams=lambda wc: [wc.cam],
         centre=lambda wc: centre(wc.dataset),
         views_dir=lambda wc: res(wc.dataset, "views"),
-        model_dir=lambda wc: res(wc.dataset, "reg_a", "model"),
     script:
         "../scripts/depth.py"
 

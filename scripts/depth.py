@@ -1,22 +1,33 @@
-"""Rule depth: z-depth of the central view of one shot in registrations A and B
-(plenocal.depth.shot)."""
+"""Rules depth_a and depth_b: z-depth of the central view of every shot in registration A
+or B (plenocal.depth.shot)."""
+
+from pathlib import Path
 
 import cv2  # (first: see DESIGN.md on cv2/pycolmap)
 
 from plenocal.depth.inputs import preview
-from plenocal.depth.shot import shot_depths
+from plenocal.depth.shot import depths_a, depths_b
 from plenocal.io.files import write_image, write_json, write_npy
-from plenocal.rulelog import log_to_file
+from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]
-log_to_file(snakemake.log[0])
+params = snakemake.params
+log = rule_logger(snakemake, f"depth_{params.registration}")
 cv2.setNumThreads(max(1, int(snakemake.threads)))  # the job's cores only
 
+cams = list(params.cams)
+cfg = dict(params.depth)
+if params.registration == "a":
+    maps = depths_a(cams, params.centre, snakemake.input.reg_a, params.views_dir,
+                    params.model_dir, cfg, progress=log.info)
+else:
+    maps = depths_b(cams, params.centre, snakemake.input.rig, params.views_dir, cfg,
+                    progress=log.info)
 out = snakemake.output
-maps = shot_depths(snakemake.wildcards.cam, snakemake.params.centre, snakemake.input.reg_a,
-                   snakemake.input.rig, snakemake.params.views_dir, snakemake.params.model_dir,
-                   dict(snakemake.params.depth))
-for reg, m in maps.items():
-    write_npy(out[f"depth_{reg}"], m.depth)
-    write_image(out[f"preview_{reg}"], preview(m.depth))
-    write_json(out[f"info_{reg}"], m.info)
+for paths in zip(out.depth, out.preview, out.info, strict=True):
+    cam = Path(paths[0]).stem
+    if any(Path(p).stem != cam for p in paths) or cam not in maps:
+        raise RuntimeError(f"{paths}: outputs out of step with the shots {cams}")
+    write_npy(paths[0], maps[cam].depth)
+    write_image(paths[1], preview(maps[cam].depth))
+    write_json(paths[2], maps[cam].info)

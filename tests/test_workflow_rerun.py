@@ -86,7 +86,8 @@ def test_conversion_change_reruns_conversion_and_downstream(complete_run: Path,
     jobs = planned(work)
     assert jobs.get("convert") == 10  # every shot
     assert "simulate" not in jobs and "simulate_setup" not in jobs
-    for rule in ("features_a", "map_a", "rig_b", "depth", "scale", "merge", "report"):
+    for rule in ("features_a", "map_a", "rig_b", "depth_a", "depth_b", "scale", "merge",
+                 "report"):
         assert rule in jobs, (rule, jobs)
 
 

@@ -98,7 +98,7 @@ def _planned_priorities(out: str) -> dict[str, set[int]]:
         calib = re.search(r"wildcards: .*calib=(\w+)", block)
         if calib:
             name += f"[{calib.group(1)}]"
-        if name == "depth":  # the hand-held shots' maps apart: the scale does not read them
+        if name == "depth_b":  # the hand-held shots' maps apart: the scale does not read them
             cam = re.search(r"wildcards: .*cam=(\w+)", block)
             name += "[hand]" if cam.group(1).startswith("hand") else ""
         p = re.search(r"^\s+priority: (\d+)", block, flags=re.M)
@@ -119,7 +119,8 @@ def test_critical_chain_goes_first(tmp_path: Path):
     prios = _planned_priorities(proc.stdout + proc.stderr)
     chain = ["convert_setup", "convert", "features_a", "match_a", "map_a",
              "view_features", "view_matches", "baseline_sfm",
-             "reprojection_calib[baseline_sfm]", "rig_b", "depth", "scale", "merge"]
+             "reprojection_calib[baseline_sfm]", "rig_b", "depth_a", "depth_b", "scale",
+             "merge"]
     for rule in chain:
         assert prios.get(rule) == {20}, (rule, prios.get(rule))
     # the lenslet images (one job, every core) with the chain
@@ -129,5 +130,6 @@ def test_critical_chain_goes_first(tmp_path: Path):
                  "synthesis_exp3_part", "synthesis_exp3"):
         assert prios.get(rule) == {5}, (rule, prios.get(rule))
     # ... and last what only feeds short jobs
-    for rule in ("reprojection_calib[complete]", "depth[hand]", "convert_quality"):
+    for rule in ("reprojection_calib[complete]", "depth_a_other", "depth_b[hand]",
+                 "convert_quality"):
         assert prios.get(rule) == {0}, (rule, prios.get(rule))

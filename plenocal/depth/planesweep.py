@@ -307,6 +307,17 @@ def consistency_partner(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[Pinh
     return j, others, other_imgs
 
 
+def plane_sweep_unchecked(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
+                          src_imgs: list[np.ndarray], near: float, far: float,
+                          opt: PlaneSweepOptions | None = None) -> np.ndarray:
+    """:func:`plane_sweep_depth` without the left-right check, whatever ``opt.lr_check``
+    says: for maps that are checked against each other (:func:`plenocal.depth.shot.
+    depths_a`)."""
+    opt = opt or PlaneSweepOptions()
+    ref_img = check_sweep_inputs(ref, ref_img, srcs, near, far, "plane sweep")
+    return _sweep(ref, ref_img, srcs, src_imgs, near, far, opt)[0]
+
+
 def plane_sweep_depth(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
                       src_imgs: list[np.ndarray], near: float, far: float,
                       opt: PlaneSweepOptions | None = None) -> np.ndarray:

@@ -1,13 +1,23 @@
-"""The two depth maps of a shot's central view (rule depth): in registration A (sources:
-the central views of the nearest shots, SfM units) and in registration B (sources: views
-of its own set, metres), the inputs of the scale (Eq. 5). One job computes both: they share
-the process start-up and the reference view (on the default data 28 jobs instead of 56,
-each about 1 s of start-up). :mod:`plenocal.depth.inputs` chooses sources and bounds."""
+"""The depth maps of the shots' central views in registrations A and B, the inputs of the
+scale (Eq. 5; Fig. 4c): rule depth_a makes every shot's map in registration A (sources: the
+central views of the nearest shots, SfM units), rule depth_b every shot's map in
+registration B (sources: views of its own set, metres). :mod:`plenocal.depth.inputs`
+chooses sources and bounds.
+
+Registration A's left-right check compares each shot's map with the map of its nearest
+source, which is itself one of the maps made here: the plane sweep makes every shot's map
+once, unchecked, and then checks each against its neighbour's (:func:`depths_a`). Where
+each map was made alone, the check swept the neighbour a second time from other sources
+(82 labels beside the map's own 52 on the default data), and each shot paid a process
+start-up; one job for all shots does neither. Registration B's check partner is another
+view of the shot's own set, whose map nothing else needs: it is swept for the check, as
+before."""
 
 from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,8 +25,9 @@ import numpy as np
 
 from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.artifacts.rig import read_rig
-from plenocal.depth import estimate_depth, resolve_backend
-from plenocal.depth.inputs import depth_job_a, depth_job_b
+from plenocal.depth import estimate_depth, planesweep_options, resolve_backend
+from plenocal.depth.inputs import DepthJob, depth_job_a, depth_job_b
+from plenocal.depth.planesweep import left_right_check, plane_sweep_unchecked
 from plenocal.io.files import read_image
 
 log = logging.getLogger(__name__)
@@ -32,42 +43,113 @@ class ShotDepth:
     info: dict  # backend, bounds, units, sources, valid share, reference
 
 
-def shot_depths(cam: str, centre: str, reg_a_path: str | Path, rig_path: str | Path,
-                views_dir: str | Path, model_dir: str | Path | None,
-                cfg: dict) -> dict[str, ShotDepth]:
-    """The depth maps of shot ``cam``'s central view ``centre`` in registrations A
-    (``reg_a.json`` at ``reg_a_path``, its COLMAP model in ``model_dir`` for the bounds) and
-    B (``rig.json`` at ``rig_path``), from the views in ``views_dir``; ``cfg``: the depth
-    stage's settings (backend, sources_a, sources_b, bounds_margin and the backend's)."""
-    margin = float(cfg["bounds_margin"])
-    backend = resolve_backend(cfg["backend"])
-    jobs = {
-        "a": depth_job_a(read_reg_a(reg_a_path), reg_a_path, cam, centre, views_dir,
-                         model_dir, int(cfg["sources_a"]), margin),
-        "b": depth_job_b(read_rig(rig_path), cam, centre, views_dir, cfg["sources_b"],
-                         margin),
-    }
-    images: dict[str, np.ndarray] = {}
+class _Images:
+    """The views read so far, by path (a shot's central view is the source of several
+    maps)."""
 
-    def image(path) -> np.ndarray:
+    def __init__(self) -> None:
+        self._images: dict[str, np.ndarray] = {}
+
+    def __call__(self, path: str | Path) -> np.ndarray:
         key = str(path)
-        if key not in images:
-            images[key] = read_image(path)
-        return images[key]
+        if key not in self._images:
+            self._images[key] = read_image(path)
+        return self._images[key]
 
+
+def _info(job: DepthJob, backend: str, cam: str, centre: str, depth: np.ndarray,
+          **extra) -> dict:
+    return {"backend": backend, "near": job.near, "far": job.far, "units": job.units,
+            "sources": job.src_names, "valid_share": float((depth > 0).mean()),
+            "reference": f"{cam}/{centre}", **extra}
+
+
+def _estimate_each(reg: str, jobs: dict[str, DepthJob], centre: str, cfg: dict, backend: str,
+                   progress: Callable[[str], None]) -> dict[str, ShotDepth]:
+    """Each job's map on its own (the backend checks it as it does)."""
+    image = _Images()
     out = {}
-    for reg in REGISTRATIONS:
-        job = jobs[reg]
-        log.info("%s/%s: backend %s, bounds [%.6g, %.6g] %s, sources %s", reg, cam, backend,
-                 job.near, job.far, job.units, ", ".join(job.src_names))
+    for k, (cam, job) in enumerate(jobs.items()):
         t0 = time.perf_counter()
         depth = estimate_depth(job.ref_cam, image(job.ref_path), job.src_cams,
                                [image(p) for p in job.src_paths], job.near, job.far, cfg,
                                backend=backend)
-        valid = float((depth > 0).mean())
-        log.info("%s/%s: %.1f s, %.1f %% valid", reg, cam, time.perf_counter() - t0,
-                 100 * valid)
-        out[reg] = ShotDepth(depth, {"backend": backend, "near": job.near, "far": job.far,
-                                     "units": job.units, "sources": job.src_names,
-                                     "valid_share": valid, "reference": f"{cam}/{centre}"})
+        out[cam] = ShotDepth(depth, _info(job, backend, cam, centre, depth))
+        progress(f"{reg}/{cam}: {time.perf_counter() - t0:.1f} s, "
+                 f"{100 * out[cam].info['valid_share']:.1f} % valid ({k + 1} of {len(jobs)})")
     return out
+
+
+def _describe(reg: str, jobs: dict[str, DepthJob], backend: str,
+              progress: Callable[[str], None]) -> None:
+    for cam, job in jobs.items():
+        progress(f"{reg}/{cam}: backend {backend}, bounds [{job.near:.6g}, {job.far:.6g}] "
+                 f"{job.units}, sources {', '.join(job.src_names)}")
+
+
+def depths_a(cams: list[str], centre: str, reg_a_path: str | Path, views_dir: str | Path,
+             model_dir: str | Path | None, cfg: dict,
+             progress: Callable[[str], None] = log.info) -> dict[str, ShotDepth]:
+    """Registration A's depth map of the central view ``centre`` of every shot in ``cams``
+    (``reg_a.json`` at ``reg_a_path``, its COLMAP model in ``model_dir`` for the bounds),
+    from the views in ``views_dir``; ``cfg``: the depth stage's settings (backend,
+    sources_a, bounds_margin and the backend's).
+
+    With the plane sweep every map is swept once, then (``lr_check``) each keeps the
+    pixels that its nearest source's map - one of these maps - sees at the same depth
+    within ``lr_tolerance`` (:func:`plenocal.depth.planesweep.left_right_check`); a
+    nearest source that is not among ``cams`` is swept for the check alone."""
+    margin = float(cfg["bounds_margin"])
+    backend = resolve_backend(cfg["backend"])
+    reg_a = read_reg_a(reg_a_path)
+    jobs = {cam: depth_job_a(reg_a, reg_a_path, cam, centre, views_dir, model_dir,
+                             int(cfg["sources_a"]), margin) for cam in cams}
+    _describe("a", jobs, backend, progress)
+    if backend != "planesweep":
+        return _estimate_each("a", jobs, centre, cfg, backend, progress)
+    opt = planesweep_options(cfg)
+    image = _Images()
+    raw: dict[str, np.ndarray] = {}
+
+    def sweep(cam: str, job: DepthJob) -> np.ndarray:
+        if cam not in raw:
+            t0 = time.perf_counter()
+            raw[cam] = plane_sweep_unchecked(job.ref_cam, image(job.ref_path), job.src_cams,
+                                             [image(p) for p in job.src_paths], job.near,
+                                             job.far, opt)
+            progress(f"a/{cam}: swept in {time.perf_counter() - t0:.1f} s "
+                     f"({len(raw)} of {len(jobs)})")
+        return raw[cam]
+
+    for cam, job in jobs.items():
+        sweep(cam, job)
+    out = {}
+    for cam, job in jobs.items():
+        depth = raw[cam]
+        extra = {}
+        if opt.lr_check:
+            partner = job.src_names[0]  # the nearest source
+            partner_job = jobs.get(partner) or depth_job_a(
+                reg_a, reg_a_path, partner, centre, views_dir, model_dir,
+                int(cfg["sources_a"]), margin)
+            ok = left_right_check(job.ref_cam, depth, job.src_cams[0],
+                                  sweep(partner, partner_job), opt.lr_tolerance)
+            depth = np.where(ok, depth, 0.0).astype(np.float32)
+            extra["lr_partner"] = partner
+        out[cam] = ShotDepth(depth, _info(job, backend, cam, centre, depth, **extra))
+        progress(f"a/{cam}: {100 * out[cam].info['valid_share']:.1f} % valid")
+    return out
+
+
+def depths_b(cams: list[str], centre: str, rig_path: str | Path, views_dir: str | Path,
+             cfg: dict, progress: Callable[[str], None] = log.info) -> dict[str, ShotDepth]:
+    """Registration B's depth map of the central view ``centre`` of every shot in ``cams``
+    (``rig.json`` at ``rig_path``), from the other views of its own set in ``views_dir``;
+    ``cfg``: the depth stage's settings (backend, sources_b, bounds_margin and the
+    backend's)."""
+    backend = resolve_backend(cfg["backend"])
+    rig = read_rig(rig_path)
+    jobs = {cam: depth_job_b(rig, cam, centre, views_dir, cfg["sources_b"],
+                             float(cfg["bounds_margin"])) for cam in cams}
+    _describe("b", jobs, backend, progress)
+    return _estimate_each("b", jobs, centre, cfg, backend, progress)
