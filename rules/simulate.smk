@@ -29,8 +29,8 @@ rule simulate_setup:
 # Every lenslet image of a dataset in one job, traced on the job's threads (numba): the
 # scene, the optics and the lens maps are set up once (about 1.3 s a job when each shot
 # had its own, 28 jobs on the default data), and the pixels are traced independently, so
-# the images are the same bits on any number of threads. Snakemake gives the job the
-# cores it has (at most `threads`); profiles/slurm may raise it for a cluster node.
+# the images are the same bits on any number of threads. A local run gives the job the
+# cores it has (at most `threads`); profiles/slurm sets what a cluster node has.
 for _i, _d in enumerate(SYNTHETIC):
 
     rule:
@@ -50,7 +50,7 @@ for _i, _d in enumerate(SYNTHETIC):
         priority: PRIORITY["chain"]
         conda:
             "../envs/plenocal.yaml"
-        threads: 8
+        threads: 16
         resources:
             mem_mb=3000,
             runtime=60,
