@@ -194,7 +194,9 @@ def target_seconds(work: Path, target: str, rules: tuple[str, ...]) -> float:
     for block in re.split(r"\n(?=(?:local)?rule \w+:)", out):
         m = re.match(r"(?:local)?rule (\w+):", block)
         bench = re.search(r"^\s+benchmark: (\S+)", block, flags=re.M)
-        if m and bench and m.group(1) in rules:
+        # a rule's step by its benchmark folder: rules of runs of shots (view_features_0,
+        # depth_b_1, ...) write to their step's folder
+        if m and bench and Path(bench.group(1)).parent.name in rules:
             with open(work / bench.group(1)) as fh:
                 total += sum(float(row.get("s", 0) or 0)
                              for row in csv.DictReader(fh, delimiter="\t"))

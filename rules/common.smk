@@ -237,6 +237,30 @@ def convert_targets(dataset):
     return out
 
 
+# --- jobs of several shots -------------------------------------------------------------
+
+#: shots per job of the per-shot steps whose start-up (imports, numba's or COLMAP's set-up:
+#: 1.1-1.4 s) is as long as a shot's work: rules view_features and depth_b. Snakemake
+#: checksums a job's inputs under 1 MB once for each of its outputs, so a job of all shots
+#: with every view as an input would cost more than it saves (depth.smk).
+SHOTS_PER_JOB = 7
+
+
+def shot_chunks(shots):
+    """``shots`` in runs of at most SHOTS_PER_JOB, in order."""
+    return [shots[i : i + SHOTS_PER_JOB] for i in range(0, len(shots), SHOTS_PER_JOB)]
+
+
+def chunk_label(chunk):
+    """A run of shots in a log or benchmark file name: its first and last shot."""
+    return chunk[0] if len(chunk) == 1 else f"{chunk[0]}-{chunk[-1]}"
+
+
+def chunk_rule(base, dataset_index, k):
+    """The name of the k-th chunk rule of ``base`` for the dataset of that index."""
+    return f"{base}_{k}" if dataset_index == 0 else f"{base}_{dataset_index}_{k}"
+
+
 # --- helpers of rules/depth.smk -------------------------------------------------------
 
 
@@ -250,12 +274,6 @@ def depth_groups(dataset):
         for sfx, shots, prio in (("", scale, PRIORITY["chain"]), ("_other", other, 0))
         if shots
     ]
-
-
-def depth_b_priority(wildcards):
-    """Registration B's maps that the scale reads go with the calibration, the others
-    last."""
-    return PRIORITY["chain"] if wildcards.cam in scale_shots(wildcards.dataset) else 0
 
 
 def depth_shots(dataset, suffix):
@@ -407,7 +425,7 @@ def report_inputs(wildcards):
         out["convert_setup"] = res(d, "views", "convert_setup.json")
     if have("features_a"):
         out["features"] = res(d, "reg_a", "features.json")
-    if have("depth_a") and have("depth_b"):
+    if have("depth_a") and have(chunk_rule("depth_b", 0, 0)):
         out["depth"] = [
             res(d, "depth", r, f"{c}.png") for r in ("a", "b") for c in cams(d)
         ]

@@ -6,9 +6,10 @@ A's maps are checked against each other (each against its nearest source's), so 
 made together: one job for the shots the scale reads (config scale.shots), one for the
 others (the hand-held shots by default, which only the report shows: rule
 depth_a_other, run last); a second dataset's rules carry its index (depth_a_1, ...).
-B's maps are made one job per shot: a job with all of them would declare every view of
-every set as its inputs, and Snakemake checksums a job's inputs again for each of its
-outputs (525 views x 63 outputs: 7.5 s in the scheduler, the cores idle)."""
+B's maps are made SHOTS_PER_JOB shots a job (depth_b_0, depth_b_1, ..., depth_b_other_0):
+a job with all of them would declare every view of every set as its inputs, and
+Snakemake checksums a job's inputs again for each of its outputs (525 views x 63
+outputs: 7.5 s in the scheduler, the cores idle)."""
 
 for _i, _d in enumerate(DATASETS):
     for _sfx, _shots, _prio in depth_groups(_d):
@@ -60,44 +61,54 @@ for _i, _d in enumerate(DATASETS):
             script:
                 "../scripts/depth.py"
 
+        for _k, _chunk in enumerate(shot_chunks(_shots)):
 
-rule depth_b:
-    input:
-        rig="results/{dataset}/reg_b/rig.json",
-        views=lambda wc: [
-            res(wc.dataset, "views", wc.cam, f"{v}.png") for v in views(wc.dataset)
-        ],
-    output:
-        depth=["results/{dataset}/depth/b/{cam}.npy"],
-        preview=[
-            report(
-                "results/{dataset}/depth/b/{cam}.png",
-                caption="../report/depth.rst",
-                category="Depth",
-                subcategory="registration b",
-            )
-        ],
-        info=["results/{dataset}/depth/b/{cam}.json"],
-    log:
-        log_path("depth_b", "{cam}"),
-    benchmark:
-        bench_path("depth_b", "{cam}")
-    priority: depth_b_priority
-    conda:
-        "../envs/plenocal.yaml"
-    threads: 1
-    resources:
-        mem_mb=3000,
-        runtime=30,
-        gpu=lambda wc: 1 if stage_config("depth")["backend"] == "colmap" else 0,
-    params:
-        depth=lambda wc: registration_depth_config(),
-        registration="b",
-        cams=lambda wc: [wc.cam],
-        centre=lambda wc: centre(wc.dataset),
-        views_dir=lambda wc: res(wc.dataset, "views"),
-    script:
-        "../scripts/depth.py"
+            rule:
+                name:
+                    chunk_rule(f"depth_b{_sfx}", _i, _k)
+                input:
+                    rig="results/{dataset}/reg_b/rig.json",
+                    views=lambda wc, chunk=_chunk: [
+                        res(wc.dataset, "views", c, f"{v}.png")
+                        for c in chunk
+                        for v in views(wc.dataset)
+                    ],
+                output:
+                    depth=[f"results/{{dataset}}/depth/b/{c}.npy" for c in _chunk],
+                    preview=[
+                        report(
+                            f"results/{{dataset}}/depth/b/{c}.png",
+                            caption="../report/depth.rst",
+                            category="Depth",
+                            subcategory="registration b",
+                        )
+                        for c in _chunk
+                    ],
+                    info=[f"results/{{dataset}}/depth/b/{c}.json" for c in _chunk],
+                log:
+                    log_path("depth_b", chunk_label(_chunk)),
+                benchmark:
+                    bench_path("depth_b", chunk_label(_chunk))
+                wildcard_constraints:
+                    dataset=re.escape(_d),
+                priority: _prio
+                conda:
+                    "../envs/plenocal.yaml"
+                threads: 1
+                resources:
+                    mem_mb=3000,
+                    runtime=30,
+                    gpu=lambda wc: (
+                        1 if stage_config("depth")["backend"] == "colmap" else 0
+                    ),
+                params:
+                    depth=lambda wc: registration_depth_config(),
+                    registration="b",
+                    cams=_chunk,
+                    centre=lambda wc: centre(wc.dataset),
+                    views_dir=lambda wc: res(wc.dataset, "views"),
+                script:
+                    "../scripts/depth.py"
 
 
 rule depth_view:

@@ -37,7 +37,9 @@ def planned(work: Path) -> dict[str, int]:
         if not m:
             break
         if m.group(1) != "total":
-            jobs[m.group(1)] = int(m.group(2))
+            # the rules of runs of shots (view_features_0, depth_b_1, ...) by their step
+            rule = re.sub(r"_\d+$", "", m.group(1))
+            jobs[rule] = jobs.get(rule, 0) + int(m.group(2))
     return jobs
 
 

@@ -94,13 +94,10 @@ def _planned_priorities(out: str) -> dict[str, set[int]]:
         m = re.match(r"(?:local)?rule (\w+):", block)
         if not m:
             continue
-        name = m.group(1)
+        name = re.sub(r"_\d+$", "", m.group(1))  # view_features_0, depth_b_1, ... by step
         calib = re.search(r"wildcards: .*calib=(\w+)", block)
         if calib:
             name += f"[{calib.group(1)}]"
-        if name == "depth_b":  # the hand-held shots' maps apart: the scale does not read them
-            cam = re.search(r"wildcards: .*cam=(\w+)", block)
-            name += "[hand]" if cam.group(1).startswith("hand") else ""
         p = re.search(r"^\s+priority: (\d+)", block, flags=re.M)
         prios.setdefault(name, set()).add(int(p.group(1)) if p else 0)
     return prios
@@ -130,6 +127,6 @@ def test_critical_chain_goes_first(tmp_path: Path):
                  "synthesis_exp3_part", "synthesis_exp3"):
         assert prios.get(rule) == {5}, (rule, prios.get(rule))
     # ... and last what only feeds short jobs
-    for rule in ("reprojection_calib[complete]", "depth_a_other", "depth_b[hand]",
+    for rule in ("reprojection_calib[complete]", "depth_a_other", "depth_b_other",
                  "convert_quality"):
         assert prios.get(rule) == {0}, (rule, prios.get(rule))
