@@ -160,6 +160,15 @@ def bench_path(rule, name="{dataset}"):
     return f"results/{{dataset}}/benchmarks/{rule}/{name}.tsv"
 
 
+def dataset_path(dataset, pattern):
+    """``pattern`` (a path with ``{dataset}``) for one dataset. The rules made for one
+    dataset name their files in full: Snakemake's index of outputs looks a path up by the
+    constant part of each output before its first wildcard, and ``results/{dataset}/...``
+    has only ``results/`` - every path of the run was tried against every such output
+    (issue 15: the no-op's DAG)."""
+    return pattern.replace("{dataset}", dataset)
+
+
 def stage_config(name):
     return config[name]
 
@@ -187,15 +196,6 @@ def final_targets():
 
 
 # --- helpers of rules/convert.smk -----------------------------------------------------
-
-
-def convert_groups():
-    """[(N, [datasets])], the first dataset's N first."""
-    groups = {}
-    for d in DATASETS:
-        groups.setdefault(n_views(d), []).append(d)
-    first = n_views(DATASETS[0])
-    return [(first, groups.pop(first))] + sorted(groups.items())
 
 
 def convert_settings(dataset):

@@ -3,8 +3,9 @@ the patch-size map and disparity.json; on synthetic datasets also the views' qua
 against the simulator's ideal renders (rule convert_quality).
 
 Snakemake outputs cannot be functions of the wildcards, and every view is declared as
-an output, so the rule is defined once per distinct N among the datasets: `convert`
-for the N of the first dataset (all of them, usually), `convert_n<N>` for others."""
+an output, so the rule is defined once per dataset (whose N it knows): `convert` for the
+first, `convert_<i>` for the i-th other; its files are named in full (common.smk
+dataset_path)."""
 
 
 rule convert_setup:
@@ -34,32 +35,30 @@ rule convert_setup:
         "../scripts/convert_setup.py"
 
 
-for _i, (_n, _datasets) in enumerate(convert_groups()):
+for _i, _d in enumerate(DATASETS):
 
     rule:
         name:
-            "convert" if _i == 0 else f"convert_n{_n}"
+            "convert" if _i == 0 else f"convert_{_i}"
         input:
-            lenslet="data/{dataset}/lenslet/{cam}.png",
-            calib="data/{dataset}/calib.xml",
-            camera="data/{dataset}/camera.yaml",
-            setup="results/{dataset}/views/convert_setup.json",
+            lenslet=data(_d, "lenslet", "{cam}.png"),
+            calib=data(_d, "calib.xml"),
+            camera=data(_d, "camera.yaml"),
+            setup=res(_d, "views", "convert_setup.json"),
         output:
-            views=[f"results/{{dataset}}/views/{{cam}}/{v}.png" for v in view_names(_n)],
-            patch_size="results/{dataset}/views/{cam}/patch_size.npy",
+            views=[res(_d, "views", "{cam}", f"{v}.png") for v in views(_d)],
+            patch_size=res(_d, "views", "{cam}", "patch_size.npy"),
             patch_png=report(
-                "results/{dataset}/views/{cam}/patch_size.png",
+                res(_d, "views", "{cam}", "patch_size.png"),
                 caption="../report/patch_size.rst",
                 category="Conversion",
                 subcategory="{cam}",
             ),
-            disparity="results/{dataset}/views/{cam}/disparity.json",
+            disparity=res(_d, "views", "{cam}", "disparity.json"),
         log:
-            log_path("convert", "{cam}"),
+            dataset_path(_d, log_path("convert", "{cam}")),
         benchmark:
-            bench_path("convert", "{cam}")
-        wildcard_constraints:
-            dataset="|".join(re.escape(d) for d in _datasets),
+            dataset_path(_d, bench_path("convert", "{cam}"))
         priority: PRIORITY["chain"]
         conda:
             "../envs/plenocal.yaml"
@@ -68,8 +67,8 @@ for _i, (_n, _datasets) in enumerate(convert_groups()):
             mem_mb=2500,
             runtime=10,
         params:
-            convert=lambda wc: convert_settings(wc.dataset),
-            views=lambda wc: n_views(wc.dataset),
+            convert=convert_settings(_d),
+            views=n_views(_d),
         script:
             "../scripts/convert.py"
 

@@ -19,29 +19,24 @@ for _i, _d in enumerate(DATASETS):
             name:
                 f"depth_a{_name}"
             input:
-                reg_a="results/{dataset}/reg_a/reg_a.json",
-                views=lambda wc: [
-                    res(wc.dataset, "views", c, f"{centre(wc.dataset)}.png")
-                    for c in cams(wc.dataset)
-                ],
+                reg_a=res(_d, "reg_a", "reg_a.json"),
+                views=[res(_d, "views", c, f"{centre(_d)}.png") for c in cams(_d)],
             output:
-                depth=[f"results/{{dataset}}/depth/a/{c}.npy" for c in _shots],
+                depth=[res(_d, "depth", "a", f"{c}.npy") for c in _shots],
                 preview=[
                     report(
-                        f"results/{{dataset}}/depth/a/{c}.png",
+                        res(_d, "depth", "a", f"{c}.png"),
                         caption="../report/depth.rst",
                         category="Depth",
                         subcategory="registration a",
                     )
                     for c in _shots
                 ],
-                info=[f"results/{{dataset}}/depth/a/{c}.json" for c in _shots],
+                info=[res(_d, "depth", "a", f"{c}.json") for c in _shots],
             log:
-                log_path(f"depth_a{_sfx}"),
+                dataset_path(_d, log_path(f"depth_a{_sfx}")),
             benchmark:
-                bench_path(f"depth_a{_sfx}")
-            wildcard_constraints:
-                dataset=re.escape(_d),
+                dataset_path(_d, bench_path(f"depth_a{_sfx}"))
             priority: _prio
             conda:
                 "../envs/plenocal.yaml"
@@ -54,10 +49,10 @@ for _i, _d in enumerate(DATASETS):
             params:
                 depth=lambda wc: registration_depth_config(),
                 registration="a",
-                cams=lambda wc, sfx=_sfx: depth_shots(wc.dataset, sfx),
-                centre=lambda wc: centre(wc.dataset),
-                views_dir=lambda wc: res(wc.dataset, "views"),
-                model_dir=lambda wc: res(wc.dataset, "reg_a", "model"),
+                cams=_shots,
+                centre=centre(_d),
+                views_dir=lambda wc, d=_d: res(d, "views"),
+                model_dir=lambda wc, d=_d: res(d, "reg_a", "model"),
             script:
                 "../scripts/depth.py"
 
@@ -67,30 +62,28 @@ for _i, _d in enumerate(DATASETS):
                 name:
                     chunk_rule(f"depth_b{_sfx}", _i, _k)
                 input:
-                    rig="results/{dataset}/reg_b/rig.json",
-                    views=lambda wc, chunk=_chunk: [
-                        res(wc.dataset, "views", c, f"{v}.png")
-                        for c in chunk
-                        for v in views(wc.dataset)
+                    rig=res(_d, "reg_b", "rig.json"),
+                    views=[
+                        res(_d, "views", c, f"{v}.png")
+                        for c in _chunk
+                        for v in views(_d)
                     ],
                 output:
-                    depth=[f"results/{{dataset}}/depth/b/{c}.npy" for c in _chunk],
+                    depth=[res(_d, "depth", "b", f"{c}.npy") for c in _chunk],
                     preview=[
                         report(
-                            f"results/{{dataset}}/depth/b/{c}.png",
+                            res(_d, "depth", "b", f"{c}.png"),
                             caption="../report/depth.rst",
                             category="Depth",
                             subcategory="registration b",
                         )
                         for c in _chunk
                     ],
-                    info=[f"results/{{dataset}}/depth/b/{c}.json" for c in _chunk],
+                    info=[res(_d, "depth", "b", f"{c}.json") for c in _chunk],
                 log:
-                    log_path("depth_b", chunk_label(_chunk)),
+                    dataset_path(_d, log_path("depth_b", chunk_label(_chunk))),
                 benchmark:
-                    bench_path("depth_b", chunk_label(_chunk))
-                wildcard_constraints:
-                    dataset=re.escape(_d),
+                    dataset_path(_d, bench_path("depth_b", chunk_label(_chunk)))
                 priority: _prio
                 conda:
                     "../envs/plenocal.yaml"
@@ -105,8 +98,8 @@ for _i, _d in enumerate(DATASETS):
                     depth=lambda wc: registration_depth_config(),
                     registration="b",
                     cams=_chunk,
-                    centre=lambda wc: centre(wc.dataset),
-                    views_dir=lambda wc: res(wc.dataset, "views"),
+                    centre=centre(_d),
+                    views_dir=lambda wc, d=_d: res(d, "views"),
                 script:
                     "../scripts/depth.py"
 

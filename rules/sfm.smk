@@ -86,19 +86,19 @@ for _i, _d in enumerate(DATASETS):
             name:
                 chunk_rule("view_features", _i, _k)
             input:
-                views=lambda wc, chunk=_chunk: [
-                    res(wc.dataset, "views", c, f"{v}.png")
-                    for c in chunk
-                    for v in views(wc.dataset)
+                views=[
+                    res(_d, "views", c, f"{v}.png") for c in _chunk for v in views(_d)
                 ],
             output:
-                [f"results/{{dataset}}/matches/features/{c}.db" for c in _chunk],
+                [res(_d, "matches", "features", f"{c}.db") for c in _chunk],
             log:
-                log_path("view_features", f"{{dataset}}_{chunk_label(_chunk)}"),
+                dataset_path(
+                    _d, log_path("view_features", f"{_d}_{chunk_label(_chunk)}")
+                ),
             benchmark:
-                bench_path("view_features", f"{{dataset}}_{chunk_label(_chunk)}")
-            wildcard_constraints:
-                dataset=re.escape(_d),
+                dataset_path(
+                    _d, bench_path("view_features", f"{_d}_{chunk_label(_chunk)}")
+                )
             priority: PRIORITY["chain"]
             conda:
                 "../envs/plenocal.yaml"

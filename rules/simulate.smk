@@ -37,16 +37,14 @@ for _i, _d in enumerate(SYNTHETIC):
         name:
             "simulate" if _i == 0 else f"simulate_{_i}"
         input:
-            TRUTH,
-            calib="data/{dataset}/calib.xml",
+            [dataset_path(_d, p) for p in TRUTH],
+            calib=data(_d, "calib.xml"),
         output:
-            [f"data/{{dataset}}/lenslet/{c}.png" for c in cams(_d)],
+            [data(_d, "lenslet", f"{c}.png") for c in cams(_d)],
         log:
-            log_path("simulate"),
+            dataset_path(_d, log_path("simulate")),
         benchmark:
-            bench_path("simulate")
-        wildcard_constraints:
-            dataset=re.escape(_d),
+            dataset_path(_d, bench_path("simulate"))
         priority: PRIORITY["chain"]
         conda:
             "../envs/plenocal.yaml"
@@ -55,7 +53,7 @@ for _i, _d in enumerate(SYNTHETIC):
             mem_mb=3000,
             runtime=60,
         params:
-            sim=sim_config,
+            sim=ds_config(_d)["simulate"],
         script:
             "../scripts/simulate.py"
 
@@ -117,35 +115,26 @@ rule ground_truth_render:
 # of ideal renders is a target) in one job: the scene's textures are loaded once, and
 # N^2 - 2 job start-ups (about 2 s each) are saved. The central view of every shot has
 # a job of its own below; other single views (Exp. 3's lateral views) stay with
-# ground_truth_render. One rule per distinct N, as rule convert.
-for _i, (_n, _datasets) in enumerate(convert_groups()):
-    _syn = [d for d in _datasets if is_synthetic(d)]
-    _set = [v for v in view_names(_n) if v != central_view(_n)]
-    if not _syn or not _set:
-        continue
-    _name = "ground_truth_render_set" if _i == 0 else f"ground_truth_render_set_n{_n}"
+# ground_truth_render. One rule per dataset, its files named in full (common.smk
+# dataset_path).
+for _i, _d in enumerate(SYNTHETIC):
+    _full = full_set_cam(_d)
+    _set = [v for v in views(_d) if v != centre(_d)]
+    _name = "ground_truth_render_set" if _i == 0 else f"ground_truth_render_set_{_i}"
 
     rule:
         name:
             _name
         input:
-            TRUTH,
-            cams="results/{dataset}/ground_truth/cameras.json",
+            [dataset_path(_d, p) for p in TRUTH],
+            cams=res(_d, "ground_truth", "cameras.json"),
         output:
-            image=[
-                f"results/{{dataset}}/ground_truth/renders/{{cam}}/{v}.png"
-                for v in _set
-            ],
-            depth=[
-                f"results/{{dataset}}/ground_truth/depth/{{cam}}/{v}.npy" for v in _set
-            ],
+            image=[res(_d, "ground_truth", "renders", _full, f"{v}.png") for v in _set],
+            depth=[res(_d, "ground_truth", "depth", _full, f"{v}.npy") for v in _set],
         log:
-            log_path("ground_truth_render_set", "{cam}"),
+            dataset_path(_d, log_path("ground_truth_render_set", _full)),
         benchmark:
-            bench_path("ground_truth_render_set", "{cam}")
-        wildcard_constraints:
-            dataset="|".join(re.escape(d) for d in _syn),
-            cam="|".join(sorted({re.escape(full_set_cam(d)) for d in _syn})),
+            dataset_path(_d, bench_path("ground_truth_render_set", _full))
         priority: PRIORITY["synthesis"]
         conda:
             "../envs/plenocal.yaml"
@@ -154,7 +143,7 @@ for _i, (_n, _datasets) in enumerate(convert_groups()):
             mem_mb=1000,
             runtime=30,
         params:
-            supersample=lambda wc: sim_config(wc)["render"]["ideal_supersample"],
+            supersample=ds_config(_d)["simulate"]["render"]["ideal_supersample"],
         script:
             "../scripts/ground_truth_render.py"
 
@@ -176,22 +165,15 @@ for _i, _d in enumerate(SYNTHETIC):
         name:
             _name
         input:
-            TRUTH,
-            cams="results/{dataset}/ground_truth/cameras.json",
+            [dataset_path(_d, p) for p in TRUTH],
+            cams=res(_d, "ground_truth", "cameras.json"),
         output:
-            image=[
-                f"results/{{dataset}}/ground_truth/renders/{c}/{v}.png"
-                for c, v in _keys
-            ],
-            depth=[
-                f"results/{{dataset}}/ground_truth/depth/{c}/{v}.npy" for c, v in _keys
-            ],
+            image=[res(_d, "ground_truth", "renders", c, f"{v}.png") for c, v in _keys],
+            depth=[res(_d, "ground_truth", "depth", c, f"{v}.npy") for c, v in _keys],
         log:
-            log_path("ground_truth_render_central"),
+            dataset_path(_d, log_path("ground_truth_render_central")),
         benchmark:
-            bench_path("ground_truth_render_central")
-        wildcard_constraints:
-            dataset=re.escape(_d),
+            dataset_path(_d, bench_path("ground_truth_render_central"))
         priority: PRIORITY["synthesis"]
         conda:
             "../envs/plenocal.yaml"
@@ -200,7 +182,7 @@ for _i, _d in enumerate(SYNTHETIC):
             mem_mb=1000,
             runtime=30,
         params:
-            supersample=lambda wc: sim_config(wc)["render"]["ideal_supersample"],
+            supersample=ds_config(_d)["simulate"]["render"]["ideal_supersample"],
         script:
             "../scripts/ground_truth_render.py"
 
