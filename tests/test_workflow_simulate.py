@@ -3,6 +3,7 @@ directory, twice: the same seed gives byte-identical files."""
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import re
 import subprocess
@@ -130,3 +131,41 @@ def test_critical_chain_goes_first(tmp_path: Path):
     for rule in ("reprojection_calib[complete]", "depth_a_other", "depth_b_other",
                  "convert_quality"):
         assert prios.get(rule) == {0}, (rule, prios.get(rule))
+
+
+@pytest.mark.workflow
+def test_two_datasets_each_get_their_own_rules(tmp_path: Path):
+    """Two synthetic datasets of different N and shots in one run: the rules made for
+    one dataset (simulate, convert, depth_a, depth_b_<k>, view_features_<k>, the ideal
+    renders of whole sets) exist once per dataset, name their files in full, and each
+    dataset's jobs write under its own folder only."""
+    work = tiny_workflow(tmp_path / "w")
+    cfg = yaml.safe_load((work / "config.yaml").read_text())
+    other = copy.deepcopy(cfg["datasets"]["tiny"])
+    other["views"] = 5 if other["views"] != 5 else 3
+    other["simulate"]["array"]["cols"] += 1
+    cfg["datasets"]["tiny2"] = other
+    (work / "config.yaml").write_text(yaml.safe_dump(cfg))
+    proc = run(work, "-n")
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 0, out[-3000:]
+    rules = {m.group(1) for m in re.finditer(r"^(?:local)?rule (\w+):", out, flags=re.M)}
+    for base in ("simulate", "convert", "depth_a", "ground_truth_render_set",
+                 "ground_truth_render_central"):
+        assert {base, f"{base}_1"} <= rules, (base, sorted(rules))
+    assert {"view_features_0", "view_features_1_0", "depth_b_0", "depth_b_1_0"} <= rules
+    # every job of a per-dataset rule writes into its own dataset's folders
+    own = {"simulate": "tiny", "simulate_1": "tiny2", "convert": "tiny", "convert_1": "tiny2",
+           "depth_a": "tiny", "depth_a_1": "tiny2", "view_features_0": "tiny",
+           "view_features_1_0": "tiny2", "depth_b_0": "tiny", "depth_b_1_0": "tiny2"}
+    seen = set()
+    for block in re.split(r"\n(?=(?:local)?rule \w+:)", out):
+        m = re.match(r"(?:local)?rule (\w+):", block)
+        outs = re.search(r"^\s+output: (.+)$", block, flags=re.M)
+        if m and outs and m.group(1) in own:
+            seen.add(m.group(1))
+            for path in outs.group(1).split(", "):
+                assert f"/{own[m.group(1)]}/" in path, (m.group(1), path)
+    assert seen == set(own)
+    n2 = other["views"]
+    assert f"results/tiny2/views/x00_y00/{n2 - 1}_{n2 - 1}.png" in out
