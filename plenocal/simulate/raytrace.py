@@ -134,6 +134,16 @@ def _hit(row, ox, oy, oz, dx, dy, dz, best):
 
 
 @njit(cache=True, inline="always")
+def _nearer(quads, q, ox, oy, oz, dx, dy, dz, best, hit, ba, bb):
+    """The nearest hit so far (distance, quad, texel coordinates) after testing quad
+    ``q``: the quad where it is hit nearer than ``best``, else the hit as it was."""
+    tt, a, b = _hit(quads[q], ox, oy, oz, dx, dy, dz, best)
+    if tt > 0.0:
+        return tt, q, a, b
+    return best, hit, ba, bb
+
+
+@njit(cache=True, inline="always")
 def _shade(hit, best, ba, bb, tex_id, texel, atlas, toff, th, tw, rgb):
     """The colour of the nearest hit (quad ``hit`` at texel coordinates ``ba``, ``bb``)
     into rgb, or the background where nothing was hit (``hit`` < 0); returns the hit's
@@ -173,12 +183,7 @@ def _trace(ox, oy, oz, dx, dy, dz, quads, groups, tex_id, texel, atlas, toff, th
             if t1 < t0 or t1 < 0.0:
                 continue
         for q in range(q0, q1):
-            tt, a, b = _hit(quads[q], ox, oy, oz, dx, dy, dz, best)
-            if tt > 0.0:
-                best = tt
-                hit = q
-                ba = a
-                bb = b
+            best, hit, ba, bb = _nearer(quads, q, ox, oy, oz, dx, dy, dz, best, hit, ba, bb)
     return _shade(hit, best, ba, bb, tex_id, texel, atlas, toff, th, tw, rgb)
 
 
@@ -192,13 +197,7 @@ def _trace_candidates(ox, oy, oz, dx, dy, dz, quads, cand, ncand, tex_id, texel,
     ba = 0.0
     bb = 0.0
     for i in range(ncand):
-        q = cand[i]
-        tt, a, b = _hit(quads[q], ox, oy, oz, dx, dy, dz, best)
-        if tt > 0.0:
-            best = tt
-            hit = q
-            ba = a
-            bb = b
+        best, hit, ba, bb = _nearer(quads, cand[i], ox, oy, oz, dx, dy, dz, best, hit, ba, bb)
     return _shade(hit, best, ba, bb, tex_id, texel, atlas, toff, th, tw, rgb)
 
 
