@@ -276,10 +276,6 @@ def depth_groups(dataset):
     ]
 
 
-def depth_shots(dataset, suffix):
-    return dict((sfx, shots) for sfx, shots, _ in depth_groups(dataset))[suffix]
-
-
 # depth settings of the synthesis depth maps only (rule depth_view)
 SYNTHESIS_DEPTH_KEYS = ("synthesis_method", "views", "sgm")
 

@@ -32,10 +32,6 @@ from plenocal.io.files import read_image
 
 log = logging.getLogger(__name__)
 
-#: the registrations, in the order their maps are computed
-REGISTRATIONS = ("a", "b")
-
-
 @dataclass(frozen=True)
 class ShotDepth:
     """One registration's depth map of a shot's central view and what it was made from."""
@@ -99,11 +95,14 @@ def depths_a(cams: list[str], centre: str, reg_a_path: str | Path, views_dir: st
     pixels that its nearest source's map - one of these maps - sees at the same depth
     within ``lr_tolerance`` (:func:`plenocal.depth.planesweep.left_right_check`); a
     nearest source that is not among ``cams`` is swept for the check alone."""
-    margin = float(cfg["bounds_margin"])
     backend = resolve_backend(cfg["backend"])
     reg_a = read_reg_a(reg_a_path)
-    jobs = {cam: depth_job_a(reg_a, reg_a_path, cam, centre, views_dir, model_dir,
-                             int(cfg["sources_a"]), margin) for cam in cams}
+
+    def job_of(cam: str) -> DepthJob:
+        return depth_job_a(reg_a, reg_a_path, cam, centre, views_dir, model_dir,
+                           int(cfg["sources_a"]), float(cfg["bounds_margin"]))
+
+    jobs = {cam: job_of(cam) for cam in cams}
     _describe("a", jobs, backend, progress)
     if backend != "planesweep":
         return _estimate_each("a", jobs, centre, cfg, backend, progress)
@@ -117,8 +116,7 @@ def depths_a(cams: list[str], centre: str, reg_a_path: str | Path, views_dir: st
             raw[cam] = plane_sweep_unchecked(job.ref_cam, image(job.ref_path), job.src_cams,
                                              [image(p) for p in job.src_paths], job.near,
                                              job.far, opt)
-            progress(f"a/{cam}: swept in {time.perf_counter() - t0:.1f} s "
-                     f"({len(raw)} of {len(jobs)})")
+            progress(f"a/{cam}: swept in {time.perf_counter() - t0:.1f} s")
         return raw[cam]
 
     for cam, job in jobs.items():
@@ -129,11 +127,9 @@ def depths_a(cams: list[str], centre: str, reg_a_path: str | Path, views_dir: st
         extra = {}
         if opt.lr_check:
             partner = job.src_names[0]  # the nearest source
-            partner_job = jobs.get(partner) or depth_job_a(
-                reg_a, reg_a_path, partner, centre, views_dir, model_dir,
-                int(cfg["sources_a"]), margin)
             ok = left_right_check(job.ref_cam, depth, job.src_cams[0],
-                                  sweep(partner, partner_job), opt.lr_tolerance)
+                                  sweep(partner, jobs.get(partner) or job_of(partner)),
+                                  opt.lr_tolerance)
             depth = np.where(ok, depth, 0.0).astype(np.float32)
             extra["lr_partner"] = partner
         out[cam] = ShotDepth(depth, _info(job, backend, cam, centre, depth, **extra))
