@@ -1,12 +1,13 @@
 """Compiled (numba) pieces of the plane sweep's inner loop (:mod:`plenocal.depth.planesweep`,
 shared with SGM): the per-pixel truncated colour + gradient difference, the mask of the
-windows a warped source does not cover, the mean of the best-k source costs (of all
-sources: the plane sweep; of those that see the pixel: SGM) and the winner-take-all over
-the labels. (Kept in one file: numba's cache tracks a kernel's own file only, so a kernel
-here calls no compiled function of another module.)
+windows a warped source does not cover (from the homography), the mean of the best-k
+source costs (of all sources: the plane sweep; of those that see the pixel: SGM) and the
+winner-take-all over the labels. (Kept in one file: numba's cache tracks a kernel's own
+file only, so a kernel here calls no compiled function of another module.)
 
-Each replaces a chain of whole-image numpy passes (and their temporaries) by one pass and
-gives the same bits: the same float32 operations in the same order, no fast-math.
+Each but the mask replaces a chain of whole-image numpy passes (and their temporaries) by
+one pass and gives the same bits: the same float32 operations in the same order, no
+fast-math.
 """
 
 from __future__ import annotations
@@ -14,20 +15,17 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-#: the validity threshold of the box-filtered coverage channel (a window mean at or
-#: below it leaves the source image)
-COVERED = np.float32(0.999)
-
 
 @numba.njit(cache=True)
-def tad_pixels(ref_feat, warped, dc, cover):  # pragma: no cover - numba
+def tad_pixels(ref_feat, warped, dc):  # pragma: no cover - numba
     """Per pixel ``0.3 min(|dI|, 0.08) / 0.08 + 0.7 min(|dIx| + |dIy|, 0.04) / 0.04``
-    (float32, in numpy's order of operations) into ``dc``, and the warped coverage
-    channel (``warped[..., 3]``) copied into the contiguous ``cover``.
+    (float32, in numpy's order of operations) into ``dc``.
 
     ``ref_feat`` and ``warped`` are (H, W, 4) float32 and C-contiguous: grey, x and y
-    gradients, coverage. Row by row: the absolute differences of the whole interleaved
-    row first (one contiguous pass that vectorises), then the per-pixel terms."""
+    gradients and a fourth channel that is not read (a four-channel warp costs what a
+    one-channel warp costs and vectorises). Row by row: the absolute differences of the
+    whole interleaved row first (one contiguous pass that vectorises), then the
+    per-pixel terms."""
     H, W = dc.shape
     c08 = np.float32(0.08)
     c04 = np.float32(0.04)
@@ -40,29 +38,74 @@ def tad_pixels(ref_feat, warped, dc, cover):  # pragma: no cover - numba
         r = rf[y]
         s = wf[y]
         o = dc[y]
-        v = cover[y]
         for i in range(4 * W):
             diff[i] = abs(r[i] - s[i])
         for x in range(W):
             a = min(diff[4 * x], c08) / c08
             b = min(diff[4 * x + 1] + diff[4 * x + 2], c04) / c04
             o[x] = a * c3 + b * c7
-            v[x] = s[4 * x + 3]
 
 
 @numba.njit(cache=True)
-def mask_uncovered(box_cover, cost):  # pragma: no cover - numba
-    """+inf into ``cost`` where ``box_cover`` (the box-filtered coverage channel) is at or
-    below :data:`COVERED`: the window leaves the source image. One pass instead of
-    numpy's comparison and masked copy."""
+def _inside_columns(hom, src_w, src_h, y):  # pragma: no cover - numba
+    """The columns ``[lo, hi]`` (real numbers; lo > hi: none) of reference row ``y`` whose
+    sampling position ``hom @ (x, y, 1)`` (reference -> source, as warped with
+    ``cv2.WARP_INVERSE_MAP``) lies in front of the source and inside its pixel centres
+    ``[0, src_w - 1] x [0, src_h - 1]``. Along a row the position is a projective map of
+    x, so with ``w = h20 x + d > 0`` each bound is a linear inequality ``a x + b >= 0``."""
+    b0 = hom[0, 1] * y + hom[0, 2]
+    b1 = hom[1, 1] * y + hom[1, 2]
+    d = hom[2, 1] * y + hom[2, 2]
+    lo = -np.inf
+    hi = np.inf
+    for k in range(5):
+        if k == 0:  # u >= 0
+            a, b = hom[0, 0], b0
+        elif k == 1:  # u <= src_w - 1
+            a, b = (src_w - 1.0) * hom[2, 0] - hom[0, 0], (src_w - 1.0) * d - b0
+        elif k == 2:  # v >= 0
+            a, b = hom[1, 0], b1
+        elif k == 3:  # v <= src_h - 1
+            a, b = (src_h - 1.0) * hom[2, 0] - hom[1, 0], (src_h - 1.0) * d - b1
+        else:  # in front: w > 0
+            a, b = hom[2, 0], d - 1e-12
+        if a > 0.0:
+            lo = max(lo, -b / a)
+        elif a < 0.0:
+            hi = min(hi, -b / a)
+        elif b < 0.0:
+            return np.inf, -np.inf
+    return lo, hi
+
+
+@numba.njit(cache=True)
+def mask_uncovered(hom, src_w, src_h, half, cost):  # pragma: no cover - numba
+    """+inf into ``cost`` (H, W) where the matching window (``2 half + 1`` square, mirrored
+    at the reference's borders as the box filter mirrors it) samples the source outside
+    its image: some pixel of the window maps, by the reference -> source homography
+    ``hom``, outside ``[0, src_w - 1] x [0, src_h - 1]`` or behind the source.
+
+    A homography maps the window's rectangle to a convex quadrilateral, so the window is
+    inside when its rows' inside intervals (:func:`_inside_columns`) all hold its
+    columns: per row one interval, per pixel two comparisons. (Until issue 15 the mask was
+    a box filter of a warped coverage channel, <= 0.999: the same windows, but for
+    positions within a fiftieth of a pixel of the border, at a fifth of a source cost's
+    time.)"""
     H, W = cost.shape
-    thr = COVERED
+    lo = np.empty(H)
+    hi = np.empty(H)
+    for y in range(H):
+        lo[y], hi[y] = _inside_columns(hom, src_w, src_h, y)
     inf = np.float32(np.inf)
     for y in range(H):
-        b = box_cover[y]
+        wlo = -np.inf
+        whi = np.inf
+        for r in range(max(y - half, 0), min(y + half, H - 1) + 1):
+            wlo = max(wlo, lo[r])
+            whi = min(whi, hi[r])
         o = cost[y]
         for x in range(W):
-            if b[x] <= thr:
+            if not (wlo <= max(x - half, 0) and min(x + half, W - 1) <= whi):
                 o[x] = inf
 
 

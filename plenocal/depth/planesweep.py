@@ -36,7 +36,6 @@ import numpy as np
 from plenocal.camera import PinholeCamera
 from plenocal.config import stage_defaults
 from plenocal.depth.costkernels import (
-    COVERED,
     mask_uncovered,
     mean_of_best,
     tad_pixels,
@@ -74,7 +73,9 @@ def _grey(img: np.ndarray) -> np.ndarray:
 
 
 def _features(img: np.ndarray) -> np.ndarray:
-    """Channels warped per plane: grey, x/y gradients (for tad), validity."""
+    """Channels warped per plane: grey, x/y gradients (for tad) and a fourth of ones that
+    nothing reads: OpenCV warps four float channels as fast as one (three take 2.5x as
+    long)."""
     g = _grey(img)
     gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3) / 8.0
     gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3) / 8.0
@@ -142,37 +143,35 @@ def plane_homographies(ref: PinholeCamera, src: PinholeCamera,
 
 
 def _source_cost(ref_feat: np.ndarray, ref_stats: tuple, warped: np.ndarray,
-                 opt: PlaneSweepOptions, out: np.ndarray | None = None,
-                 scratch: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
-    """Cost of one warped source against the reference, +inf where the window leaves
-    the source image (written into ``out`` when given; ``scratch``: two (H, W) float32
-    planes the tad cost may reuse)."""
+                 hom: np.ndarray, src_size: tuple[int, int], opt: PlaneSweepOptions,
+                 out: np.ndarray | None = None,
+                 scratch: np.ndarray | None = None) -> np.ndarray:
+    """Cost of one source, warped onto the reference by the homography ``hom`` (reference
+    -> source pixels), +inf where the window leaves the source image (``src_size``:
+    width, height; :func:`plenocal.depth.costkernels.mask_uncovered`). Written into
+    ``out`` when given; ``scratch``: an (H, W) float32 plane the tad cost may reuse."""
     w = opt.window
     if opt.cost == "tad":
         # 0.3 min(|dI|, 0.08) / 0.08 + 0.7 min(|dIx| + |dIy|, 0.04) / 0.04, box-aggregated
-        if scratch is None:
-            scratch = (np.empty(warped.shape[:2], np.float32),
-                       np.empty(warped.shape[:2], np.float32))
-        dc, cover = scratch
-        tad_pixels(ref_feat, warped, dc, cover)
+        dc = scratch if scratch is not None else np.empty(warped.shape[:2], np.float32)
+        tad_pixels(ref_feat, warped, dc)
         out = _box(dc, w, out)
-        mask_uncovered(_box(cover, w, dc), out)  # (dc is free again)
-        return out
-    if opt.cost != "zncc":
-        raise ValueError(f"depth: unknown matching cost {opt.cost!r} (use zncc or tad)")
-    invalid = _box(warped[..., 3], w) <= COVERED
-    mr, sr = ref_stats
-    s = np.ascontiguousarray(warped[..., 0])
-    ms = _box(s, w)
-    vs = np.maximum(_box(s * s, w) - ms * ms, 0.0)
-    cov = _box(ref_feat[..., 0] * s, w) - mr * ms
-    ncc = cov / np.sqrt(np.maximum(sr * sr * vs, 1e-12))
-    cost = (1.0 - np.clip(ncc, -1.0, 1.0)).astype(np.float32)
-    if out is None:
-        out = cost
+    elif opt.cost == "zncc":
+        mr, sr = ref_stats
+        s = np.ascontiguousarray(warped[..., 0])
+        ms = _box(s, w)
+        vs = np.maximum(_box(s * s, w) - ms * ms, 0.0)
+        cov = _box(ref_feat[..., 0] * s, w) - mr * ms
+        ncc = cov / np.sqrt(np.maximum(sr * sr * vs, 1e-12))
+        cost = (1.0 - np.clip(ncc, -1.0, 1.0)).astype(np.float32)
+        if out is None:
+            out = cost
+        else:
+            out[...] = cost
     else:
-        out[...] = cost
-    np.copyto(out, np.float32(np.inf), where=invalid)
+        raise ValueError(f"depth: unknown matching cost {opt.cost!r} (use zncc or tad)")
+    mask_uncovered(np.ascontiguousarray(hom, dtype=np.float64), float(src_size[0]),
+                   float(src_size[1]), w // 2, out)
     return out
 
 
@@ -193,13 +192,14 @@ def source_costs(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCame
     size = (ref.width, ref.height)
     per = np.empty((len(srcs), ref.height, ref.width), dtype=np.float32)
     warped = np.empty((ref.height, ref.width, 4), dtype=np.float32)
-    scratch = (np.empty(per.shape[1:], np.float32), np.empty(per.shape[1:], np.float32))
+    scratch = np.empty(per.shape[1:], np.float32)
     flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
     for i in range(len(depths)):
         for j, sf in enumerate(src_feat):
             cv2.warpPerspective(sf, homs[j][i], size, dst=warped, flags=flags,
                                 borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-            _source_cost(ref_feat, (mr, sr), warped, opt, out=per[j], scratch=scratch)
+            _source_cost(ref_feat, (mr, sr), warped, homs[j][i], (srcs[j].width,
+                         srcs[j].height), opt, out=per[j], scratch=scratch)
         yield per
 
 
