@@ -40,7 +40,8 @@ for _i, _d in enumerate(DATASETS):
             priority: _prio
             conda:
                 "../envs/plenocal.yaml"
-            threads: 1
+            # each map swept in its own process (the same maps on any number of cores)
+            threads: 2
             resources:
                 mem_mb=3000,
                 runtime=60,

@@ -13,14 +13,16 @@ from plenocal.rulelog import rule_logger
 snakemake = globals()["snakemake"]
 params = snakemake.params
 log = rule_logger(snakemake, f"depth_{params.registration}")
-cv2.setNumThreads(max(1, int(snakemake.threads)))  # the job's cores only
+threads = max(1, int(snakemake.threads))
 
 cams = list(params.cams)
 cfg = dict(params.depth)
 if params.registration == "a":
+    cv2.setNumThreads(1)  # the job's cores sweep a map each (processes)
     maps = depths_a(cams, params.centre, snakemake.input.reg_a, params.views_dir,
-                    params.model_dir, cfg, progress=log.info)
+                    params.model_dir, cfg, progress=log.info, threads=threads)
 else:
+    cv2.setNumThreads(threads)  # the job's cores only
     maps = depths_b(cams, params.centre, snakemake.input.rig, params.views_dir, cfg,
                     progress=log.info)
 out = snakemake.output

@@ -253,3 +253,27 @@ def test_depth_jobs_of_both_registrations():
     assert job.units == "m" and len(job.src_names) == 4 and "2_2" not in job.src_names
     assert all(p.parent.name == "x01_y00" for p in job.src_paths)
     assert str(job.ref_path) == "views/x01_y00/2_2.png" and 0 < job.near < job.far
+
+
+def test_maps_swept_in_worker_processes_are_the_maps_swept_here(texture, tmp_path):
+    """Registration A's maps (plenocal.depth.shot._sweep_all): in two worker processes the
+    same bits as one after the other in this process, in the jobs' order."""
+    from plenocal.depth.inputs import DepthJob
+    from plenocal.depth.shot import _sweep_all
+    from plenocal.io.files import write_image
+
+    jobs = {}
+    for k, tilt in enumerate((0.0, 20.0, 35.0)):
+        ref, ri, _, srcs, sims = _scene(texture, tilt)
+        paths = []
+        for j, img in enumerate([ri, *sims[:4]]):
+            paths.append(tmp_path / f"s{k}_{j}.png")
+            write_image(paths[-1], (np.clip(img, 0, 1) * 255).astype(np.uint8))
+        jobs[f"shot{k}"] = DepthJob(ref, paths[0], [f"v{j}" for j in range(4)], srcs[:4],
+                                    paths[1:], 0.4, 0.9, "m")
+    opt = PlaneSweepOptions(num_depths=24)
+    here = list(_sweep_all(jobs, opt, 1))
+    workers = list(_sweep_all(jobs, opt, 2))
+    assert [c for c, _, _ in workers] == list(jobs) == [c for c, _, _ in here]
+    for (_, a, _), (_, b, _) in zip(here, workers, strict=True):
+        assert a.tobytes() == b.tobytes() and (a > 0).mean() > 0.5

@@ -3,7 +3,9 @@ shared with SGM): the per-pixel truncated colour + gradient difference, the mask
 windows a warped source does not cover (from the homography), the mean of the best-k
 source costs (of all sources: the plane sweep; of those that see the pixel: SGM) and the
 winner-take-all over the labels. (Kept in one file: numba's cache tracks a kernel's own
-file only, so a kernel here calls no compiled function of another module.)
+file only, so a kernel here calls no compiled function of another module.) The kernels
+release the GIL (``nogil``): registration A's maps are swept on a job's threads side by
+side (:func:`plenocal.depth.shot.depths_a`).
 
 Each but the mask replaces a chain of whole-image numpy passes (and their temporaries) by
 one pass and gives the same bits: the same float32 operations in the same order, no
@@ -16,7 +18,7 @@ import numba
 import numpy as np
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def tad_pixels(ref_feat, warped, dc):  # pragma: no cover - numba
     """Per pixel ``0.3 min(|dI|, 0.08) / 0.08 + 0.7 min(|dIx| + |dIy|, 0.04) / 0.04``
     (float32, in numpy's order of operations) into ``dc``.
@@ -46,7 +48,7 @@ def tad_pixels(ref_feat, warped, dc):  # pragma: no cover - numba
             o[x] = a * c3 + b * c7
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _inside_columns(hom, src_w, src_h, y):  # pragma: no cover - numba
     """The columns ``[lo, hi]`` (real numbers; lo > hi: none) of reference row ``y`` whose
     sampling position ``hom @ (x, y, 1)`` (reference -> source, as warped with
@@ -78,7 +80,7 @@ def _inside_columns(hom, src_w, src_h, y):  # pragma: no cover - numba
     return lo, hi
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def mask_uncovered(hom, src_w, src_h, half, cost):  # pragma: no cover - numba
     """+inf into ``cost`` (H, W) where the matching window (``2 half + 1`` square, mirrored
     at the reference's borders as the box filter mirrors it) samples the source outside
@@ -109,7 +111,7 @@ def mask_uncovered(hom, src_w, src_h, half, cost):  # pragma: no cover - numba
                 o[x] = inf
 
 
-@numba.njit(cache=True, fastmath={"nnan", "nsz"})
+@numba.njit(cache=True, nogil=True, fastmath={"nnan", "nsz"})
 def _bubble_smallest(per, y, passes, run):  # pragma: no cover - numba
     """``passes`` bubble passes over row ``y`` of the planes of ``per`` (S, H, W): after
     pass i plane i holds the i-th smallest value (the first ``passes`` ascending, the
@@ -137,7 +139,7 @@ def _bubble_smallest(per, y, passes, run):  # pragma: no cover - numba
             first[x] = run[x]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def mean_of_best(per, k, out):  # pragma: no cover - numba
     """Per pixel of ``per`` (S, H, W, overwritten): the mean of its ``k`` smallest costs,
     summed in ascending order in float32 (+inf when one of them is), divided by ``k``
@@ -160,7 +162,7 @@ def mean_of_best(per, k, out):  # pragma: no cover - numba
             o[x] /= kf
 
 
-@numba.njit(cache=True, fastmath={"nnan", "nsz"})
+@numba.njit(cache=True, nogil=True, fastmath={"nnan", "nsz"})
 def mean_of_seen_best(per, k_of, k_max, out):  # pragma: no cover - numba
     """Per pixel of ``per`` (S, H, W, overwritten): the mean of the ``k_of[S']`` smallest
     of the S' finite costs (summed in ascending order, float32), 1 where no source sees
@@ -194,7 +196,7 @@ def mean_of_seen_best(per, k_of, k_max, out):  # pragma: no cover - numba
             o[x] = o[x] / np.float32(k[x]) if seen[x] > 0 else np.float32(1.0)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def wta_labels(vol, inv0, step, best, depth, c0, second):  # pragma: no cover - numba
     """Per pixel of the cost volume ``vol`` (D, H, W; non-finite costs read as 1e6): the
     first minimum over the labels ``best`` and its cost ``c0``, the parabolic sub-label
