@@ -250,3 +250,22 @@ def test_reg_a_round_trip(tmp_path):
     write_json(tmp_path / "bad.json", doc)
     with pytest.raises(ValueError, match="camera x01_y00: K must be 3x3"):
         read_reg_a(tmp_path / "bad.json")
+
+
+def test_png_levels_store_the_same_pixels_and_are_deterministic(tmp_path):
+    """write_image: the lenslet images' level (stored, LENSLET_PNG_LEVEL) and the default
+    give the same pixels back; the same input gives the same bytes."""
+    import numpy as np
+
+    from plenocal.io.files import LENSLET_PNG_LEVEL, read_image, write_image
+
+    img = (np.random.default_rng(3).integers(0, 4096, (40, 60, 3)) << 4).astype(np.uint16)
+    sizes = {}
+    for level in (LENSLET_PNG_LEVEL, 1):
+        a, b = tmp_path / f"a{level}.png", tmp_path / f"b{level}.png"
+        write_image(a, img, level=level)
+        write_image(b, img, level=level)
+        assert a.read_bytes() == b.read_bytes()
+        assert np.array_equal(read_image(a), img)
+        sizes[level] = a.stat().st_size
+    assert sizes[LENSLET_PNG_LEVEL] > sizes[1]  # stored: no compression

@@ -149,8 +149,16 @@ def write_npy(path: str | Path, array: np.ndarray) -> None:
 PNG_LEVEL = 1
 
 
-def write_image(path: str | Path, image: np.ndarray) -> None:
-    """Write a PNG (uint8 or uint16, gray or RGB) deterministically and atomically.
+#: zlib level of the simulator's lenslet images (:func:`write_image` ``level``): stored, not
+#: compressed - the noisy 12-bit pixels compress to 70 % at best, and a 2048 x 1536 image
+#: then encodes in 0.05 s instead of 0.22 s and decodes in 0.05 s instead of 0.15 s, for
+#: 18.9 MB instead of 13.3 MB on disk (issue 15).
+LENSLET_PNG_LEVEL = 0
+
+
+def write_image(path: str | Path, image: np.ndarray, level: int = PNG_LEVEL) -> None:
+    """Write a PNG (uint8 or uint16, gray or RGB) deterministically and atomically
+    (``level``: zlib's, 0 = stored).
 
     OpenCV's PNG encoder is used (fixed compression level, no timestamps), with RGB
     input converted to OpenCV's BGR order. Level :data:`PNG_LEVEL` (zlib 1): on a 12-bit
@@ -172,7 +180,7 @@ def write_image(path: str | Path, image: np.ndarray) -> None:
         raise TypeError(f"write_image needs uint8 or uint16, got {image.dtype}")
     if image.ndim == 3 and image.shape[2] == 3:
         image = image[:, :, ::-1]
-    ok, enc = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL,
+    ok, enc = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, int(level),
                                            cv2.IMWRITE_PNG_STRATEGY,
                                            cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY,
                                            cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_UP])

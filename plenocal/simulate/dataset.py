@@ -14,7 +14,13 @@ import yaml
 from plenocal.camera import pose
 from plenocal.config import with_defaults
 from plenocal.grid import MicrolensGrid
-from plenocal.io.files import atomic_write_text, read_json, write_image, write_json
+from plenocal.io.files import (
+    LENSLET_PNG_LEVEL,
+    atomic_write_text,
+    read_json,
+    write_image,
+    write_json,
+)
 from plenocal.io.raytrix import read_calib, write_calib
 from plenocal.names import array_shot, array_shots, handheld_shot, handheld_shots
 from plenocal.optics import PlenopticOptics
@@ -232,7 +238,7 @@ def render_shots(sim: dict, data_dir: str | Path, cams: list[str], out_pngs: lis
     def finish(cam: str, img: np.ndarray, out_png) -> None:
         rng = np.random.default_rng([sim["seed"], 5, order.index(cam)])
         write_image(out_png, read_out(img, rng, sensor["noise_std"], sensor["full_well_e"],
-                                      sensor["bit_depth"]))
+                                      sensor["bit_depth"]), level=LENSLET_PNG_LEVEL)
         log(f"{cam}: done")
 
     # each shot's readout and PNG (single-threaded, 0.65 s on the default camera) beside
