@@ -40,8 +40,11 @@ for _i, _d in enumerate(DATASETS):
             priority: _prio
             conda:
                 "../envs/plenocal.yaml"
-            # each map swept in its own process (the same maps on any number of cores)
-            threads: 2
+            # one core: with two, the job waited for both cores to be free at once and the
+            # full run's chain behind it stood still for 300 s (issue 15); given more
+            # (--set-threads depth_a=2, a cluster node's cores) it sweeps a map per
+            # process, the same maps
+            threads: 1
             resources:
                 mem_mb=3000,
                 runtime=60,
