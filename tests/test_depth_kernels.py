@@ -1,13 +1,20 @@
 """The compiled pieces of the plane sweep and SGM (plenocal/depth/costkernels.py and the
 SGM aggregation) give the bits of the numpy / OpenCV definitions they replaced: the tad
 cost, the best-k mean, the label-axis block move and the fused horizontal path pair; the
-uncovered-window mask is checked by hand and against the box filter it replaced."""
+uncovered-window mask of the plane sweep is checked by hand and against the box filter
+of the warped coverage channel that SGM keeps."""
 
 import cv2  # (before pycolmap)
 import numpy as np
 from synth.costs import random_costs
 
-from plenocal.depth.costkernels import mask_uncovered, mean_of_best, tad_pixels
+from plenocal.depth.costkernels import (
+    COVERED,
+    mask_box_uncovered,
+    mask_uncovered,
+    mean_of_best,
+    tad_pixels,
+)
 from plenocal.depth.planesweep import _box
 from plenocal.depth.sgm import SgmOptions, _aggregate_dir, _to_label_axis, sgm_aggregate
 
@@ -40,6 +47,20 @@ def test_tad_pixels_is_the_numpy_definition():
     dc = np.empty((13, 17), np.float32)
     tad_pixels(ref, warped, dc)
     assert dc.tobytes() == want.tobytes()
+
+
+def test_mask_box_uncovered_is_the_box_threshold():
+    """SGM's test (plenocal.depth.sgm): the box-filtered warped coverage channel <= 0.999."""
+    rng = np.random.default_rng(1)
+    cover = _features(rng, (13, 17))[..., 3].copy()
+    cost = rng.random((13, 17), np.float32)
+    box = _box(cover, 5)
+    want = cost.copy()
+    np.copyto(want, np.float32(np.inf), where=box <= 0.999)
+    mask_box_uncovered(box, cost)
+    assert cost.tobytes() == want.tobytes()
+    assert np.isinf(cost[:, :4]).all() and np.isfinite(cost[6:, 10:]).all()
+    assert COVERED == np.float32(0.999)
 
 
 def _box_cover_mask(hom, src_w, src_h, shape, window):

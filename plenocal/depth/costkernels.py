@@ -48,6 +48,27 @@ def tad_pixels(ref_feat, warped, dc):  # pragma: no cover - numba
             o[x] = a * c3 + b * c7
 
 
+#: the validity threshold of the box-filtered coverage channel (a window mean at or
+#: below it leaves the source image; :func:`mask_box_uncovered`)
+COVERED = np.float32(0.999)
+
+
+@numba.njit(cache=True, nogil=True)
+def mask_box_uncovered(box_cover, cost):  # pragma: no cover - numba
+    """+inf into ``cost`` where ``box_cover`` (the box-filtered warped coverage channel) is
+    at or below :data:`COVERED`: the window leaves the source image. One pass instead of
+    numpy's comparison and masked copy."""
+    H, W = cost.shape
+    thr = COVERED
+    inf = np.float32(np.inf)
+    for y in range(H):
+        b = box_cover[y]
+        o = cost[y]
+        for x in range(W):
+            if b[x] <= thr:
+                o[x] = inf
+
+
 @numba.njit(cache=True, nogil=True)
 def _inside_columns(hom, src_w, src_h, y):  # pragma: no cover - numba
     """The columns ``[lo, hi]`` (real numbers; lo > hi: none) of reference row ``y`` whose

@@ -110,7 +110,7 @@ def matching_cost(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCam
     # (a (D, H, W) volume and its transposed copy cost 100 MB more and a slow strided pass)
     block = np.empty((min(LABEL_BLOCK, D), ref.height, ref.width), np.float32)
     for i, per in enumerate(source_costs(ref, ref_img, srcs, src_imgs, depths,
-                                         _sweep_options(opt))):
+                                         _sweep_options(opt), cover="warped")):
         b = i % LABEL_BLOCK
         mean_of_seen_best(per, k_of, k_max, block[b])
         if b == len(block) - 1 or i == D - 1:
