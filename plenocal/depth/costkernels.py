@@ -3,9 +3,7 @@ shared with SGM): the per-pixel truncated colour + gradient difference, the mask
 windows a warped source does not cover (from the homography), the mean of the best-k
 source costs (of all sources: the plane sweep; of those that see the pixel: SGM) and the
 winner-take-all over the labels. (Kept in one file: numba's cache tracks a kernel's own
-file only, so a kernel here calls no compiled function of another module.) The kernels
-release the GIL (``nogil``): registration A's maps are swept on a job's threads side by
-side (:func:`plenocal.depth.shot.depths_a`).
+file only, so a kernel here calls no compiled function of another module.)
 
 Each but the mask replaces a chain of whole-image numpy passes (and their temporaries) by
 one pass and gives the same bits: the same float32 operations in the same order, no
@@ -18,7 +16,7 @@ import numba
 import numpy as np
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True)
 def tad_pixels(ref_feat, warped, dc):  # pragma: no cover - numba
     """Per pixel ``0.3 min(|dI|, 0.08) / 0.08 + 0.7 min(|dIx| + |dIy|, 0.04) / 0.04``
     (float32, in numpy's order of operations) into ``dc``.
@@ -53,7 +51,7 @@ def tad_pixels(ref_feat, warped, dc):  # pragma: no cover - numba
 COVERED = np.float32(0.999)
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True)
 def mask_box_uncovered(box_cover, cost):  # pragma: no cover - numba
     """+inf into ``cost`` where ``box_cover`` (the box-filtered warped coverage channel) is
     at or below :data:`COVERED`: the window leaves the source image. One pass instead of
@@ -69,7 +67,7 @@ def mask_box_uncovered(box_cover, cost):  # pragma: no cover - numba
                 o[x] = inf
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True)
 def _inside_columns(hom, src_w, src_h, y):  # pragma: no cover - numba
     """The columns ``[lo, hi]`` (real numbers; lo > hi: none) of reference row ``y`` whose
     sampling position ``hom @ (x, y, 1)`` (reference -> source, as warped with
@@ -101,7 +99,7 @@ def _inside_columns(hom, src_w, src_h, y):  # pragma: no cover - numba
     return lo, hi
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True)
 def mask_uncovered(hom, src_w, src_h, half, cost):  # pragma: no cover - numba
     """+inf into ``cost`` (H, W) where the matching window (``2 half + 1`` square, mirrored
     at the reference's borders as the box filter mirrors it) samples the source outside
@@ -132,7 +130,7 @@ def mask_uncovered(hom, src_w, src_h, half, cost):  # pragma: no cover - numba
                 o[x] = inf
 
 
-@numba.njit(cache=True, nogil=True, fastmath={"nnan", "nsz"})
+@numba.njit(cache=True, fastmath={"nnan", "nsz"})
 def _bubble_smallest(per, y, passes, run):  # pragma: no cover - numba
     """``passes`` bubble passes over row ``y`` of the planes of ``per`` (S, H, W): after
     pass i plane i holds the i-th smallest value (the first ``passes`` ascending, the
@@ -160,7 +158,7 @@ def _bubble_smallest(per, y, passes, run):  # pragma: no cover - numba
             first[x] = run[x]
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True)
 def mean_of_best(per, k, out):  # pragma: no cover - numba
     """Per pixel of ``per`` (S, H, W, overwritten): the mean of its ``k`` smallest costs,
     summed in ascending order in float32 (+inf when one of them is), divided by ``k``
@@ -183,7 +181,7 @@ def mean_of_best(per, k, out):  # pragma: no cover - numba
             o[x] /= kf
 
 
-@numba.njit(cache=True, nogil=True, fastmath={"nnan", "nsz"})
+@numba.njit(cache=True, fastmath={"nnan", "nsz"})
 def mean_of_seen_best(per, k_of, k_max, out):  # pragma: no cover - numba
     """Per pixel of ``per`` (S, H, W, overwritten): the mean of the ``k_of[S']`` smallest
     of the S' finite costs (summed in ascending order, float32), 1 where no source sees
@@ -217,7 +215,7 @@ def mean_of_seen_best(per, k_of, k_max, out):  # pragma: no cover - numba
             o[x] = o[x] / np.float32(k[x]) if seen[x] > 0 else np.float32(1.0)
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True)
 def wta_labels(vol, inv0, step, best, depth, c0, second):  # pragma: no cover - numba
     """Per pixel of the cost volume ``vol`` (D, H, W; non-finite costs read as 1e6): the
     first minimum over the labels ``best`` and its cost ``c0``, the parabolic sub-label

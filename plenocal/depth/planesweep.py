@@ -179,8 +179,9 @@ def _source_cost(ref_feat: np.ndarray, ref_stats: tuple, warped: np.ndarray,
         mask_uncovered(np.ascontiguousarray(hom, dtype=np.float64), float(src_size[0]),
                        float(src_size[1]), w // 2, out)
     elif cover == "warped":
+        # the box of the coverage channel into the scratch plane (free again after the cost)
         cov = np.ascontiguousarray(warped[..., 3])
-        mask_box_uncovered(_box(cov, w), out)
+        mask_box_uncovered(_box(cov, w, scratch), out)
     else:
         raise ValueError(f"depth: unknown coverage test {cover!r} (homography or warped)")
     return out
