@@ -20,7 +20,7 @@ from plenocal.io.raytrix import read_calib, write_calib
 from plenocal.optics import PlenopticOptics
 from plenocal.simulate.dataset import make_calib, nearest_lens_map, render_shot, setup_dataset
 from plenocal.simulate.mla import lens_type_map
-from plenocal.simulate.raytrace import render_lenslet
+from plenocal.simulate.raytrace import prepare_lenslet, render_lenslet, trace_lenslet
 from plenocal.simulate.scene import SceneArrays, pack_textures, scene_arrays
 from plenocal.simulate.sensor import natural_vignetting, read_out
 
@@ -459,6 +459,10 @@ def test_bounding_boxes_skip_nothing_that_a_ray_hits(tmp_path: Path):
         every = render_lenslet(scene, opt, lm, shot, 4, 0, cull=False, **kw)
         np.testing.assert_array_equal(fast, every, err_msg=name)
         assert fast.std() > 0.05, name
+        # one set-up for every shot of a camera (render_shots) traces the same image
+        setup = prepare_lenslet(scene, opt, lm, 4, 0)
+        np.testing.assert_array_equal(trace_lenslet(setup, scene, shot, **kw), fast,
+                                      err_msg=name)
     shot = np.asarray(shots["hand01"]["cam_to_world"])
     K = np.array([[300.0, 0, 119.5], [0, 300.0, 89.5], [0, 0, 1]])
     img, z = render_pinhole(scene, K, shot, 240, 180, 2)

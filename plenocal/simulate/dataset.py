@@ -26,7 +26,12 @@ from plenocal.names import array_shot, array_shots, handheld_shot, handheld_shot
 from plenocal.optics import PlenopticOptics
 from plenocal.simulate.mla import lens_type_map, make_calib
 from plenocal.simulate.optics_setup import optics_from_config
-from plenocal.simulate.raytrace import nearest_lens_centres, render_lenslet
+from plenocal.simulate.raytrace import (
+    LensletSetup,
+    nearest_lens_centres,
+    prepare_lenslet,
+    trace_lenslet,
+)
 from plenocal.simulate.scene import SceneArrays, make_scene, pack_textures, scene_arrays
 from plenocal.simulate.sensor import natural_vignetting, read_out
 
@@ -194,17 +199,27 @@ def render_white(sim: dict, data_dir: str | Path, out_png: str | Path) -> None:
                                   sensor["bit_depth"]))
 
 
+def _trace_prepared(setup: LensletSetup, scene: SceneArrays, falloff: np.ndarray | None,
+                    cam_to_world: np.ndarray, sensor: dict, aperture: float) -> np.ndarray:
+    """Trace one lenslet image with a prepared ``setup``
+    (:func:`plenocal.simulate.raytrace.prepare_lenslet`), the block's front stop and the
+    cos^4 ``falloff`` (None: off)."""
+    stop = sensor["front_stop_distance_m"]
+    img = trace_lenslet(setup, scene, cam_to_world, stop_distance=stop,
+                        stop_diameter=sensor["front_stop_diameter_scale"] * aperture
+                        if stop > 0 else 0.0)
+    if falloff is not None:
+        img = img * falloff[..., None]
+    return img
+
+
 def _trace_shot(sim: dict, optics: PlenopticOptics, scene: SceneArrays, lens_map: np.ndarray,
                 types: np.ndarray, cam_to_world: np.ndarray, sensor: dict) -> np.ndarray:
     """Trace one lenslet image with the block's rays, front stop and cos^4 falloff."""
-    stop = sensor["front_stop_distance_m"]
-    img = render_lenslet(scene, optics, lens_map, cam_to_world, sim["render"]["samples"],
-                         sim["seed"], lens_types=types, stop_distance=stop,
-                         stop_diameter=sensor["front_stop_diameter_scale"] * optics.aperture
-                         if stop > 0 else 0.0)
-    if sensor["vignetting_cos4"]:
-        img = img * natural_vignetting(optics, lens_map)[..., None]
-    return img
+    setup = prepare_lenslet(scene, optics, lens_map, sim["render"]["samples"], sim["seed"],
+                            lens_types=types)
+    falloff = natural_vignetting(optics, lens_map) if sensor["vignetting_cos4"] else None
+    return _trace_prepared(setup, scene, falloff, cam_to_world, sensor, optics.aperture)
 
 
 def render_shots(sim: dict, data_dir: str | Path, cams: list[str], out_pngs: list,
@@ -234,6 +249,10 @@ def render_shots(sim: dict, data_dir: str | Path, cams: list[str], out_pngs: lis
     types = lens_type_map(calib, lens_map)
     sensor = sensor_truth(sim)
     order = sorted(shots)
+    # what every shot traces with, once (0.1 s a shot on the default camera)
+    setup = prepare_lenslet(scene, optics, lens_map, sim["render"]["samples"], sim["seed"],
+                            lens_types=types)
+    falloff = natural_vignetting(optics, lens_map) if sensor["vignetting_cos4"] else None
 
     def finish(cam: str, img: np.ndarray, out_png) -> None:
         rng = np.random.default_rng([sim["seed"], 5, order.index(cam)])
@@ -249,8 +268,8 @@ def render_shots(sim: dict, data_dir: str | Path, cams: list[str], out_pngs: lis
             log(f"{cam}: tracing {optics.width}x{optics.height} px x "
                 f"{sim['render']['samples']} rays ({optics.lens_types} lens type(s), "
                 f"{optics.kind}), shot {k + 1} of {len(cams)}")
-            img = _trace_shot(sim, optics, scene, lens_map, types,
-                              np.asarray(shots[cam]["cam_to_world"]), sensor)
+            img = _trace_prepared(setup, scene, falloff, np.asarray(shots[cam]["cam_to_world"]),
+                                  sensor, optics.aperture)
             if pending is not None:
                 pending.result()  # (raises the writer's error here)
             pending = writer.submit(finish, cam, img, out_png)
