@@ -34,7 +34,10 @@ SYNTHETIC = [d for d in DATASETS if "simulate" in config["datasets"][d]]
 #: (its depth maps, the ideal renders it compares with, the experiments: Exp. 3 is the
 #: longest job of the tail), and last the other Table I rows and the hand-held shots'
 #: depth maps, which only feed short jobs (issue 15).
-PRIORITY = {"synthesis": 5, "chain": 20}
+#: The views other than the central ones (convert_views_<k>) come after registration A's
+#: inputs and before the synthesis: rendered on the core that registration A's one-core
+#: chain leaves free.
+PRIORITY = {"synthesis": 5, "views": 15, "chain": 20}
 
 
 def reprojection_priority(wildcards):

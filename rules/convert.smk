@@ -1,6 +1,9 @@
-"""Lenslet-to-multiview conversion (RLC, Fig. 1 (a)): one job per shot, all N x N views,
-the patch-size map and disparity.json; on synthetic datasets also the views' quality
-against the simulator's ideal renders (rule convert_quality).
+"""Lenslet-to-multiview conversion (RLC, Fig. 1 (a)): one job per shot measures the image
+(analysis.npz), renders the central view - all that registration A needs - and writes the
+patch-size map and disparity.json; jobs of SHOTS_PER_JOB shots render the other views from
+the measurements (convert_views_<k>), beside registration A (issue 15: 0.64 of a shot's
+1.0 s of conversion is measuring). On synthetic datasets also the views' quality against
+the simulator's ideal renders (rule convert_quality).
 
 Snakemake outputs cannot be functions of the wildcards, and every view is declared as
 an output, so the rule is defined once per dataset (whose N it knows): `convert` for the
@@ -46,7 +49,8 @@ for _i, _d in enumerate(DATASETS):
             camera=data(_d, "camera.yaml"),
             setup=res(_d, "views", "convert_setup.json"),
         output:
-            views=[res(_d, "views", "{cam}", f"{v}.png") for v in views(_d)],
+            centre=res(_d, "views", "{cam}", f"{centre(_d)}.png"),
+            analysis=res(_d, "views", "{cam}", "analysis.npz"),
             patch_size=res(_d, "views", "{cam}", "patch_size.npy"),
             patch_png=report(
                 res(_d, "views", "{cam}", "patch_size.png"),
@@ -69,8 +73,52 @@ for _i, _d in enumerate(DATASETS):
         params:
             convert=convert_settings(_d),
             views=n_views(_d),
+            centre=centre(_d),
         script:
             "../scripts/convert.py"
+
+    # the other views, SHOTS_PER_JOB shots a job, after registration A's inputs
+    # (PRIORITY["views"]): on the core its one-core chain leaves free
+    for _k, _chunk in enumerate(shot_chunks(cams(_d))):
+
+        rule:
+            name:
+                chunk_rule("convert_views", _i, _k)
+            input:
+                lenslet=[data(_d, "lenslet", f"{c}.png") for c in _chunk],
+                analysis=[res(_d, "views", c, "analysis.npz") for c in _chunk],
+                calib=data(_d, "calib.xml"),
+                camera=data(_d, "camera.yaml"),
+                setup=res(_d, "views", "convert_setup.json"),
+            output:
+                [
+                    res(_d, "views", c, f"{v}.png")
+                    for c in _chunk
+                    for v in views(_d)
+                    if v != centre(_d)
+                ],
+            log:
+                dataset_path(
+                    _d, log_path("convert_views", f"{_d}_{chunk_label(_chunk)}")
+                ),
+            benchmark:
+                dataset_path(
+                    _d, bench_path("convert_views", f"{_d}_{chunk_label(_chunk)}")
+                )
+            priority: PRIORITY["views"]
+            conda:
+                "../envs/plenocal.yaml"
+            threads: 1
+            resources:
+                mem_mb=2500,
+                runtime=20,
+            params:
+                convert=convert_settings(_d),
+                views=n_views(_d),
+                cams=_chunk,
+                names=[v for v in views(_d) if v != centre(_d)],
+            script:
+                "../scripts/convert_views.py"
 
 
 rule convert_quality:

@@ -1,13 +1,15 @@
-"""Rule convert: one lenslet image -> its N x N subaperture views, patch-size map and
-disparity range (plenocal.convert)."""
+"""Rule convert: one lenslet image -> its measurements (plenocal.convert.analysis), its
+central view, patch-size map and disparity range (plenocal.convert); rule convert_views
+renders the other views from the measurements."""
 
 import time
-from pathlib import Path
 
 import cv2
 
 from plenocal.convert import ConvertSettings, convert_files
+from plenocal.convert.analysis import write_analysis
 from plenocal.io.files import write_image, write_json, write_npy
+from plenocal.names import parse_view
 from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]
@@ -27,14 +29,10 @@ log.info("%s: %d lenses (%d used), patch size %.2f..%.2f px (median %.2f, %.0f%%
          100 * stats["patch_size_px"]["confident_share"], time.perf_counter() - t0)
 write_npy(snakemake.output.patch_size, shot.used_patch)
 write_image(snakemake.output.patch_png, shot.patch_picture())
-out_dir = Path(snakemake.output.disparity).parent
-expected = {str(p) for p in snakemake.output.views}
-for name, img in shot.views():
-    path = out_dir / f"{name}.png"
-    if str(path) not in expected:
-        raise RuntimeError(f"{path} is not a declared output of rule convert")
-    write_image(path, img)
-    log.info("%s: view %s written (%dx%d)", cam, name, img.shape[1], img.shape[0])
+write_analysis(snakemake.output.analysis, shot.analysis)
+r, c = parse_view(snakemake.params.centre)
+write_image(snakemake.output.centre, shot.view(r, c))
+log.info("%s: central view %s written", cam, snakemake.params.centre)
 write_json(snakemake.output.disparity, stats)
 log.info("%s: D_min %.4f, D_max %.4f px (paper sign), %.2f s in all", cam, stats["D_min"],
          stats["D_max"], time.perf_counter() - t0)

@@ -300,6 +300,36 @@ def test_conversion_is_deterministic():
     assert np.array_equal(a.view(0, 2), b.view(0, 2))
 
 
+def test_views_from_the_stored_analysis_are_the_same(tmp_path):
+    """Rule convert stores a shot's measurements (analysis.npz) and rule convert_views
+    renders the other views from them: the same views as one conversion, deterministic
+    bytes, and an analysis of another image refused with the remedy."""
+    from plenocal.convert.analysis import read_analysis, write_analysis
+
+    calib = calib_for_optics(small_optics())
+    grid = MicrolensGrid(calib, 400, 300)
+    img = lenslet_from_patch_size(grid, 5.0, random_texture(256, 1.5, 4))
+    whole = ShotConversion(img, calib, 3)
+    write_analysis(tmp_path / "a.npz", whole.analysis)
+    write_analysis(tmp_path / "b.npz", whole.analysis)
+    assert (tmp_path / "a.npz").read_bytes() == (tmp_path / "b.npz").read_bytes()
+    stored = read_analysis(tmp_path / "a.npz")
+    assert stored.mla == whole.mla and stored.patch.warnings == whole.patch.warnings
+    split = ShotConversion(img, calib, 3, analysis=stored)
+    for (name, a), (_, b) in zip(whole.views(), split.views(), strict=True):
+        assert np.array_equal(a, b), name
+    assert split.disparity() == whole.disparity()
+    # measured on another grid (one lens fewer): refused, naming the remedy
+    other = ShotConversion(img[:, :-40], calib, 3)
+    with pytest.raises(ConvertError, match=r"lenses.*rerun rule convert"):
+        ShotConversion(img, calib, 3, analysis=other.analysis)
+    (tmp_path / "c.npz").write_bytes(b"not a zip")
+    with pytest.raises(ConvertError, match=r"c\.npz: not a readable conversion analysis"):
+        read_analysis(tmp_path / "c.npz")
+    with pytest.raises(ConvertError, match=r"not found; rerun rule convert"):
+        read_analysis(tmp_path / "missing.npz")
+
+
 # ---------------------------------------------------------------------------
 # (4) errors
 # ---------------------------------------------------------------------------

@@ -123,6 +123,8 @@ def test_critical_chain_goes_first(tmp_path: Path):
         assert prios.get(rule) == {20}, (rule, prios.get(rule))
     # the lenslet images (one job, every core) with the chain
     assert prios["simulate"] == {20}
+    # the views other than the central ones, beside registration A's one-core chain
+    assert prios.get("convert_views") == {15}, prios.get("convert_views")
     # then the synthesis (its depth maps, the ideal renders, the experiments) ...
     for rule in ("ground_truth_render", "ground_truth_render_central", "depth_view",
                  "synthesis_exp3_part", "synthesis_exp3"):

@@ -37,6 +37,7 @@ import yaml
 
 from plenocal.artifacts.disparity import disparity_record
 from plenocal.config import settings_from, stage_defaults, with_defaults
+from plenocal.convert.analysis import ConvertAnalysis
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.levels import significant_bits, to_unit_float
 from plenocal.convert.patchsize import (
@@ -214,11 +215,15 @@ class ShotConversion:
     """One lenslet image: grid, patch sizes, layout and the per-shot render plan.
 
     ``grid``: a microlens grid to use instead of the one built from ``calib`` (a grid
-    refined from the image, for instance); it must belong to an image of this size."""
+    refined from the image, for instance); it must belong to an image of this size.
+    ``analysis``: this image's measurements made before (:attr:`analysis`, written by
+    :func:`plenocal.convert.analysis.write_analysis`): the views are rendered from them
+    without measuring the image again (the same views)."""
 
     def __init__(self, image: np.ndarray, calib: RayCalib, n_views: int,
                  settings: ConvertSettings | None = None, source: str = "<image>",
-                 grid: MicrolensGrid | None = None) -> None:
+                 grid: MicrolensGrid | None = None,
+                 analysis: ConvertAnalysis | None = None) -> None:
         self.settings = st = settings or ConvertSettings()
         self.grid_check: dict | None = None  # set by whoever checked the grid
         self.warnings: list[str] = []
@@ -242,17 +247,22 @@ class ShotConversion:
                                f"{max_q:.2f} px from the lens centre, outside the safe micro "
                                f"image (radius {calib.safe_diameter / 2:.2f} px): lower "
                                "convert.view_spacing_px or the number of views")
-        gray = to_gray(self._source)
-        self.mla, self.mla_scores = st.mla, None
-        if st.mla == "auto":
-            self.mla, k, g = detect_mla_kind(gray, self.grid, st.patch)
-            self.mla_scores = {"keplerian": k, "galilean": g}
-            log.info("%s: MLA kind from the image: %s (mean best ZNCC: points moving towards "
-                     "the neighbour %.3f, away %.3f)", source, self.mla, k, g)
-        self.patch: PatchSizeResult = estimate_patch_size(gray, self.grid, st.patch,
-                                                          mla=self.mla)
-        for note in self.patch.warnings:
-            log.warning("%s: %s", source, note)
+        if analysis is None:
+            analysis = self._measure(source)
+        else:
+            problem = (f"holds {analysis.lenses} lenses, the grid {len(self.grid)}"
+                       if analysis.lenses != len(self.grid) else
+                       f"was made for a {analysis.mla} MLA, the settings say {st.mla}"
+                       if st.mla != "auto" and analysis.mla != st.mla else
+                       "has no vignetting profile, the settings devignette"
+                       if st.devignette and analysis.profile is None else None)
+            if problem:
+                raise ConvertError(f"{source}: the conversion analysis {problem}: it belongs "
+                                   "to another image or settings; rerun rule convert for "
+                                   "this shot")
+        self.analysis: ConvertAnalysis = analysis
+        self.mla, self.mla_scores = analysis.mla, analysis.mla_scores
+        self.patch: PatchSizeResult = analysis.patch
         self.warnings += [f"{source}: {note}" for note in self.patch.warnings]
         inside = self.grid.inside(0.0)
         tile = resolve_tile(st.tile_size, self.patch.patch[inside],
@@ -264,8 +274,8 @@ class ShotConversion:
             raise ConvertError(f"{source} with {calib.source}: {exc}") from None
         self.used_patch = self.patch.patch[self.layout.lens_index]
         # the micro images' vignetting, one profile per lens type (rows of self.profile)
-        self.profile, profile_row = (lens_type_profiles(gray, self.grid) if st.devignette
-                                     else (None, None))
+        self.profile, profile_row = ((analysis.profile, analysis.profile_row)
+                                     if st.devignette else (None, None))
         # the tight blend, and the wider ones where some view reaches the rim (the corners
         # reach farthest); one geometry for all
         self._median_patch = float(np.median(self.used_patch))
@@ -278,6 +288,22 @@ class ShotConversion:
                            else profile_row[self.layout.lens_index])
         self.plan: RenderPlan = plans[0]
         self._plans: list[RenderPlan] = plans
+
+    def _measure(self, source: str) -> ConvertAnalysis:
+        """The image's MLA kind (where ``auto``), patch sizes and vignetting profiles."""
+        st = self.settings
+        gray = to_gray(self._source)
+        mla, scores = st.mla, None
+        if st.mla == "auto":
+            mla, k, g = detect_mla_kind(gray, self.grid, st.patch)
+            scores = {"keplerian": k, "galilean": g}
+            log.info("%s: MLA kind from the image: %s (mean best ZNCC: points moving towards "
+                     "the neighbour %.3f, away %.3f)", source, mla, k, g)
+        patch = estimate_patch_size(gray, self.grid, st.patch, mla=mla)
+        for note in patch.warnings:
+            log.warning("%s: %s", source, note)
+        profile, row = lens_type_profiles(gray, self.grid) if st.devignette else (None, None)
+        return ConvertAnalysis(mla, scores, patch, profile, row)
 
     def _rim_reach(self, offset: float) -> int:
         return rim_reach(offset, self._median_patch, self.calib.safe_diameter)
@@ -362,13 +388,15 @@ def patch_size_picture(layout: ViewLayout, patch: np.ndarray, confident: np.ndar
 
 def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str | Path | None,
                   n_views: int, settings: ConvertSettings | None = None,
-                  setup_json: str | Path | None = None) -> ShotConversion:
+                  setup_json: str | Path | None = None,
+                  analysis: ConvertAnalysis | None = None) -> ShotConversion:
     """Read the inputs of one shot (with every check) and prepare its conversion.
 
     ``setup_json``: the camera's ``convert_setup.json`` (rule ``convert_setup``): its MLA
     kind, tile and grid are used. Without it (one image, the command line) the grid is
     checked and chosen here per ``settings.grid``, and ``auto`` settings are read from
-    this image."""
+    this image. ``analysis``: the shot's measurements made before
+    (:mod:`plenocal.convert.analysis`; rule ``convert_views``)."""
     from plenocal.convert.setup import check_and_grid, read_setup  # noqa: PLC0415
 
     settings = settings or ConvertSettings()
@@ -379,14 +407,16 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
     if setup_json is not None:
         setup = read_setup(setup_json)
         shot = ShotConversion(image, calib, n_views, setup.settings(settings),
-                              source=str(lenslet), grid=setup.grid(calib, W, H))
+                              source=str(lenslet), grid=setup.grid(calib, W, H),
+                              analysis=analysis)
         shot.grid_check = setup.grid_check
         return shot
     grid, check = check_and_grid(image, calib, settings.grid)
     log.info("%s", check.summary())
     for note in check.warnings:
         log.warning("%s: %s", lenslet, note)
-    shot = ShotConversion(image, calib, n_views, settings, source=str(lenslet), grid=grid)
+    shot = ShotConversion(image, calib, n_views, settings, source=str(lenslet), grid=grid,
+                          analysis=analysis)
     shot.grid_check = check.to_dict()
     shot.warnings = [f"{lenslet}: {w}" for w in check.warnings] + shot.warnings
     return shot

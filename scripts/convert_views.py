@@ -1,0 +1,35 @@
+"""Rules convert_views_<k>: the views other than the central one of a run of shots, rendered
+from each shot's measurements (rule convert's analysis.npz; plenocal.convert.analysis)."""
+
+import time
+from pathlib import Path
+
+import cv2
+
+from plenocal.convert import ConvertSettings, convert_files
+from plenocal.convert.analysis import read_analysis
+from plenocal.io.files import write_image
+from plenocal.names import parse_view
+from plenocal.rulelog import rule_logger
+
+snakemake = globals()["snakemake"]
+log = rule_logger(snakemake, "convert_views")
+cv2.setNumThreads(max(1, int(snakemake.threads)))
+
+params = snakemake.params
+settings = ConvertSettings.from_config(params.convert)
+inp = snakemake.input
+outputs = {str(p) for p in snakemake.output}
+for k, (cam, lenslet, analysis) in enumerate(zip(params.cams, inp.lenslet, inp.analysis,
+                                                  strict=True)):
+    t0 = time.perf_counter()
+    shot = convert_files(lenslet, inp.calib, inp.camera, int(params.views), settings,
+                         setup_json=inp.setup, analysis=read_analysis(analysis))
+    out_dir = Path(analysis).parent
+    for name in params.names:
+        path = out_dir / f"{name}.png"
+        if str(path) not in outputs:
+            raise RuntimeError(f"{path} is not a declared output of {snakemake.rule}")
+        write_image(path, shot.view(*parse_view(name)))
+    log.info("%s: %d views in %.2f s (%d of %d)", cam, len(params.names),
+             time.perf_counter() - t0, k + 1, len(params.cams))
