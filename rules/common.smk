@@ -399,7 +399,8 @@ def mpeg_views_inputs(wildcards):
 def mpeg_views_targets(dataset):
     """The MPEG depth/texture/RVS exports, where the workflow defines the rules that
     make their inputs (a workflow of rig and merge alone, as in the tests, has none)."""
-    if not all(workflow.is_rule(r) for r in ("depth_view", "convert")):
+    convert = chunk_rule("convert", DATASETS.index(dataset), 0)
+    if not all(workflow.is_rule(r) for r in ("depth_view", convert)):
         return []
     return [res(dataset, "calibration", "mpeg", f) for f in ("depth", "texture", "rvs")]
 
@@ -431,7 +432,7 @@ def report_inputs(wildcards):
         out["rig"] = res(d, "reg_b", "rig.json")
     if is_synthetic(d) and have("convert_quality"):
         out["convert_quality"] = res(d, "convert", "quality.json")
-    if have("convert"):
+    if have(chunk_rule("convert", DATASETS.index(d), 0)):
         out["patch_size"] = [res(d, "views", c, "patch_size.png") for c in cams(d)]
         # their warnings reach the report's first screen
         out["disparity"] = [res(d, "views", c, "disparity.json") for c in cams(d)]

@@ -1,14 +1,15 @@
-"""Lenslet-to-multiview conversion (RLC, Fig. 1 (a)): one job per shot measures the image
-(analysis.npz), renders the central view - all that registration A needs - and writes the
-patch-size map and disparity.json; jobs of SHOTS_PER_JOB shots render the other views from
-the measurements (convert_views_<k>), beside registration A (issue 15: 0.64 of a shot's
-1.0 s of conversion is measuring). On synthetic datasets also the views' quality against
-the simulator's ideal renders (rule convert_quality).
+"""Lenslet-to-multiview conversion (RLC, Fig. 1 (a)), SHOTS_PER_JOB shots a job: rules
+convert_<k> measure each image (analysis.npz) and render its central view - all that
+registration A needs - with the patch-size map and disparity.json; rules
+convert_views_<k> render the other views from the measurements, beside registration A
+(issue 15: measuring is 0.64 of a shot's 1.0 s of conversion, and a job's start-up 0.3 s).
+On synthetic datasets also the views' quality against the simulator's ideal renders (rule
+convert_quality).
 
 Snakemake outputs cannot be functions of the wildcards, and every view is declared as
-an output, so the rule is defined once per dataset (whose N it knows): `convert` for the
-first, `convert_<i>` for the i-th other; its files are named in full (common.smk
-dataset_path)."""
+an output, so the rules are defined per dataset (whose shots and N they know): convert_<k>
+for the first, convert_<i>_<k> for the i-th other (common.smk chunk_rule); their files
+are named in full (common.smk dataset_path)."""
 
 
 rule convert_setup:
@@ -39,43 +40,48 @@ rule convert_setup:
 
 
 for _i, _d in enumerate(DATASETS):
+    for _k, _chunk in enumerate(shot_chunks(cams(_d))):
 
-    rule:
-        name:
-            "convert" if _i == 0 else f"convert_{_i}"
-        input:
-            lenslet=data(_d, "lenslet", "{cam}.png"),
-            calib=data(_d, "calib.xml"),
-            camera=data(_d, "camera.yaml"),
-            setup=res(_d, "views", "convert_setup.json"),
-        output:
-            centre=res(_d, "views", "{cam}", f"{centre(_d)}.png"),
-            analysis=res(_d, "views", "{cam}", "analysis.npz"),
-            patch_size=res(_d, "views", "{cam}", "patch_size.npy"),
-            patch_png=report(
-                res(_d, "views", "{cam}", "patch_size.png"),
-                caption="../report/patch_size.rst",
-                category="Conversion",
-                subcategory="{cam}",
-            ),
-            disparity=res(_d, "views", "{cam}", "disparity.json"),
-        log:
-            dataset_path(_d, log_path("convert", "{cam}")),
-        benchmark:
-            dataset_path(_d, bench_path("convert", "{cam}"))
-        priority: PRIORITY["chain"]
-        conda:
-            "../envs/plenocal.yaml"
-        threads: 1
-        resources:
-            mem_mb=2500,
-            runtime=10,
-        params:
-            convert=convert_settings(_d),
-            views=n_views(_d),
-            centre=centre(_d),
-        script:
-            "../scripts/convert.py"
+        rule:
+            name:
+                chunk_rule("convert", _i, _k)
+            input:
+                lenslet=[data(_d, "lenslet", f"{c}.png") for c in _chunk],
+                calib=data(_d, "calib.xml"),
+                camera=data(_d, "camera.yaml"),
+                setup=res(_d, "views", "convert_setup.json"),
+            output:
+                centre=[res(_d, "views", c, f"{centre(_d)}.png") for c in _chunk],
+                analysis=[res(_d, "views", c, "analysis.npz") for c in _chunk],
+                patch_size=[res(_d, "views", c, "patch_size.npy") for c in _chunk],
+                patch_png=[
+                    report(
+                        res(_d, "views", c, "patch_size.png"),
+                        caption="../report/patch_size.rst",
+                        category="Conversion",
+                        subcategory=c,
+                    )
+                    for c in _chunk
+                ],
+                disparity=[res(_d, "views", c, "disparity.json") for c in _chunk],
+            log:
+                dataset_path(_d, log_path("convert", f"{_d}_{chunk_label(_chunk)}")),
+            benchmark:
+                dataset_path(_d, bench_path("convert", f"{_d}_{chunk_label(_chunk)}"))
+            priority: PRIORITY["chain"]
+            conda:
+                "../envs/plenocal.yaml"
+            threads: 1
+            resources:
+                mem_mb=2500,
+                runtime=20,
+            params:
+                convert=convert_settings(_d),
+                views=n_views(_d),
+                centre=centre(_d),
+                cams=_chunk,
+            script:
+                "../scripts/convert.py"
 
     # the other views, SHOTS_PER_JOB shots a job, after registration A's inputs
     # (PRIORITY["views"]): on the core its one-core chain leaves free

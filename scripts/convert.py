@@ -1,8 +1,9 @@
-"""Rule convert: one lenslet image -> its measurements (plenocal.convert.analysis), its
-central view, patch-size map and disparity range (plenocal.convert); rule convert_views
-renders the other views from the measurements."""
+"""Rules convert_<k>: the lenslet images of a run of shots -> per shot its measurements
+(plenocal.convert.analysis), central view, patch-size map and disparity range
+(plenocal.convert); rules convert_views_<k> render the other views from the measurements."""
 
 import time
+from pathlib import Path
 
 import cv2
 
@@ -16,23 +17,30 @@ snakemake = globals()["snakemake"]
 log = rule_logger(snakemake, "convert")
 cv2.setNumThreads(max(1, int(snakemake.threads)))
 
-cam = snakemake.wildcards.cam
-settings = ConvertSettings.from_config(snakemake.params.convert)
-n_views = int(snakemake.params.views)
-t0 = time.perf_counter()
-shot = convert_files(snakemake.input.lenslet, snakemake.input.calib, snakemake.input.camera,
-                     n_views, settings, setup_json=snakemake.input.setup)
-stats = shot.disparity()
-log.info("%s: %d lenses (%d used), patch size %.2f..%.2f px (median %.2f, %.0f%% confident), "
-         "%.2f s", cam, len(shot.grid), stats["used_lenses"], stats["patch_size_px"]["min"],
-         stats["patch_size_px"]["max"], stats["patch_size_px"]["median"],
-         100 * stats["patch_size_px"]["confident_share"], time.perf_counter() - t0)
-write_npy(snakemake.output.patch_size, shot.used_patch)
-write_image(snakemake.output.patch_png, shot.patch_picture())
-write_analysis(snakemake.output.analysis, shot.analysis)
-r, c = parse_view(snakemake.params.centre)
-write_image(snakemake.output.centre, shot.view(r, c))
-log.info("%s: central view %s written", cam, snakemake.params.centre)
-write_json(snakemake.output.disparity, stats)
-log.info("%s: D_min %.4f, D_max %.4f px (paper sign), %.2f s in all", cam, stats["D_min"],
-         stats["D_max"], time.perf_counter() - t0)
+params = snakemake.params
+inp, out = snakemake.input, snakemake.output
+settings = ConvertSettings.from_config(params.convert)
+n_views = int(params.views)
+r, c = parse_view(params.centre)
+for k, cam in enumerate(params.cams):
+    t0 = time.perf_counter()
+    shot = convert_files(inp.lenslet[k], inp.calib, inp.camera, n_views, settings,
+                         setup_json=inp.setup)
+    stats = shot.disparity()
+    log.info("%s: %d lenses (%d used), patch size %.2f..%.2f px (median %.2f, %.0f%% "
+             "confident), %.2f s", cam, len(shot.grid), stats["used_lenses"],
+             stats["patch_size_px"]["min"], stats["patch_size_px"]["max"],
+             stats["patch_size_px"]["median"], 100 * stats["patch_size_px"]["confident_share"],
+             time.perf_counter() - t0)
+    paths = (out.centre[k], out.analysis[k], out.patch_size[k], out.patch_png[k],
+             out.disparity[k])
+    if any(Path(p).parent.name != cam for p in paths):
+        raise RuntimeError(f"{paths}: outputs out of step with the shots {params.cams}")
+    write_npy(out.patch_size[k], shot.used_patch)
+    write_image(out.patch_png[k], shot.patch_picture())
+    write_analysis(out.analysis[k], shot.analysis)
+    write_image(out.centre[k], shot.view(r, c))
+    write_json(out.disparity[k], stats)
+    log.info("%s: D_min %.4f, D_max %.4f px (paper sign), central view %s, %.2f s in all "
+             "(%d of %d)", cam, stats["D_min"], stats["D_max"], params.centre,
+             time.perf_counter() - t0, k + 1, len(params.cams))

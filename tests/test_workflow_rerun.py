@@ -86,7 +86,7 @@ def test_conversion_change_reruns_conversion_and_downstream(complete_run: Path,
     work = clone(complete_run, tmp_path / "w")
     edit_config(work, lambda c: c["convert"].update(tile_size=7))
     jobs = planned(work)
-    assert jobs.get("convert") == 10  # every shot
+    assert jobs.get("convert") == 2 and jobs.get("convert_views") == 2  # every shot
     assert "simulate" not in jobs and "simulate_setup" not in jobs
     for rule in ("features_a", "map_a", "rig_b", "depth_a", "depth_b", "scale", "merge",
                  "report"):
@@ -109,7 +109,7 @@ def test_killed_run_leaves_nothing_trusted(complete_run: Path, tmp_path: Path):
     work = clone(complete_run, tmp_path / "w")
     edit_config(work, lambda c: c["convert"].update(tile_size=5))
     proc = subprocess.Popen([sys.executable, "-m", "snakemake", "-j1", "--workflow-profile",
-                             "none", "--until", "convert"], cwd=work,
+                             "none", "--until", "convert_views_0"], cwd=work,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)
     logs = work / "results/tiny/logs/convert"
@@ -136,7 +136,7 @@ def test_killed_run_leaves_nothing_trusted(complete_run: Path, tmp_path: Path):
     rerun = snakemake(work, "-n", "--rerun-incomplete")
     out = rerun.stdout + rerun.stderr
     assert rerun.returncode == 0, out[-3000:]
-    assert re.search(r"^convert\s+\d+$", out, flags=re.M), out[-3000:]
+    assert re.search(r"^convert_\d+\s+\d+$", out, flags=re.M), out[-3000:]
 
 
 def _reversed_keys(value):
@@ -159,7 +159,7 @@ def test_reordered_config_keys_rerun_nothing(complete_run: Path, tmp_path: Path)
     assert planned(work) == {}
     # and a real change still reruns: the check above is not blind
     edit_config(work, lambda c: c["convert"].update(tile_size=7))
-    assert planned(work).get("convert") == 10
+    assert planned(work).get("convert") == 2
 
 
 def test_snakemake_report_attaches_every_caption(complete_run: Path, tmp_path: Path):

@@ -152,12 +152,14 @@ def test_two_datasets_each_get_their_own_rules(tmp_path: Path):
     out = proc.stdout + proc.stderr
     assert proc.returncode == 0, out[-3000:]
     rules = {m.group(1) for m in re.finditer(r"^(?:local)?rule (\w+):", out, flags=re.M)}
-    for base in ("simulate", "convert", "depth_a", "ground_truth_render_set",
+    for base in ("simulate", "depth_a", "ground_truth_render_set",
                  "ground_truth_render_central"):
         assert {base, f"{base}_1"} <= rules, (base, sorted(rules))
-    assert {"view_features_0", "view_features_1_0", "depth_b_0", "depth_b_1_0"} <= rules
+    assert {"view_features_0", "view_features_1_0", "depth_b_0", "depth_b_1_0", "convert_0",
+            "convert_1_0", "convert_views_0", "convert_views_1_0"} <= rules
     # every job of a per-dataset rule writes into its own dataset's folders
-    own = {"simulate": "tiny", "simulate_1": "tiny2", "convert": "tiny", "convert_1": "tiny2",
+    own = {"simulate": "tiny", "simulate_1": "tiny2", "convert_0": "tiny",
+           "convert_1_0": "tiny2", "convert_views_0": "tiny", "convert_views_1_0": "tiny2",
            "depth_a": "tiny", "depth_a_1": "tiny2", "view_features_0": "tiny",
            "view_features_1_0": "tiny2", "depth_b_0": "tiny", "depth_b_1_0": "tiny2"}
     seen = set()
