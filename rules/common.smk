@@ -259,13 +259,9 @@ def shot_chunks(shots, per_job=SHOTS_PER_JOB):
     """``shots`` in order, in the fewest runs of at most ``per_job``, of even lengths
     (differing by one at most: 21 shots 6 a job are 6, 5, 5, 5)."""
     n = -(-len(shots) // per_job)
-    size, extra = divmod(len(shots), n) if n else (0, 0)
-    out, i = [], 0
-    for k in range(n):
-        j = i + size + (1 if k < extra else 0)
-        out.append(shots[i:j])
-        i = j
-    return out
+    size, extra = divmod(len(shots), max(n, 1))
+    ends = [k * size + min(k, extra) for k in range(n + 1)]
+    return [shots[a:b] for a, b in zip(ends, ends[1:])]
 
 
 def chunk_label(chunk):

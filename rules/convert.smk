@@ -83,10 +83,8 @@ for _i, _d in enumerate(DATASETS):
             script:
                 "../scripts/convert.py"
 
-    # the other views, SHOTS_PER_JOB shots a job, after registration A's inputs
-    # (PRIORITY["views"]): on the core its one-core chain leaves free
-    for _k, _chunk in enumerate(shot_chunks(cams(_d))):
-
+        # the other views of the same shots, after registration A's inputs
+        # (PRIORITY["views"]): on the core its one-core chain leaves free
         rule:
             name:
                 chunk_rule("convert_views", _i, _k)

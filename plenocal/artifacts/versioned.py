@@ -16,7 +16,13 @@ def read_versioned(path: str | Path, fmt: str, version: int, name: str, remedy: 
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: {name} not found; {remedy}")
-    doc = read_json(path)
+    return check_versioned(path, read_json(path), fmt, version, name, remedy)
+
+
+def check_versioned(path: str | Path, doc: Any, fmt: str, version: int, name: str,
+                    remedy: str) -> dict:
+    """``doc`` (read from ``path``) if it is a mapping that says ``format: fmt`` and
+    ``version``; otherwise the error of :func:`read_versioned`."""
     if not isinstance(doc, dict) or doc.get("format") != fmt or doc.get("version") != version:
         got = (doc.get("format"), doc.get("version")) if isinstance(doc, dict) else (None, None)
         raise ValueError(f"{path}: not a {name} of version {version} (format {got[0]!r}, "

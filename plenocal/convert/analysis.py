@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from plenocal.artifacts.versioned import check_versioned
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.patchsize import PatchSizeResult
 from plenocal.io.files import atomic_write_bytes
@@ -81,12 +82,10 @@ def read_analysis(path: str | Path) -> ConvertAnalysis:
     except (OSError, ValueError, KeyError) as exc:
         raise ConvertError(f"{path}: not a readable conversion analysis ({exc}); {_REMEDY}") \
             from None
-    if not isinstance(meta, dict) or meta.get("format") != FORMAT \
-            or meta.get("version") != VERSION:
-        got = (meta.get("format"), meta.get("version")) if isinstance(meta, dict) \
-            else (None, None)
-        raise ConvertError(f"{path}: not a conversion analysis of version {VERSION} (format "
-                           f"{got[0]!r}, version {got[1]!r}); {_REMEDY}")
+    try:
+        check_versioned(path, meta, FORMAT, VERSION, "conversion analysis", _REMEDY)
+    except ValueError as exc:
+        raise ConvertError(str(exc)) from None
     missing = [k for k in _PATCH_ARRAYS if k not in arrays]
     if meta.get("devignette"):
         missing += [k for k in ("profile", "profile_row") if k not in arrays]

@@ -199,15 +199,24 @@ def render_white(sim: dict, data_dir: str | Path, out_png: str | Path) -> None:
                                   sensor["bit_depth"]))
 
 
-def _trace_prepared(setup: LensletSetup, scene: SceneArrays, falloff: np.ndarray | None,
-                    cam_to_world: np.ndarray, sensor: dict, aperture: float) -> np.ndarray:
-    """Trace one lenslet image with a prepared ``setup``
-    (:func:`plenocal.simulate.raytrace.prepare_lenslet`), the block's front stop and the
-    cos^4 ``falloff`` (None: off)."""
+def _shot_setup(sim: dict, optics: PlenopticOptics, scene: SceneArrays, lens_map: np.ndarray,
+                types: np.ndarray, sensor: dict) -> tuple[LensletSetup, np.ndarray | None]:
+    """What every shot of the camera traces with: the tracer's set-up
+    (:func:`plenocal.simulate.raytrace.prepare_lenslet`) and the cos^4 falloff (None:
+    off)."""
+    setup = prepare_lenslet(scene, optics, lens_map, sim["render"]["samples"], sim["seed"],
+                            lens_types=types)
+    return setup, natural_vignetting(optics, lens_map) if sensor["vignetting_cos4"] else None
+
+
+def _trace_prepared(setup: LensletSetup, falloff: np.ndarray | None, scene: SceneArrays,
+                    cam_to_world: np.ndarray, sensor: dict) -> np.ndarray:
+    """Trace one lenslet image with a prepared set-up (:func:`_shot_setup`) and the
+    block's front stop."""
     stop = sensor["front_stop_distance_m"]
     img = trace_lenslet(setup, scene, cam_to_world, stop_distance=stop,
-                        stop_diameter=sensor["front_stop_diameter_scale"] * aperture
-                        if stop > 0 else 0.0)
+                        stop_diameter=sensor["front_stop_diameter_scale"]
+                        * (2 * setup.half_aperture) if stop > 0 else 0.0)
     if falloff is not None:
         img = img * falloff[..., None]
     return img
@@ -216,10 +225,8 @@ def _trace_prepared(setup: LensletSetup, scene: SceneArrays, falloff: np.ndarray
 def _trace_shot(sim: dict, optics: PlenopticOptics, scene: SceneArrays, lens_map: np.ndarray,
                 types: np.ndarray, cam_to_world: np.ndarray, sensor: dict) -> np.ndarray:
     """Trace one lenslet image with the block's rays, front stop and cos^4 falloff."""
-    setup = prepare_lenslet(scene, optics, lens_map, sim["render"]["samples"], sim["seed"],
-                            lens_types=types)
-    falloff = natural_vignetting(optics, lens_map) if sensor["vignetting_cos4"] else None
-    return _trace_prepared(setup, scene, falloff, cam_to_world, sensor, optics.aperture)
+    return _trace_prepared(*_shot_setup(sim, optics, scene, lens_map, types, sensor), scene,
+                           cam_to_world, sensor)
 
 
 def render_shots(sim: dict, data_dir: str | Path, cams: list[str], out_pngs: list,
@@ -250,9 +257,7 @@ def render_shots(sim: dict, data_dir: str | Path, cams: list[str], out_pngs: lis
     sensor = sensor_truth(sim)
     order = sorted(shots)
     # what every shot traces with, once (0.1 s a shot on the default camera)
-    setup = prepare_lenslet(scene, optics, lens_map, sim["render"]["samples"], sim["seed"],
-                            lens_types=types)
-    falloff = natural_vignetting(optics, lens_map) if sensor["vignetting_cos4"] else None
+    setup, falloff = _shot_setup(sim, optics, scene, lens_map, types, sensor)
 
     def finish(cam: str, img: np.ndarray, out_png) -> None:
         rng = np.random.default_rng([sim["seed"], 5, order.index(cam)])
@@ -268,8 +273,8 @@ def render_shots(sim: dict, data_dir: str | Path, cams: list[str], out_pngs: lis
             log(f"{cam}: tracing {optics.width}x{optics.height} px x "
                 f"{sim['render']['samples']} rays ({optics.lens_types} lens type(s), "
                 f"{optics.kind}), shot {k + 1} of {len(cams)}")
-            img = _trace_prepared(setup, scene, falloff, np.asarray(shots[cam]["cam_to_world"]),
-                                  sensor, optics.aperture)
+            img = _trace_prepared(setup, falloff, scene, np.asarray(shots[cam]["cam_to_world"]),
+                                  sensor)
             if pending is not None:
                 pending.result()  # (raises the writer's error here)
             pending = writer.submit(finish, cam, img, out_png)
