@@ -230,11 +230,12 @@ def convert_quality_views(wildcards):
 
 
 def convert_targets(dataset):
-    """One output per conversion job (its disparity.json): Snakemake reruns a job when
-    any of its outputs is missing, so the default target still brings back every view,
-    while the DAG matches one path per shot instead of N x N + 1 (the no-op's time,
-    issue 15)."""
+    """Per shot, one output of each conversion job (disparity.json, views.json):
+    Snakemake reruns a job when any of its outputs is missing, so the default target
+    still brings back every view, while the DAG matches two paths per shot instead of
+    N x N + 1 (the no-op's time, issue 15)."""
     out = [res(dataset, "views", c, "disparity.json") for c in cams(dataset)]
+    out += view_sets(dataset, cams(dataset))
     if is_synthetic(dataset):
         out.append(res(dataset, "convert", "quality.json"))
     return out
@@ -344,16 +345,18 @@ def depth_view_inputs(wildcards):
         "calibration": res(d, "calibration", "cameras.json"),
         "rig": res(d, "reg_b", "rig.json"),
         # candidate sources: the same view of every array shot, every view of its set
-        "views": sorted(
-            {res(d, "views", c, f"{wildcards.view}.png") for c in array_cams(d)}
-            | {res(d, "views", wildcards.cam, f"{v}.png") for v in views(d)}
-        ),
+        "view_sets": view_sets(d, sorted({*array_cams(d), wildcards.cam})),
     }
 
 
-def view_path(dataset, key):
-    cam, view = names.split_key(key)
-    return res(dataset, "views", cam, f"{view}.png")
+def view_set(dataset, cam):
+    """The shot's views.json (plenocal.convert.viewset): the input of the rules that read
+    all its views, instead of its N x N PNGs (issue 15: the DAG's look-ups)."""
+    return res(dataset, "views", cam, "views.json")
+
+
+def view_sets(dataset, shots):
+    return [view_set(dataset, c) for c in shots]
 
 
 def true_depth_path(dataset, key):
@@ -388,7 +391,7 @@ def mpeg_views_inputs(wildcards):
     return {
         "mpeg": res(d, "calibration", "mpeg", "cameras.json"),
         "depth": [depth_view_path(d, k) for k in keys],
-        "views": [view_path(d, k) for k in keys],
+        "view_sets": view_sets(d, dict.fromkeys(names.split_key(k)[0] for k in keys)),
     }
 
 
@@ -564,9 +567,7 @@ def synthesis_inputs(wildcards):
     out = {
         "calibration": res(d, "calibration", "cameras.json"),
         "rig": res(d, "reg_b", "rig.json"),
-        "views": [
-            res(d, "views", c, f"{v}.png") for c in array_cams(d) for v in views(d)
-        ],
+        "view_sets": view_sets(d, array_cams(d)),
     }
     if is_synthetic(d):
         out["truth"] = res(d, "ground_truth", "cameras.json")
@@ -624,7 +625,7 @@ def synthesis_exp_join_inputs(wildcards, exp):
     views: the parts rendered them; each view is a file Snakemake looks up)."""
     out = synthesis_exp_inputs(wildcards, exp)
     if exp in SPLIT_EXPERIMENTS:
-        del out["views"]
+        del out["view_sets"]
         out.update(synthesis_parts(wildcards, exp))
     return out
 

@@ -91,16 +91,19 @@ for _i, _d in enumerate(DATASETS):
             input:
                 lenslet=[data(_d, "lenslet", f"{c}.png") for c in _chunk],
                 analysis=[res(_d, "views", c, "analysis.npz") for c in _chunk],
+                # listed with the others in each shot's views.json
+                centre=[res(_d, "views", c, f"{centre(_d)}.png") for c in _chunk],
                 calib=data(_d, "calib.xml"),
                 camera=data(_d, "camera.yaml"),
                 setup=res(_d, "views", "convert_setup.json"),
             output:
-                [
+                views=[
                     res(_d, "views", c, f"{v}.png")
                     for c in _chunk
                     for v in views(_d)
                     if v != centre(_d)
                 ],
+                view_set=[view_set(_d, c) for c in _chunk],
             log:
                 dataset_path(
                     _d, log_path("convert_views", f"{_d}_{chunk_label(_chunk)}")
@@ -121,6 +124,7 @@ for _i, _d in enumerate(DATASETS):
                 views=n_views(_d),
                 cams=_chunk,
                 names=[v for v in views(_d) if v != centre(_d)],
+                all_names=views(_d),
             script:
                 "../scripts/convert_views.py"
 

@@ -67,11 +67,7 @@ for _i, _d in enumerate(DATASETS):
                     chunk_rule(f"depth_b{_sfx}", _i, _k)
                 input:
                     rig=res(_d, "reg_b", "rig.json"),
-                    views=[
-                        res(_d, "views", c, f"{v}.png")
-                        for c in _chunk
-                        for v in views(_d)
-                    ],
+                    view_sets=[view_set(_d, c) for c in _chunk],
                 output:
                     depth=[res(_d, "depth", "b", f"{c}.npy") for c in _chunk],
                     preview=[

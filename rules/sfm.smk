@@ -86,9 +86,7 @@ for _i, _d in enumerate(DATASETS):
             name:
                 chunk_rule("view_features", _i, _k)
             input:
-                views=[
-                    res(_d, "views", c, f"{v}.png") for c in _chunk for v in views(_d)
-                ],
+                view_sets=[view_set(_d, c) for c in _chunk],
             output:
                 [res(_d, "matches", "features", f"{c}.db") for c in _chunk],
             log:

@@ -1,5 +1,6 @@
 """Rules convert_views_<k>: the views other than the central one of a run of shots, rendered
-from each shot's measurements (rule convert's analysis.npz; plenocal.convert.analysis)."""
+from each shot's measurements (rule convert's analysis.npz; plenocal.convert.analysis),
+and each shot's views.json (plenocal.convert.viewset)."""
 
 import time
 from pathlib import Path
@@ -8,6 +9,7 @@ import cv2
 
 from plenocal.convert import ConvertSettings, convert_files
 from plenocal.convert.analysis import read_analysis
+from plenocal.convert.viewset import write_view_set
 from plenocal.io.files import write_image
 from plenocal.names import parse_view
 from plenocal.rulelog import rule_logger
@@ -31,5 +33,10 @@ for k, (cam, lenslet, analysis) in enumerate(zip(params.cams, inp.lenslet, inp.a
         if str(path) not in outputs:
             raise RuntimeError(f"{path} is not a declared output of {snakemake.rule}")
         write_image(path, shot.view(*parse_view(name)))
+    # the shot's views as one unit, central view included: what the rules that read
+    # whole shots take as their input (plenocal.convert.viewset)
+    view_set = write_view_set(out_dir, params.all_names)
+    if str(view_set) not in outputs:
+        raise RuntimeError(f"{view_set} is not a declared output of {snakemake.rule}")
     log.info("%s: %d views in %.2f s (%d of %d)", cam, len(params.names),
              time.perf_counter() - t0, k + 1, len(params.cams))

@@ -7,6 +7,7 @@ from pathlib import Path
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 import numpy as np
 
+from plenocal.convert.viewset import view_set_files
 from plenocal.export.mpeg_views import export_views
 from plenocal.io.files import read_image
 from plenocal.names import file_key
@@ -19,7 +20,7 @@ log = rule_logger(snakemake, "mpeg_views")
 verify = dict(snakemake.params.verify)
 layout = layout_from_cams(list(snakemake.params.array_cams), int(snakemake.params.n_views))
 depth_files = {file_key(p): p for p in snakemake.input.depth}
-view_files = {file_key(p): p for p in snakemake.input.views}
+view_files = view_set_files(snakemake.input.view_sets)
 sets = layout.exp2_cams(verify["exp2_sets"])
 plans = {}
 for exp in (1, 2, 3):

@@ -6,14 +6,15 @@ from pathlib import Path
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.calib.reg_a import viewdb
+from plenocal.convert.viewset import view_set_files
 from plenocal.io.files import make_temp_dir
-from plenocal.names import file_key, split_key
+from plenocal.names import split_key
 from plenocal.rulelog import log_to_file
 
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821
 cfg = sm.params.sfm
-views = {file_key(p): p for p in sm.input.views}
+views = {k: str(p) for k, p in view_set_files(sm.input.view_sets).items()}
 for out in sm.output:
     out_db = Path(out)
     cam = out_db.stem
