@@ -498,3 +498,37 @@ def test_bundle_culling_keeps_the_reachable_quads_only():
     far = boxes([0.8 * mm, 10 * mm, -1 * mm, 1 * mm, 0.6, 0.6],
                 [1.3 * mm, 10 * mm, -1 * mm, 1 * mm, 0.6, 0.6])
     assert _bundle_candidates(*args, far, cand) == 1 and cand[0] == 0
+
+
+def test_fast_math_lenslet_kernel_traces_what_strict_arithmetic_does(tmp_path: Path,
+                                                                     monkeypatch):
+    """The lenslet kernel is compiled with LLVM's fast-math flags (LENSLET_FASTMATH: fused
+    multiply-adds, reciprocals, reassociation; not nnan/ninf): its image equals, to well
+    under a float32 step, the one its own source gives with IEEE arithmetic (numba's
+    py_func, whose helpers are compiled without fast-math) - for a Keplerian shot and a
+    Galilean one through a front stop."""
+    import json
+
+    from plenocal.simulate import raytrace
+    from plenocal.simulate.dataset import optics_from_truth
+
+    assert {"nnan", "ninf"}.isdisjoint(raytrace.LENSLET_FASTMATH)
+    sim = small_sim(64, 48)
+    setup_dataset(sim, tmp_path)
+    truth = tmp_path / "truth"
+    scene = scene_arrays(json.loads((truth / "scene.json").read_text()))
+    optics = optics_from_truth(truth / "optics.json")
+    lm = nearest_lens_map(MicrolensGrid(read_calib(tmp_path / "calib.xml"), optics.width,
+                                        optics.height))
+    shots = json.loads((truth / "shots.json").read_text())
+    galilean = dataclasses.replace(optics, kind="galilean")
+    for name, opt, stop in [("x00_y00", optics, 0.0), ("hand02", galilean, 0.01)]:
+        shot = np.asarray(shots[name]["cam_to_world"])
+        kw = {"stop_distance": stop, "stop_diameter": 0.8 * opt.aperture if stop else 0.0}
+        setup = prepare_lenslet(scene, opt, lm, 4, 0)
+        fast = trace_lenslet(setup, scene, shot, **kw)
+        with monkeypatch.context() as m:
+            m.setattr(raytrace, "_render_lenslet", raytrace._render_lenslet.py_func)
+            strict = trace_lenslet(setup, scene, shot, **kw)
+        assert strict.std() > 0.02, name  # the scene is in the picture
+        np.testing.assert_allclose(fast, strict, rtol=0, atol=1e-6, err_msg=name)
