@@ -345,6 +345,7 @@ def depth_view_inputs(wildcards):
         "calibration": res(d, "calibration", "cameras.json"),
         "rig": res(d, "reg_b", "rig.json"),
         # candidate sources: the same view of every array shot, every view of its set
+        # (the shots' views.json: one input a shot)
         "view_sets": view_sets(d, sorted({*array_cams(d), wildcards.cam})),
     }
 
@@ -622,7 +623,7 @@ def synthesis_parts(wildcards, exp):
 def synthesis_exp_join_inputs(wildcards, exp):
     """synthesis_exp<exp>: its inputs or, for a split experiment, its parts' runs with
     the cameras, the bounds and the depth maps whose quality the result reports (no
-    views: the parts rendered them; each view is a file Snakemake looks up)."""
+    view sets: the parts rendered them)."""
     out = synthesis_exp_inputs(wildcards, exp)
     if exp in SPLIT_EXPERIMENTS:
         del out["view_sets"]

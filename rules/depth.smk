@@ -7,9 +7,10 @@ made together: one job for the shots the scale reads (config scale.shots), one f
 others (the hand-held shots by default, which only the report shows: rule
 depth_a_other, run last); a second dataset's rules carry its index (depth_a_1, ...).
 B's maps are made DEPTH_B_SHOTS_PER_JOB shots a job (depth_b_0, depth_b_1, ...,
-depth_b_other_0): a job with all of them would declare every view of every set as its
-inputs, and Snakemake checksums a job's inputs again for each of its outputs (525 views x
-63 outputs: 7.5 s in the scheduler, the cores idle)."""
+depth_b_other_0), on the core that A's one-core job leaves free; each job's inputs are its
+shots' views.json, not their N x N views (Snakemake looks every input up and checksums a
+job's inputs again for each of its outputs: 525 views x 63 outputs took 7.5 s in the
+scheduler when one job declared them all)."""
 
 for _i, _d in enumerate(DATASETS):
     for _sfx, _shots, _prio in depth_groups(_d):

@@ -9,7 +9,7 @@ import cv2
 
 from plenocal.convert import ConvertSettings, convert_files
 from plenocal.convert.analysis import read_analysis
-from plenocal.convert.viewset import write_view_set
+from plenocal.convert.viewset import view_set_path, write_view_set
 from plenocal.io.files import write_image
 from plenocal.names import parse_view
 from plenocal.rulelog import rule_logger
@@ -35,8 +35,9 @@ for k, (cam, lenslet, analysis) in enumerate(zip(params.cams, inp.lenslet, inp.a
         write_image(path, shot.view(*parse_view(name)))
     # the shot's views as one unit, central view included: what the rules that read
     # whole shots take as their input (plenocal.convert.viewset)
-    view_set = write_view_set(out_dir, params.all_names)
-    if str(view_set) not in outputs:
-        raise RuntimeError(f"{view_set} is not a declared output of {snakemake.rule}")
+    if str(view_set_path(out_dir)) not in outputs:
+        raise RuntimeError(f"{view_set_path(out_dir)} is not a declared output of "
+                           f"{snakemake.rule}")
+    write_view_set(out_dir, params.all_names)
     log.info("%s: %d views in %.2f s (%d of %d)", cam, len(params.names),
              time.perf_counter() - t0, k + 1, len(params.cams))
