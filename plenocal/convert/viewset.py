@@ -18,12 +18,11 @@ The document: ``{"format": "plenocal.view_set", "version": 1, "shot": <shot>,
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Sequence
 from pathlib import Path
 
 from plenocal.artifacts.versioned import complete, read_versioned
-from plenocal.io.files import write_json
+from plenocal.io.files import file_sha256, write_json
 
 FORMAT = "plenocal.view_set"
 VERSION = 1
@@ -38,12 +37,6 @@ def view_set_path(shot_dir: str | Path) -> Path:
     return Path(shot_dir) / FILE_NAME
 
 
-def file_digest(path: str | Path) -> str:
-    """SHA-256 of a file's bytes, hex."""
-    with open(path, "rb") as f:
-        return hashlib.file_digest(f, "sha256").hexdigest()
-
-
 def write_view_set(shot_dir: str | Path, names: Sequence[str]) -> Path:
     """List the views ``<shot_dir>/<name>.png`` (every one must exist) in
     ``<shot_dir>/views.json``; returns its path."""
@@ -53,7 +46,7 @@ def write_view_set(shot_dir: str | Path, names: Sequence[str]) -> Path:
         raise FileNotFoundError(f"{shot_dir}: views {', '.join(missing)} not found; the "
                                 f"view set lists only complete shots: {_REMEDY}")
     doc = {"format": FORMAT, "version": VERSION, "shot": shot_dir.name,
-           "views": {n: file_digest(shot_dir / f"{n}.png") for n in names}}
+           "views": {n: file_sha256(shot_dir / f"{n}.png") for n in names}}
     path = view_set_path(shot_dir)
     write_json(path, doc)
     return path

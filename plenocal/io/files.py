@@ -8,6 +8,7 @@ that the same numbers give the same bytes.
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import os
@@ -130,6 +131,12 @@ def dumps_json(obj: Any) -> str:
 
 def write_json(path: str | Path, obj: Any) -> None:
     atomic_write_text(path, dumps_json(obj))
+
+
+def file_sha256(path: str | Path) -> str:
+    """SHA-256 of a file's bytes, hex (read in chunks: a tarball or a view alike)."""
+    with open(path, "rb") as fh:
+        return hashlib.file_digest(fh, "sha256").hexdigest()
 
 
 def read_json(path: str | Path) -> Any:

@@ -17,7 +17,6 @@ target as PNG.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import shutil
 import subprocess
@@ -31,7 +30,7 @@ import numpy as np
 from plenocal.camera import PinholeCamera
 from plenocal.export.depthmaps import write_depth16_png
 from plenocal.export.mpeg import mpeg_document
-from plenocal.io.files import to_float, to_uint8, write_image, write_json
+from plenocal.io.files import file_sha256, to_float, to_uint8, write_image, write_json
 
 RVS_HINT = ("build RVS 4.0 from its source (README, 'MPEG exports and RVS'): "
             "python -m plenocal.verify.rvs <rvs-4.0-src.tar.gz>, and give the binary it "
@@ -61,21 +60,13 @@ def build_prerequisites() -> list[str]:
     return missing
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def build_rvs(tarball: str | Path, root: str | Path | None = None, jobs: int = 2) -> Path:
     """Path of the RVS binary built from ``tarball`` (cached by the tarball's hash; the
     cache entry appears only once the build succeeded)."""
     tarball = Path(tarball)
     if not tarball.is_file():
         raise RvsError(f"RVS source {tarball} does not exist; {RVS_HINT}")
-    dest = Path(root) if root else cache_root() / "rvs" / _sha256(tarball)[:16]
+    dest = Path(root) if root else cache_root() / "rvs" / file_sha256(tarball)[:16]
     binary = dest / "RVS"
     if binary.is_file():
         return binary
