@@ -532,3 +532,79 @@ def test_fast_math_lenslet_kernel_traces_what_strict_arithmetic_does(tmp_path: P
             strict = trace_lenslet(setup, scene, shot, **kw)
         assert strict.std() > 0.02, name  # the scene is in the picture
         np.testing.assert_allclose(fast, strict, rtol=0, atol=1e-6, err_msg=name)
+
+
+def _nearest_quad_hit(scene, o: np.ndarray, d: np.ndarray) -> tuple[int, float, float, float]:
+    """The nearest quad the ray ``o + t d`` hits (first of equals), by plain numpy: (quad or
+    -1, t, texel coordinates along U and V in metres)."""
+    den = scene.normal @ d
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.einsum("qi,qi->q", scene.normal, scene.p0 - o) / den
+        r = o + t[:, None] * d - scene.p0
+        a = np.einsum("qi,qi->q", r, scene.u) / np.einsum("qi,qi->q", scene.u, scene.u)
+        b = np.einsum("qi,qi->q", r, scene.v) / np.einsum("qi,qi->q", scene.v, scene.v)
+    ok = (np.abs(den) >= 1e-12) & (t > 1e-9) & (a >= 0) & (a <= 1) & (b >= 0) & (b <= 1)
+    if not ok.any():
+        return -1, -1.0, 0.0, 0.0
+    q = int(np.flatnonzero(ok)[np.argmin(t[ok])])
+    return (q, float(t[q]), float(a[q] * np.linalg.norm(scene.u[q])),
+            float(b[q] * np.linalg.norm(scene.v[q])))
+
+
+def test_lenslet_pixels_are_the_mean_of_their_rays_traced_one_by_one(tmp_path: Path):
+    """The lenslet kernel handles a pixel's rays lane by lane (generation, each candidate
+    quad against all of them, then the colours): every pixel equals the mean of its rays
+    traced one at a time here - the kernel's sample pattern through the microlens, the
+    main lens and a front stop (a ray they stop adds nothing), the nearest hit among all
+    quads by plain numpy, and the texture lookup (:func:`raytrace._shade`)."""
+    import json
+    import math
+
+    from plenocal.simulate import raytrace
+    from plenocal.simulate.dataset import optics_from_truth
+
+    sim = small_sim(64, 48)
+    setup_dataset(sim, tmp_path)
+    truth = tmp_path / "truth"
+    scene = scene_arrays(json.loads((truth / "scene.json").read_text()))
+    optics = optics_from_truth(truth / "optics.json")
+    lm = nearest_lens_map(MicrolensGrid(read_calib(tmp_path / "calib.xml"), optics.width,
+                                        optics.height))
+    shot = np.asarray(json.loads((truth / "shots.json").read_text())["hand02"]["cam_to_world"])
+    st = prepare_lenslet(scene, optics, lm, 5, 0)
+    R, C = shot[:3, :3], shot[:3, 3]
+    ns = len(st.jitter)
+    rgb = np.empty(3)
+    # the main lens alone, then with a front stop that clips more
+    for stop_z, stop_half, clipped_by in [(0.0, 0.0, "aperture"), (0.01, 0.4 * optics.aperture,
+                                                                   "stop")]:
+        img = trace_lenslet(st, scene, shot, stop_distance=stop_z, stop_diameter=2 * stop_half)
+        ref = np.zeros(img.shape)
+        stopped = {"aperture": 0, "stop": 0}
+        for row in range(st.height):
+            for col in range(st.width):
+                lens = np.array([st.lens_x[row, col], st.lens_y[row, col]])
+                t = st.t_types[st.lens_types[row, col]]
+                rot = (row * 7919 + col * 104729) % ns
+                for k in range(ns):
+                    jx, jy = st.jitter[(k + rot) % ns]
+                    sensor = -np.array([col + jx - (st.width - 1) / 2,
+                                        row + jy - (st.height - 1) / 2]) * st.pixel_size
+                    m = lens + st.half_lens * st.disk[k]
+                    slope = (lens + (lens - sensor) * t / st.s - m) / t
+                    h = m + slope * st.L
+                    u = slope - h / st.F
+                    if math.hypot(*h) > st.half_aperture:
+                        stopped["aperture"] += 1
+                        continue
+                    if stop_half > 0 and math.hypot(*(h + u * stop_z)) > stop_half:
+                        stopped["stop"] += 1
+                        continue
+                    q, tt, ba, bb = _nearest_quad_hit(scene, R[:, :2] @ h + C,
+                                                      R[:, :2] @ u + R[:, 2])
+                    raytrace._shade(q, tt, ba, bb, scene.tex_id, scene.texel, scene.atlas,
+                                    scene.tex_off, scene.tex_h, scene.tex_w, rgb)
+                    ref[row, col] += rgb / ns
+        assert stopped[clipped_by] > 0, stopped  # the test was exercised
+        assert img.std() > 0.02  # the scene is in the picture
+        np.testing.assert_allclose(img, ref, rtol=0, atol=1e-6, err_msg=clipped_by)
