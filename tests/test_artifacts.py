@@ -3,6 +3,8 @@ read by one definition, with a format version that a reader checks."""
 
 from __future__ import annotations
 
+import zlib
+
 import pytest
 from synth.lenslets import calib_for_optics, lenslet_from_patch_size, random_texture
 
@@ -269,3 +271,13 @@ def test_png_levels_store_the_same_pixels_and_are_deterministic(tmp_path):
         assert np.array_equal(read_image(a), img)
         sizes[level] = a.stat().st_size
     assert sizes[LENSLET_PNG_LEVEL] > sizes[1]  # stored: no compression
+    # stored data is unfiltered (filter type 0 on every row: a filter only helps zlib)
+    data, pos = (tmp_path / f"a{LENSLET_PNG_LEVEL}.png").read_bytes(), 8
+    idat = b""
+    while pos < len(data):
+        n = int.from_bytes(data[pos:pos + 4], "big")
+        if data[pos + 4:pos + 8] == b"IDAT":
+            idat += data[pos + 8:pos + 8 + n]
+        pos += 12 + n
+    rows = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(40, 1 + 60 * 3 * 2)
+    assert (rows[:, 0] == 0).all()

@@ -325,6 +325,23 @@ def test_sensor_noise_is_seeded_and_12_bit_data_spans_its_range(tmp_path: Path):
     assert dn.mean() == pytest.approx(0.5, abs=1e-3)
 
 
+
+def test_compiled_12_bit_readout_gives_the_bits_of_numpy_passes():
+    """The 12-bit readout with shot noise runs as one compiled pass: the same uint16 values
+    as numpy's whole-image passes of the noise model (the same normals), over and under
+    the range, at -0, 0 and 1."""
+    x = np.random.default_rng(3).uniform(-0.1, 1.1, (37, 53, 3)).astype(np.float32)
+    x[0, 0] = [-0.0, 0.0, 1.0]
+    full_well, sigma = 13500.0, 0.00096
+    z = np.random.default_rng([7, 1]).standard_normal(x.shape, dtype=np.float32)
+    var = np.clip(x, 0.0, None) * np.float32(1.0 / full_well) + np.float32(sigma ** 2)
+    dn = np.clip(np.rint((x + np.sqrt(var) * z) * np.float32(4095.0)), 0, 4095)
+    expected = dn.astype(np.uint16) << 4
+    got = read_out(x, np.random.default_rng([7, 1]), sigma, full_well, 12)
+    assert got.dtype == np.uint16 and got.shape == x.shape
+    np.testing.assert_array_equal(got, expected)
+    assert got.min() == 0 and got.max() == 4095 << 4
+
 def test_vignetting_darkens_the_sensor_edges():
     """cos^4 of the chief ray and a front stop: the sensor's edges are darker than its
     centre, the centre is untouched by the stop."""

@@ -14,6 +14,7 @@ that a reader scaling by 65535 sees the full range and the low four bits are zer
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from plenocal.io.files import to_uint8
 from plenocal.optics import PlenopticOptics
@@ -34,9 +35,16 @@ def read_out(img: np.ndarray, rng: np.random.Generator, noise_std: float,
     """Noise and quantisation of a float image in [0, 1]: uint8 (8-bit) or uint16
     holding 12-bit data MSB-aligned."""
     x = np.asarray(img, dtype=np.float32)
+    if full_well_e and bit_depth == 12:
+        # the default camera's path in one compiled pass (the same normals and bits)
+        z = rng.standard_normal(x.shape, dtype=np.float32)
+        out = np.empty(x.shape, np.uint16)
+        _noisy_dn12(np.ascontiguousarray(x).reshape(-1), z.reshape(-1),
+                    np.float32(1.0 / full_well_e), np.float32(noise_std ** 2), out.reshape(-1))
+        return out
     if full_well_e:
-        var = np.clip(x, 0.0, None) * np.float32(1.0 / full_well_e) + np.float32(noise_std ** 2)
-        x = x + np.sqrt(var) * rng.standard_normal(x.shape, dtype=np.float32)
+        x = x + np.sqrt(_noise_variance(x, full_well_e, noise_std)) * rng.standard_normal(
+            x.shape, dtype=np.float32)
     elif noise_std > 0:
         x = x + rng.normal(0.0, noise_std, x.shape).astype(np.float32)
     if bit_depth == 8:
@@ -45,3 +53,24 @@ def read_out(img: np.ndarray, rng: np.random.Generator, noise_std: float,
         dn = np.clip(np.rint(x * np.float32(4095.0)), 0, 4095).astype(np.uint16)
         return (dn << 4).astype(np.uint16)
     raise ValueError(f"sensor.bit_depth: 8 or 12, not {bit_depth}")
+
+
+def _noise_variance(x: np.ndarray, full_well_e: float, noise_std: float) -> np.ndarray:
+    """Shot plus read noise variance (float32) of the irradiance ``x``."""
+    return np.clip(x, 0.0, None) * np.float32(1.0 / full_well_e) + np.float32(noise_std ** 2)
+
+
+@njit(cache=True)
+def _noisy_dn12(x, z, inv_full_well, read_var, out):  # pragma: no cover - numba
+    """:func:`read_out`'s 12-bit path with shot noise, pixel by pixel: ``x + sqrt(max(x, 0)
+    / full_well + read_var) z`` rounded to 12 bits, clipped, MSB-aligned - numpy's
+    float32 operations in numpy's order (the same bits as the whole-image passes, in 0.03
+    instead of 0.16 s on a default 3-megapixel RGB image; issue 15). ``x``, ``z`` float32,
+    ``out`` uint16, all flat."""
+    zero = np.float32(0.0)
+    top = np.float32(4095.0)
+    for i in range(x.shape[0]):
+        v = x[i]
+        var = max(v, zero) * inv_full_well + read_var
+        dn = np.rint((v + np.sqrt(var) * z[i]) * top)
+        out[i] = np.uint16(min(max(dn, zero), top)) << np.uint16(4)
