@@ -25,19 +25,20 @@ SYNTHETIC = [d for d in DATASETS if "simulate" in config["datasets"][d]]
 #: Scheduling priorities (Snakemake runs the ready job of highest priority first). The
 #: longest chain of the full run is simulate -> convert -> registration A (whose poses
 #: choose the pairs of all views to match) and view_features -> view_matches ->
-#: baseline_sfm -> the naive calibration's reprojection -> report, and beside it the
-#: calibration (registration B, depth, scale, merge), which the synthesis depth maps and
-#: experiments wait for: these jobs go first, so that the two serial COLMAP jobs
-#: (matching, then the naive mapper) start as soon as they can and the depth maps fill
-#: the other core beside them. The lenslet images (one job on every core) come first of
-#: all, then the converter's set-up, which every conversion waits for. Then the synthesis
-#: (its depth maps, the ideal renders it compares with, the experiments: Exp. 3 is the
-#: longest job of the tail), and last the other Table I rows and the hand-held shots'
-#: depth maps, which only feed short jobs (issue 15).
-#: The views other than the central ones (convert_views_<k>) come after registration A's
-#: inputs and before the synthesis: rendered on the core that registration A's one-core
-#: chain leaves free.
-PRIORITY = {"synthesis": 5, "views": 15, "chain": 20}
+#: baseline_sfm -> the naive calibration's reprojection -> report: these jobs go first
+#: ("chain"), so that the two serial COLMAP jobs (matching, then the naive mapper) start as
+#: soon as they can. Next the views other than the central ones (convert_views_<k>) and
+#: their SIFT ("views"), which view_matches waits for: rendered on the core that
+#: registration A's one-core chain leaves free. Then the calibration's depth maps, scale
+#: and merge ("calibration"), which fill the other core beside the COLMAP jobs (before
+#: them, they held view_matches back by 20 s in the full run; in the calibration alone
+#: the views are done when registration A is, and nothing else waits). The lenslet
+#: images (one job on every core) come first of all, then the converter's set-up, which
+#: every conversion waits for. Then the synthesis (its depth maps, the ideal renders it
+#: compares with, the experiments: Exp. 3 is the longest job of the tail), and last the
+#: other Table I rows and the hand-held shots' depth maps, which only feed short jobs
+#: (issue 15).
+PRIORITY = {"synthesis": 5, "calibration": 16, "views": 18, "chain": 20}
 
 
 def reprojection_priority(wildcards):
@@ -285,7 +286,10 @@ def depth_groups(dataset):
     other = [c for c in cams(dataset) if c not in scale]
     return [
         (sfx, shots, prio)
-        for sfx, shots, prio in (("", scale, PRIORITY["chain"]), ("_other", other, 0))
+        for sfx, shots, prio in (
+            ("", scale, PRIORITY["calibration"]),
+            ("_other", other, 0),
+        )
         if shots
     ]
 

@@ -16,7 +16,7 @@ rule scale:
         log_path("scale"),
     benchmark:
         bench_path("scale")
-    priority: PRIORITY["chain"]
+    priority: PRIORITY["calibration"]
     conda:
         "../envs/plenocal.yaml"
     threads: 1
@@ -47,7 +47,7 @@ rule merge:
         log_path("merge"),
     benchmark:
         bench_path("merge")
-    priority: PRIORITY["chain"]
+    priority: PRIORITY["calibration"]
     conda:
         "../envs/plenocal.yaml"
     threads: 1

@@ -14,7 +14,7 @@ rule rig_b:
         log_path("rig_b"),
     benchmark:
         bench_path("rig_b")
-    priority: PRIORITY["chain"]
+    priority: PRIORITY["calibration"]
     conda:
         "../envs/plenocal.yaml"
     threads: 1

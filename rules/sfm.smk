@@ -97,7 +97,7 @@ for _i, _d in enumerate(DATASETS):
                 dataset_path(
                     _d, bench_path("view_features", f"{_d}_{chunk_label(_chunk)}")
                 )
-            priority: PRIORITY["chain"]
+            priority: PRIORITY["views"]
             conda:
                 "../envs/plenocal.yaml"
             threads: lambda wc: stage_config("sfm")["num_threads"]

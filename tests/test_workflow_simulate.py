@@ -108,31 +108,32 @@ def _planned_priorities(out: str) -> dict[str, set[int]]:
 def test_critical_chain_goes_first(tmp_path: Path):
     """The longest chain of the run (simulate -> convert -> registration A and
     view_features -> view_matches -> baseline_sfm -> its Table I row) is scheduled
-    with the calibration (B, depth, scale, merge), then the synthesis (ground-truth
-    renders, synthesis depth, the experiments), then what can wait (the other Table I
-    rows, the hand-held shots' depth maps): rules/common.smk PRIORITY."""
+    first, then the views and their SIFT that view_matches waits for, then the
+    calibration (B, depth, scale, merge), then the synthesis (ground-truth renders,
+    synthesis depth, the experiments), then what can wait (the other Table I rows, the
+    hand-held shots' depth maps): rules/common.smk PRIORITY."""
     work = tiny_workflow(tmp_path / "w")
     proc = run(work, "-n")
     assert proc.returncode == 0, proc.stderr[-3000:]
     prios = _planned_priorities(proc.stdout + proc.stderr)
-    chain = ["convert_setup", "convert", "features_a", "match_a", "map_a",
-             "view_features", "view_matches", "baseline_sfm",
-             "reprojection_calib[baseline_sfm]", "rig_b", "depth_a", "depth_b", "scale",
-             "merge"]
-    for rule in chain:
-        assert prios.get(rule) == {20}, (rule, prios.get(rule))
-    # the lenslet images (one job, every core) with the chain
-    assert prios["simulate"] == {20}
-    # the views other than the central ones, beside registration A's one-core chain
-    assert prios.get("convert_views") == {15}, prios.get("convert_views")
-    # then the synthesis (its depth maps, the ideal renders, the experiments) ...
-    for rule in ("ground_truth_render", "ground_truth_render_central", "depth_view",
-                 "synthesis_exp3_part", "synthesis_exp3"):
-        assert prios.get(rule) == {5}, (rule, prios.get(rule))
-    # ... and last what only feeds short jobs
-    for rule in ("reprojection_calib[complete]", "depth_a_other", "depth_b_other",
-                 "convert_quality"):
-        assert prios.get(rule) == {0}, (rule, prios.get(rule))
+    levels = {
+        # the lenslet images (one job, every core) with the chain
+        20: ["simulate", "convert_setup", "convert", "features_a", "match_a", "map_a",
+             "view_matches", "baseline_sfm", "reprojection_calib[baseline_sfm]"],
+        # the views other than the central ones and their SIFT, beside registration A
+        18: ["convert_views", "view_features"],
+        # the calibration, beside the COLMAP jobs
+        16: ["rig_b", "depth_a", "depth_b", "scale", "merge"],
+        # then the synthesis (its depth maps, the ideal renders, the experiments) ...
+        5: ["ground_truth_render", "ground_truth_render_central", "depth_view",
+            "synthesis_exp3_part", "synthesis_exp3"],
+        # ... and last what only feeds short jobs
+        0: ["reprojection_calib[complete]", "depth_a_other", "depth_b_other",
+            "convert_quality"],
+    }
+    for level, rules in levels.items():
+        for rule in rules:
+            assert prios.get(rule) == {level}, (rule, prios.get(rule))
 
 
 @pytest.mark.workflow
