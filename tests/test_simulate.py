@@ -517,6 +517,23 @@ def test_bundle_culling_keeps_the_reachable_quads_only():
     assert _bundle_candidates(*args, far, cand) == 1 and cand[0] == 0
 
 
+def _small_camera(tmp_path: Path):
+    """A 64 x 48 sensor's dataset in ``tmp_path``: (scene arrays, optics, per-pixel lens
+    centres, shots' cam_to_world by name)."""
+    import json
+
+    from plenocal.simulate.dataset import optics_from_truth
+
+    setup_dataset(small_sim(64, 48), tmp_path)
+    truth = tmp_path / "truth"
+    scene = scene_arrays(json.loads((truth / "scene.json").read_text()))
+    optics = optics_from_truth(truth / "optics.json")
+    lm = nearest_lens_map(MicrolensGrid(read_calib(tmp_path / "calib.xml"), optics.width,
+                                        optics.height))
+    shots = json.loads((truth / "shots.json").read_text())
+    return scene, optics, lm, {k: np.asarray(v["cam_to_world"]) for k, v in shots.items()}
+
+
 def test_fast_math_lenslet_kernel_traces_what_strict_arithmetic_does(tmp_path: Path,
                                                                      monkeypatch):
     """The lenslet kernel is compiled with LLVM's fast-math flags (LENSLET_FASTMATH: fused
@@ -524,23 +541,13 @@ def test_fast_math_lenslet_kernel_traces_what_strict_arithmetic_does(tmp_path: P
     under a float32 step, the one its own source gives with IEEE arithmetic (numba's
     py_func, whose helpers are compiled without fast-math) - for a Keplerian shot and a
     Galilean one through a front stop."""
-    import json
-
     from plenocal.simulate import raytrace
-    from plenocal.simulate.dataset import optics_from_truth
 
     assert {"nnan", "ninf"}.isdisjoint(raytrace.LENSLET_FASTMATH)
-    sim = small_sim(64, 48)
-    setup_dataset(sim, tmp_path)
-    truth = tmp_path / "truth"
-    scene = scene_arrays(json.loads((truth / "scene.json").read_text()))
-    optics = optics_from_truth(truth / "optics.json")
-    lm = nearest_lens_map(MicrolensGrid(read_calib(tmp_path / "calib.xml"), optics.width,
-                                        optics.height))
-    shots = json.loads((truth / "shots.json").read_text())
+    scene, optics, lm, shots = _small_camera(tmp_path)
     galilean = dataclasses.replace(optics, kind="galilean")
     for name, opt, stop in [("x00_y00", optics, 0.0), ("hand02", galilean, 0.01)]:
-        shot = np.asarray(shots[name]["cam_to_world"])
+        shot = shots[name]
         kw = {"stop_distance": stop, "stop_diameter": 0.8 * opt.aperture if stop else 0.0}
         setup = prepare_lenslet(scene, opt, lm, 4, 0)
         fast = trace_lenslet(setup, scene, shot, **kw)
@@ -574,20 +581,12 @@ def test_lenslet_pixels_are_the_mean_of_their_rays_traced_one_by_one(tmp_path: P
     traced one at a time here - the kernel's sample pattern through the microlens, the
     main lens and a front stop (a ray they stop adds nothing), the nearest hit among all
     quads by plain numpy, and the texture lookup (:func:`raytrace._shade`)."""
-    import json
     import math
 
     from plenocal.simulate import raytrace
-    from plenocal.simulate.dataset import optics_from_truth
 
-    sim = small_sim(64, 48)
-    setup_dataset(sim, tmp_path)
-    truth = tmp_path / "truth"
-    scene = scene_arrays(json.loads((truth / "scene.json").read_text()))
-    optics = optics_from_truth(truth / "optics.json")
-    lm = nearest_lens_map(MicrolensGrid(read_calib(tmp_path / "calib.xml"), optics.width,
-                                        optics.height))
-    shot = np.asarray(json.loads((truth / "shots.json").read_text())["hand02"]["cam_to_world"])
+    scene, optics, lm, shots = _small_camera(tmp_path)
+    shot = shots["hand02"]
     st = prepare_lenslet(scene, optics, lm, 5, 0)
     R, C = shot[:3, :3], shot[:3, 3]
     ns = len(st.jitter)

@@ -146,6 +146,17 @@ def _hit(row, ox, oy, oz, dx, dy, dz, best):
 
 
 @njit(cache=True, inline="always")
+def _keep_nearer(k, h, tt, q, a, b, best, hit, ba, bb):
+    """Lane ``k`` takes the hit (distance ``tt``, quad ``q``, texel coordinates ``a``,
+    ``b``) where ``h``, else keeps its own: selects, no branch (the loops over a pixel's
+    rays vectorise)."""
+    best[k] = tt if h else best[k]
+    hit[k] = q if h else hit[k]
+    ba[k] = a if h else ba[k]
+    bb[k] = b if h else bb[k]
+
+
+@njit(cache=True, inline="always")
 def _shade(hit, best, ba, bb, tex_id, texel, atlas, toff, th, tw, rgb):
     """The colour of the nearest hit (quad ``hit`` at texel coordinates ``ba``, ``bb``)
     into rgb, or the background where nothing was hit (``hit`` < 0); returns the hit's
@@ -353,10 +364,7 @@ def _render_lenslet(height, width, pix_size, L, s, t_types, lens_type, F, half_a
                 for k in range(ns):
                     h, tt, a, b = _hit(row_q, ox[k], oy[k], oz[k], dx[k], dy[k], dz[k],
                                        best[k])
-                    best[k] = tt if h else best[k]
-                    hit[k] = q if h else hit[k]
-                    ba[k] = a if h else ba[k]
-                    bb[k] = b if h else bb[k]
+                    _keep_nearer(k, h, tt, q, a, b, best, hit, ba, bb)
             acc0 = 0.0
             acc1 = 0.0
             acc2 = 0.0
@@ -440,10 +448,7 @@ def _render_pinhole(height, width, Kinv, R, C, ss, quads, groups, tex_id, texel,
                     row_q = _quad_row(quads, q)
                     for k in range(n):
                         h, tt, a, b = _hit(row_q, ox, oy, oz, dx[k], dy[k], dz[k], best[k])
-                        best[k] = tt if h else best[k]
-                        hit[k] = q if h else hit[k]
-                        ba[k] = a if h else ba[k]
-                        bb[k] = b if h else bb[k]
+                        _keep_nearer(k, h, tt, q, a, b, best, hit, ba, bb)
             a0 = 0.0
             a1 = 0.0
             a2 = 0.0
