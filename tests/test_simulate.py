@@ -624,3 +624,34 @@ def test_lenslet_pixels_are_the_mean_of_their_rays_traced_one_by_one(tmp_path: P
         assert stopped[clipped_by] > 0, stopped  # the test was exercised
         assert img.std() > 0.02  # the scene is in the picture
         np.testing.assert_allclose(img, ref, rtol=0, atol=1e-6, err_msg=clipped_by)
+
+
+def test_pinhole_pixels_are_the_mean_of_their_rays_traced_one_by_one(tmp_path: Path):
+    """The pinhole renderer takes a pixel's rays lane by lane too (a group of quads
+    skipped where none of them meets its box): every pixel equals the mean of its
+    ss x ss rays traced one at a time by a plain-numpy nearest hit, and its depth is
+    the z of its centre ray's hit."""
+    from plenocal.simulate import raytrace
+
+    scene, _, _, shots = _small_camera(tmp_path)
+    shot = shots["hand01"]
+    W, H, ss = 40, 30, 2
+    K = np.array([[60.0, 0, 19.5], [0, 60.0, 14.5], [0, 0, 1]])
+    img, z = raytrace.render_pinhole(scene, K, shot, W, H, ss)
+    Kinv, R, C = np.linalg.inv(K), shot[:3, :3], shot[:3, 3]
+    rgb = np.empty(3)
+    ref, ref_z = np.zeros(img.shape), np.zeros(z.shape)
+    for row in range(H):
+        for col in range(W):
+            for i in range(ss):
+                for j in range(ss):
+                    ray = R @ Kinv @ [col - 0.5 + (j + 0.5) / ss, row - 0.5 + (i + 0.5) / ss, 1]
+                    q, t, ba, bb = _nearest_quad_hit(scene, C, ray)
+                    raytrace._shade(q, t, ba, bb, scene.tex_id, scene.texel, scene.atlas,
+                                    scene.tex_off, scene.tex_h, scene.tex_w, rgb)
+                    ref[row, col] += rgb / ss ** 2
+            q, t, _, _ = _nearest_quad_hit(scene, C, R @ Kinv @ [col, row, 1.0])
+            ref_z[row, col] = t if q >= 0 else 0.0  # K^-1 (u, v, 1) has camera z 1
+    assert img.std() > 0.02 and (z > 0).mean() > 0.9
+    np.testing.assert_allclose(img, ref, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(z, ref_z, rtol=1e-6, atol=0)
