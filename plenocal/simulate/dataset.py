@@ -265,7 +265,7 @@ def render_shots(sim: dict, data_dir: str | Path, cams: list[str], out_pngs: lis
                                       sensor["bit_depth"]), level=LENSLET_PNG_LEVEL)
         log(f"{cam}: done")
 
-    # each shot's readout and PNG (single-threaded, 0.65 s on the default camera) beside
+    # each shot's readout and PNG (single-threaded, 0.25 s on the default camera) beside
     # the next shot's tracing, so that no core waits for them
     with ThreadPoolExecutor(max_workers=1) as writer:
         pending = None
