@@ -180,8 +180,8 @@ def write_image(path: str | Path, image: np.ndarray, level: int = PNG_LEVEL) -> 
     fewer bytes; a 500 x 376 view in 4.8 / 2.7 ms instead of 8.3 / 4.3 ms with 17 % more
     bytes (issue 15). Stored data (level 0) is written unfiltered: a filter only helps
     compression, and the "up" filter's pass cost a 12-bit lenslet image 0.12 instead of
-    0.04 s to encode and 0.04 instead of 0.03 s to decode, for the same bytes of pixels
-    (issue 15). The pixels are the same either way.
+    0.04 s to encode and 0.04 instead of 0.03 s to decode (issue 15). The pixels are the
+    same either way.
     """
     import cv2  # noqa: PLC0415  (imported late: see DESIGN.md on cv2/pycolmap order)
 

@@ -405,6 +405,7 @@ def _render_pinhole(height, width, Kinv, R, C, ss, quads, groups, tex_id, texel,
     dx = np.empty(n)
     dy = np.empty(n)
     dz = np.empty(n)
+    inv = np.empty((n, 3))  # 1 / direction per axis (inf where 0), for the boxes' slabs
     best = np.empty(n)
     hit = np.empty(n, dtype=np.int64)
     ba = np.empty(n)
@@ -422,6 +423,9 @@ def _render_pinhole(height, width, Kinv, R, C, ss, quads, groups, tex_id, texel,
             # z-depth of the pixel centre's ray (direction has z_cam = 1 by K^-1)
             dx[n - 1], dy[n - 1], dz[n - 1], cz = _pixel_ray(Kinv, R, float(col), float(row))
             for k in range(n):
+                inv[k, 0] = 1.0 / dx[k] if dx[k] != 0.0 else math.inf
+                inv[k, 1] = 1.0 / dy[k] if dy[k] != 0.0 else math.inf
+                inv[k, 2] = 1.0 / dz[k] if dz[k] != 0.0 else math.inf
                 best[k] = 1e30
                 hit[k] = -1
                 ba[k] = 0.0
@@ -433,12 +437,9 @@ def _render_pinhole(height, width, Kinv, R, C, ss, quads, groups, tex_id, texel,
                 if q1 - q0 > 1:
                     inside = False
                     for k in range(n):
-                        ix = 1.0 / dx[k] if dx[k] != 0.0 else math.inf
-                        iy = 1.0 / dy[k] if dy[k] != 0.0 else math.inf
-                        iz = 1.0 / dz[k] if dz[k] != 0.0 else math.inf
-                        t0, t1 = _slab(ox, ix, grp[2], grp[5], -1e30, 1e30)
-                        t0, t1 = _slab(oy, iy, grp[3], grp[6], t0, t1)
-                        t0, t1 = _slab(oz, iz, grp[4], grp[7], t0, t1)
+                        t0, t1 = _slab(ox, inv[k, 0], grp[2], grp[5], -1e30, 1e30)
+                        t0, t1 = _slab(oy, inv[k, 1], grp[3], grp[6], t0, t1)
+                        t0, t1 = _slab(oz, inv[k, 2], grp[4], grp[7], t0, t1)
                         if not (t1 < t0 or t1 < 0.0):
                             inside = True
                             break

@@ -43,8 +43,8 @@ def read_out(img: np.ndarray, rng: np.random.Generator, noise_std: float,
                     np.float32(1.0 / full_well_e), np.float32(noise_std ** 2), out.reshape(-1))
         return out
     if full_well_e:
-        x = x + np.sqrt(_noise_variance(x, full_well_e, noise_std)) * rng.standard_normal(
-            x.shape, dtype=np.float32)
+        var = np.clip(x, 0.0, None) * np.float32(1.0 / full_well_e) + np.float32(noise_std ** 2)
+        x = x + np.sqrt(var) * rng.standard_normal(x.shape, dtype=np.float32)
     elif noise_std > 0:
         x = x + rng.normal(0.0, noise_std, x.shape).astype(np.float32)
     if bit_depth == 8:
@@ -53,11 +53,6 @@ def read_out(img: np.ndarray, rng: np.random.Generator, noise_std: float,
         dn = np.clip(np.rint(x * np.float32(4095.0)), 0, 4095).astype(np.uint16)
         return (dn << 4).astype(np.uint16)
     raise ValueError(f"sensor.bit_depth: 8 or 12, not {bit_depth}")
-
-
-def _noise_variance(x: np.ndarray, full_well_e: float, noise_std: float) -> np.ndarray:
-    """Shot plus read noise variance (float32) of the irradiance ``x``."""
-    return np.clip(x, 0.0, None) * np.float32(1.0 / full_well_e) + np.float32(noise_std ** 2)
 
 
 @njit(cache=True)
