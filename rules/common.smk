@@ -177,7 +177,15 @@ def stage_config(name):
     return config[name]
 
 
-SFM_CORE = ("seed", "num_threads", "max_num_features", "sift")
+def gpus(stage, key):
+    """A rule's ``gpu`` resource: 1 where config ``<stage>.<key>`` asks for COLMAP's CUDA
+    code by name (``cuda``, ``colmap``), so that a cluster sends the job to a GPU node;
+    ``auto`` declares none and takes a GPU only where the job finds one (plenocal.gpu).
+    """
+    return lambda wc: 1 if stage_config(stage)[key] in ("cuda", "colmap") else 0
+
+
+SFM_CORE = ("seed", "num_threads", "max_num_features", "sift", "device")
 
 
 def sfm_params(*sections):

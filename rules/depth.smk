@@ -50,7 +50,7 @@ for _i, _d in enumerate(DATASETS):
                 mem_mb=3000,
                 runtime=60,
                 # COLMAP's patch-match stereo needs a GPU node; the plane sweep does not
-                gpu=lambda wc: 1 if stage_config("depth")["backend"] == "colmap" else 0,
+                gpu=gpus("depth", "backend"),
             params:
                 depth=lambda wc: registration_depth_config(),
                 registration="a",
@@ -92,9 +92,7 @@ for _i, _d in enumerate(DATASETS):
                 resources:
                     mem_mb=3000,
                     runtime=30,
-                    gpu=lambda wc: (
-                        1 if stage_config("depth")["backend"] == "colmap" else 0
-                    ),
+                    gpu=gpus("depth", "backend"),
                 params:
                     depth=lambda wc: registration_depth_config(),
                     registration="b",

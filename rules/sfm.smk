@@ -23,6 +23,8 @@ rule features_a:
     resources:
         mem_mb=4000,
         runtime=30,
+        # SiftGPU and the GPU matcher where sfm.device is cuda (a GPU node on a cluster)
+        gpu=gpus("sfm", "device"),
     params:
         sfm=lambda wc: sfm_params(),
     script:
@@ -46,6 +48,7 @@ rule match_a:
     resources:
         mem_mb=4000,
         runtime=30,
+        gpu=gpus("sfm", "device"),
     params:
         sfm=lambda wc: sfm_params(),
     script:
@@ -104,6 +107,7 @@ for _i, _d in enumerate(DATASETS):
             resources:
                 mem_mb=1000,
                 runtime=30,
+                gpu=gpus("sfm", "device"),
             params:
                 sfm=lambda wc: sfm_params(),
             script:
@@ -130,6 +134,7 @@ rule view_matches:
     resources:
         mem_mb=4000,
         runtime=60,
+        gpu=gpus("sfm", "device"),
     params:
         sfm=lambda wc: sfm_params("view_matching"),
     script:

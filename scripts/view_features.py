@@ -6,6 +6,7 @@ from pathlib import Path
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.calib.reg_a import viewdb
+from plenocal.calib.reg_a.colmap import resolve_sfm_device
 from plenocal.convert.viewset import view_set_files
 from plenocal.io.files import make_temp_dir
 from plenocal.names import split_key
@@ -14,6 +15,7 @@ from plenocal.rulelog import log_to_file
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821
 cfg = sm.params.sfm
+use_gpu, extractor = resolve_sfm_device(cfg)  # sfm.device and sfm.sift
 views = {k: str(p) for k, p in view_set_files(sm.input.view_sets).items()}
 for out in sm.output:
     out_db = Path(out)
@@ -28,8 +30,8 @@ for out in sm.output:
     try:
         viewdb.extract_view_features(shot_views, work / "features.db", work,
                                      max_num_features=cfg["max_num_features"],
-                                     seed=cfg["seed"], extractor=cfg["sift"],
-                                     num_threads=sm.threads)
+                                     seed=cfg["seed"], extractor=extractor,
+                                     num_threads=sm.threads, use_gpu=use_gpu)
         (work / "features.db").replace(out_db)
     finally:
         shutil.rmtree(work, ignore_errors=True)

@@ -7,12 +7,14 @@ import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.calib.reg_a import viewdb
+from plenocal.calib.reg_a.colmap import resolve_sfm_device
 from plenocal.io.files import make_temp_dir, write_json
 from plenocal.rulelog import log_to_file
 
 log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821
 cfg = sm.params.sfm
+use_gpu, _ = resolve_sfm_device(cfg)  # sfm.device
 centres = {cam: c.centre for cam, c in read_reg_a(sm.input.reg_a).cameras.items()}
 out_db = Path(sm.output.database)
 out_db.parent.mkdir(parents=True, exist_ok=True)
@@ -24,7 +26,8 @@ try:
     info.update(viewdb.match_views(work / "database.db", shot_centres=centres,
                                    shot_neighbours=cfg["view_matching"]["shot_neighbours"],
                                    view_radius=cfg["view_matching"]["view_radius"],
-                                   seed=cfg["seed"], num_threads=sm.threads, work_dir=work))
+                                   seed=cfg["seed"], num_threads=sm.threads, work_dir=work,
+                                   use_gpu=use_gpu))
     (work / "database.db").replace(out_db)
 finally:
     shutil.rmtree(work, ignore_errors=True)

@@ -136,6 +136,37 @@ def test_critical_chain_goes_first(tmp_path: Path):
             assert prios.get(rule) == {level}, (rule, prios.get(rule))
 
 
+def _planned_gpus(out: str) -> dict[str, set[int]]:
+    """rule (by step) -> the ``gpu`` resource of its planned jobs in a dry run."""
+    gpus: dict[str, set[int]] = {}
+    for block in re.split(r"\n(?=(?:local)?rule \w+:)", out):
+        m = re.match(r"(?:local)?rule (\w+):", block)
+        if m:
+            g = re.search(r"^\s+resources: .*\bgpu=(\d+)", block, flags=re.M)
+            gpus.setdefault(re.sub(r"_\d+$", "", m.group(1)), set()).add(
+                int(g.group(1)) if g else 0)
+    return gpus
+
+
+@pytest.mark.workflow
+def test_gpu_jobs_ask_for_a_gpu_only_where_the_config_names_cuda(tmp_path: Path):
+    """``sfm.device: cuda`` and ``depth.backend: colmap`` give COLMAP's SIFT, matching
+    and depth jobs one GPU each (a cluster sends them to a GPU node) and no other job;
+    the default ``auto`` asks for none (it takes a GPU only where a job finds one)."""
+    work = tiny_workflow(tmp_path / "w")
+    gpu_rules = {"features_a", "match_a", "view_features", "view_matches", "depth_a",
+                 "depth_b", "depth_a_other", "depth_b_other"}
+    proc = run(work, "-n", "--config", 'sfm={"device": "cuda"}', 'depth={"backend": "colmap"}')
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    gpus = _planned_gpus(proc.stdout + proc.stderr)
+    assert gpu_rules <= set(gpus), sorted(gpus)
+    for rule, seen in gpus.items():
+        assert seen == ({1} if rule in gpu_rules else {0}), (rule, seen)
+    proc = run(work, "-n")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert set().union(*_planned_gpus(proc.stdout + proc.stderr).values()) == {0}
+
+
 @pytest.mark.workflow
 def test_two_datasets_each_get_their_own_rules(tmp_path: Path):
     """Two synthetic datasets of different N and shots in one run: the rules made for

@@ -59,26 +59,58 @@ def image_size(path: str | Path) -> tuple[int, int]:
 #: COLMAP's SIFT default: the scale space starts on the image upsampled 2x
 DEFAULT_FIRST_OCTAVE = -1
 
-#: SIFT implementations (config ``sfm.sift``): OpenCV's, set up as COLMAP's (the default:
-#: about 6x faster on one core), or COLMAP's own
+#: SIFT implementations (config ``sfm.sift``): OpenCV's, set up as COLMAP's (about 6x
+#: faster than COLMAP's on one core), or COLMAP's own (SiftGPU on a GPU); the config's
+#: ``auto`` is one of them (:func:`resolve_extractor`)
 EXTRACTORS = ("opencv", "colmap")
 #: the keyword defaults of the COLMAP steps: config.schema.yaml's sfm block
 SFM_DEFAULTS = stage_defaults("sfm")
-DEFAULT_EXTRACTOR = SFM_DEFAULTS["sift"]
+DEFAULT_EXTRACTOR = "opencv"  # sfm.sift auto on the CPU
 DEFAULT_MAX_FEATURES = SFM_DEFAULTS["max_num_features"]
 DEFAULT_SEED, DEFAULT_THREADS = SFM_DEFAULTS["seed"], SFM_DEFAULTS["num_threads"]
 
 
+def resolve_extractor(sift: str, use_gpu: bool) -> str:
+    """The SIFT implementation of config ``sfm.sift``: ``auto`` -> ``colmap`` (SiftGPU)
+    where the SfM steps use the GPU (``use_gpu``, :func:`resolve_sfm_device`), else
+    ``opencv``; ``opencv`` or ``colmap`` as they are (OpenCV's SIFT runs on the CPU
+    either way)."""
+    if sift == "auto":
+        return "colmap" if use_gpu else "opencv"
+    if sift not in EXTRACTORS:
+        raise ValueError(f"SIFT extractor {sift!r}: use auto or one of {', '.join(EXTRACTORS)} "
+                         "(config key sfm.sift)")
+    return sift
+
+
+def resolve_sfm_device(sfm: Mapping) -> tuple[bool, str]:
+    """(use the GPU, SIFT extractor) of the config's ``sfm`` block: ``sfm.device``
+    resolved by :func:`plenocal.gpu.resolve_device` (``auto``: the GPU where COLMAP's
+    CUDA code can run), then ``sfm.sift`` (:func:`resolve_extractor`)."""
+    from plenocal.gpu import resolve_device  # noqa: PLC0415
+
+    use_gpu = resolve_device(sfm["device"], "sfm.device") == "cuda"
+    return use_gpu, resolve_extractor(sfm["sift"], use_gpu)
+
+
+def _device(use_gpu: bool):
+    """pycolmap's Device: ``cuda`` with ``use_gpu``, else ``cpu``."""
+    import pycolmap  # noqa: PLC0415
+
+    return pycolmap.Device.cuda if use_gpu else pycolmap.Device.cpu
+
+
 def _extraction_options(max_num_features: int, num_threads: int,
-                        first_octave: int = DEFAULT_FIRST_OCTAVE):
+                        first_octave: int = DEFAULT_FIRST_OCTAVE, use_gpu: bool = False):
     """SIFT settings: COLMAP's defaults but the feature cap and the first octave
     (``first_octave`` 0: the scale space starts at the image's own resolution, about a
-    third of the time of COLMAP's -1 and half the keypoints; see README, SIFT)."""
+    third of the time of COLMAP's -1 and half the keypoints; see README, SIFT);
+    ``use_gpu``: SiftGPU on the first GPU."""
     import pycolmap  # noqa: PLC0415
 
     opts = pycolmap.FeatureExtractionOptions()
     opts.num_threads = num_threads
-    opts.use_gpu = False
+    opts.use_gpu = use_gpu
     opts.sift.max_num_features = max_num_features
     opts.sift.first_octave = first_octave
     return opts
@@ -90,18 +122,20 @@ def extract_features(database: str | Path, image_dir: str | Path,
                      max_num_features: int = DEFAULT_MAX_FEATURES,
                      num_threads: int = DEFAULT_THREADS, seed: int = DEFAULT_SEED,
                      first_octave: int = DEFAULT_FIRST_OCTAVE,
-                     extractor: str = DEFAULT_EXTRACTOR) -> None:
+                     extractor: str = DEFAULT_EXTRACTOR, use_gpu: bool = False) -> None:
     """SIFT into a new database. ``groups``: (image names, camera) pairs; all images of
     a group share one COLMAP camera. A group's camera, where given, is written with its
     intrinsics (``model`` PINHOLE or SIMPLE_PINHOLE, marked as a known focal length);
     where None, the camera gets COLMAP's default focal (1.2 max(W, H)) and the principal
     point at the image centre. ``first_octave``: SIFT's first octave
     (:func:`_extraction_options`). ``extractor``: ``"opencv"`` (:func:`opencv_sift`,
-    COLMAP's settings, first octave -1 only) or ``"colmap"`` (COLMAP's own CPU SIFT);
-    the images, cameras and frames are COLMAP's import either way."""
+    COLMAP's settings, first octave -1 only, on the CPU) or ``"colmap"`` (COLMAP's own
+    SIFT: SiftGPU with ``use_gpu``, else its CPU SIFT); the images, cameras and frames
+    are COLMAP's import either way."""
     if extractor not in EXTRACTORS:
         raise ValueError(f"SIFT extractor {extractor!r}: use one of {', '.join(EXTRACTORS)} "
                          "(config key sfm.sift)")
+    device = _device(use_gpu and extractor == "colmap")
     if extractor == "opencv" and first_octave != -1:
         raise ValueError(f"OpenCV's SIFT starts on the image upsampled 2x (first octave -1),"
                          f" not {first_octave}: use sfm.sift colmap for another first octave")
@@ -136,8 +170,9 @@ def extract_features(database: str | Path, image_dir: str | Path,
                                       camera_mode=pycolmap.CameraMode.SINGLE,
                                       reader_options=reader,
                                       extraction_options=_extraction_options(
-                                          max_num_features, num_threads, first_octave),
-                                      device=pycolmap.Device.cpu)
+                                          max_num_features, num_threads, first_octave,
+                                          use_gpu),
+                                      device=device)
         else:
             with pycolmap.Database.open(str(database)):
                 pass  # created with COLMAP's schema: import_images needs the file
@@ -145,7 +180,8 @@ def extract_features(database: str | Path, image_dir: str | Path,
                                    camera_mode=pycolmap.CameraMode.SINGLE, image_names=names,
                                    options=reader)
             _write_opencv_sift(database, Path(image_dir), set(names), max_num_features)
-        log.info("features (%s SIFT): %d images of group %s", extractor, len(names), names[0])
+        log.info("features (%s SIFT on the %s): %d images of group %s", extractor,
+                 "GPU" if use_gpu and extractor == "colmap" else "CPU", len(names), names[0])
 
 
 def _write_opencv_sift(database: Path, image_dir: Path, names: set[str],
@@ -224,37 +260,42 @@ def _verification_options(seed: int, max_error_px: float = 4.0):
     return opts
 
 
-def _matching_options(num_threads: int):
+def _matching_options(num_threads: int, use_gpu: bool = False):
     import pycolmap  # noqa: PLC0415
 
     opts = pycolmap.FeatureMatchingOptions()
     opts.num_threads = num_threads
-    opts.use_gpu = False
+    opts.use_gpu = use_gpu
     return opts
 
 
 def match(database: str | Path, pairs: Iterable[tuple[str, str]] | None = None, *,
           seed: int = DEFAULT_SEED, num_threads: int = DEFAULT_THREADS,
-          work_dir: str | Path | None = None) -> int:
+          work_dir: str | Path | None = None, use_gpu: bool = False) -> int:
     """Match and geometrically verify: every pair (``pairs`` None: exhaustive) or the
-    given image-name pairs. Returns the number of verified pairs."""
+    given image-name pairs; ``use_gpu``: the descriptors are matched by COLMAP's GPU
+    matcher (the verification runs on the CPU either way).
+    Returns the number of verified pairs."""
     import pycolmap  # noqa: PLC0415
 
+    device = _device(use_gpu)
     pycolmap.set_random_seed(seed)
     database = Path(database)
     if pairs is None:
-        pycolmap.match_exhaustive(str(database), matching_options=_matching_options(num_threads),
+        pycolmap.match_exhaustive(str(database),
+                                  matching_options=_matching_options(num_threads, use_gpu),
                                   verification_options=_verification_options(seed),
-                                  device=pycolmap.Device.cpu)
+                                  device=device)
     else:
         pair_file = Path(work_dir or database.parent) / f".{database.stem}.pairs.txt"
         pair_file.write_text("".join(f"{a} {b}\n" for a, b in pairs))
         popts = pycolmap.ImportedPairingOptions()
         popts.match_list_path = str(pair_file)
-        pycolmap.match_image_pairs(str(database), matching_options=_matching_options(num_threads),
+        pycolmap.match_image_pairs(str(database),
+                                   matching_options=_matching_options(num_threads, use_gpu),
                                    pairing_options=popts,
                                    verification_options=_verification_options(seed),
-                                   device=pycolmap.Device.cpu)
+                                   device=device)
         pair_file.unlink()
     with pycolmap.Database.open(str(database)) as db:
         n = db.num_verified_image_pairs()

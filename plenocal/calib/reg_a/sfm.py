@@ -66,7 +66,7 @@ def features_a(views: Mapping[str, str | Path], image_dir: str | Path,
                database: str | Path, *,
                max_num_features: int = cm.DEFAULT_MAX_FEATURES, seed: int = cm.DEFAULT_SEED,
                num_threads: int = cm.DEFAULT_THREADS, first_octave: int = cm.DEFAULT_FIRST_OCTAVE,
-               extractor: str = cm.DEFAULT_EXTRACTOR) -> dict:
+               extractor: str = cm.DEFAULT_EXTRACTOR, use_gpu: bool = False) -> dict:
     """Stage the central views (``views``: cam -> png) as ``<cam>.png`` in ``image_dir``
     and extract SIFT into a new ``database`` with one SIMPLE_PINHOLE camera for all
     (``first_octave``: the same SIFT setting as the view database's, so the naive
@@ -83,7 +83,7 @@ def features_a(views: Mapping[str, str | Path], image_dir: str | Path,
     names = cm.stage_images(views, image_dir)
     cm.extract_features(database, image_dir, [(names, None)], model="SIMPLE_PINHOLE",
                         max_num_features=max_num_features, num_threads=num_threads, seed=seed,
-                        first_octave=first_octave, extractor=extractor)
+                        first_octave=first_octave, extractor=extractor, use_gpu=use_gpu)
     import pycolmap  # noqa: PLC0415
 
     with pycolmap.Database.open(str(database)) as db:
@@ -102,17 +102,19 @@ def features_a(views: Mapping[str, str | Path], image_dir: str | Path,
             + ": texture-poor views may not register (more texture, light or focus)")
         log.warning("%s", warnings[-1])
     # read by the report's Warnings box (plenocal.report.sources)
-    return {"num_images": len(kp), "keypoints": kp, WARNINGS_KEY: warning_list(warnings)}
+    return {"num_images": len(kp), "keypoints": kp, "sift": extractor,
+            "device": "cuda" if use_gpu and extractor == "colmap" else "cpu",
+            WARNINGS_KEY: warning_list(warnings)}
 
 
 def match_a(database: str | Path, *, seed: int = cm.DEFAULT_SEED,
-            num_threads: int = cm.DEFAULT_THREADS) -> dict:
-    """Exhaustive matching with geometric verification."""
-    n = cm.match(database, None, seed=seed, num_threads=num_threads)
+            num_threads: int = cm.DEFAULT_THREADS, use_gpu: bool = False) -> dict:
+    """Exhaustive matching (on the GPU with ``use_gpu``) with geometric verification."""
+    n = cm.match(database, None, seed=seed, num_threads=num_threads, use_gpu=use_gpu)
     if n == 0:
         raise RegistrationError(f"{database}: no image pair passed geometric verification; "
                                 "the views need more texture or overlap")
-    return {"num_verified_pairs": n}
+    return {"num_verified_pairs": n, "device": "cuda" if use_gpu else "cpu"}
 
 
 def incremental_options(seed: int, num_threads: int):

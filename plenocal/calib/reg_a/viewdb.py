@@ -114,7 +114,7 @@ def extract_view_features(images: Mapping[str, str | Path], database: str | Path
                           work_dir: str | Path, *, max_num_features: int = cm.DEFAULT_MAX_FEATURES,
                           seed: int = cm.DEFAULT_SEED, num_threads: int = cm.DEFAULT_THREADS,
                           first_octave: int = cm.DEFAULT_FIRST_OCTAVE,
-                          extractor: str = cm.DEFAULT_EXTRACTOR) -> dict:
+                          extractor: str = cm.DEFAULT_EXTRACTOR, use_gpu: bool = False) -> dict:
     """SIFT of ``images`` (``"<cam>/<view>"`` -> png) into a new ``database``, one
     shared camera with no prior focal length; ``work_dir`` receives the staged images.
     Needs no calibration, so it runs while registration A is computed (rule
@@ -128,7 +128,8 @@ def extract_view_features(images: Mapping[str, str | Path], database: str | Path
                          "with the same settings")
     cm.extract_features(database, image_dir, [(names, None)], model="PINHOLE",
                         max_num_features=max_num_features, num_threads=num_threads,
-                        seed=seed, first_octave=first_octave, extractor=extractor)
+                        seed=seed, first_octave=first_octave, extractor=extractor,
+                        use_gpu=use_gpu)
     import pycolmap  # noqa: PLC0415
 
     with pycolmap.Database.open(str(database)) as db:
@@ -138,6 +139,7 @@ def extract_view_features(images: Mapping[str, str | Path], database: str | Path
              np.mean(kp), seconds)
     return {"num_images": len(names), "keypoints_mean": float(np.mean(kp)),
             "keypoints_min": int(min(kp)), "first_octave": first_octave, "sift": extractor,
+            "device": "cuda" if use_gpu and extractor == "colmap" else "cpu",
             "features_s": seconds}
 
 
@@ -209,21 +211,21 @@ def match_views(database: str | Path, *,
                 shot_neighbours: int | None = _MATCHING["shot_neighbours"],
                 view_radius: int | None = _MATCHING["view_radius"],
                 seed: int = cm.DEFAULT_SEED, num_threads: int = cm.DEFAULT_THREADS,
-                work_dir: str | Path | None = None) -> dict:
-    """Match and verify, in the SIFT ``database`` itself, the pairs of
+                work_dir: str | Path | None = None, use_gpu: bool = False) -> dict:
+    """Match (on the GPU with ``use_gpu``) and verify, in the SIFT ``database`` itself, the pairs of
     :func:`view_pairs`. Returns counts and the time taken."""
     t0 = time.perf_counter()
     names = [f"{n}.png" for n in database_names(database)]
     pairs = view_pairs(names, shot_centres, shot_neighbours=shot_neighbours,
                        view_radius=view_radius)
     n_verified = cm.match(database, pairs, seed=seed, num_threads=num_threads,
-                          work_dir=work_dir)
+                          work_dir=work_dir, use_gpu=use_gpu)
     seconds = time.perf_counter() - t0
     log.info("view matches: %d images, %d pairs (%d verified), %.1f s", len(names),
              len(pairs), n_verified, seconds)
     return {"num_images": len(names), "num_pairs": len(pairs),
             "num_verified_pairs": int(n_verified), "shot_neighbours": shot_neighbours,
-            "view_radius": view_radius}
+            "view_radius": view_radius, "matching_device": "cuda" if use_gpu else "cpu"}
 
 
 def match_view_database(features: str | Path, database: str | Path, **kwargs) -> dict:
@@ -241,7 +243,7 @@ def build_view_database(images: Mapping[str, str | Path], database: str | Path,
                         max_num_features: int = cm.DEFAULT_MAX_FEATURES,
                         seed: int = cm.DEFAULT_SEED, num_threads: int = cm.DEFAULT_THREADS,
                         first_octave: int = cm.DEFAULT_FIRST_OCTAVE,
-                        extractor: str = cm.DEFAULT_EXTRACTOR) -> dict:
+                        extractor: str = cm.DEFAULT_EXTRACTOR, use_gpu: bool = False) -> dict:
     """:func:`extract_view_features` and :func:`match_view_database` in one go (the
     workflow runs them as two rules): SIFT of ``images`` and the matching of
     :func:`view_pairs` into a new ``database``; ``work_dir`` receives the staged images
@@ -250,11 +252,12 @@ def build_view_database(images: Mapping[str, str | Path], database: str | Path,
     info = extract_view_features(images, features, work_dir,
                                  max_num_features=max_num_features, seed=seed,
                                  num_threads=num_threads, first_octave=first_octave,
-                                 extractor=extractor)
+                                 extractor=extractor, use_gpu=use_gpu)
     info.update(match_view_database(features, database, shot_centres=shot_centres,
                                     shot_neighbours=shot_neighbours,
                                     view_radius=view_radius, seed=seed,
-                                    num_threads=num_threads, work_dir=work_dir))
+                                    num_threads=num_threads, work_dir=work_dir,
+                                    use_gpu=use_gpu))
     features.unlink()
     return info
 
