@@ -10,7 +10,14 @@ from synth.costs import random_costs
 from synth.planes import camera_at, fronto_plane, photo_texture, render_plane
 
 from plenocal.depth import DepthBackendError, estimate_depth, resolve_backend
-from plenocal.depth.colmap_mvs import colmap_available, prepare_workspace, read_colmap_array
+from plenocal.depth.colmap_mvs import (
+    MvsProblem,
+    colmap_available,
+    colmap_depths,
+    prepare_workspace,
+    prepare_workspace_many,
+    read_colmap_array,
+)
 from plenocal.depth.costkernels import mean_of_seen_best
 from plenocal.depth.inputs import nearest_sources
 from plenocal.depth.planesweep import (
@@ -82,17 +89,40 @@ def test_colmap_backend_clear_error_without_gpu(texture):
         estimate_depth(ref, ri, srcs[:2], sims[:2], 0.4, 0.9, {"backend": "colmap"})
 
 
+@pytest.mark.parametrize("tilt", [0.0, 30.0])
+def test_colmap_backend_recovers_plane_on_a_gpu(texture, tilt, tmp_path):
+    """COLMAP's patch-match stereo (depth.backend colmap) on the plane that the plane
+    sweep recovers above: within 1 % of the true depth where valid, about as complete.
+    Runs only where a CUDA pycolmap and a GPU are present (skipped with the reason
+    elsewhere: CI has no GPU; BENCHMARKS.md "GPU" has a run)."""
+    ok, why = colmap_available()
+    if not ok:
+        pytest.skip(f"COLMAP's CUDA code cannot run here: {why}")
+    ref, ri, rd, srcs, sims = _scene(texture, tilt)
+    d = estimate_depth(ref, ri, srcs, sims, 0.4, 0.9, {"backend": "colmap"},
+                       workspace=tmp_path)
+    q = depth_quality(d, rd, 0.01, border=8)
+    assert q["valid_share"] > 0.8, q
+    assert q["within_of_valid"] > 0.9, q
+    assert q["median_rel_error"] < 0.004, q
+
+
 def test_colmap_probe_skipped_without_nvidia_smi(monkeypatch):
     import plenocal.depth.colmap_mvs as mvs
+    import plenocal.gpu as gpu
 
     def no_subprocess(*a, **k):
         raise AssertionError("the pycolmap probe ran although nvidia-smi is missing")
 
-    monkeypatch.setattr(mvs.shutil, "which", lambda name: None)
-    monkeypatch.setattr(mvs.subprocess, "run", no_subprocess)
-    ok, why = mvs.colmap_available()
-    assert not ok and "no GPU" in why
-    assert resolve_backend("auto") == "planesweep"
+    monkeypatch.setattr(gpu.shutil, "which", lambda name: None)
+    monkeypatch.setattr(gpu.subprocess, "run", no_subprocess)
+    gpu.cuda_available.cache_clear()
+    try:
+        ok, why = mvs.colmap_available()
+        assert not ok and "no GPU" in why
+        assert resolve_backend("auto") == "planesweep"
+    finally:
+        gpu.cuda_available.cache_clear()
 
 
 def test_colmap_workspace_is_readable(tmp_path, texture):
@@ -112,6 +142,47 @@ def test_colmap_workspace_is_readable(tmp_path, texture):
     np.testing.assert_allclose(px - 0.5, uv[0], atol=1e-6)
     cfg = (tmp_path / "stereo" / "patch-match.cfg").read_text().splitlines()
     assert cfg == [names[0], ", ".join(names[1:])]
+
+
+def _two_problems(texture):
+    """The plane seen from the reference with three sources, and from the first source
+    with the reference and the second source: four distinct views."""
+    ref, ri, rd, srcs, sims = _scene(texture, 0.0)
+    return [MvsProblem(ref, ri, srcs[:3], sims[:3], 0.4, 0.9),
+            MvsProblem(srcs[0], sims[0], [ref, srcs[1]], [ri, sims[1]], 0.45, 0.85)], rd
+
+
+def test_colmap_workspace_holds_each_view_once_for_many_references(tmp_path, texture):
+    """One COLMAP run for several maps (a depth job's): every distinct view written once,
+    patch-match.cfg lists each reference with its own sources, fusion.cfg the
+    references."""
+    import pycolmap
+
+    problems, _ = _two_problems(texture)
+    names = prepare_workspace_many(tmp_path, problems)
+    v = [f"view{i:03d}.png" for i in range(4)]
+    assert names == [[v[0], v[1], v[2], v[3]], [v[1], v[0], v[2]]]
+    assert sorted(p.name for p in (tmp_path / "images").iterdir()) == v
+    assert pycolmap.Reconstruction(str(tmp_path / "sparse")).num_images() == 4
+    cfg = (tmp_path / "stereo" / "patch-match.cfg").read_text().splitlines()
+    assert cfg == [v[0], ", ".join(v[1:]), v[1], f"{v[0]}, {v[2]}"]
+    assert (tmp_path / "stereo" / "fusion.cfg").read_text().splitlines() == [v[0], v[1]]
+    with pytest.raises(ValueError, match="twice"):
+        prepare_workspace_many(tmp_path / "again", [problems[0], problems[0]])
+
+
+def test_colmap_depths_in_one_run_on_a_gpu(tmp_path, texture):
+    """Two maps in one COLMAP run, each within its own bounds and about as good as the
+    single map above. Runs only where a CUDA pycolmap and a GPU are present."""
+    ok, why = colmap_available()
+    if not ok:
+        pytest.skip(f"COLMAP's CUDA code cannot run here: {why}")
+    problems, rd = _two_problems(texture)
+    d0, d1 = colmap_depths(problems, tmp_path)
+    q = depth_quality(d0, rd, 0.01, border=8)
+    assert q["valid_share"] > 0.8 and q["within_of_valid"] > 0.9, q
+    assert d1[d1 > 0].min() >= 0.45 and d1.max() <= 0.85
+    assert (d1 > 0).mean() > 0.5
 
 
 def test_colmap_array_reader(tmp_path):

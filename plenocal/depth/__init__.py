@@ -16,12 +16,15 @@ from plenocal.depth.colmap_mvs import (
     COLMAP_HINT,
     ColmapOptions,
     DepthBackendError,
+    MvsProblem,
     colmap_available,
     colmap_depth,
+    colmap_depths,
 )
 from plenocal.depth.planesweep import PlaneSweepOptions, plane_sweep_depth
 
-__all__ = ["DepthBackendError", "estimate_depth", "planesweep_options", "resolve_backend"]
+__all__ = ["DepthBackendError", "MvsProblem", "colmap_depths_in_one_run", "estimate_depth",
+           "planesweep_options", "resolve_backend"]
 
 
 def planesweep_options(cfg: dict | None) -> PlaneSweepOptions:
@@ -49,6 +52,15 @@ def resolve_backend(name: str) -> str:
     if name == "colmap":
         raise DepthBackendError(f"depth backend 'colmap' cannot run here ({why}): {COLMAP_HINT}")
     return "planesweep"
+
+
+def colmap_depths_in_one_run(problems: list[MvsProblem], cfg: dict | None = None
+                             ) -> list[np.ndarray]:
+    """Z-depth maps of several references by COLMAP's patch-match stereo in one run (one
+    child process and CUDA context for all, a temporary workspace); ``cfg``: the config's
+    ``depth`` block, partial or whole."""
+    with tempfile.TemporaryDirectory(prefix="plenocal_mvs_") as tmp:
+        return colmap_depths(problems, tmp, colmap_options(cfg))
 
 
 def estimate_depth(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],

@@ -2,7 +2,7 @@
 
 The CUDA build of pycolmap (``pycolmap-cuda12``) aborts the whole process where no
 GPU is visible, and the CPU wheel raises, so the work runs in a child process and
-:func:`colmap_available` probes that child first. The workspace is COLMAP's dense
+:func:`plenocal.gpu.cuda_available` probes first. The workspace is COLMAP's dense
 layout::
 
     <ws>/images/<name>.png           reference and sources
@@ -16,7 +16,6 @@ triangulation angles are lowered for the small baselines of subaperture views.
 
 from __future__ import annotations
 
-import shutil
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -26,6 +25,7 @@ import numpy as np
 
 from plenocal.camera import PinholeCamera, k_to_colmap
 from plenocal.config import stage_defaults
+from plenocal.gpu import CUDA_HINT, cuda_available
 from plenocal.io.files import atomic_write_text, to_float, to_uint8, write_image, write_json
 
 
@@ -33,8 +33,7 @@ class DepthBackendError(RuntimeError):
     """A depth backend that cannot run here."""
 
 
-COLMAP_HINT = ("install pycolmap-cuda12 and run on a GPU node, or use depth.backend: "
-               "planesweep")
+COLMAP_HINT = f"{CUDA_HINT}, or use depth.backend: planesweep"
 
 
 _COLMAP = stage_defaults("depth.colmap")
@@ -53,58 +52,72 @@ class ColmapOptions:
     timeout_s: float = 1800.0
 
 
-_PROBE = (
-    "import sys, subprocess\n"
-    "import pycolmap\n"
-    "if not getattr(pycolmap, 'has_cuda', False):\n"
-    "    print('pycolmap is built without CUDA'); sys.exit(3)\n"
-    "try:\n"
-    "    out = subprocess.run(['nvidia-smi', '-L'], capture_output=True, text=True, timeout=30)\n"
-    "except (OSError, subprocess.TimeoutExpired):\n"
-    "    print('nvidia-smi not found: no GPU visible'); sys.exit(4)\n"
-    "if out.returncode != 0 or 'GPU' not in out.stdout:\n"
-    "    print('no GPU visible'); sys.exit(4)\n"
-    "print('ok')\n"
-)
-
-
 def colmap_available() -> tuple[bool, str]:
-    """(can run, why not) - probed in a subprocess so that a CUDA wheel without a GPU
-    cannot abort this process. Without ``nvidia-smi`` on the PATH the probe's answer is
-    known (no GPU visible) and the subprocess, with its pycolmap import (half a second
-    per depth job), is skipped."""
-    if shutil.which("nvidia-smi") is None:
-        return False, "nvidia-smi not found: no GPU visible"
-    try:
-        out = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True,
-                             timeout=120)
-    except subprocess.TimeoutExpired:
-        return False, "probing pycolmap timed out"
-    msg = (out.stdout.strip() or out.stderr.strip().splitlines()[-1:] or ["failed"])
-    msg = msg if isinstance(msg, str) else msg[0]
-    return out.returncode == 0, msg
+    """(can run, why not): :func:`plenocal.gpu.cuda_available` (a CUDA pycolmap and a
+    GPU, probed once per process in a child process)."""
+    return cuda_available()
 
 
 def image_name(index: int) -> str:
     return f"view{index:03d}.png"
 
 
+@dataclass(frozen=True)
+class MvsProblem:
+    """One reference view's depth: its camera and image, its sources', and its bounds."""
+    ref: PinholeCamera
+    ref_img: np.ndarray
+    srcs: list[PinholeCamera]
+    src_imgs: list[np.ndarray]
+    near: float
+    far: float
+
+
+def _view_table(problems: list[MvsProblem]) -> tuple[list[tuple[PinholeCamera, np.ndarray]],
+                                                     list[list[int]]]:
+    """The distinct views of ``problems`` (an image array and its camera, once each,
+    however many maps it serves) and, per problem, the indices of its reference and
+    sources in that list."""
+    views: list[tuple[PinholeCamera, np.ndarray]] = []
+    index: dict[tuple, int] = {}
+    per_problem = []
+    for pb in problems:
+        ids = []
+        for cam, img in zip([pb.ref, *pb.srcs], [pb.ref_img, *pb.src_imgs], strict=True):
+            key = (id(img), cam.K.tobytes(), cam.cam_to_world.tobytes(), cam.width,
+                   cam.height)
+            if key not in index:
+                index[key] = len(views)
+                views.append((cam, img))
+            ids.append(index[key])
+        per_problem.append(ids)
+    return views, per_problem
+
+
 def prepare_workspace(ws: str | Path, ref: PinholeCamera, ref_img: np.ndarray,
                       srcs: list[PinholeCamera], src_imgs: list[np.ndarray]) -> list[str]:
-    """Write the dense workspace; returns the image names (reference first)."""
+    """Write the dense workspace of one reference; returns the image names (reference
+    first)."""
+    names = prepare_workspace_many(ws, [MvsProblem(ref, ref_img, srcs, src_imgs, 0.0, 1.0)])
+    return names[0]
+
+
+def prepare_workspace_many(ws: str | Path, problems: list[MvsProblem]) -> list[list[str]]:
+    """Write one dense workspace for all ``problems``: every distinct view once, and
+    patch-match.cfg with each reference followed by its sources. Returns, per problem,
+    the image names of its reference and sources."""
     import cv2  # noqa: PLC0415,F401  (cv2 before anything that imports pycolmap)
 
     ws = Path(ws)
-    cams = [ref, *srcs]
-    imgs = [ref_img, *src_imgs]
-    names = [image_name(i) for i in range(len(cams))]
-    for name, img in zip(names, imgs, strict=True):
+    views, per_problem = _view_table(problems)
+    names = [image_name(i) for i in range(len(views))]
+    for name, (_, img) in zip(names, views, strict=True):
         im = np.asarray(img)
         write_image(ws / "images" / name, im if im.dtype in (np.uint8, np.uint16)
                     else to_uint8(to_float(im)))
     cam_lines = ["# CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]"]
     img_lines = ["# IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME", "# POINTS2D[]"]
-    for i, (c, name) in enumerate(zip(cams, names, strict=True), start=1):
+    for i, ((c, _), name) in enumerate(zip(views, names, strict=True), start=1):
         K = k_to_colmap(c.K)
         cam_lines.append(f"{i} PINHOLE {c.width} {c.height} "
                          + " ".join(_num(x) for x in (K[0, 0], K[1, 1], K[0, 2], K[1, 2])))
@@ -118,11 +131,15 @@ def prepare_workspace(ws: str | Path, ref: PinholeCamera, ref_img: np.ndarray,
     atomic_write_text(ws / "sparse" / "points3D.txt", "# no points: depth bounds are given\n")
     for sub in ("depth_maps", "normal_maps", "consistency_graphs"):
         (ws / "stereo" / sub).mkdir(parents=True, exist_ok=True)
-    # patch-match.cfg: reference, then its sources listed explicitly
-    cfg = f"{names[0]}\n{', '.join(names[1:])}\n"
+    # patch-match.cfg: each reference, then its sources listed explicitly
+    out = [[names[i] for i in ids] for ids in per_problem]
+    refs = list(dict.fromkeys(n[0] for n in out))
+    if len(refs) != len(out):
+        raise ValueError("colmap depth: a reference view appears twice in one workspace")
+    cfg = "".join(f"{n[0]}\n{', '.join(n[1:])}\n" for n in out)
     atomic_write_text(ws / "stereo" / "patch-match.cfg", cfg)
-    atomic_write_text(ws / "stereo" / "fusion.cfg", f"{names[0]}\n")
-    return names
+    atomic_write_text(ws / "stereo" / "fusion.cfg", "".join(f"{r}\n" for r in refs))
+    return out
 
 
 def _num(x: float) -> str:
@@ -188,13 +205,28 @@ def colmap_depth(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCame
                  src_imgs: list[np.ndarray], near: float, far: float, workspace: str | Path,
                  opt: ColmapOptions | None = None) -> np.ndarray:
     """Z-depth of the reference by patch-match stereo (0 invalid)."""
+    return colmap_depths([MvsProblem(ref, ref_img, srcs, src_imgs, near, far)], workspace,
+                         opt)[0]
+
+
+def colmap_depths(problems: list[MvsProblem], workspace: str | Path,
+                  opt: ColmapOptions | None = None) -> list[np.ndarray]:
+    """Z-depth of every problem's reference by patch-match stereo (0 invalid), in one
+    COLMAP run: one child process, one pycolmap import and one CUDA context for all the
+    maps of a job (issue 15: a process per map spent most of its 4-10 s starting). The
+    run searches the union of the problems' bounds; each map then keeps the depths within
+    its own."""
     opt = opt or ColmapOptions()
+    if not problems:
+        return []
     ok, why = colmap_available()
     if not ok:
         raise DepthBackendError(f"depth backend 'colmap' cannot run here ({why}): {COLMAP_HINT}")
     ws = Path(workspace)
-    names = prepare_workspace(ws, ref, ref_img, srcs, src_imgs)
-    opts = patch_match_options(near, far, max(ref.width, ref.height), opt)
+    names = prepare_workspace_many(ws, problems)
+    size = max(max(p.ref.width, p.ref.height) for p in problems)
+    opts = patch_match_options(min(p.near for p in problems), max(p.far for p in problems),
+                               size, opt)
     write_json(ws / "patch_match_options.json", opts)
     cmd = [sys.executable, "-c", _RUN, str(ws), str(ws / "patch_match_options.json")]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=opt.timeout_s)
@@ -202,12 +234,16 @@ def colmap_depth(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCame
         tail = "\n".join((out.stdout + out.stderr).splitlines()[-20:])
         raise DepthBackendError(f"pycolmap patch_match_stereo failed (exit {out.returncode}) in "
                                 f"{ws}:\n{tail}")
-    dm = ws / "stereo" / "depth_maps" / f"{names[0]}.photometric.bin"
-    if opt.geom_consistency:
-        dm = dm.with_name(f"{names[0]}.geometric.bin")
-    depth = read_colmap_array(dm)
-    if depth.shape != (ref.height, ref.width):
-        raise DepthBackendError(f"{dm}: depth map is {depth.shape[1]}x{depth.shape[0]}, expected "
-                                f"{ref.width}x{ref.height}")
-    depth = np.where((depth >= near) & (depth <= far), depth, 0.0)
-    return depth.astype(np.float32)
+    kind = "geometric" if opt.geom_consistency else "photometric"
+    depths = []
+    for pb, pb_names in zip(problems, names, strict=True):
+        dm = ws / "stereo" / "depth_maps" / f"{pb_names[0]}.{kind}.bin"
+        if not dm.is_file():
+            raise DepthBackendError(f"{dm}: COLMAP wrote no depth map for this reference")
+        depth = read_colmap_array(dm)
+        if depth.shape != (pb.ref.height, pb.ref.width):
+            raise DepthBackendError(f"{dm}: depth map is {depth.shape[1]}x{depth.shape[0]}, "
+                                    f"expected {pb.ref.width}x{pb.ref.height}")
+        depths.append(np.where((depth >= pb.near) & (depth <= pb.far), depth, 0.0)
+                      .astype(np.float32))
+    return depths

@@ -27,7 +27,13 @@ import numpy as np
 
 from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.artifacts.rig import read_rig
-from plenocal.depth import estimate_depth, planesweep_options, resolve_backend
+from plenocal.depth import (
+    MvsProblem,
+    colmap_depths_in_one_run,
+    estimate_depth,
+    planesweep_options,
+    resolve_backend,
+)
 from plenocal.depth.inputs import DepthJob, depth_job_a, depth_job_b
 from plenocal.depth.planesweep import (
     PlaneSweepOptions,
@@ -68,9 +74,22 @@ def _info(job: DepthJob, backend: str, cam: str, centre: str, depth: np.ndarray,
 
 def _estimate_each(reg: str, jobs: dict[str, DepthJob], centre: str, cfg: dict, backend: str,
                    progress: Callable[[str], None]) -> dict[str, ShotDepth]:
-    """Each job's map on its own (the backend checks it as it does)."""
+    """Each job's map on its own (the backend checks it as it does); COLMAP's maps all in
+    one run (:func:`plenocal.depth.colmap_depths_in_one_run`)."""
     image = _Images()
     out = {}
+    if backend == "colmap":
+        t0 = time.perf_counter()
+        problems = [MvsProblem(job.ref_cam, image(job.ref_path), job.src_cams,
+                               [image(p) for p in job.src_paths], job.near, job.far)
+                    for job in jobs.values()]
+        depths = colmap_depths_in_one_run(problems, cfg)
+        for (cam, job), depth in zip(jobs.items(), depths, strict=True):
+            out[cam] = ShotDepth(depth, _info(job, backend, cam, centre, depth))
+            progress(f"{reg}/{cam}: {100 * out[cam].info['valid_share']:.1f} % valid")
+        progress(f"{reg}: {len(jobs)} maps by COLMAP in one run, "
+                 f"{time.perf_counter() - t0:.1f} s")
+        return out
     for k, (cam, job) in enumerate(jobs.items()):
         t0 = time.perf_counter()
         depth = estimate_depth(job.ref_cam, image(job.ref_path), job.src_cams,
