@@ -604,12 +604,26 @@ def synthesis_exp_inputs(wildcards, exp):
 SPLIT_EXPERIMENTS = (3,)
 
 
-def synthesis_params(exp):
-    """The params of scripts/synthesis.py, the same for synthesis_exp<exp> and its _part
-    jobs (the script reads one set of params for both)."""
+#: the verify settings that a synthesis job does not read, by experiment (and Exp. 3's
+#: parts): a change to one of them leaves the job as it is. The parts render and keep each
+#: target's errors per ring of pixels; the join scores them with the PSNR's border.
+SYNTHESIS_UNREAD = {
+    "1": ("exp2_sets", "exp3_view_stride"),
+    "2": ("exp3_view_stride",),
+    "3": ("exp2_sets",),
+    "3_part": ("exp2_sets", "psnr_border_px"),
+}
+
+
+def synthesis_params(exp, part=False):
+    """The params of scripts/synthesis.py for synthesis_exp<exp> (``part``: its _part
+    jobs): the verify settings that the job reads (SYNTHESIS_UNREAD)."""
+    unread = SYNTHESIS_UNREAD[f"{exp}_part" if part else str(exp)]
     return {
         "experiment": exp,
-        "verify": lambda wc: stage_config("verify"),
+        "verify": lambda wc: {
+            k: v for k, v in stage_config("verify").items() if k not in unread
+        },
         "depth": lambda wc: synthesis_depth_config(),
         "views_dir": lambda wc: res(wc.dataset, "views"),
         "array_cams": lambda wc: array_cams(wc.dataset),

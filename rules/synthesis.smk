@@ -66,7 +66,7 @@ for _exp in SPLIT_EXPERIMENTS:
             mem_mb=4000,
             runtime=60,
         params:
-            **synthesis_params(_exp),
+            **synthesis_params(_exp, part=True),
         script:
             "../scripts/synthesis.py"
 

@@ -4,6 +4,9 @@ it holds (experiment, camera sets, metric) in fields of the file."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
+import numpy as np
 import pytest
 
 from plenocal.artifacts.results import (
@@ -87,17 +90,31 @@ def test_gt_errors_round_trip_and_versions(tmp_path):
     _refuses_other_versions(path, read_gt_errors, "gt_errors.json", "run rule gt_errors")
 
 
+def _errors(psnr: dict[str, float]) -> dict[str, dict]:
+    """A run's errors per ring (plenocal.verify.scores) for targets of one pixel whose
+    PSNR is the given one, to rounding."""
+    return {t: {"shape": [1, 1], "sse": np.array([10.0 ** (-db / 10)])}
+            for t, db in psnr.items()}
+
+
+def _rounded(tables: list[PsnrTable]) -> tuple[PsnrTable, ...]:
+    return tuple(replace(t, psnr_db={k: round(v, 9) for k, v in t.psnr_db.items()})
+                 for t in tables)
+
+
 def test_synthesis_round_trip_db_lost_and_versions(tmp_path):
     inputs = ["x00_y00/1_1", "x02_y00/1_1"]
-    runs = {("dibr", "estimated", "ground_truth"): {"inputs": inputs, "psnr": {
-                "x01_y00/1_1": 30.5, "x01_y01/1_1": 31.0}},
-            ("dibr", "estimated", "complete"): {"inputs": inputs, "psnr": {
-                "x01_y00/1_1": 30.0, "x01_y01/1_1": 30.0}},
-            ("dibr", "true", "complete"): {"inputs": inputs, "psnr": {"x01_y00/1_1": 33.0}}}
-    tables = tuple(psnr_tables(1, runs, ["dibr"]))
+    runs = {("dibr", "estimated", "ground_truth"): {"inputs": inputs, "errors": _errors({
+                "x01_y00/1_1": 30.5, "x01_y01/1_1": 31.0})},
+            ("dibr", "estimated", "complete"): {"inputs": inputs, "errors": _errors({
+                "x01_y00/1_1": 30.0, "x01_y01/1_1": 30.0})},
+            ("dibr", "true", "complete"): {"inputs": inputs,
+                                           "errors": _errors({"x01_y00/1_1": 33.0})}}
+    tables = _rounded(psnr_tables(1, runs, ["dibr"], 0))
     # ordered by renderer, depth, cameras: the complete calibration before the truth
     assert [(t.depth, t.cameras) for t in tables] == [
         ("estimated", "complete"), ("estimated", "ground_truth"), ("true", "complete")]
+    assert tables[1].psnr_db == {"x01_y00/1_1": 30.5, "x01_y01/1_1": 31.0}
     quality = DepthQuality(pixels=900, valid_share=0.96, within_share=0.9,
                            within_of_valid=0.9375, median_rel_error=0.0031, tolerance=0.01)
     result = SynthesisResult(experiment=1, renderer="dibr", tables=tables,
@@ -177,15 +194,17 @@ def test_synthesis_figures_are_derived_from_the_tables():
 
 def test_psnr_tables_name_the_runs_of_experiments_2_and_3():
     two = {("rvs", "estimated", "complete"): {"sets": {
-        "x01_y00": {"inputs": ["x01_y00/0_1"], "psnr": {"x01_y00/0_0": 36.0}},
-        "x00_y00": {"inputs": ["x00_y00/0_1"], "psnr": {"x00_y00/0_0": 35.0}}}}}
-    assert [(t.renderer, t.run) for t in psnr_tables(2, two, ["rvs"])] == [
+        "x01_y00": {"inputs": ["x01_y00/0_1"], "errors": _errors({"x01_y00/0_0": 36.0})},
+        "x00_y00": {"inputs": ["x00_y00/0_1"], "errors": _errors({"x00_y00/0_0": 35.0})}}}}
+    assert [(t.renderer, t.run) for t in psnr_tables(2, two, ["rvs"], 0)] == [
         ("rvs", "x00_y00"), ("rvs", "x01_y00")]
-    part = {"inputs": ["x00_y00/1_1"], "psnr": {"x01_y00/0_0": 29.0}}
+    part = {"inputs": ["x00_y00/1_1"], "errors": _errors({"x01_y00/0_0": 29.0})}
     three = {(r, "estimated", "complete"): {"central": part, "lateral": part, "view_stride": 1}
              for r in ("rvs", "dibr")}
-    assert [(t.renderer, t.run) for t in psnr_tables(3, three, ["rvs", "dibr"])] == [
+    tables = psnr_tables(3, three, ["rvs", "dibr"], 0)
+    assert [(t.renderer, t.run) for t in tables] == [
         ("rvs", "central"), ("rvs", "lateral"), ("dibr", "central"), ("dibr", "lateral")]
+    assert _rounded(tables)[0].psnr_db == {"x01_y00/0_0": 29.0}
 
 
 def test_convert_quality_round_trip_and_versions(tmp_path):

@@ -13,6 +13,7 @@ from plenocal.verify.experiments import (
     inner_corner_view,
     layout_from_cams,
 )
+from plenocal.verify.scores import psnr_from_rings
 from plenocal.verify.synthesis import (
     SynthesisContext,
     experiment1,
@@ -54,38 +55,65 @@ def _ctx(root, cams):
                             0.45, 0.8, CFG)
 
 
+def _psnrs(run: dict, border: int = CFG["psnr_border_px"]) -> dict[str, float]:
+    """A run's PSNR per target from its errors per ring (as psnr_tables computes it)."""
+    return {t: psnr_from_rings(e["sse"], e["shape"], border) for t, e in run["errors"].items()}
+
+
+def _mean(run: dict) -> float:
+    return float(np.mean(list(_psnrs(run).values())))
+
+
 def test_experiments_layout_and_psnr(dataset):
     root, cams = dataset
     ctx = _ctx(root, cams)
+    shots = sorted({k.split("/")[0] for k in cams})
     e1, kept = experiment1(ctx)
-    assert len(e1["grid"]) == ROWS and len(e1["grid"][0]) == COLS
-    assert e1["grid"][0][0] is None and e1["grid"][1][2] is None  # corners are inputs
-    assert e1["count"] == COLS * ROWS - 4
-    assert e1["mean_psnr"] > 30.0, e1
+    # every central view but the corners' (the inputs) is a target
+    assert set(_psnrs(e1)) == {f"{c}/1_1" for c in shots} - set(e1["inputs"])
+    assert len(e1["inputs"]) == 4 and len(_psnrs(e1)) == COLS * ROWS - 4
+    assert _mean(e1) > 30.0, _psnrs(e1)
     e2, _ = experiment2(ctx, ["x01_y00"])
-    g = e2["sets"]["x01_y00"]["grid"]
-    assert g[0][1] is None and g[1][0] is None and g[1][2] is None and g[2][1] is None
-    assert e2["mean_psnr"] > 30.0, e2
+    s2 = e2["sets"]["x01_y00"]
+    assert set(s2["inputs"]) == {"x01_y00/0_1", "x01_y00/1_0", "x01_y00/1_2", "x01_y00/2_1"}
+    assert set(_psnrs(s2)) == {f"x01_y00/{v}" for v in view_names(N)} - set(s2["inputs"])
+    assert _mean(s2) > 30.0, _psnrs(s2)
     assert lateral_view(ctx, "x00_y00") == "2_2" and lateral_view(ctx, "x02_y01") == "0_0"
     e3, _ = experiment3(ctx, stride=2)
-    assert len(e3["central"]["grid"]) == ROWS * N
     # stride 2 on a 3 x 3 set keeps the centre view only
-    assert e3["central"]["count"] == COLS * ROWS - 4
-    assert e3["lateral"]["count"] == COLS * ROWS
-    assert e3["lateral"]["mean_psnr"] > 28.0, e3["lateral"]
+    assert len(_psnrs(e3["central"])) == COLS * ROWS - 4
+    assert len(_psnrs(e3["lateral"])) == COLS * ROWS
+    assert _mean(e3["lateral"]) > 28.0, _psnrs(e3["lateral"])
+
+
+def test_runs_do_not_depend_on_the_border(dataset):
+    """The renders' errors are kept per ring of pixels, so a run is the same whatever
+    verify.psnr_border_px says (only the tables made from it change): rule
+    synthesis_exp3_part does not rerun when the border changes."""
+    root, cams = dataset
+    layout = layout_from_cams(sorted({k.split("/")[0] for k in cams}), N)
+    path = lambda c, v: str(root / c / f"{v}.png")  # noqa: E731
+    a, _ = run_experiment(1, cams, path, layout, 0.45, 0.8, {**CFG, "psnr_border_px": 0})
+    b, _ = run_experiment(1, cams, path, layout, 0.45, 0.8, {**CFG, "psnr_border_px": 20})
+    assert a.keys() == b.keys() and a["errors"].keys() == b["errors"].keys()
+    for t in a["errors"]:
+        np.testing.assert_array_equal(a["errors"][t]["sse"], b["errors"][t]["sse"])
+    t0, t20 = (psnr_tables(1, {("dibr", "true", "complete"): a}, ["dibr"], border)[0].psnr_db
+               for border in (0, 20))
+    assert t0.keys() == t20.keys() and all(t0[t] != t20[t] for t in t0)
 
 
 def test_bad_calibration_loses_db(dataset):
     root, cams = dataset
-    good, _ = experiment1(_ctx(root, cams))
+    good = _mean(experiment1(_ctx(root, cams))[0])
     bad_cams = dict(cams)
     k = "x00_y00/1_1"
     M = cams[k].cam_to_world.copy()
     M[0, 3] += 0.002  # a corner input off by 2 mm
     bad_cams[k] = PinholeCamera(cams[k].K, M, W, H)
-    bad, _ = experiment1(_ctx(root, bad_cams))
-    assert bad["mean_psnr"] < good["mean_psnr"] - 1.0, (good["mean_psnr"], bad["mean_psnr"])
-    assert np.isfinite(good["mean_psnr"])
+    bad = _mean(experiment1(_ctx(root, bad_cams))[0])
+    assert bad < good - 1.0, (good, bad)
+    assert np.isfinite(good)
 
 
 def test_plan_and_shared_depth(dataset):
@@ -118,24 +146,25 @@ def test_plan_and_shared_depth(dataset):
                                 0.8, CFG, true)
         runs[("dibr", "true", name)] = runs[("dibr", "estimated", name)] = res
     good, bad = runs[("dibr", "true", "ground_truth")], runs[("dibr", "true", "complete")]
-    assert good["psnr"]["x01_y00/1_1"] > bad["psnr"]["x01_y00/1_1"] + 3.0
+    assert _psnrs(good)["x01_y00/1_1"] > _psnrs(bad)["x01_y00/1_1"] + 3.0
     # the other targets see the same cameras and the same depth: the same PSNR
-    assert good["psnr"]["x01_y01/1_1"] == bad["psnr"]["x01_y01/1_1"]
+    assert _psnrs(good)["x01_y01/1_1"] == _psnrs(bad)["x01_y01/1_1"]
     # the figures the report and bench/ derive from the result's PSNR tables
     res = SynthesisResult(experiment=1, renderer="dibr",
-                          tables=tuple(psnr_tables(1, runs, ["dibr"])),
+                          tables=tuple(psnr_tables(1, runs, ["dibr"], 6)),
                           setup=SynthesisSetup(near_m=0.45, far_m=0.8, psnr_border_px=6,
                                                depth_method="given", depth_quality={}))
     assert res.renderers == ("dibr",)
     lost = res.mean_db_lost("dibr", ("estimated", "complete"), ("estimated", "ground_truth"))
     assert lost == res.mean_db_lost("dibr", ("true", "complete"), ("true", "ground_truth"))
     assert lost[""] > 0.5
-    assert lost[""] == pytest.approx(good["mean_psnr"] - bad["mean_psnr"], abs=1e-12)
+    assert lost[""] == pytest.approx(_mean(good) - _mean(bad), abs=1e-12)
     assert res.mean_db_lost("dibr", ("estimated", "complete"), ("true", "complete")) == {"": 0.0}
     for cameras, r in (("complete", bad), ("ground_truth", good)):
         (s,) = res.psnr_stats("dibr", "estimated", cameras).values()
+        p = list(_psnrs(r).values())
         assert (s.mean_db, s.min_db, s.max_db, s.count) == pytest.approx(
-            (r["mean_psnr"], r["min_psnr"], r["max_psnr"], r["count"]), abs=1e-12)
+            (np.mean(p), min(p), max(p), len(p)), abs=1e-12)
 
 
 def test_threads_render_the_same_images(dataset):
@@ -152,7 +181,11 @@ def test_threads_render_the_same_images(dataset):
     assert list(a) == list(b) == targets
     for t in targets:
         np.testing.assert_array_equal(a[t], b[t])
-    assert one.score(inputs, targets)[0] == two.score(inputs, targets)[0]
+    e1, e2 = one.score(inputs, targets)[0], two.score(inputs, targets)[0]
+    assert list(e1) == list(e2) == targets
+    for t in targets:
+        assert e1[t]["shape"] == e2[t]["shape"]
+        np.testing.assert_array_equal(e1[t]["sse"], e2[t]["sse"])
 
 
 def test_exp3_by_camera_set_joins_to_the_same_result(dataset, tmp_path):
@@ -203,5 +236,5 @@ def test_exp3_by_camera_set_joins_to_the_same_result(dataset, tmp_path):
     with pytest.raises(ValueError, match="cannot be joined"):
         parts[0].joined(other)
     (tmp_path / "old.json").write_text('{"format": "plenocal.synthesis_runs", "version": 0}')
-    with pytest.raises(ValueError, match="not a synthesis runs of version 1"):
+    with pytest.raises(ValueError, match="not a synthesis runs of version 2"):
         read_synthesis_runs(tmp_path / "old.json", tmp_path / "complete.npz")

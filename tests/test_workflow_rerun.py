@@ -74,11 +74,23 @@ def test_complete_run_leaves_nothing_to_do(complete_run: Path):
 
 
 def test_verification_change_reruns_only_verification(complete_run: Path, tmp_path: Path):
+    """How the views are scored (the PSNR's border) reruns the experiments' scoring but
+    not Exp. 3's renders, whose parts keep each target's errors per ring of pixels; how
+    they are rendered (the DIBR's soft z-test) reruns those too; Exp. 2's sets rerun
+    Exp. 2 (and make the new sets' inputs) but not Exp. 1 or 3; nothing before the
+    verification reruns."""
     work = clone(complete_run, tmp_path / "w")
     edit_config(work, lambda c: c.setdefault("verify", {}).update(psnr_border_px=9))
-    jobs = planned(work)
-    assert jobs, "a verification setting changed: its jobs must rerun"
-    assert set(jobs) <= VERIFY_RULES, jobs
+    assert set(planned(work)) == VERIFY_RULES - {"synthesis_exp3_part"}
+    edit_config(work, lambda c: c["verify"].update(dibr={"depth_exponent": 6.0}))
+    assert set(planned(work)) == VERIFY_RULES
+    work = clone(complete_run, tmp_path / "w2")
+    edit_config(work, lambda c: c.setdefault("verify", {}).update(exp2_sets="all"))
+    jobs = set(planned(work))
+    # every set's views: their depth maps, ideal renders and MPEG exports are new jobs
+    assert "synthesis_exp2" in jobs and jobs <= VERIFY_RULES | {
+        "depth_view", "ground_truth_render", "mpeg_views"}, jobs
+    assert not jobs & {"synthesis_exp1", "synthesis_exp3_part", "synthesis_exp3"}, jobs
 
 
 def test_conversion_change_reruns_conversion_and_downstream(complete_run: Path,

@@ -19,6 +19,7 @@ import io
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -380,7 +381,7 @@ def read_synthesis(path: str | Path) -> SynthesisResult:
 # ---------------------------------------------------------------------------
 
 SYNTHESIS_RUNS_FORMAT = "plenocal.synthesis_runs"
-SYNTHESIS_RUNS_VERSION = 1
+SYNTHESIS_RUNS_VERSION = 2  # 2: the targets' errors per ring of pixels, in the .npz
 
 
 @dataclass(frozen=True)
@@ -408,20 +409,49 @@ class SynthesisRuns:
                              {**self.kept, **other.kept})
 
 
+def _arrays_out(obj: Any, arrays: dict[str, np.ndarray]) -> Any:
+    """``obj`` with each array replaced by ``{"npz": "array<k>"}``, the array in
+    ``arrays`` (exact bits: the JSON would round them)."""
+    if isinstance(obj, np.ndarray):
+        key = f"array{len(arrays)}"
+        arrays[key] = obj
+        return {"npz": key}
+    if isinstance(obj, dict):
+        return {k: _arrays_out(v, arrays) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_arrays_out(v, arrays) for v in obj]
+    return obj
+
+
+def _arrays_in(obj: Any, z: Mapping[str, np.ndarray]) -> Any:
+    """:func:`_arrays_out` undone with the .npz ``z``."""
+    if isinstance(obj, dict):
+        if obj.keys() == {"npz"}:
+            return z[obj["npz"]]
+        return {k: _arrays_in(v, z) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_arrays_in(v, z) for v in obj]
+    return obj
+
+
 def write_synthesis_runs(json_path: str | Path, npz_path: str | Path,
                          runs: SynthesisRuns) -> None:
-    """The runs as JSON (format plenocal.synthesis_runs) and their kept images as an
-    uncompressed .npz (``image<i>`` in the JSON's ``kept`` order)."""
+    """The runs as JSON (format plenocal.synthesis_runs) and, in an uncompressed .npz,
+    their kept images (``image<i>`` in the JSON's ``kept`` order) and the arrays of the
+    runs' results (the targets' errors per ring of pixels; ``{"npz": "array<k>"}`` in
+    the JSON)."""
     kept = sorted(runs.kept)
-    buf = io.BytesIO()
-    np.savez(buf, **{f"image{i}": runs.kept[k] for i, k in enumerate(kept)})
-    atomic_write_bytes(npz_path, buf.getvalue())
-    write_json(json_path, {
+    arrays: dict[str, np.ndarray] = {}
+    doc = {
         "format": SYNTHESIS_RUNS_FORMAT, "version": SYNTHESIS_RUNS_VERSION,
         "experiment": runs.experiment, "renderers": list(runs.renderers),
-        "runs": [{"renderer": r, "depth": d, "cameras": c, "result": res}
+        "runs": [{"renderer": r, "depth": d, "cameras": c, "result": _arrays_out(res, arrays)}
                  for (r, d, c), res in sorted(runs.runs.items())],
-        "kept": [{"cameras": c, "key": k} for c, k in kept]})
+        "kept": [{"cameras": c, "key": k} for c, k in kept]}
+    buf = io.BytesIO()
+    np.savez(buf, **{f"image{i}": runs.kept[k] for i, k in enumerate(kept)}, **arrays)
+    atomic_write_bytes(npz_path, buf.getvalue())
+    write_json(json_path, doc)
 
 
 def read_synthesis_runs(json_path: str | Path, npz_path: str | Path) -> SynthesisRuns:
@@ -429,12 +459,13 @@ def read_synthesis_runs(json_path: str | Path, npz_path: str | Path) -> Synthesi
     remedy = "rerun rule synthesis_exp3_part"
 
     def build(doc: dict) -> SynthesisRuns:
-        with np.load(npz_path) as z:
-            kept = {(str(e["cameras"]), str(e["key"])): z[f"image{i}"]
-                    for i, e in enumerate(doc["kept"])}
+        with np.load(npz_path) as npz:
+            z = {k: npz[k] for k in npz.files}
+        kept = {(str(e["cameras"]), str(e["key"])): z[f"image{i}"]
+                for i, e in enumerate(doc["kept"])}
         return SynthesisRuns(int(doc["experiment"]), tuple(doc["renderers"]),
                              {(str(r["renderer"]), str(r["depth"]), str(r["cameras"])):
-                              r["result"] for r in doc["runs"]}, kept)
+                              _arrays_in(r["result"], z) for r in doc["runs"]}, kept)
 
     return decode(json_path, SYNTHESIS_RUNS_FORMAT, SYNTHESIS_RUNS_VERSION,
                   "synthesis runs", remedy, build)

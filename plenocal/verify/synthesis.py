@@ -49,18 +49,16 @@ from plenocal.depth.views import estimate_view_depth
 from plenocal.export.mpeg import mpeg_name
 from plenocal.io.files import read_image, to_float
 from plenocal.names import (
-    array_position,
     key_shot,
-    parse_view,
     split_key,
-    view_name,
 )
-from plenocal.verify.dibr import DibrOptions, PreparedView, View, prepare_view, psnr, synthesize
+from plenocal.verify.dibr import DibrOptions, PreparedView, View, prepare_view, synthesize
 from plenocal.verify.experiments import (
     ArrayLayout,
     all_views,
     experiment_plan,
 )
+from plenocal.verify.scores import error_rings, psnr_from_rings
 
 log = logging.getLogger(__name__)
 
@@ -166,25 +164,29 @@ class SynthesisContext:
         return {t: outs[mpeg_name(t)] for t in targets}
 
     def score(self, inputs: list[str], targets: list[str],
-              keep: set[str] | None = None) -> tuple[dict[str, float], dict[str, np.ndarray]]:
-        border = int(self.config["psnr_border_px"])
-        scores, kept = {}, {}
+              keep: set[str] | None = None) -> tuple[dict[str, dict], dict[str, np.ndarray]]:
+        """Every target rendered from ``inputs`` and its errors against the captured
+        view, per ring of pixels (:func:`plenocal.verify.scores.error_rings`: ``{"shape":
+        [H, W(, C)], "sse": [...]}``, which :func:`psnr_tables` turns into the PSNR with
+        the config's border), and the renders of ``keep``."""
+        errors, kept = {}, {}
         rendered = self.render(inputs, targets)
 
-        def compare(t: str) -> tuple[np.ndarray, float]:
+        def compare(t: str) -> tuple[np.ndarray, np.ndarray]:
             out, truth = rendered[t], self.image(t)
             if out.ndim == 3 and truth.ndim == 2:
                 out = out.mean(axis=2)
-            return out, psnr(out, truth, border)
+            return out, error_rings(out, truth)
 
-        # reading the captured targets and their PSNR, on the job's cores (in order)
+        # reading the captured targets and their errors, on the job's cores (in order)
         with ThreadPoolExecutor(self.workers) as pool:
-            for t, (out, score) in zip(targets, pool.map(compare, targets), strict=True):
-                scores[t] = score
-                log.info("synthesized %s: %.2f dB", t, score)
+            for t, (out, sse) in zip(targets, pool.map(compare, targets), strict=True):
+                errors[t] = {"shape": list(out.shape), "sse": sse}
+                log.info("synthesized %s: %.2f dB over the whole view", t,
+                         psnr_from_rings(sse, out.shape))
                 if keep and t in keep:
                     kept[t] = out
-        return scores, kept
+        return errors, kept
 
 
 def lateral_view(ctx: SynthesisContext, cam: str) -> str:
@@ -206,14 +208,6 @@ def dibr_options(cfg: Mapping) -> DibrOptions:
     return settings_from(DibrOptions, with_defaults("verify", cfg)["dibr"])
 
 
-def _summary(scores: dict[str, float]) -> dict:
-    vals = np.array(list(scores.values()), dtype=float)
-    if len(vals) == 0:
-        return {"mean_psnr": None, "min_psnr": None, "max_psnr": None, "count": 0}
-    return {"mean_psnr": float(vals.mean()), "min_psnr": float(vals.min()),
-            "max_psnr": float(vals.max()), "count": int(len(vals))}
-
-
 def _known(ctx: SynthesisContext, keys: list[str]) -> list[str]:
     return [k for k in keys if k in ctx.cameras]
 
@@ -224,45 +218,34 @@ def experiment1(ctx: SynthesisContext) -> tuple[dict, dict[str, np.ndarray]]:
     cv = L.centre_view
     inputs, targets = experiment_plan(L, 1)["exp1"]
     keep = {f"{L.middle_cam}/{cv}"}
-    scores, kept = ctx.score(inputs, _known(ctx, targets), keep)
-    grid = [[scores.get(f"{L.cam(c, r)}/{cv}") for c in range(L.cols)] for r in range(L.rows)]
-    return {"inputs": inputs, "psnr": scores, "grid": grid, **_summary(scores)}, kept
+    errors, kept = ctx.score(inputs, _known(ctx, targets), keep)
+    return {"inputs": inputs, "errors": errors}, kept
 
 
 def experiment2(ctx: SynthesisContext, cams: list[str]) -> tuple[dict, dict[str, np.ndarray]]:
     """Every view of the N x N sets of ``cams`` from the middle views of their sides."""
     L = ctx.layout
-    n = L.n_views
-    sets, all_scores, kept = {}, {}, {}
+    sets, kept = {}, {}
     for cam in cams:
         inputs, targets = experiment_plan(L, 2, [cam])[f"exp2_{cam}"]
-        scores, k = ctx.score(inputs, _known(ctx, targets), {f"{cam}/{L.centre_view}"})
+        errors, k = ctx.score(inputs, _known(ctx, targets), {f"{cam}/{L.centre_view}"})
         kept.update(k)
-        grid = [[scores.get(f"{cam}/{view_name(r, c)}") for c in range(n)] for r in range(n)]
-        sets[cam] = {"inputs": inputs, "psnr": scores, "grid": grid, **_summary(scores)}
-        all_scores.update(scores)
-    return {"sets": sets, **_summary(all_scores)}, kept
+        sets[cam] = {"inputs": inputs, "errors": errors}
+    return {"sets": sets}, kept
 
 
 def experiment3(ctx: SynthesisContext, stride: int = 1) -> tuple[dict, dict[str, np.ndarray]]:
     """Every view of every array shot (every ``stride``-th view row/column, the centre
     always included) from the corner shots' central (a) and lateral (b) views."""
     L = ctx.layout
-    n = L.n_views
     plan = experiment_plan(L, 3, stride=stride, lateral=lambda c: lateral_view(ctx, c))
     result, kept = {}, {}
     for variant in ("central", "lateral"):
         inputs, targets = plan[f"exp3_{variant}"]
         keep = {f"{L.middle_cam}/{L.centre_view}"}
-        scores, k = ctx.score(inputs, _known(ctx, targets), keep)
+        errors, k = ctx.score(inputs, _known(ctx, targets), keep)
         kept.update({f"{variant}:{key}": img for key, img in k.items()})
-        grid = [[None] * (L.cols * n) for _ in range(L.rows * n)]
-        for key, val in scores.items():
-            cam, view = split_key(key)
-            r, c = parse_view(view)
-            col, row = array_position(cam)
-            grid[row * n + r][col * n + c] = val
-        result[variant] = {"inputs": inputs, "psnr": scores, "grid": grid, **_summary(scores)}
+        result[variant] = {"inputs": inputs, "errors": errors}
     result["view_stride"] = stride
     return result, kept
 
@@ -368,17 +351,19 @@ def synthesis_result(runs: SynthesisRuns, depths: dict[str, dict[str, np.ndarray
         kept_images.append(SynthImage(f"{synth_rel}/{name}", view, cname,
                                       variant or (key_shot(view) if exp == 2 else "")))
     result = SynthesisResult(experiment=exp, renderer=renderers[0],
-                             tables=tuple(psnr_tables(exp, runs.runs, renderers)),
+                             tables=tuple(psnr_tables(exp, runs.runs, renderers, border)),
                              setup=setup, images=tuple(kept_images))
     return result, files
 
 
 def psnr_tables(exp: int, runs: dict[tuple[str, str, str], dict],
-                renderers: list[str]) -> list[PsnrTable]:
+                renderers: list[str], border: int) -> list[PsnrTable]:
     """The PSNR tables of ``runs[(renderer, depth, cameras)]`` (the results of
     :func:`run_experiment`), one per run of the experiment: Exp. 1 one, Exp. 2 one per
     set (``run`` = its shot), Exp. 3 one per input choice (``central``, ``lateral``).
-    Ordered by renderer (as given), depth, camera set and run."""
+    Ordered by renderer (as given), depth, camera set and run; each target's PSNR
+    excludes ``border`` pixels (config ``verify.psnr_border_px``, from its errors per
+    ring, :func:`plenocal.verify.scores.psnr_from_rings`)."""
     def parts(res: dict) -> dict[str, dict]:
         if exp == 1:
             return {"": res}
@@ -394,5 +379,7 @@ def psnr_tables(exp: int, runs: dict[tuple[str, str, str], dict],
                 if res is None:
                     continue
                 out += [PsnrTable(renderer, depth, cameras, run, tuple(r["inputs"]),
-                                  dict(r["psnr"])) for run, r in sorted(parts(res).items())]
+                                  {t: psnr_from_rings(e["sse"], e["shape"], border)
+                                   for t, e in r["errors"].items()})
+                        for run, r in sorted(parts(res).items())]
     return out

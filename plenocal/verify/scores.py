@@ -1,0 +1,74 @@
+"""PSNR of a synthesized view against the captured one, excluding a border, in two steps:
+the squared errors summed per ring of pixels at the same distance from the image's edge
+(:func:`error_rings`, where the view is rendered), then the PSNR for any border from those
+sums (:func:`psnr_from_rings`, where the experiment is scored). A change of the border
+(config ``verify.psnr_border_px``) then rescores the renders without rendering them again.
+
+Ring ``r`` holds the pixels ``(y, x)`` with ``min(y, x, H - 1 - y, W - 1 - x) = r``; a
+border of ``b`` pixels excludes exactly the rings ``r < b``, the pixels that
+``img[b:-b, b:-b]`` leaves out (:func:`plenocal.verify.dibr.psnr`).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+
+@functools.lru_cache(maxsize=8)
+def ring_index(height: int, width: int) -> np.ndarray:
+    """(H * W,) int64: each pixel's ring, its distance in pixels to the nearest edge, in
+    row order (read-only, cached per size)."""
+    y = np.arange(height)[:, None]
+    x = np.arange(width)[None, :]
+    ring = np.minimum(np.minimum(y, height - 1 - y), np.minimum(x, width - 1 - x))
+    out = np.ascontiguousarray(ring.ravel(), dtype=np.int64)
+    out.flags.writeable = False
+    return out
+
+
+def num_rings(height: int, width: int) -> int:
+    """The number of rings of an H x W image: ``(min(H, W) + 1) // 2``."""
+    return (min(height, width) + 1) // 2
+
+
+def error_rings(out: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Squared differences of two float images of one shape (H, W) or (H, W, C), in
+    float64, summed over the channels and over each ring (:func:`ring_index`, in pixel
+    order): (num_rings,) float64."""
+    a = np.asarray(out)
+    b = np.asarray(truth)
+    if a.shape != b.shape:
+        raise ValueError(f"PSNR of images of different shapes {a.shape} and {b.shape}")
+    d = np.subtract(a, b, dtype=np.float64)
+    np.square(d, out=d)
+    if d.ndim == 3:
+        d = d.sum(axis=2)
+    H, W = d.shape
+    return np.bincount(ring_index(H, W), weights=d.ravel(), minlength=num_rings(H, W))
+
+
+def ring_sizes(shape: tuple[int, ...]) -> np.ndarray:
+    """(num_rings,) int64: the values (pixels times channels) of each ring of an image of
+    ``shape``."""
+    H, W = int(shape[0]), int(shape[1])
+    channels = int(shape[2]) if len(shape) == 3 else 1
+    return np.bincount(ring_index(H, W), minlength=num_rings(H, W)) * channels
+
+
+def psnr_from_rings(sse: np.ndarray, shape: tuple[int, ...], border: int = 0,
+                    peak: float = 1.0) -> float:
+    """PSNR (dB) from the ring sums ``sse`` (:func:`error_rings`) of an image of
+    ``shape``, excluding ``border`` pixels: ``10 log10(peak^2 / MSE)``, the MSE over the
+    rings ``r >= border``; inf where it is 0."""
+    sse = np.asarray(sse, dtype=np.float64)
+    sizes = ring_sizes(tuple(shape))
+    if sse.shape != sizes.shape:
+        raise ValueError(f"{sse.shape[0]} ring sums for an image of shape {tuple(shape)} "
+                         f"({sizes.shape[0]} rings)")
+    if not 0 <= border < sizes.shape[0]:
+        raise ValueError(f"config: verify.psnr_border_px = {border} leaves no pixel of a "
+                         f"{shape[1]} x {shape[0]} view: use 0 to {sizes.shape[0] - 1}")
+    mse = float(sse[border:].sum()) / float(sizes[border:].sum())
+    return float("inf") if mse == 0 else float(10.0 * np.log10(peak * peak / mse))
