@@ -57,18 +57,26 @@ def cuda_available() -> tuple[bool, str]:
     return out.returncode == 0, lines[-1]
 
 
-def resolve_device(name: str, key: str = "sfm.device") -> str:
-    """The device of a COLMAP step from the config's value ``name`` at ``key``:
-    ``auto`` -> ``cuda`` where :func:`cuda_available`, else ``cpu``; ``cpu`` as it is;
-    ``cuda`` where it cannot run -> :class:`GpuUnavailableError`."""
-    if name == "cpu":
+def resolve_auto(name: str, key: str, cpu: str, gpu: str,
+                 error: type[RuntimeError] = GpuUnavailableError) -> str:
+    """The choice of the config's value ``name`` at ``key`` between a CPU path ``cpu``
+    and COLMAP's CUDA path ``gpu``: ``auto`` -> ``gpu`` where :func:`cuda_available`, else
+    ``cpu``; ``cpu`` as it is; ``gpu`` where it cannot run -> ``error``, naming the key,
+    the reason and the remedy."""
+    if name == cpu:
         return name
-    if name not in ("auto", "cuda"):
-        raise ValueError(f"config: {key} = {name!r}: must be auto, cpu or cuda")
+    if name not in ("auto", gpu):
+        raise ValueError(f"config: {key} = {name!r}: must be auto, {cpu} or {gpu}")
     ok, why = cuda_available()
     if ok:
-        return "cuda"
-    if name == "cuda":
-        raise GpuUnavailableError(f"config: {key} = cuda, but COLMAP's CUDA code cannot run "
-                                  f"here ({why}): {CUDA_HINT}, or set {key}: auto or cpu")
-    return "cpu"
+        return gpu
+    if name == gpu:
+        raise error(f"config: {key} = {gpu}, but COLMAP's CUDA code cannot run here ({why}): "
+                    f"{CUDA_HINT}, or set {key}: auto or {cpu}")
+    return cpu
+
+
+def resolve_device(name: str, key: str = "sfm.device") -> str:
+    """The device of a COLMAP step (config ``sfm.device``): ``cpu`` or ``cuda``
+    (:func:`resolve_auto`)."""
+    return resolve_auto(name, key, "cpu", "cuda")

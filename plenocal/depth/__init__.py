@@ -13,15 +13,14 @@ import numpy as np
 from plenocal.camera import PinholeCamera
 from plenocal.config import settings_from, with_defaults
 from plenocal.depth.colmap_mvs import (
-    COLMAP_HINT,
     ColmapOptions,
     DepthBackendError,
     MvsProblem,
-    colmap_available,
     colmap_depth,
     colmap_depths,
 )
 from plenocal.depth.planesweep import PlaneSweepOptions, plane_sweep_depth
+from plenocal.gpu import resolve_auto
 
 __all__ = ["DepthBackendError", "MvsProblem", "colmap_depths_in_one_run", "estimate_depth",
            "planesweep_options", "resolve_backend"]
@@ -40,18 +39,10 @@ def colmap_options(cfg: dict | None) -> ColmapOptions:
 
 
 def resolve_backend(name: str) -> str:
-    """``auto`` -> colmap where it can run (CUDA build and a GPU, probed in a
-    subprocess), else planesweep; ``colmap`` where it cannot -> DepthBackendError."""
-    if name == "planesweep":
-        return name
-    if name not in ("auto", "colmap"):
-        raise ValueError(f"config: depth.backend = {name!r}: must be auto, planesweep or colmap")
-    ok, why = colmap_available()
-    if ok:
-        return "colmap"
-    if name == "colmap":
-        raise DepthBackendError(f"depth backend 'colmap' cannot run here ({why}): {COLMAP_HINT}")
-    return "planesweep"
+    """Config ``depth.backend``: ``auto`` -> colmap where it can run (a CUDA pycolmap and a
+    GPU, probed in a subprocess), else planesweep; ``colmap`` where it cannot ->
+    DepthBackendError (:func:`plenocal.gpu.resolve_auto`)."""
+    return resolve_auto(name, "depth.backend", "planesweep", "colmap", DepthBackendError)
 
 
 def colmap_depths_in_one_run(problems: list[MvsProblem], cfg: dict | None = None

@@ -25,12 +25,12 @@ import numpy as np
 
 from plenocal.camera import PinholeCamera, k_to_colmap
 from plenocal.config import stage_defaults
-from plenocal.gpu import CUDA_HINT, cuda_available
+from plenocal.gpu import CUDA_HINT, GpuUnavailableError, cuda_available
 from plenocal.io.files import atomic_write_text, to_float, to_uint8, write_image, write_json
 
 
-class DepthBackendError(RuntimeError):
-    """A depth backend that cannot run here."""
+class DepthBackendError(GpuUnavailableError):
+    """A depth backend that cannot run here (or COLMAP's patch-match that failed)."""
 
 
 COLMAP_HINT = f"{CUDA_HINT}, or use depth.backend: planesweep"
