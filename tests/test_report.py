@@ -117,7 +117,9 @@ def make_results(root: Path) -> Path:
     array = [c for c in CAMS if c.startswith("x")]
 
     def scores(keys, base):
-        return {"psnr": {k: base + 0.5 * i for i, k in enumerate(keys)}}
+        # each target one pixel whose error gives the PSNR base + 0.5 i (to rounding)
+        return {"errors": {k: {"shape": [1, 1], "sse": np.array([10 ** (-(base + 0.5 * i) / 10)])}
+                           for i, k in enumerate(keys)}}
 
     runs1 = {("dibr", "estimated", name): dict(
         scores([f"{c}/1_1" for c in array if c not in corners], 28.0 + off),
@@ -151,7 +153,7 @@ def make_results(root: Path) -> Path:
                                      cameras_, run))
             k += 1
         typed.write_synthesis(res / "eval" / f"synthesis_exp{exp}.json", typed.SynthesisResult(
-            experiment=exp, renderer="dibr", tables=tuple(psnr_tables(exp, runs, ["dibr"])),
+            experiment=exp, renderer="dibr", tables=tuple(psnr_tables(exp, runs, ["dibr"], 0)),
             setup=typed.SynthesisSetup(near_m=0.4, far_m=0.8, psnr_border_px=8,
                                        depth_method="sgm", depth_quality={},
                                        view_stride=1 if exp == 3 else None),
