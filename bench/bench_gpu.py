@@ -27,14 +27,13 @@ import json
 import shutil
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_workflow import ROOT, make_copy, rule_benchmarks  # noqa: E402
+from bench_workflow import ROOT, make_copy, rule_benchmarks, snakemake  # noqa: E402
 
 #: the rules whose device or backend the two runs change
 CHANGED = ("features_a", "match_a", "view_features", "view_matches", "depth_a", "depth_b")
@@ -46,21 +45,6 @@ RUNS = {
     "gpu_sift": {"sfm": {"device": "cuda", "sift": "auto"}, "depth": {"backend": "planesweep"}},
     "gpu": {"sfm": {"device": "cuda", "sift": "auto"}, "depth": {"backend": "colmap"}},
 }
-
-
-def run_snakemake(work: Path, jobs: int, *targets: str) -> float:
-    import subprocess  # noqa: PLC0415
-
-    cmd = [sys.executable, "-m", "snakemake", f"-j{jobs}", "--workflow-profile", "none",
-           "--scheduler", "greedy", *targets]
-    t0 = time.perf_counter()
-    proc = subprocess.run(cmd, cwd=work, capture_output=True, text=True)
-    wall = time.perf_counter() - t0
-    (work / f"snakemake_{int(t0)}.log").write_text(proc.stdout + proc.stderr)
-    if proc.returncode != 0:
-        raise RuntimeError(f"snakemake {' '.join(targets)} failed in {work}:\n"
-                           f"{(proc.stdout + proc.stderr)[-4000:]}")
-    return wall
 
 
 def depth_scores(results: Path, reg: str) -> dict:
@@ -101,7 +85,7 @@ def one_run(work: Path, config: dict, label: str, jobs: int, ds: str) -> dict:
         cfg.setdefault(section, {}).update(values)
     (work / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
     targets = [f"results/{ds}/eval/gt_errors.json", f"results/{ds}/matches/matches.json"]
-    wall = run_snakemake(work, jobs, *targets)
+    wall, _ = snakemake(work, *targets, jobs=jobs, log=work / f"snakemake_{label}.log")
     results = work / "results" / ds
     # the true depth of the depth maps' reference views (the ideal renders' rule)
     truth = []
@@ -109,7 +93,8 @@ def one_run(work: Path, config: dict, label: str, jobs: int, ds: str) -> dict:
         cam, view = json.loads(info_path.read_text())["reference"].split("/")
         truth.append(f"results/{ds}/ground_truth/depth/{cam}/{view}.npy")
     if truth:
-        run_snakemake(work, jobs, *sorted(set(truth)))
+        snakemake(work, *sorted(set(truth)), jobs=jobs,
+                  log=work / f"snakemake_{label}_truth.log")
     shutil.copytree(results / "logs", work / f"logs_{label}", dirs_exist_ok=True)
     checks = json.loads((results / "eval" / "gt_errors.json").read_text())["checks"]
     rules = rule_benchmarks(work)

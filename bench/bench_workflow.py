@@ -56,9 +56,9 @@ def make_copy(dest: Path, config: dict) -> Path:
 
 
 def snakemake(workdir: Path, *args: str, log: Path | None = None,
-              env: dict | None = None) -> tuple[float, str]:
+              env: dict | None = None, jobs: int = 2) -> tuple[float, str]:
     # the scheduling of profiles/default (the README's `snakemake -j2`), without its logging
-    cmd = [sys.executable, "-m", "snakemake", "-j2", "--workflow-profile", "none",
+    cmd = [sys.executable, "-m", "snakemake", f"-j{jobs}", "--workflow-profile", "none",
            "--scheduler", "greedy", *args]
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, env=env)

@@ -16,7 +16,6 @@ from plenocal.depth.colmap_mvs import (
     ColmapOptions,
     DepthBackendError,
     MvsProblem,
-    colmap_depth,
     colmap_depths,
 )
 from plenocal.depth.planesweep import PlaneSweepOptions, plane_sweep_depth
@@ -45,11 +44,13 @@ def resolve_backend(name: str) -> str:
     return resolve_auto(name, "depth.backend", "planesweep", "colmap", DepthBackendError)
 
 
-def colmap_depths_in_one_run(problems: list[MvsProblem], cfg: dict | None = None
-                             ) -> list[np.ndarray]:
+def colmap_depths_in_one_run(problems: list[MvsProblem], cfg: dict | None = None,
+                             workspace: str | Path | None = None) -> list[np.ndarray]:
     """Z-depth maps of several references by COLMAP's patch-match stereo in one run (one
-    child process and CUDA context for all, a temporary workspace); ``cfg``: the config's
-    ``depth`` block, partial or whole."""
+    child process and CUDA context for all) in ``workspace`` (None: a temporary one);
+    ``cfg``: the config's ``depth`` block, partial or whole."""
+    if workspace is not None:
+        return colmap_depths(problems, workspace, colmap_options(cfg))
     with tempfile.TemporaryDirectory(prefix="plenocal_mvs_") as tmp:
         return colmap_depths(problems, tmp, colmap_options(cfg))
 
@@ -69,8 +70,5 @@ def estimate_depth(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCa
     if backend == "planesweep":
         return plane_sweep_depth(ref, ref_img, srcs, src_imgs, near, far,
                                  planesweep_options(cfg))
-    if workspace is None:
-        with tempfile.TemporaryDirectory(prefix="plenocal_mvs_") as tmp:
-            return colmap_depth(ref, ref_img, srcs, src_imgs, near, far, tmp,
-                                colmap_options(cfg))
-    return colmap_depth(ref, ref_img, srcs, src_imgs, near, far, workspace, colmap_options(cfg))
+    return colmap_depths_in_one_run([MvsProblem(ref, ref_img, srcs, src_imgs, near, far)], cfg,
+                                    workspace)[0]

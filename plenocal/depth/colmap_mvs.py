@@ -201,14 +201,6 @@ def read_colmap_array(path: str | Path) -> np.ndarray:
     return arr[..., 0] if c == 1 else arr
 
 
-def colmap_depth(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCamera],
-                 src_imgs: list[np.ndarray], near: float, far: float, workspace: str | Path,
-                 opt: ColmapOptions | None = None) -> np.ndarray:
-    """Z-depth of the reference by patch-match stereo (0 invalid)."""
-    return colmap_depths([MvsProblem(ref, ref_img, srcs, src_imgs, near, far)], workspace,
-                         opt)[0]
-
-
 def colmap_depths(problems: list[MvsProblem], workspace: str | Path,
                   opt: ColmapOptions | None = None) -> list[np.ndarray]:
     """Z-depth of every problem's reference by patch-match stereo (0 invalid), in one

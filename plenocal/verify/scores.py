@@ -44,17 +44,29 @@ def error_rings(out: np.ndarray, truth: np.ndarray) -> np.ndarray:
     d = np.subtract(a, b, dtype=np.float64)
     np.square(d, out=d)
     if d.ndim == 3:
-        d = d.sum(axis=2)
+        # channel by channel, in order: the bits of d.sum(axis=2), whose reduction along
+        # the short last axis took 3.0 ms of a 500 x 376 view against 0.5 ms
+        total = d[..., 0].copy()
+        for c in range(1, d.shape[2]):
+            total += d[..., c]
+        d = total
     H, W = d.shape
     return np.bincount(ring_index(H, W), weights=d.ravel(), minlength=num_rings(H, W))
 
 
+@functools.lru_cache(maxsize=8)
+def _pixels_per_ring(height: int, width: int) -> np.ndarray:
+    out = np.bincount(ring_index(height, width), minlength=num_rings(height, width))
+    out.flags.writeable = False
+    return out
+
+
 def ring_sizes(shape: tuple[int, ...]) -> np.ndarray:
     """(num_rings,) int64: the values (pixels times channels) of each ring of an image of
-    ``shape``."""
-    H, W = int(shape[0]), int(shape[1])
+    ``shape`` (the pixels counted once per size: every target of a run is scored with
+    them)."""
     channels = int(shape[2]) if len(shape) == 3 else 1
-    return np.bincount(ring_index(H, W), minlength=num_rings(H, W)) * channels
+    return _pixels_per_ring(int(shape[0]), int(shape[1])) * channels
 
 
 def psnr_from_rings(sse: np.ndarray, shape: tuple[int, ...], border: int = 0,

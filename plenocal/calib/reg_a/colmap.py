@@ -26,6 +26,7 @@ import numpy as np
 
 from plenocal.camera import PinholeCamera, invert_pose, k_from_colmap, k_to_colmap
 from plenocal.config import stage_defaults
+from plenocal.gpu import resolve_device
 
 log = logging.getLogger(__name__)
 
@@ -87,10 +88,14 @@ def resolve_sfm_device(sfm: Mapping) -> tuple[bool, str]:
     """(use the GPU, SIFT extractor) of the config's ``sfm`` block: ``sfm.device``
     resolved by :func:`plenocal.gpu.resolve_device` (``auto``: the GPU where COLMAP's
     CUDA code can run), then ``sfm.sift`` (:func:`resolve_extractor`)."""
-    from plenocal.gpu import resolve_device  # noqa: PLC0415
-
     use_gpu = resolve_device(sfm["device"], "sfm.device") == "cuda"
     return use_gpu, resolve_extractor(sfm["sift"], use_gpu)
+
+
+def sift_device(extractor: str, use_gpu: bool) -> str:
+    """Where ``extractor``'s SIFT runs: ``cuda`` for COLMAP's with ``use_gpu`` (SiftGPU),
+    else ``cpu`` (OpenCV's always)."""
+    return "cuda" if use_gpu and extractor == "colmap" else "cpu"
 
 
 def _device(use_gpu: bool):
@@ -135,7 +140,7 @@ def extract_features(database: str | Path, image_dir: str | Path,
     if extractor not in EXTRACTORS:
         raise ValueError(f"SIFT extractor {extractor!r}: use one of {', '.join(EXTRACTORS)} "
                          "(config key sfm.sift)")
-    device = _device(use_gpu and extractor == "colmap")
+    device = _device(sift_device(extractor, use_gpu) == "cuda")
     if extractor == "opencv" and first_octave != -1:
         raise ValueError(f"OpenCV's SIFT starts on the image upsampled 2x (first octave -1),"
                          f" not {first_octave}: use sfm.sift colmap for another first octave")
@@ -180,8 +185,8 @@ def extract_features(database: str | Path, image_dir: str | Path,
                                    camera_mode=pycolmap.CameraMode.SINGLE, image_names=names,
                                    options=reader)
             _write_opencv_sift(database, Path(image_dir), set(names), max_num_features)
-        log.info("features (%s SIFT on the %s): %d images of group %s", extractor,
-                 "GPU" if use_gpu and extractor == "colmap" else "CPU", len(names), names[0])
+        log.info("features (%s SIFT, %s): %d images of group %s", extractor,
+                 sift_device(extractor, use_gpu), len(names), names[0])
 
 
 def _write_opencv_sift(database: Path, image_dir: Path, names: set[str],

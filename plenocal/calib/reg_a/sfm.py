@@ -103,7 +103,7 @@ def features_a(views: Mapping[str, str | Path], image_dir: str | Path,
         log.warning("%s", warnings[-1])
     # read by the report's Warnings box (plenocal.report.sources)
     return {"num_images": len(kp), "keypoints": kp, "sift": extractor,
-            "device": "cuda" if use_gpu and extractor == "colmap" else "cpu",
+            "device": cm.sift_device(extractor, use_gpu),
             WARNINGS_KEY: warning_list(warnings)}
 
 

@@ -139,7 +139,7 @@ def extract_view_features(images: Mapping[str, str | Path], database: str | Path
              np.mean(kp), seconds)
     return {"num_images": len(names), "keypoints_mean": float(np.mean(kp)),
             "keypoints_min": int(min(kp)), "first_octave": first_octave, "sift": extractor,
-            "device": "cuda" if use_gpu and extractor == "colmap" else "cpu",
+            "device": cm.sift_device(extractor, use_gpu),
             "features_s": seconds}
 
 
