@@ -6,10 +6,12 @@ convert_views_<k> render the other views from the measurements, beside registrat
 On synthetic datasets also the views' quality against the simulator's ideal renders (rule
 convert_quality).
 
-Snakemake outputs cannot be functions of the wildcards, and every view is declared as
-an output, so the rules are defined per dataset (whose shots and N they know): convert_<k>
+Snakemake outputs cannot be functions of the wildcards, and each shot's files are declared
+as outputs, so the rules are defined per dataset (whose shots and N they know): convert_<k>
 for the first, convert_<i>_<k> for the i-th other (common.smk chunk_rule); their files
-are named in full (common.smk dataset_path)."""
+are named in full (common.smk dataset_path). Rules convert_views_<k> declare each shot's
+views.json, which the consumers read, and only those of its views that are not on disk
+(common.smk missing_views: the no-op's DAG)."""
 
 
 rule convert_setup:
@@ -97,12 +99,8 @@ for _i, _d in enumerate(DATASETS):
                 camera=data(_d, "camera.yaml"),
                 setup=res(_d, "views", "convert_setup.json"),
             output:
-                views=[
-                    res(_d, "views", c, f"{v}.png")
-                    for c in _chunk
-                    for v in views(_d)
-                    if v != centre(_d)
-                ],
+                # only those not on disk: the consumers read views.json (missing_views)
+                views=missing_views(_d, _chunk),
                 view_set=[view_set(_d, c) for c in _chunk],
             log:
                 dataset_path(

@@ -17,6 +17,8 @@ import pytest
 import yaml
 from conftest import snakemake
 
+from plenocal.names import central_view, view_names
+
 VERIFY_RULES = {"synthesis_exp1", "synthesis_exp2", "synthesis_exp3_part", "synthesis_exp3",
                 "report", "all"}
 
@@ -103,6 +105,27 @@ def test_conversion_change_reruns_conversion_and_downstream(complete_run: Path,
     for rule in ("features_a", "map_a", "rig_b", "depth_a", "depth_b", "scale", "merge",
                  "report"):
         assert rule in jobs, (rule, jobs)
+
+
+def test_deleted_view_reruns_its_conversion(complete_run: Path, tmp_path: Path):
+    """The views on disk are not in the DAG (rules/common.smk missing_views): a view
+    deleted by hand is declared again, so its conversion job reruns, and a full run
+    brings it back with the same bytes."""
+    work = clone(complete_run, tmp_path / "w")
+    shot = sorted(p for p in (work / "results/tiny/views").iterdir() if p.is_dir())[0]
+    n = yaml.safe_load((work / "config.yaml").read_text())["datasets"]["tiny"]["views"]
+    view = shot / f"{view_names(n)[0]}.png"
+    assert view.stem != central_view(n) and view.is_file()
+    before = view.read_bytes()
+    view.unlink()
+    jobs = planned(work)
+    assert jobs.get("convert_views") == 1, jobs
+    assert "convert" not in jobs and "simulate" not in jobs, jobs
+    proc = snakemake(work, "-j2", str(view.relative_to(work)))
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    assert view.read_bytes() == before
+    # the shot's views.json is written again with the same bytes: nothing else reruns
+    assert planned(work) == {}
 
 
 def test_script_edit_reruns_that_rule_and_dependants(complete_run: Path, tmp_path: Path):

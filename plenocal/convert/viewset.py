@@ -9,8 +9,9 @@ the depth maps and view synthesis of the verification, the MPEG exports) take th
 as their input instead of the N x N PNGs: Snakemake looks every input up among all the
 rules' outputs and checks it again for each consumer, and the views were 4,188 of the
 4,891 look-ups of the default run's DAG - most of a no-op rerun (issue 15). A consumer
-still reruns when a view changes (the list's checksum changes), and a deleted view
-brings rule ``convert_views`` back (its output is missing).
+still reruns when a view changes (the list's checksum changes). The views on disk are
+not outputs in the DAG at all (``rules/common.smk`` ``missing_views``); a deleted view is
+declared and asked for again, so rule ``convert_views`` brings it back.
 
 The document: ``{"format": "plenocal.view_set", "version": 1, "shot": <shot>,
 "views": {<view name>: <sha256 hex>, ...}}``, keys sorted, written atomically.
