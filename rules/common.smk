@@ -242,8 +242,8 @@ def convert_quality_views(wildcards):
 def convert_targets(dataset):
     """Per shot, one output of each conversion job (disparity.json, views.json) and the
     views that are not on disk (missing_views): the DAG matches two paths per shot
-    instead of N x N + 1 (the no-op's time, issue 15), and a view deleted by hand is asked
-    for again (Snakemake reruns a job for a missing output only where it is asked for)."""
+    instead of N x N + 1 (the no-op's time, issue 15), and a view deleted by hand is
+    asked for again (Snakemake reruns a job for a missing output only where asked)."""
     out = [res(dataset, "views", c, "disparity.json") for c in cams(dataset)]
     out += view_sets(dataset, cams(dataset))
     # a view deleted by hand: asked for, so that its job reruns (missing_views)
