@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 
+import numba
 import numpy as np
 
 
@@ -33,6 +34,25 @@ def num_rings(height: int, width: int) -> int:
     return (min(height, width) + 1) // 2
 
 
+@numba.njit(cache=True, nogil=True)
+def _ring_sums(a, b, rings):  # pragma: no cover - numba
+    """Per pixel of two (H, W, C) float images in row order, the squared differences in
+    float64 summed over the channels in order and added to the pixel's ring: the bits of
+    numpy's ``np.subtract(a, b, dtype=float64)``, squared, summed channel by channel
+    and ``np.bincount``-ed (which adds in pixel order), in one pass without temporaries
+    (2.1 -> 0.7 ms a 500 x 376 view)."""
+    H, W, C = a.shape
+    for y in range(H):
+        for x in range(W):
+            r = min(min(y, H - 1 - y), min(x, W - 1 - x))
+            d = np.float64(a[y, x, 0]) - np.float64(b[y, x, 0])
+            s = d * d
+            for c in range(1, C):
+                d = np.float64(a[y, x, c]) - np.float64(b[y, x, c])
+                s += d * d
+            rings[r] += s
+
+
 def error_rings(out: np.ndarray, truth: np.ndarray) -> np.ndarray:
     """Squared differences of two float images of one shape (H, W) or (H, W, C), in
     float64, summed over the channels and over each ring (:func:`ring_index`, in pixel
@@ -41,17 +61,12 @@ def error_rings(out: np.ndarray, truth: np.ndarray) -> np.ndarray:
     b = np.asarray(truth)
     if a.shape != b.shape:
         raise ValueError(f"PSNR of images of different shapes {a.shape} and {b.shape}")
-    d = np.subtract(a, b, dtype=np.float64)
-    np.square(d, out=d)
-    if d.ndim == 3:
-        # channel by channel, in order: the bits of d.sum(axis=2), whose reduction along
-        # the short last axis took 3.0 ms of a 500 x 376 view against 0.5 ms
-        total = d[..., 0].copy()
-        for c in range(1, d.shape[2]):
-            total += d[..., c]
-        d = total
-    H, W = d.shape
-    return np.bincount(ring_index(H, W), weights=d.ravel(), minlength=num_rings(H, W))
+    if a.ndim == 2:
+        a, b = a[..., None], b[..., None]
+    H, W = a.shape[:2]
+    rings = np.zeros(num_rings(H, W))
+    _ring_sums(np.ascontiguousarray(a), np.ascontiguousarray(b), rings)
+    return rings
 
 
 @functools.lru_cache(maxsize=8)

@@ -176,7 +176,12 @@ def _blend(colour, z, w, q, z_tolerance, depth_exponent):  # pragma: no cover - 
                 wt = np.float64(wi) * q[i]
                 if depth_exponent > 0:
                     r = np.float32(zmin / zi)
-                    wt = wt * np.float64(r ** exponent)
+                    # an integer exponent: the float64 power rounded to float32 (as the
+                    # DIBR since the seventeenth session; powf is not correctly rounded)
+                    e = int(depth_exponent)
+                    p = (np.float32(np.float64(r) ** e) if e == depth_exponent and 1 <= e <= 64
+                         else r ** exponent)
+                    wt = wt * np.float64(p)
                 t += wt
                 for c in range(C):
                     acc[c] += wt * np.float64(colour[i, y, x, c])
