@@ -257,9 +257,10 @@ def _splat(depth, Kinv, R, C, K_t, R_t, t_t, zbuf):  # pragma: no cover - numba
     reads took longer than the arithmetic. The products are summed term by term in this
     order, not by BLAS: where a point projects exactly onto a pixel boundary - with the
     ground-truth cameras of an array one image coordinate is an integer for half the
-    points - the last bit decides which pixels the splat covers, so such renders differ from the earlier numpy
-    version (Exp. 1 with true depth and ground-truth cameras -0.026 dB, elsewhere at most
-    0.003 dB; with the calibration's cameras the same to 1e-7 dB)."""
+    points - the last bit decides which pixels the splat covers, so such renders differ
+    from the earlier numpy version (Exp. 1 with true depth and ground-truth cameras
+    -0.026 dB, elsewhere at most 0.003 dB; with the calibration's cameras the same to
+    1e-7 dB)."""
     H, W = depth.shape
     Ht, Wt = zbuf.shape
     us = np.empty(W)
