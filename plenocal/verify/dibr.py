@@ -27,9 +27,11 @@ across a depth discontinuity draw - and what remains (holes open to the image bo
 by push-pull interpolation.
 
 What does not depend on the target is computed once per input (:class:`PreparedView`:
-dense depth, its discontinuities); the colour is sampled only where a
-sample is blended. Each step keeps the arithmetic and order of the straightforward
-version (tests/synth/dibr_previous.py), so the renders are the same bits.
+dense depth, its discontinuities); the colour is sampled only where a sample is blended.
+Each step keeps the arithmetic and order of the straightforward version
+(tests/synth/dibr_previous.py), so the renders are the same bits (since the seventeenth
+session both take an integer depth exponent's power as the float64 one rounded to
+float32, not powf's: see :func:`_blend`).
 """
 
 from __future__ import annotations
