@@ -245,6 +245,14 @@ def _unproject(Kinv, R, C, x, y, z):  # pragma: no cover - numba
     return X0, X1, X2
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _entries(M):  # pragma: no cover - numba
+    """The nine entries of a 3 x 3 matrix in row order, read once into the kernels'
+    locals."""
+    return (M[0, 0], M[0, 1], M[0, 2], M[1, 0], M[1, 1], M[1, 2], M[2, 0], M[2, 1],
+            M[2, 2])
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _splat(depth, Kinv, R, C, K_t, R_t, t_t, zbuf):  # pragma: no cover - numba
     """Forward warp of every pixel of an input z-depth map (float32; the input's
@@ -268,13 +276,9 @@ def _splat(depth, Kinv, R, C, K_t, R_t, t_t, zbuf):  # pragma: no cover - numba
     us = np.empty(W)
     vs = np.empty(W)
     zs = np.empty(W)
-    q00, q01, q02 = R_t[0, 0], R_t[0, 1], R_t[0, 2]
-    q10, q11, q12 = R_t[1, 0], R_t[1, 1], R_t[1, 2]
-    q20, q21, q22 = R_t[2, 0], R_t[2, 1], R_t[2, 2]
+    q00, q01, q02, q10, q11, q12, q20, q21, q22 = _entries(R_t)
     p0, p1, p2 = t_t[0], t_t[1], t_t[2]
-    k00, k01, k02 = K_t[0, 0], K_t[0, 1], K_t[0, 2]
-    k10, k11, k12 = K_t[1, 0], K_t[1, 1], K_t[1, 2]
-    k20, k21, k22 = K_t[2, 0], K_t[2, 1], K_t[2, 2]
+    k00, k01, k02, k10, k11, k12, k20, k21, k22 = _entries(K_t)
     for y in range(H):
         for x in range(W):
             z = np.float64(depth[y, x])
@@ -361,20 +365,12 @@ def _backward(zbuf, Kinv_t, R_t, C_t, K_s, R_s, t_s, aux, Ws, Hs, occlusion_tole
     matrices' entries are read once, into locals."""
     H, W = zbuf.shape
     Ha, Wa = aux.shape[0], aux.shape[1]
-    i00, i01, i02 = Kinv_t[0, 0], Kinv_t[0, 1], Kinv_t[0, 2]
-    i10, i11, i12 = Kinv_t[1, 0], Kinv_t[1, 1], Kinv_t[1, 2]
-    i20, i21, i22 = Kinv_t[2, 0], Kinv_t[2, 1], Kinv_t[2, 2]
-    r00, r01, r02 = R_t[0, 0], R_t[0, 1], R_t[0, 2]
-    r10, r11, r12 = R_t[1, 0], R_t[1, 1], R_t[1, 2]
-    r20, r21, r22 = R_t[2, 0], R_t[2, 1], R_t[2, 2]
+    i00, i01, i02, i10, i11, i12, i20, i21, i22 = _entries(Kinv_t)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _entries(R_t)
     c0, c1, c2 = C_t[0], C_t[1], C_t[2]
-    s00, s01, s02 = R_s[0, 0], R_s[0, 1], R_s[0, 2]
-    s10, s11, s12 = R_s[1, 0], R_s[1, 1], R_s[1, 2]
-    s20, s21, s22 = R_s[2, 0], R_s[2, 1], R_s[2, 2]
+    s00, s01, s02, s10, s11, s12, s20, s21, s22 = _entries(R_s)
     t0, t1, t2 = t_s[0], t_s[1], t_s[2]
-    k00, k01, k02 = K_s[0, 0], K_s[0, 1], K_s[0, 2]
-    k10, k11, k12 = K_s[1, 0], K_s[1, 1], K_s[1, 2]
-    k20, k21, k22 = K_s[2, 0], K_s[2, 1], K_s[2, 2]
+    k00, k01, k02, k10, k11, k12, k20, k21, k22 = _entries(K_s)
     us = np.empty(W, np.float32)
     vs = np.empty(W, np.float32)
     zss = np.empty(W)
