@@ -371,6 +371,7 @@ def _backward(zbuf, Kinv_t, R_t, C_t, K_s, R_s, t_s, aux, Ws, Hs, occlusion_tole
     s00, s01, s02, s10, s11, s12, s20, s21, s22 = _entries(R_s)
     t0, t1, t2 = t_s[0], t_s[1], t_s[2]
     k00, k01, k02, k10, k11, k12, k20, k21, k22 = _entries(K_s)
+    zts = np.empty(W, np.float32)
     us = np.empty(W, np.float32)
     vs = np.empty(W, np.float32)
     zss = np.empty(W)
@@ -380,7 +381,9 @@ def _backward(zbuf, Kinv_t, R_t, C_t, K_s, R_s, t_s, aux, Ws, Hs, occlusion_tole
         # compiler vectorises (where the target has no depth its values are not read)
         for x in range(W):
             zb = zbuf[y, x]
-            zz = np.float64(np.float32(zb)) if np.isfinite(zb) else 0.0
+            zt = np.float32(zb) if np.isfinite(zb) else np.float32(0.0)
+            zts[x] = zt
+            zz = np.float64(zt)
             cx = i00 * x + i01 * y + i02
             cy = i10 * x + i11 * y + i12
             cz = i20 * x + i21 * y + i22
@@ -395,8 +398,7 @@ def _backward(zbuf, Kinv_t, R_t, C_t, K_s, R_s, t_s, aux, Ws, Hs, occlusion_tole
             vs[x] = np.float32((k10 * a + k11 * b + k12 * zs) / d)
             zss[x] = zs
         for x in range(W):
-            zb = zbuf[y, x]
-            zt = np.float32(zb) if np.isfinite(zb) else np.float32(0.0)
+            zt = zts[x]
             if not zt > 0:
                 pos[y, x] = -1
                 w[y, x] = 0.0
