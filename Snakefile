@@ -1,5 +1,7 @@
 """plenocal: calibration of plenoptic 2.0 camera arrays (see README.md)."""
 
+import gc
+
 from snakemake.utils import min_version
 
 min_version("9.0")
@@ -35,3 +37,10 @@ rule all:
     default_target: True
     input:
         final_targets(),
+
+
+# Last: what parsing made (Snakemake's modules, the rules, the config) lives as long as
+# the process. Frozen, the cyclic collector no longer walks it, and neither does the
+# interpreter's exit: a no-op rerun's exit took 0.20-0.23 s, now 0.03 s (issue 15).
+# What the DAG and the jobs make later is collected as before.
+gc.freeze()
