@@ -40,10 +40,22 @@ def load_schema(path: str | Path | None = None) -> dict:
         return yaml.load(fh, Loader=_LOADER)  # a safe loader (C or Python)
 
 
-@functools.lru_cache(maxsize=1)
+@functools.lru_cache(maxsize=2)
+def _parsed_schema(text: str) -> dict:
+    """A schema's text, parsed once per process (read only: defaults are copied). Keyed
+    by the text, not the path: the workflow validates against its own copy of
+    config.schema.yaml, and the settings dataclasses read the package's, the same bytes
+    in a checkout (the Snakefile's parse read it twice: issue 15, the no-op)."""
+    return yaml.load(text, Loader=_LOADER)  # a safe loader (C or Python)
+
+
+def _read_schema(path: str | Path) -> dict:
+    return _parsed_schema(Path(path).read_text())
+
+
 def _package_schema() -> dict:
-    """config.schema.yaml, parsed once per process (read only: defaults are copied)."""
-    return load_schema()
+    """config.schema.yaml of the package (read only)."""
+    return _read_schema(SCHEMA_PATH)
 
 
 def _resolve(schema: dict, root: dict) -> dict:
@@ -155,7 +167,7 @@ def validate_config(config: dict, schema_path: str | Path | None = None) -> dict
     """Validate ``config`` in place (defaults filled in) and return it."""
     import jsonschema  # noqa: PLC0415 - see the TYPE_CHECKING import
 
-    schema = load_schema(schema_path)
+    schema = _read_schema(schema_path or SCHEMA_PATH)  # read only
     _fill_defaults(schema, config, schema)
     validator = jsonschema.validators.validator_for(schema)(schema)
     errors = sorted(validator.iter_errors(config), key=lambda e: list(e.absolute_path))
