@@ -14,6 +14,7 @@ from plenocal.depth.costkernels import (
     mask_uncovered,
     mean_of_best,
     tad_pixels,
+    tad_pixels_cover,
 )
 from plenocal.depth.planesweep import _box
 from plenocal.depth.sgm import SgmOptions, _aggregate_dir, _to_label_axis, sgm_aggregate
@@ -47,6 +48,11 @@ def test_tad_pixels_is_the_numpy_definition():
     dc = np.empty((13, 17), np.float32)
     tad_pixels(ref, warped, dc)
     assert dc.tobytes() == want.tobytes()
+    # SGM's variant: the same costs, and the coverage channel copied out
+    dc2, cover = np.full((13, 17), np.nan, np.float32), np.full((13, 17), np.nan, np.float32)
+    tad_pixels_cover(ref, warped, dc2, cover)
+    assert dc2.tobytes() == want.tobytes()
+    assert cover.tobytes() == np.ascontiguousarray(warped[..., 3]).tobytes()
 
 
 def test_mask_box_uncovered_is_the_box_threshold():

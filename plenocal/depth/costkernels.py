@@ -16,6 +16,21 @@ import numba
 import numpy as np
 
 
+@numba.njit(cache=True, inline="always")
+def _tad_row(r, s, o, diff):  # pragma: no cover - numba
+    """One row of :func:`tad_pixels`: ``r`` and ``s`` interleaved (4 W), ``o`` (W)."""
+    c08 = np.float32(0.08)
+    c04 = np.float32(0.04)
+    c3 = np.float32(0.3)
+    c7 = np.float32(0.7)
+    for i in range(diff.shape[0]):
+        diff[i] = abs(r[i] - s[i])
+    for x in range(o.shape[0]):
+        a = min(diff[4 * x], c08) / c08
+        b = min(diff[4 * x + 1] + diff[4 * x + 2], c04) / c04
+        o[x] = a * c3 + b * c7
+
+
 @numba.njit(cache=True)
 def tad_pixels(ref_feat, warped, dc):  # pragma: no cover - numba
     """Per pixel ``0.3 min(|dI|, 0.08) / 0.08 + 0.7 min(|dIx| + |dIy|, 0.04) / 0.04``
@@ -27,23 +42,29 @@ def tad_pixels(ref_feat, warped, dc):  # pragma: no cover - numba
     whole interleaved row first (one contiguous pass that vectorises), then the
     per-pixel terms."""
     H, W = dc.shape
-    c08 = np.float32(0.08)
-    c04 = np.float32(0.04)
-    c3 = np.float32(0.3)
-    c7 = np.float32(0.7)
     diff = np.empty(4 * W, np.float32)
     rf = ref_feat.reshape(H, 4 * W)
     wf = warped.reshape(H, 4 * W)
     for y in range(H):
-        r = rf[y]
+        _tad_row(rf[y], wf[y], dc[y], diff)
+
+
+@numba.njit(cache=True)
+def tad_pixels_cover(ref_feat, warped, dc, cover):  # pragma: no cover - numba
+    """:func:`tad_pixels`, and the warped coverage channel (the fourth) copied into the
+    (H, W) plane ``cover`` while its row is in cache: SGM's coverage test box-filters it,
+    and numpy's strided copy of the channel was a pass of its own (a tenth of a source's
+    cost per label, issue 15)."""
+    H, W = dc.shape
+    diff = np.empty(4 * W, np.float32)
+    rf = ref_feat.reshape(H, 4 * W)
+    wf = warped.reshape(H, 4 * W)
+    for y in range(H):
         s = wf[y]
-        o = dc[y]
-        for i in range(4 * W):
-            diff[i] = abs(r[i] - s[i])
+        _tad_row(rf[y], s, dc[y], diff)
+        c = cover[y]
         for x in range(W):
-            a = min(diff[4 * x], c08) / c08
-            b = min(diff[4 * x + 1] + diff[4 * x + 2], c04) / c04
-            o[x] = a * c3 + b * c7
+            c[x] = s[4 * x + 3]
 
 
 #: the validity threshold of the box-filtered coverage channel (a window mean at or

@@ -40,6 +40,7 @@ from plenocal.depth.costkernels import (
     mask_uncovered,
     mean_of_best,
     tad_pixels,
+    tad_pixels_cover,
     wta_labels,
 )
 from plenocal.io.files import to_float
@@ -146,20 +147,26 @@ def plane_homographies(ref: PinholeCamera, src: PinholeCamera,
 def _source_cost(ref_feat: np.ndarray, ref_stats: tuple, warped: np.ndarray,
                  hom: np.ndarray, src_size: tuple[int, int], opt: PlaneSweepOptions,
                  out: np.ndarray | None = None, scratch: np.ndarray | None = None,
-                 cover: str = "homography") -> np.ndarray:
+                 cover: str = "homography", cover_plane: np.ndarray | None = None,
+                 ) -> np.ndarray:
     """Cost of one source, warped onto the reference by the homography ``hom`` (reference
     -> source pixels), +inf where the window leaves the source image (``src_size``:
     width, height). ``cover``: ``homography`` tests the window's pixels' sampling
     positions (:func:`plenocal.depth.costkernels.mask_uncovered`), ``warped`` the
     box-filtered warped coverage channel (:func:`plenocal.depth.costkernels.
     mask_box_uncovered`: a fifth of the cost more; SGM's choice, see :func:`source_costs`).
-    Written into ``out`` when given; ``scratch``: an (H, W) float32 plane the tad cost may
-    reuse."""
+    Written into ``out`` when given; ``scratch`` and ``cover_plane``: (H, W) float32 planes
+    the tad cost and the ``warped`` test may reuse."""
     w = opt.window
     if opt.cost == "tad":
         # 0.3 min(|dI|, 0.08) / 0.08 + 0.7 min(|dIx| + |dIy|, 0.04) / 0.04, box-aggregated
         dc = scratch if scratch is not None else np.empty(warped.shape[:2], np.float32)
-        tad_pixels(ref_feat, warped, dc)
+        if cover == "warped":  # the coverage channel copied out in the same pass
+            if cover_plane is None:
+                cover_plane = np.empty_like(dc)
+            tad_pixels_cover(ref_feat, warped, dc, cover_plane)
+        else:
+            tad_pixels(ref_feat, warped, dc)
         out = _box(dc, w, out)
     elif opt.cost == "zncc":
         mr, sr = ref_stats
@@ -180,8 +187,9 @@ def _source_cost(ref_feat: np.ndarray, ref_stats: tuple, warped: np.ndarray,
                        float(src_size[1]), w // 2, out)
     elif cover == "warped":
         # the box of the coverage channel into the scratch plane (free again after the cost)
-        cov = np.ascontiguousarray(warped[..., 3])
-        mask_box_uncovered(_box(cov, w, scratch), out)
+        if opt.cost != "tad":
+            cover_plane = np.ascontiguousarray(warped[..., 3])
+        mask_box_uncovered(_box(cover_plane, w, scratch), out)
     else:
         raise ValueError(f"depth: unknown coverage test {cover!r} (homography or warped)")
     return out
@@ -212,13 +220,15 @@ def source_costs(ref: PinholeCamera, ref_img: np.ndarray, srcs: list[PinholeCame
     per = np.empty((len(srcs), ref.height, ref.width), dtype=np.float32)
     warped = np.empty((ref.height, ref.width, 4), dtype=np.float32)
     scratch = np.empty(per.shape[1:], np.float32)
+    cover_plane = np.empty(per.shape[1:], np.float32) if cover == "warped" else None
     flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
     for i in range(len(depths)):
         for j, sf in enumerate(src_feat):
             cv2.warpPerspective(sf, homs[j][i], size, dst=warped, flags=flags,
                                 borderMode=cv2.BORDER_CONSTANT, borderValue=0)
             _source_cost(ref_feat, (mr, sr), warped, homs[j][i], (srcs[j].width,
-                         srcs[j].height), opt, out=per[j], scratch=scratch, cover=cover)
+                         srcs[j].height), opt, out=per[j], scratch=scratch, cover=cover,
+                         cover_plane=cover_plane)
         yield per
 
 
