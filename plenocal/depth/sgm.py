@@ -196,15 +196,15 @@ def _aggregate_dir(cost, grey, dy, dx, p1, p2, contrast, out):  # pragma: no cov
     cur = np.zeros((W, D), np.float32)
     prev_min = np.zeros(W, np.float32)
     cur_min = np.zeros(W, np.float32)
-    step = np.empty(D, np.float32)
     ys = range(H) if dy >= 0 else range(H - 1, -1, -1)
     for y in ys:
         xs = range(W) if dx >= 0 else range(W - 1, -1, -1)
         for x in xs:
             py, px = y - dy, x - dx
             c = cost[y, x]
+            row = cur[x]  # written in place: the previous pixel is another row or column
             if py < 0 or py >= H or px < 0 or px >= W:
-                m = _path_start(c, step)
+                m = _path_start(c, row)
             else:
                 if dy == 0:
                     lp = cur[px]
@@ -213,13 +213,11 @@ def _aggregate_dir(cost, grey, dy, dx, p1, p2, contrast, out):  # pragma: no cov
                     lp = prev[px]
                     lmin = prev_min[px]
                 pp2 = _edge_p2(grey, y, x, py, px, p1, p2, contrast)
-                m = _path_pixel(c, lp, lmin, pp2, p1, step)
+                m = _path_pixel(c, lp, lmin, pp2, p1, row)
             cur_min[x] = m
-            row = cur[x]
             o = out[y, x]
             for d in range(D):
-                row[d] = step[d]
-                o[d] += step[d]
+                o[d] += row[d]
         tmp = prev
         prev = cur
         cur = tmp
@@ -236,8 +234,8 @@ def _aggregate_rows(cost, grey, p1, p2, contrast, out):  # pragma: no cover - nu
     H, W, D = cost.shape
     fwd = np.empty((W, D), np.float32)
     fwd_min = np.empty(W, np.float32)
-    prev = np.empty(D, np.float32)
-    step = np.empty(D, np.float32)
+    prev = np.empty(D, np.float32)  # the backward path's previous pixel and this one,
+    step = np.empty(D, np.float32)  # swapped after each pixel instead of copied
     for y in range(H):
         fwd_min[0] = _path_start(cost[y, 0], fwd[0])
         for x in range(1, W):
@@ -255,8 +253,8 @@ def _aggregate_rows(cost, grey, p1, p2, contrast, out):  # pragma: no cover - nu
             o = out[y, x]
             f = fwd[x]
             for d in range(D):
-                prev[d] = step[d]
                 o[d] = f[d] + step[d]
+            prev, step = step, prev
 
 
 def sgm_aggregate(cost: np.ndarray, grey: np.ndarray, opt: SgmOptions,
