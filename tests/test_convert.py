@@ -3,6 +3,7 @@ geometry, every Raytrix fixture converts, and the error cases."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -18,6 +19,8 @@ from synth.lenslets import (
 from plenocal.convert import ConvertError, ConvertSettings, ShotConversion, convert_files
 from plenocal.convert.patchsize import estimate_patch_size, weighted_median
 from plenocal.convert.quality import summarise, view_quality
+from plenocal.convert.setup import decide_setup
+from plenocal.convert.shot import mla_contradiction
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import write_image
 from plenocal.io.raytrix import LensType, RayCalib, read_calib, write_calib
@@ -187,6 +190,51 @@ def test_views_upright_for_every_grid_rotation_and_mla_kind(rotation, mla):
         ideal8 = np.clip(np.rint(ideal * 255), 0, 255).astype(np.uint8)
         q = view_quality(shot.view(r, c), ideal8, border=L.tile)
         assert q["psnr_db"] > 33, (rotation, mla, r, c, q)
+
+
+def test_mla_contradiction_warns_only_where_the_other_kind_matches_far_better():
+    assert mla_contradiction("galilean", {"keplerian": 0.966, "galilean": 0.193}) == (
+        "convert.mla = galilean, but the image matches as keplerian (mean best ZNCC 0.966 "
+        "against 0.193 as galilean): the views will be a mosaic of misplaced patches; set "
+        "the kind to auto or keplerian (workflow: convert.mla or the dataset's mla; command "
+        "line: --mla)")
+    assert mla_contradiction("keplerian", {"keplerian": 0.966, "galilean": 0.193}) is None
+    # a frame without texture: low and close both ways
+    assert mla_contradiction("galilean", {"keplerian": 0.35, "galilean": 0.2}) is None
+    assert mla_contradiction("galilean", {"keplerian": float("nan"),
+                                          "galilean": float("nan")}) is None
+
+
+def test_a_forced_mla_kind_that_the_image_contradicts_is_warned_about():
+    """Set by hand the wrong way, the MLA kind makes a mosaic of the views: the conversion
+    warns, with the image's scores. The right kind set by hand, and a camera set-up's kind
+    (checked on its central shot: ``check_mla=False``), are not warned about."""
+    calib = calib_for_optics(small_optics())
+    grid = MicrolensGrid(calib, 400, 300)
+    img = lenslet_from_patch_size(grid, 5.0, random_texture(512, 1.5, 8), mla="galilean")
+
+    def mla_warnings(shot):
+        return [w for w in shot.warnings if "convert.mla = " in w]
+
+    wrong = ShotConversion(img, calib, 5, replace(FIXED_TILE, mla="keplerian"), source="s")
+    (note,) = mla_warnings(wrong)
+    assert note.startswith("s: convert.mla = keplerian, but the image matches as galilean")
+    assert wrong.disparity()["warnings"] == wrong.warnings
+    assert not mla_warnings(ShotConversion(img, calib, 5, replace(FIXED_TILE, mla="galilean")))
+    assert not mla_warnings(ShotConversion(img, calib, 5, replace(FIXED_TILE, mla="keplerian"),
+                                           check_mla=False))
+
+
+def test_a_camera_setup_carries_the_mla_warning():
+    """In the workflow the kind is checked once, on the shot that decides the camera's
+    set-up (rule convert_setup), whose warnings reach the report."""
+    calib = calib_for_optics(small_optics())
+    grid = MicrolensGrid(calib, 400, 300)
+    img = lenslet_from_patch_size(grid, 5.0, random_texture(512, 1.5, 8), mla="galilean")
+    setup, _ = decide_setup(img, calib, 5, replace(FIXED_TILE, mla="keplerian"), "x03_y01")
+    assert [w for w in setup.warnings
+            if w.startswith("x03_y01: convert.mla = keplerian, but the image matches as")]
+    assert setup.mla == "keplerian" and setup.mla_source == "setting"
 
 
 def test_galilean_disparity_has_the_other_sign():

@@ -129,6 +129,10 @@ def test_mosaic_measure_fails_the_wrong_kind_and_passes_the_right_one(fujita):
     for r, c in ((2, 2), (0, 0)):
         assert blend_disagreement(wrong.plan_for(r, c), wrong._source, r, c) > 0.6
         assert blend_disagreement(shot.plan_for(r, c), shot._source, r, c) < 0.4
+    # and the conversion says so: the kind was set by hand, the image reads the other way
+    assert any("convert.mla = keplerian, but the image matches as galilean" in w
+               for w in wrong.warnings)
+    assert not any("convert.mla" in w for w in shot.warnings)
 
 
 def test_tspc_crop_converts_clean_and_upright():

@@ -211,6 +211,27 @@ def resolve_tile(setting: int | str, patch: np.ndarray, confident: np.ndarray,
     return max(2, int(math.ceil(upsample * float(np.median(p)) - 1e-6)))
 
 
+#: how much better (mean best ZNCC, :func:`plenocal.convert.patchsize.detect_mla`) the
+#: image must match as the other MLA kind than as the one the settings name before the
+#: conversion warns: on the six real frames and the simulator's two set-ups the right kind
+#: scored 0.86-0.98 and the wrong one 0.16-0.29 (README, "MLA kinds"), a gap of 0.57 or
+#: more; a frame without texture scores low and close both ways and is not warned about
+MLA_CONTRADICTION = 0.3
+
+
+def mla_contradiction(kind: str, scores: dict[str, float]) -> str | None:
+    """The warning for an MLA kind set by hand that the image contradicts (``scores``:
+    each kind's mean best ZNCC), or None. Forced the wrong way, the views are a mosaic of
+    misplaced patches (Fujita2 as ``keplerian``, Boys2 as ``galilean``)."""
+    other = next(k for k in scores if k != kind)
+    if not scores[other] - scores[kind] >= MLA_CONTRADICTION:  # (NaN: no warning)
+        return None
+    return (f"convert.mla = {kind}, but the image matches as {other} (mean best ZNCC "
+            f"{scores[other]:.3f} against {scores[kind]:.3f} as {kind}): the views will be "
+            f"a mosaic of misplaced patches; set the kind to auto or {other} (workflow: "
+            f"convert.mla or the dataset's mla; command line: --mla)")
+
+
 class ShotConversion:
     """One lenslet image: grid, patch sizes, layout and the per-shot render plan.
 
@@ -218,12 +239,16 @@ class ShotConversion:
     refined from the image, for instance); it must belong to an image of this size.
     ``analysis``: this image's measurements made before (:attr:`analysis`, written by
     :func:`plenocal.convert.analysis.write_analysis`): the views are rendered from them
-    without measuring the image again (the same views)."""
+    without measuring the image again (the same views). ``check_mla``: where the settings
+    name the MLA kind, read it from the image all the same and warn where the image
+    contradicts it (:func:`mla_contradiction`); off for the shots converted with a
+    camera's set-up, whose kind was checked on its central shot."""
 
     def __init__(self, image: np.ndarray, calib: RayCalib, n_views: int,
                  settings: ConvertSettings | None = None, source: str = "<image>",
                  grid: MicrolensGrid | None = None,
-                 analysis: ConvertAnalysis | None = None) -> None:
+                 analysis: ConvertAnalysis | None = None, check_mla: bool = True) -> None:
+        self._check_mla = check_mla
         self.settings = st = settings or ConvertSettings()
         self.grid_check: dict | None = None  # set by whoever checked the grid
         self.warnings: list[str] = []
@@ -299,6 +324,12 @@ class ShotConversion:
             scores = {"keplerian": k, "galilean": g}
             log.info("%s: MLA kind from the image: %s (mean best ZNCC: points moving towards "
                      "the neighbour %.3f, away %.3f)", source, mla, k, g)
+        elif self._check_mla:
+            _, k, g = detect_mla_kind(gray, self.grid, st.patch)
+            note = mla_contradiction(st.mla, {"keplerian": k, "galilean": g})
+            if note:
+                log.warning("%s: %s", source, note)
+                self.warnings.append(f"{source}: {note}")
         patch = estimate_patch_size(gray, self.grid, st.patch, mla=mla)
         for note in patch.warnings:
             log.warning("%s: %s", source, note)
@@ -408,7 +439,7 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
         setup = read_setup(setup_json)
         shot = ShotConversion(image, calib, n_views, setup.settings(settings),
                               source=str(lenslet), grid=setup.grid(calib, W, H),
-                              analysis=analysis)
+                              analysis=analysis, check_mla=False)
         shot.grid_check = setup.grid_check
         return shot
     grid, check = check_and_grid(image, calib, settings.grid)
