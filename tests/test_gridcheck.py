@@ -17,6 +17,7 @@ from plenocal.convert.gridcheck import (
     AUTO_DRIFT_PX,
     check_grid,
     decide,
+    grid_for_mode,
     refine_calib,
     refine_grid,
 )
@@ -89,6 +90,27 @@ def test_wrong_grid_recovered(change):
         assert check.offset_px == pytest.approx((-1.7, 0.9), abs=0.1)
     if change == "pitch":
         assert check.pitch_ratio == pytest.approx(1 / 1.004, abs=2e-4)
+
+
+@pytest.mark.parametrize("mode", ["file", "auto", "refine"])
+def test_drift_warning_says_whether_it_was_corrected(mode):
+    """The drift is a warning in every mode; where the refined lattice is used it says so,
+    instead of asking for the correction that was made (the report's first screen)."""
+    true = _calib(23.2, math.pi / 2)
+    W, H = 900, 700
+    img = _frame(true, W, H, seed=1)
+    grid, check = grid_for_mode(img, MicrolensGrid(replace(true, offset=(5.0, -1.2)), W, H),
+                                mode)
+    (note,) = [w for w in check.warnings if "drifts" in w]
+    assert note.startswith(f"grid check: the calib.xml grid drifts up to "
+                           f"{check.drift_max_px:.2f} px from the micro-image centres")
+    if mode == "file":
+        assert not check.refined
+        assert note.endswith("(convert.grid: refine / auto corrects it)")
+    else:
+        assert check.refined
+        assert note.endswith("; corrected: the views use the lattice fitted to the image "
+                             f"(convert.grid: {mode})")
 
 
 @pytest.mark.parametrize("D", [30.0, 25.0, 20.0])

@@ -191,14 +191,32 @@ class GridCheck:
                 + ("" if self.verified else " - UNVERIFIED (too few lenses measured)"))
 
 
+def _drift_warning(drift_px: float, refined_by: str | None) -> str:
+    """The warning of a calib.xml grid that drifts from the micro images, with what was
+    done about it: nothing yet (``refined_by`` None: the check alone says how to correct
+    it), or the views use the lattice fitted to the image (``convert.grid`` =
+    ``refined_by``), so that a warning on the report's first screen does not ask for a
+    correction that was made."""
+    head = (f"grid check: the calib.xml grid drifts up to {drift_px:.2f} px from the "
+            "micro-image centres")
+    if refined_by is None:
+        return head + " (convert.grid: refine / auto corrects it)"
+    return (head + "; corrected: the views use the lattice fitted to the image "
+            f"(convert.grid: {refined_by})")
+
+
 def grid_for_mode(image: np.ndarray, grid: MicrolensGrid, mode: str
                   ) -> tuple[MicrolensGrid, GridCheck]:
     """Check ``grid`` (the file's) on ``image`` and return the grid ``convert.grid`` =
     ``mode`` asks for (the file's or the refined one) with the check (``mode``, ``refined``
-    filled in)."""
+    filled in; a drift warning says when the refined grid corrected it)."""
     check = check_grid(image, grid)
     check.mode = mode
     check.refined = decide(mode, check)
+    if check.refined:
+        uncorrected = _drift_warning(check.drift_max_px, None)
+        check.warnings = [_drift_warning(check.drift_max_px, mode) if w == uncorrected else w
+                          for w in check.warnings]
     if mode == "refine" and not check.fitted:
         check.warnings.append("convert.grid refine: the lattice could not be fitted; the "
                               "file's grid is used")
@@ -478,8 +496,7 @@ def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
             f"{dn.max():.1f} px of a {D:.1f} px lens): is calib.xml for this camera and this "
             "sensor crop?")
     elif dn.max() > AUTO_DRIFT_PX:
-        warnings.append(f"grid check: the calib.xml grid drifts up to {dn.max():.2f} px from "
-                        "the micro-image centres (convert.grid: refine / auto corrects it)")
+        warnings.append(_drift_warning(float(dn.max()), None))
     return GridCheck(
         width=W, height=H, diameter_px=float(D), lenses=n_lens, measured=measured,
         measured_share=float(share), fitted=True, drift_max_px=float(dn.max()),
