@@ -213,9 +213,10 @@ def resolve_tile(setting: int | str, patch: np.ndarray, confident: np.ndarray,
 
 #: how much better (mean best ZNCC, :func:`plenocal.convert.patchsize.detect_mla`) the
 #: image must match as the other MLA kind than as the one the settings name before the
-#: conversion warns: on the six real frames and the simulator's two set-ups the right kind
-#: scored 0.86-0.98 and the wrong one 0.16-0.29 (README, "MLA kinds"), a gap of 0.57 or
-#: more; a frame without texture scores low and close both ways and is not warned about
+#: conversion warns. On the six real frames of shared/real (full frames, this code) the
+#: right kind scored 0.84-0.97 and the wrong one 0.16-0.29, the smallest gap 0.57 (Boxer);
+#: the simulator's Galilean set-up 0.98 against 0.23-0.26 (README, "MLA kinds"). A frame
+#: without texture scores low and close both ways and is not warned about.
 MLA_CONTRADICTION = 0.3
 
 
