@@ -249,7 +249,6 @@ class ShotConversion:
                  settings: ConvertSettings | None = None, source: str = "<image>",
                  grid: MicrolensGrid | None = None,
                  analysis: ConvertAnalysis | None = None, check_mla: bool = True) -> None:
-        self._check_mla = check_mla
         self.settings = st = settings or ConvertSettings()
         self.grid_check: dict | None = None  # set by whoever checked the grid
         self.warnings: list[str] = []
@@ -274,7 +273,7 @@ class ShotConversion:
                                f"image (radius {calib.safe_diameter / 2:.2f} px): lower "
                                "convert.view_spacing_px or the number of views")
         if analysis is None:
-            analysis = self._measure(source)
+            analysis = self._measure(source, check_mla)
         else:
             problem = (f"holds {analysis.lenses} lenses, the grid {len(self.grid)}"
                        if analysis.lenses != len(self.grid) else
@@ -315,8 +314,9 @@ class ShotConversion:
         self.plan: RenderPlan = plans[0]
         self._plans: list[RenderPlan] = plans
 
-    def _measure(self, source: str) -> ConvertAnalysis:
-        """The image's MLA kind (where ``auto``), patch sizes and vignetting profiles."""
+    def _measure(self, source: str, check_mla: bool) -> ConvertAnalysis:
+        """The image's MLA kind (where ``auto``; where set, checked with ``check_mla``),
+        patch sizes and vignetting profiles."""
         st = self.settings
         gray = to_gray(self._source)
         mla, scores = st.mla, None
@@ -325,7 +325,7 @@ class ShotConversion:
             scores = {"keplerian": k, "galilean": g}
             log.info("%s: MLA kind from the image: %s (mean best ZNCC: points moving towards "
                      "the neighbour %.3f, away %.3f)", source, mla, k, g)
-        elif self._check_mla:
+        elif check_mla:
             _, k, g = detect_mla_kind(gray, self.grid, st.patch)
             note = mla_contradiction(st.mla, {"keplerian": k, "galilean": g})
             if note:

@@ -158,13 +158,13 @@ def _source_cost(ref_feat: np.ndarray, ref_stats: tuple, warped: np.ndarray,
     Written into ``out`` when given; ``scratch`` and ``cover_plane``: (H, W) float32 planes
     the tad cost and the ``warped`` test may reuse."""
     w = opt.window
+    coverage = None  # the warped coverage channel as a plane, where a step copied it out
     if opt.cost == "tad":
         # 0.3 min(|dI|, 0.08) / 0.08 + 0.7 min(|dIx| + |dIy|, 0.04) / 0.04, box-aggregated
         dc = scratch if scratch is not None else np.empty(warped.shape[:2], np.float32)
         if cover == "warped":  # the coverage channel copied out in the same pass
-            if cover_plane is None:
-                cover_plane = np.empty_like(dc)
-            tad_pixels_cover(ref_feat, warped, dc, cover_plane)
+            coverage = cover_plane if cover_plane is not None else np.empty_like(dc)
+            tad_pixels_cover(ref_feat, warped, dc, coverage)
         else:
             tad_pixels(ref_feat, warped, dc)
         out = _box(dc, w, out)
@@ -187,9 +187,9 @@ def _source_cost(ref_feat: np.ndarray, ref_stats: tuple, warped: np.ndarray,
                        float(src_size[1]), w // 2, out)
     elif cover == "warped":
         # the box of the coverage channel into the scratch plane (free again after the cost)
-        if opt.cost != "tad":
-            cover_plane = np.ascontiguousarray(warped[..., 3])
-        mask_box_uncovered(_box(cover_plane, w, scratch), out)
+        if coverage is None:
+            coverage = np.ascontiguousarray(warped[..., 3])
+        mask_box_uncovered(_box(coverage, w, scratch), out)
     else:
         raise ValueError(f"depth: unknown coverage test {cover!r} (homography or warped)")
     return out
