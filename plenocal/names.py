@@ -13,15 +13,19 @@ splitting strings, so that a malformed name fails with the name in the message.
 
 from __future__ import annotations
 
+import operator
 import re
 from pathlib import PurePath
 
-SHOT_PATTERN = r"x\d{2}_y\d{2}|hand\d{2}"
-VIEW_PATTERN = r"\d+_\d+"
-_ARRAY_RE = re.compile(r"^x(\d{2})_y(\d{2})$")
-_HAND_RE = re.compile(r"^hand(\d{2})$")
-_VIEW_RE = re.compile(r"^(\d+)_(\d+)$")
-_KEY_RE = re.compile(rf"^({SHOT_PATTERN})/({VIEW_PATTERN})$")
+# ASCII digits only ([0-9], not \d: Python's \d also matches the digits of other scripts,
+# "x\u0660\u0660_y\u0660\u0660" would pass), and whole names only (fullmatch: "$" also
+# matches before a trailing newline)
+SHOT_PATTERN = r"x[0-9]{2}_y[0-9]{2}|hand[0-9]{2}"
+VIEW_PATTERN = r"[0-9]+_[0-9]+"
+_ARRAY_RE = re.compile(r"x([0-9]{2})_y([0-9]{2})")
+_HAND_RE = re.compile(r"hand([0-9]{2})")
+_VIEW_RE = re.compile(r"([0-9]+)_([0-9]+)")
+_KEY_RE = re.compile(rf"({SHOT_PATTERN})/({VIEW_PATTERN})")
 
 
 class BadName(ValueError):
@@ -48,23 +52,23 @@ def handheld_shots(count: int) -> list[str]:
 
 
 def is_shot(name: str) -> bool:
-    return bool(_ARRAY_RE.match(name) or _HAND_RE.match(name))
+    return bool(_ARRAY_RE.fullmatch(name) or _HAND_RE.fullmatch(name))
 
 
 def is_array_shot(name: str) -> bool:
-    return _ARRAY_RE.match(name) is not None
+    return _ARRAY_RE.fullmatch(name) is not None
 
 
 def is_handheld_shot(name: str) -> bool:
-    return _HAND_RE.match(name) is not None
+    return _HAND_RE.fullmatch(name) is not None
 
 
 def array_position(name: str) -> tuple[int, int] | None:
     """(col, row) of an array shot; None for a hand-held shot; an error otherwise."""
-    m = _ARRAY_RE.match(name)
+    m = _ARRAY_RE.fullmatch(name)
     if m:
         return int(m.group(1)), int(m.group(2))
-    if _HAND_RE.match(name):
+    if _HAND_RE.fullmatch(name):
         return None
     raise BadName(f"{name!r} is not a shot name (x<col>_y<row> or hand<k>, two digits)")
 
@@ -75,14 +79,19 @@ def view_name(r: int, c: int) -> str:
 
 def parse_view(name: str) -> tuple[int, int]:
     """(r, c) of a view name ``{r}_{c}``."""
-    m = _VIEW_RE.match(name)
+    m = _VIEW_RE.fullmatch(name)
     if not m:
         raise BadName(f"{name!r} is not a view name (<row>_<col>)")
     return int(m.group(1)), int(m.group(2))
 
 
 def view_names(n: int) -> list[str]:
-    """The N x N views of a shot, row-major."""
+    """The N x N views of a shot, row-major (``n`` a whole number: config ``views``)."""
+    try:
+        n = operator.index(n)
+    except TypeError:
+        raise BadName(f"the number of views per side must be a whole number (config "
+                      f"datasets.<name>.views), not {n!r}") from None
     return [view_name(r, c) for r in range(n) for c in range(n)]
 
 
@@ -105,7 +114,7 @@ def file_key(path: str | PurePath) -> str:
 
 def split_key(key: str) -> tuple[str, str]:
     """(shot, view) of a view key ``{shot}/{r}_{c}``."""
-    m = _KEY_RE.match(key)
+    m = _KEY_RE.fullmatch(key)
     if not m:
         raise BadName(f"{key!r} is not a view key (<shot>/<row>_<col>, shot "
                          "x<col>_y<row> or hand<k>)")
@@ -121,4 +130,4 @@ def key_view(key: str) -> str:
 
 
 def is_key(key: str) -> bool:
-    return _KEY_RE.match(key) is not None
+    return _KEY_RE.fullmatch(key) is not None

@@ -47,3 +47,30 @@ def test_patterns_match_what_the_functions_spell():
     view = re.compile(rf"^({names.VIEW_PATTERN})$")
     assert all(shot.match(s) for s in names.array_shots(2, 2) + names.handheld_shots(2))
     assert all(view.match(v) for v in names.view_names(5))
+
+
+def test_only_ascii_digits_and_whole_names():
+    """Issue 34: ``\\d`` matched the digits of other scripts (x٠٠_y٠٠.png passed the
+    lenslet-name check, then failed as a MissingInputException), and ``$`` matched before
+    a trailing newline."""
+    arabic = "x\u0660\u0660_y\u0660\u0660"
+    for bad in (arabic, "hand\u0660\u0661", "x00_y00\n", "hand01\n"):
+        assert not names.is_shot(bad), repr(bad)
+        assert not re.fullmatch(names.SHOT_PATTERN, bad), repr(bad)
+    with pytest.raises(names.BadName):
+        names.array_position("x00_y00\n")
+    for bad in ("\u0661_\u0661", "1_1\n"):
+        assert not re.fullmatch(names.VIEW_PATTERN, bad)
+        with pytest.raises(names.BadName):
+            names.parse_view(bad)
+    assert not names.is_key("x00_y00/1_1\n")
+
+
+def test_views_per_side_must_be_a_whole_number():
+    """Issue 34: ``views: 3.0`` gave a bare TypeError here (the config check now refuses it
+    first, naming the key: tests/test_config.py)."""
+    import numpy as np
+
+    assert names.view_names(np.int64(3)) == names.view_names(3)
+    with pytest.raises(names.BadName, match="views"):
+        names.view_names(3.0)
