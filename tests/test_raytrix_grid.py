@@ -108,6 +108,20 @@ def test_malformed_files_name_file_and_key(tmp_path: Path, mutate, key):
     assert key in str(exc.value)
 
 
+@pytest.mark.parametrize("text", ["inf", "yes", "2", "1e400", "nan"])
+def test_bad_is_real_names_file_and_key(tmp_path: Path, text: str):
+    """Issue 34: <isReal>inf</isReal> gave a bare OverflowError, <isReal>yes</isReal> a
+    bare ValueError, outside the CalibError that the converter turns into a named error."""
+    good = (FIXTURES / "Boys2.xml").read_text()
+    assert "<isReal>1</isReal>" in good
+    p = tmp_path / "calib.xml"
+    p.write_text(good.replace("<isReal>1</isReal>", f"<isReal>{text}</isReal>"))
+    with pytest.raises(CalibError, match="isReal") as exc:
+        read_calib(p)
+    assert str(p) in str(exc.value)
+    assert read_calib(FIXTURES / "Boys2.xml").is_real == 1
+
+
 def test_entity_expansion_refused(tmp_path: Path):
     bomb = ('<?xml version="1.0"?>\n<!DOCTYPE r [<!ENTITY a "aaaaaaaaaa">'
             '<!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;">]>\n'

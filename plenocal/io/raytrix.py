@@ -93,6 +93,17 @@ def _number(root: Element, path: str, source: str, required: bool = True) -> flo
     return value
 
 
+def _flag(root: Element, path: str, source: str) -> int | None:
+    """An optional 0 / 1 flag (``isReal``); None where absent or empty."""
+    el = root.find(path)
+    if el is None or not (el.text or "").strip():
+        return None
+    value = _number(root, path, source)
+    if value not in (0.0, 1.0):
+        raise _err(source, path, f"must be 0 or 1 (got {(el.text or '').strip()!r})")
+    return int(value)
+
+
 def _vec(root: Element, name: str, source: str, required: bool = True,
          keys: tuple[str, str] = ("x", "y")) -> tuple[float, float] | None:
     if root.find(name) is None:
@@ -166,14 +177,14 @@ def parse_calib(text: str | bytes, source: str = "<string>") -> RayCalib:
         raise _err(source, "lens_type.id", f"ids must be 0..{len(types) - 1} (got {ids})")
     if len(types) > 1 and sub is None:
         raise _err(source, "sub_grid_base", "missing although several lens types are given")
-    is_real = root.find("isReal")
+    is_real = _flag(root, "isReal", source)
     dist = root.find("distortion")
     kmat = root.find("k_matrix")
     return RayCalib(
         diameter=diameter, offset=offset, rotation=rotation, lens_border=lens_border,
         lens_base_x=bx, lens_base_y=by, lens_types=tuple(sorted(types, key=lambda t: t.id)),
         sub_grid_base=sub, tcp=_number(root, "tcp", source, required=False),
-        is_real=int(float(is_real.text)) if is_real is not None and is_real.text else None,
+        is_real=is_real,
         distortion_xml=_canonical(dist) if dist is not None else None,
         k_matrix_xml=_canonical(kmat) if kmat is not None else None,
         source=source,
