@@ -115,7 +115,7 @@ rule depth_view:
     benchmark:
         bench_path("depth_view", "{cam}_{view}")
     wildcard_constraints:
-        view=r"\d+_\d+",
+        view=names.VIEW_PATTERN,
     priority: PRIORITY["synthesis"]
     conda:
         "../envs/plenocal.yaml"
