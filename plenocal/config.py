@@ -16,6 +16,8 @@ from __future__ import annotations
 import copy
 import dataclasses
 import functools
+import math
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -133,6 +135,69 @@ def settings_from(cls: type[_Settings], block: Mapping[str, Any]) -> _Settings:
     return cls(**{k: v for k, v in block.items() if k in names})
 
 
+def _dotted(path: tuple) -> str:
+    """A key path as the messages spell it: ``datasets.tiny.simulate.mla.focal_ratios[0]``."""
+    out = ""
+    for part in path:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out or "<top level>"
+
+
+def _non_finite(value: Any, path: tuple = ()) -> tuple[tuple, float] | None:
+    """The first NaN or infinity in ``value`` (YAML's ``.nan``, ``.inf``), with its key
+    path; mappings in sorted key order, so the same config names the same key."""
+    if isinstance(value, dict):
+        for k in sorted(value, key=str):
+            hit = _non_finite(value[k], (*path, k))
+            if hit:
+                return hit
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            hit = _non_finite(v, (*path, i))
+            if hit:
+                return hit
+    elif isinstance(value, float) and not math.isfinite(value):
+        return path, value
+    return None
+
+
+#: a dataset's name: a folder under data/ and results/, and part of every rule's paths
+DATASET_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]*")
+
+
+def _check_keys(value: Any, path: tuple = ()) -> None:
+    """Every mapping key is text (YAML reads ``5:`` as a number, ``yes:`` as a boolean),
+    and every dataset name is a plain name (checked whole: ``re.fullmatch``, where the
+    schema's ``pattern`` is searched and its ``$`` also matches before a final newline)."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            if not isinstance(k, str):
+                kind = {bool: "a boolean", type(None): "null"}.get(type(k), "a number")
+                raise ConfigError(
+                    f"config: {_dotted((*path, str(k)))}: YAML reads the key {k!r} as {kind}, "
+                    f"not as text; quote it (\"{k}\": ...) or rename it")
+            if path == ("datasets",) and not DATASET_NAME.fullmatch(k):
+                raise ConfigError(
+                    f"config: datasets.{k!r}: a dataset name must be letters, digits, '-' and "
+                    "'_', starting with a letter or digit (it names data/<name>/ and "
+                    "results/<name>/); rename it")
+            _check_keys(v, (*path, k))
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            _check_keys(v, (*path, i))
+
+
+def _strict_validator(schema: dict) -> jsonschema.protocols.Validator:
+    """The schema's validator, with ``integer`` meaning a whole number written as one:
+    JSON schema counts 3.0 as an integer, and ``views: 3.0`` then failed in range()."""
+    import jsonschema  # noqa: PLC0415 - see the TYPE_CHECKING import
+
+    base = jsonschema.validators.validator_for(schema)
+    checker = base.TYPE_CHECKER.redefine(
+        "integer", lambda _, x: isinstance(x, int) and not isinstance(x, bool))
+    return jsonschema.validators.extend(base, type_checker=checker)(schema)
+
+
 def _path(error: jsonschema.ValidationError) -> str:
     parts = [str(p) for p in error.absolute_path]
     return ".".join(parts) if parts else "<top level>"
@@ -144,10 +209,14 @@ def _reason(error: jsonschema.ValidationError) -> str:
     if v == "not" and s.get("not", {}).get("multipleOf") == 2:
         return "must be an odd number"
     if v == "additionalProperties":
-        extra = sorted(set(error.instance) - set(s.get("properties", {})))
+        extra = sorted(map(str, set(error.instance) - set(s.get("properties", {}))))
         allowed = ", ".join(sorted(s.get("properties", {}))) or "none"
         return f"unknown key(s) {', '.join(extra)} (allowed: {allowed})"
     if v == "type":
+        if (error.validator_value == "integer" and isinstance(error.instance, float)
+                and error.instance.is_integer()):
+            return (f"must be a whole number: write {int(error.instance)}, not "
+                    f"{error.instance!r}")
         return f"must be of type {error.validator_value}"
     if v in ("minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum"):
         word = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=",
@@ -165,11 +234,16 @@ def _fail(key: str, value: Any, why: str) -> ConfigError:
 
 def validate_config(config: dict, schema_path: str | Path | None = None) -> dict:
     """Validate ``config`` in place (defaults filled in) and return it."""
-    import jsonschema  # noqa: PLC0415 - see the TYPE_CHECKING import
-
     schema = _read_schema(schema_path or SCHEMA_PATH)  # read only
+    _check_keys(config)
     _fill_defaults(schema, config, schema)
-    validator = jsonschema.validators.validator_for(schema)(schema)
+    # before the schema: a comparison with NaN is always false, so no minimum or maximum
+    # refuses it (step_m: .nan ran, and wrote null poses)
+    bad = _non_finite(config)
+    if bad:
+        raise _fail(_dotted(bad[0]), bad[1], "must be a finite number (YAML reads .nan and "
+                    ".inf as numbers; give the value, or leave the key out for its default)")
+    validator = _strict_validator(schema)
     errors = sorted(validator.iter_errors(config), key=lambda e: list(e.absolute_path))
     if errors:
         # the deepest error is the most specific one

@@ -4,6 +4,7 @@ with a message that names the key and the reason; defaults are filled in."""
 from __future__ import annotations
 
 import copy
+import math
 from pathlib import Path
 
 import pytest
@@ -61,6 +62,54 @@ def test_bad_values_name_key_and_reason(path, value, key, why):
         validate_config(c)
     msg = str(exc.value)
     assert key in msg and why in msg, msg
+
+
+@pytest.mark.parametrize("path, value", [
+    # issue 34: the probes that ran (NaN: every comparison is false, so no range refused it)
+    (("datasets", "synthetic", "simulate", "array", "step_m"), math.nan),
+    (("datasets", "synthetic", "simulate", "array", "step_m"), math.inf),
+    (("datasets", "synthetic", "simulate", "handheld", "max_offset_m"), math.inf),
+    (("datasets", "synthetic", "simulate", "sensor", "noise_std"), math.inf),
+    (("datasets", "synthetic", "simulate", "sensor", "pixel_size_um"), math.inf),
+    (("convert", "upsample"), math.inf),
+    (("convert", "view_spacing_px"), math.inf),
+    (("sfm", "reprojection", "max_error_px"), math.inf),
+    (("sfm", "reprojection", "max_error_px"), -math.inf),
+])
+def test_non_finite_numbers_are_refused(path, value):
+    """Each probe of issue 34 (every number: tests/test_faults.py)."""
+    c = _cfg()
+    node = c
+    for p in path[:-1]:
+        node = node.setdefault(p, {})
+    node[path[-1]] = value
+    with pytest.raises(ConfigError, match="finite") as exc:
+        validate_config(c)
+    assert ".".join(path) in str(exc.value)
+
+
+def test_whole_numbers_and_dataset_names():
+    """Issue 34: views: 3.0 passed the schema (JSON schema counts 3.0 as an integer) and
+    failed in names.py with a TypeError; a dataset key 5 failed in common.smk with a
+    TypeError; a dataset name "abc\\n" passed (the pattern's $ matches before a newline)."""
+    c = _cfg()
+    c["datasets"]["synthetic"]["views"] = 3.0
+    with pytest.raises(ConfigError, match=r"datasets\.synthetic\.views.*write 3, not 3\.0"):
+        validate_config(c)
+    c = _cfg()
+    c["datasets"][5] = {"views": 3}
+    with pytest.raises(ConfigError, match=r"datasets\.5: .*quote it"):
+        validate_config(c)
+    for name in ("abc\n", "a b", "-x", "caf\u00e9"):
+        c = _cfg()
+        c["datasets"][name] = {"views": 3}
+        with pytest.raises(ConfigError, match="dataset name") as exc:
+            validate_config(c)
+        assert repr(name) in str(exc.value)
+    c = _cfg()
+    c["convert"][True] = 1
+    with pytest.raises(ConfigError, match="convert.True: YAML reads the key True as a boolean"):
+        validate_config(c)
 
 
 def test_unknown_key_is_named():
