@@ -110,3 +110,71 @@ def test_read_datasheet_uses_the_schema(tmp_path: Path):
     path.write_text(yaml.safe_dump(_with("array.step_mm", "10 mm")))
     with pytest.raises(DatasheetError, match=r"array\.step_mm"):
         read_datasheet(path)
+
+
+@pytest.mark.parametrize("mutate, key, nearest", [
+    # issue 34: each of these passed, the first one hiding the report's only warning (the
+    # Eqs. 2-3 check, "skipped" without near_mm / far_mm)
+    (lambda d: d.update(scene={"near": 470, "far": 740}), "scene.far", "scene.far_mm"),
+    (lambda d: d.update(array={"step": 10}), "array.step", "array.step_mm"),
+    (lambda d: d["mla"].update(sensor_distance=0.455), "mla.sensor_distance",
+     "mla.sensor_distance_mm"),
+    (lambda d: d.update(pixel_size_um=5.5), "pixel_size_um", "pixel_size_mm"),
+    (lambda d: d.update(k=5.0), "k", "mla.k"),  # under the wrong mapping
+    (lambda d: d["main_lens"].update(Focus_Distance_mm=600), "main_lens.Focus_Distance_mm",
+     "main_lens.focus_distance_mm"),
+])
+def test_unknown_keys_refused_with_the_nearest_known_key(tmp_path: Path, mutate, key, nearest):
+    doc = copy.deepcopy(GOOD)
+    mutate(doc)
+    path = tmp_path / "camera.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(DatasheetError) as exc:
+        load_datasheet(path)
+    msg = str(exc.value)
+    assert msg.startswith(f"{path}: {key}: unknown key - did you mean {nearest}?"), msg
+
+
+def test_unknown_key_in_micrometres_gets_the_value_in_millimetres():
+    doc = copy.deepcopy(GOOD)
+    del doc["pixel_size_mm"]
+    doc["pixel_size_um"] = 5.5
+    with pytest.raises(DatasheetError, match=r"5\.5 um is pixel_size_mm: 0\.0055"):
+        check_datasheet(doc)
+
+
+def test_duplicate_keys_refused(tmp_path: Path):
+    """Issue 34: PyYAML keeps the last of two equal keys without a word."""
+    path = tmp_path / "camera.yaml"
+    text = yaml.safe_dump(GOOD)
+    path.write_text(text.replace("  k: 5.0\n", "  k: 5.0\n  k: 4.0\n"))
+    with pytest.raises(DatasheetError, match=r"mla\.k: given twice \(lines \d+ and \d+\)"):
+        load_datasheet(path)
+    path.write_text(text + "pixel_size_mm: 0.006\n")
+    with pytest.raises(DatasheetError, match=r"camera\.yaml: pixel_size_mm: given twice"):
+        load_datasheet(path)
+
+
+def test_sensor_distance_that_contradicts_k_refused():
+    """Issue 34: registration B takes mla.sensor_distance_mm where given and ignores k."""
+    with pytest.raises(DatasheetError, match=r"mla\.sensor_distance_mm = 0\.5: contradicts "
+                       r"mla\.k = 5.*0\.455 mm"):
+        check_datasheet(_with("mla.sensor_distance_mm", 0.5))
+    check_datasheet(_with("mla.sensor_distance_mm", 0.4551))  # rounding passes
+    # a Galilean camera's s (below f = 0.364 mm): k f / (k + 1)
+    check_datasheet(_with("mla.sensor_distance_mm", 5 * 0.364 / 6))
+    with pytest.raises(DatasheetError, match="Galilean"):
+        check_datasheet(_with("mla.sensor_distance_mm", 0.33))
+    doc = copy.deepcopy(GOOD)
+    del doc["mla"]["sensor_distance_mm"]
+    check_datasheet(doc)
+
+
+@pytest.mark.parametrize("text, want", [("5.5 um", "0.0055"), ("5.5µm", "0.0055"),
+                                        ("0.0055 mm", "0.0055"), ("0.0055", "0.0055")])
+def test_unit_in_a_string_gets_the_value_to_write(text: str, want: str):
+    """Issue 34: the hint for '5.5 um' said "write e.g. 5.5", itself out of range."""
+    with pytest.raises(DatasheetError) as exc:
+        check_datasheet(_with("pixel_size_mm", text))
+    assert f"write {want} for pixel_size_mm" in str(exc.value)
+    check_datasheet(_with("pixel_size_mm", float(want)))

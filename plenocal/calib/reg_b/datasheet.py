@@ -17,7 +17,9 @@ the typed :class:`Datasheet` that registration B computes with.
 
 from __future__ import annotations
 
+import difflib
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,6 +44,7 @@ SCHEMA: dict = {
     "title": "camera.yaml: datasheet of the plenoptic camera (lengths in millimetres)",
     "type": "object",
     "required": ["pixel_size_mm", "sensor_width_px", "sensor_height_px", "main_lens", "mla"],
+    "additionalProperties": False,
     "properties": {
         "pixel_size_mm": _mm(0.0005, 0.05, "sensor pixel pitch p (0.5-50 um)"),
         "sensor_width_px": {"type": "integer", "minimum": 64, "maximum": 65536},
@@ -49,6 +52,7 @@ SCHEMA: dict = {
         "main_lens": {
             "type": "object",
             "required": ["focus_distance_mm"],
+            "additionalProperties": False,
             "properties": {
                 "focus_distance_mm": _mm(5.0, 1.0e6, "X_o, where the main lens is focused"),
                 "focal_length_mm": _mm(1.0, 2000.0, "nominal focal length (information)"),
@@ -57,6 +61,7 @@ SCHEMA: dict = {
         "mla": {
             "type": "object",
             "required": ["pitch_mm", "f_numbers", "k"],
+            "additionalProperties": False,
             "properties": {
                 "pitch_mm": _mm(0.005, 2.0, "physical microlens pitch D (5 um - 2 mm)"),
                 "f_numbers": {
@@ -76,10 +81,12 @@ SCHEMA: dict = {
         },
         "array": {
             "type": "object",
+            "additionalProperties": False,
             "properties": {"step_mm": _mm(0.01, 1.0e4, "stage step between array shots")},
         },
         "scene": {
             "type": "object",
+            "additionalProperties": False,
             "properties": {
                 "near_mm": _mm(1.0, 1.0e7, "measured nearest object distance X_n"),
                 "far_mm": _mm(1.0, 1.0e7, "measured farthest object distance X_f"),
@@ -89,6 +96,13 @@ SCHEMA: dict = {
 }
 
 _UNIT = {"mm": "millimetres", "px": "pixels"}
+#: a length unit (as written in a key's name or after a number) in millimetres
+_LENGTH_MM = {"nm": 1e-6, "um": 1e-3, "\u00b5m": 1e-3, "\u03bcm": 1e-3, "mm": 1.0, "cm": 10.0,
+              "m": 1000.0}
+#: mla.sensor_distance_mm may differ this much (relative) from what mla.k gives
+SENSOR_DISTANCE_TOLERANCE = 0.01
+_NUMBER_WITH_UNIT = re.compile(
+    r"\s*([-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?)\s*([A-Za-z\u00b5\u03bc]*)\s*")
 
 
 def _dotted(path) -> str:
@@ -100,6 +114,112 @@ def _unit_hint(key: str) -> str:
     last = key.rsplit(".", 1)[-1]
     unit = last.rsplit("_", 1)[-1] if "_" in last else ""
     return f" in {_UNIT[unit]}" if unit in _UNIT else ""
+
+
+def _unit_of(key: str) -> str:
+    """The unit suffix of a key's name (``pixel_size_um`` -> ``um``), or ''."""
+    last = key.rsplit(".", 1)[-1]
+    return last.rsplit("_", 1)[-1] if "_" in last else ""
+
+
+def _number_hint(key: str, text: str) -> str:
+    """What to write instead of the string ``text`` in the number field ``key``: the value
+    converted into the key's unit where the text gives a number and a length unit."""
+    unit = _unit_of(key)
+    where = f" in {_UNIT[unit]}" if unit in _UNIT else ""
+    head = f"must be a plain number{where} (the unit is in the key name)"
+    m = _NUMBER_WITH_UNIT.fullmatch(text)
+    if m is None:
+        return f"{head}; write the number without quotes or unit"
+    value, written = float(m.group(1)), m.group(2)
+    if not written or written == unit or (unit == "px" and written in ("pixels", "pixel")):
+        return f"{head}: write {value:g} for {key}, without quotes or unit"
+    if unit == "mm" and written in _LENGTH_MM:
+        return (f"{head}: write {value * _LENGTH_MM[written]:g} for {key} ({text.strip()!r} "
+                "in millimetres)")
+    return f"{head}; {written!r} is not a unit this key can be converted from"
+
+
+def _key_paths(schema: Mapping, path: tuple = ()) -> list[tuple[str, ...]]:
+    """Every key path the schema knows, in its order (mappings before their keys)."""
+    out = []
+    for k, sub in schema.get("properties", {}).items():
+        out.append((*path, k))
+        out.extend(_key_paths(sub, (*path, k)))
+    return out
+
+
+def _nearest_key(key: str, here: list[str], path: tuple) -> tuple[str, ...] | None:
+    """The known key that an unknown ``key`` (in the mapping at ``path``, whose keys are
+    ``here``) was most likely meant to be: a close spelling at the same level, else a close
+    spelling anywhere (a key put under the wrong mapping, e.g. a top-level ``k``)."""
+    def close(word: str, candidates: list[str]) -> str | None:
+        lower = {c.lower(): c for c in candidates}
+        hit = difflib.get_close_matches(word.lower(), list(lower), n=1, cutoff=0.6)
+        return lower[hit[0]] if hit else None
+
+    same = close(key, here)
+    if same is not None:
+        return (*path, same)
+    everywhere = [p for p in _key_paths(SCHEMA) if p[:-1] != path]
+    leaf = close(key, [p[-1] for p in everywhere])
+    return next((p for p in everywhere if p[-1] == leaf), None) if leaf else None
+
+
+def _check_unknown_keys(doc: Any, schema: Mapping, path: tuple, source: str | Path) -> None:
+    """Refuse a key the schema does not know, naming the nearest known one: a typo
+    (``scene: {near: 470}`` for ``near_mm``) would otherwise leave the value unread and
+    its check (Eqs. 2-3) silently skipped."""
+    if not isinstance(doc, Mapping) or "properties" not in schema:
+        return
+    props = schema["properties"]
+    for key, value in doc.items():
+        if key in props:
+            _check_unknown_keys(value, props[key], (*path, key), source)
+            continue
+        dotted = _dotted((*path, key))
+        if not isinstance(key, str):
+            raise DatasheetError(f"{source}: {dotted}: YAML reads the key {key!r} as "
+                                 f"{'a boolean' if isinstance(key, bool) else 'a number'}; "
+                                 "keys are names (see plenocal/calib/reg_b/datasheet.py SCHEMA)")
+        where = _dotted(path) if path else "the top level"
+        takes = f"{where} takes {', '.join(props)}"
+        near = _nearest_key(key, list(props), path)
+        if near is None:
+            raise DatasheetError(f"{source}: {dotted}: unknown key ({takes}; every key: "
+                                 "plenocal/calib/reg_b/datasheet.py SCHEMA)")
+        hint = ""
+        unit, want = _unit_of(key), _unit_of(near[-1])
+        if (unit != want and unit in _LENGTH_MM and want == "mm"
+                and isinstance(value, int | float) and not isinstance(value, bool)):
+            hint = f"{value:g} {unit} is {_dotted(near)}: {value * _LENGTH_MM[unit]:g}; "
+        raise DatasheetError(f"{source}: {dotted}: unknown key - did you mean "
+                             f"{_dotted(near)}? ({hint}{takes})")
+
+
+def _check_sensor_distance(doc: Mapping, source: str | Path) -> None:
+    """``mla.sensor_distance_mm`` and ``mla.k`` must agree: registration B takes ``s``
+    where it is given and ignores ``k``, so a contradiction would pass unnoticed. ``k``
+    gives ``s = k f / (k - 1)`` (Keplerian, ``s > f``) or ``k f / (k + 1)`` (Galilean,
+    ``s < f``), ``f = F_n D`` with the middle F-number (the paper's)."""
+    from plenocal.optics import middle_f_number  # noqa: PLC0415
+
+    mla = doc["mla"]
+    s = mla.get("sensor_distance_mm")
+    if s is None:
+        return
+    fns = mla["f_numbers"] if isinstance(mla["f_numbers"], list) else [mla["f_numbers"]]
+    F_n, D, k = middle_f_number(fns), mla["pitch_mm"], mla["k"]
+    f = F_n * D
+    kepler, galilei = k * f / (k - 1.0), k * f / (k + 1.0)
+    s_k = kepler if s > f else galilei
+    if abs(s - s_k) > SENSOR_DISTANCE_TOLERANCE * s_k:
+        raise _fail(source, "mla.sensor_distance_mm", s,
+                    f"contradicts mla.k = {k:g}: with f = F_n D = {F_n:g} x {D:g} = {f:.4g} mm, "
+                    f"k gives s = k f / (k - 1) = {kepler:.4g} mm (Keplerian MLA) or "
+                    f"k f / (k + 1) = {galilei:.4g} mm (Galilean), {100 * (s / s_k - 1):+.1f} % "
+                    "off; registration B would take sensor_distance_mm and ignore k: correct "
+                    "one of them, or give only one")
 
 
 def _fail(source: str | Path, key: str, value: Any, why: str) -> DatasheetError:
@@ -133,8 +253,7 @@ def _schema_message(err: jsonschema.ValidationError) -> str:
     if v == "type":
         want = err.validator_value
         if want in ("number", "integer") and isinstance(err.instance, str):
-            return (f"must be a plain number{_unit_hint(key)} (the unit is in the key name; "
-                    f"write e.g. 5.5 for {key}, not '5.5 um')")
+            return _number_hint(key, err.instance)
         if want == "object":
             return "must be a mapping of keys to values (key: value lines), not a " + (
                 "list" if isinstance(err.instance, list) else type(err.instance).__name__)
@@ -189,6 +308,7 @@ def check_datasheet(doc: Any, source: str | Path = "camera.yaml") -> dict:
         raise DatasheetError(f"{source}: the file is {kind}; it must be a mapping of keys "
                              "to values (pixel_size_mm: ..., mla: {...}; see README, "
                              "'Bringing a real capture')")
+    _check_unknown_keys(doc, SCHEMA, (), source)
     bad = _non_finite(doc)
     if bad:
         raise _fail(source, _dotted(bad[0]), bad[1], "must be a finite number")
@@ -203,6 +323,7 @@ def check_datasheet(doc: Any, source: str | Path = "camera.yaml") -> dict:
         shown = err.instance if not isinstance(err.instance, Mapping) else "{...}"
         raise _fail(source, _dotted(err.absolute_path), shown, _schema_message(err))
     _check_ranges(doc, SCHEMA, (), source)
+    _check_sensor_distance(doc, source)
     ml, scene = doc["main_lens"], doc.get("scene") or {}
     F, X_o = ml.get("focal_length_mm"), ml["focus_distance_mm"]
     if F is not None and X_o <= F:
@@ -263,11 +384,43 @@ def load_datasheet(path: str | Path) -> dict:
         raise FileNotFoundError(f"{path}: camera datasheet not found (camera.yaml is written "
                                 "by the simulator, or put next to a real capture's calib.xml)")
     try:
-        with open(path) as fh:
-            doc = yaml.safe_load(fh)
+        doc = load_yaml_unique(path.read_text(), path)
     except yaml.YAMLError as exc:
         raise DatasheetError(f"{path}: not valid YAML: {exc}") from None
     return check_datasheet(doc, path)
+
+
+def _check_duplicates(node: yaml.Node, path: tuple, source: str | Path) -> None:
+    if isinstance(node, yaml.MappingNode):
+        seen: dict[str, int] = {}
+        for key_node, value_node in node.value:
+            key = key_node.value if isinstance(key_node, yaml.ScalarNode) else None
+            if key is not None:
+                line = key_node.start_mark.line + 1
+                if key in seen:
+                    raise DatasheetError(
+                        f"{source}: {_dotted((*path, key))}: given twice (lines {seen[key]} "
+                        f"and {line}); YAML would keep the last one without a word: delete "
+                        "one of them")
+                seen[key] = line
+            _check_duplicates(value_node, (*path, key), source)
+    elif isinstance(node, yaml.SequenceNode):
+        for i, item in enumerate(node.value):
+            _check_duplicates(item, (*path, i), source)
+
+
+def load_yaml_unique(text: str, source: str | Path = "<string>") -> Any:
+    """YAML ``text`` parsed safely, refusing a key given twice in one mapping (PyYAML keeps
+    the last one silently): :class:`DatasheetError` naming the key and both lines."""
+    loader = yaml.SafeLoader(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        _check_duplicates(node, (), source)
+        return loader.construct_document(node)
+    finally:
+        loader.dispose()
 
 
 # The checked datasheet, typed, as registration B computes with it
