@@ -210,12 +210,21 @@ def final_targets():
 # --- helpers of rules/convert.smk -----------------------------------------------------
 
 
-def convert_settings(dataset):
+#: convert settings that only rule convert_setup reads: a change reruns it alone (its
+#: convert_setup.json keeps its bytes, and the conversions after it are not rerun)
+SETUP_ONLY_CONVERT_KEYS = ("grid_foreign",)
+
+
+def convert_settings(dataset, setup=False):
     """The convert block with the dataset's own overrides (its `mla` set-up) applied:
-    only the converter of that dataset reruns when it changes."""
+    only the converter of that dataset reruns when it changes. ``setup``: rule
+    convert_setup's, with the keys only it reads (SETUP_ONLY_CONVERT_KEYS)."""
     out = dict(stage_config("convert"))
     if ds_config(dataset).get("mla") is not None:
         out["mla"] = ds_config(dataset)["mla"]
+    if not setup:
+        for key in SETUP_ONLY_CONVERT_KEYS:
+            out.pop(key, None)
     return out
 
 

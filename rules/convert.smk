@@ -35,7 +35,7 @@ rule convert_setup:
         mem_mb=2500,
         runtime=10,
     params:
-        convert=lambda wc: convert_settings(wc.dataset),
+        convert=lambda wc: convert_settings(wc.dataset, setup=True),
         views=lambda wc: n_views(wc.dataset),
     script:
         "../scripts/convert_setup.py"

@@ -16,7 +16,8 @@ image = load_lenslet(snakemake.input.lenslet, read_sensor_size(snakemake.input.c
 calib = load_calib(snakemake.input.calib)
 setup, _ = decide_setup(image, calib, int(snakemake.params.views),
                         ConvertSettings.from_config(snakemake.params.convert),
-                        source=str(snakemake.input.lenslet))
+                        source=str(snakemake.input.lenslet),
+                        grid_foreign=snakemake.params.convert["grid_foreign"])
 log.info("MLA %s (%s), tile %d px per lens pitch (%s), grid %s (convert.grid %s)",
          setup.mla, setup.mla_source, setup.tile, setup.tile_source,
          "refined from the image" if setup.refined else "calib.xml's", setup.grid_mode)

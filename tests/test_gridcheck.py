@@ -283,3 +283,37 @@ def test_grey_and_16_bit_frames_measure_alike():
         np.testing.assert_allclose(other.offset_px, ref.offset_px, atol=0.05)
         assert other.measured_share == pytest.approx(ref.measured_share, abs=0.05)
     np.testing.assert_allclose(ref.offset_px, (-0.8, -0.5), atol=0.1)
+
+
+def test_foreign_grid_stops_convert_setup():
+    """Issue 34: a calib.xml of another camera was flagged FOREIGN in the job log only;
+    every shot was converted on the wrong grid and map_a then blamed texture and overlap.
+    The set-up now stops, with the measured drift and the remedies, unless the user asks to
+    go on (convert.grid_foreign: warn) or to refine the grid (convert.grid: refine)."""
+    from plenocal.convert import ConvertSettings  # noqa: PLC0415
+    from plenocal.convert.errors import ConvertError  # noqa: PLC0415
+    from plenocal.convert.setup import decide_setup, foreign_grid_error  # noqa: PLC0415
+
+    calib = _calib(35.0, 0.0)
+    W, H = 700, 560
+    img = _frame(calib, W, H)
+    off = replace(calib, offset=(calib.offset[0] + 14.0, calib.offset[1]),
+                  source="data/d/calib.xml")
+    settings = ConvertSettings.from_config({"grid": "auto"})
+    with pytest.raises(ConvertError) as exc:
+        decide_setup(img, off, 3, settings, source="data/d/lenslet/x00_y00.png")
+    msg = str(exc.value)
+    for words in ("data/d/calib.xml", "data/d/lenslet/x00_y00.png", "drift up to 1",
+                  "convert.grid: refine", "convert.grid_foreign: warn"):
+        assert words in msg, (words, msg)
+    _, check = grid_for_mode(img, MicrolensGrid(off, W, H), "file")
+    assert check.foreign and foreign_grid_error(check, "calib.xml", "x", "error")
+    assert foreign_grid_error(check, "calib.xml", "x", "warn") is None
+    _, refined = grid_for_mode(img, MicrolensGrid(off, W, H), "refine")
+    assert refined.foreign and refined.refined
+    assert foreign_grid_error(refined, "calib.xml", "x", "error") is None
+    # the right file passes
+    _, exact = grid_for_mode(img, MicrolensGrid(calib, W, H), "auto")
+    assert foreign_grid_error(exact, "calib.xml", "x", "error") is None
+    with pytest.raises(ConvertError, match="grid_foreign"):
+        foreign_grid_error(check, "calib.xml", "x", "ignore")

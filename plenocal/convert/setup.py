@@ -106,11 +106,44 @@ def check_and_grid(image: np.ndarray, calib: RayCalib, mode: str
     return grid_for_mode(image, build_grid(calib, W, H), mode)
 
 
+#: convert.grid_foreign: stop at a foreign grid, or convert on it with a warning
+GRID_FOREIGN = ("error", "warn")
+
+
+def foreign_grid_error(check: GridCheck, calib_source: str, frame: str,
+                       policy: str = "error") -> str | None:
+    """The error that stops the run when the grid check found the calib.xml grid foreign
+    (not on the micro images: another camera's file) and it is used as it is, or None
+    (``policy`` ``warn``: the user goes on; ``convert.grid`` ``refine``: the views use the
+    lattice fitted to the image). Converting on a foreign grid gives views that registration
+    A cannot match, and its error then blames the texture and the overlap."""
+    if policy not in GRID_FOREIGN:
+        raise ConvertError(f"convert.grid_foreign: {policy!r} is not one of "
+                           f"{', '.join(GRID_FOREIGN)}")
+    if not check.foreign or check.refined or policy == "warn":
+        return None
+    dx, dy = check.offset_px
+    return (f"{calib_source}: the calib.xml grid is not on the micro images of {frame} "
+            f"({100 * check.measured_share:.0f}% of {check.lenses} lenses measured: pitch "
+            f"x{check.pitch_ratio:.4f} of the file's, lattice ({dx:+.1f}, {dy:+.1f}) px off at "
+            f"the image centre, drift up to {check.drift_max_px:.1f} px of a "
+            f"{check.diameter_px:.1f} px lens, residual {check.residual_rms_px:.2f} px): it "
+            "looks like another camera's or another sensor crop's file. Put this camera's "
+            "calib.xml there, or set convert.grid: refine to convert on the lattice fitted to "
+            "the image, or convert.grid_foreign: warn to convert on this grid all the same")
+
+
 def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: ConvertSettings,
-                 source: str) -> tuple[ConverterSetup, ShotConversion]:
-    """Decide the per-camera set-up on one shot; returns it and that shot's conversion."""
+                 source: str, grid_foreign: str = "error"
+                 ) -> tuple[ConverterSetup, ShotConversion]:
+    """Decide the per-camera set-up on one shot; returns it and that shot's conversion.
+    A foreign grid stops here (:func:`foreign_grid_error`, ``grid_foreign``: the config's
+    ``convert.grid_foreign``) before any view is made."""
     grid, check = check_and_grid(image, calib, settings.grid)
     log.info("%s: %s", source, check.summary())
+    error = foreign_grid_error(check, calib.source, source, grid_foreign)
+    if error is not None:
+        raise ConvertError(error)
     shot = ShotConversion(image, calib, n_views, settings, source=source, grid=grid)
     lattice = None
     if check.refined:
