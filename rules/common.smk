@@ -11,6 +11,13 @@ from plenocal.calib.reg_b.datasheet import DatasheetError, load_datasheet
 from plenocal import names
 from plenocal.names import central_view, view_names
 
+# COLMAP's logging (glog) to standard error alone, which every job's script sends to its
+# rule's log (plenocal.rulelog), instead of also into *.INFO / *.WARNING files of its own
+# in $TMPDIR after every job: glog reads this when pycolmap loads, in the jobs, which
+# inherit this process's environment (on a cluster node too: the job's Snakemake parses
+# this file again)
+os.environ.setdefault("GLOG_logtostderr", "1")
+
 try:
     validate_config(config, Path(workflow.basedir) / "config.schema.yaml")
 except ConfigError as err:

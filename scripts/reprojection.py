@@ -1,9 +1,12 @@
 """Rules reprojection_calib and reprojection: the reprojection error of one calibration
 (Table I of the paper), and the table of all of them."""
+import shutil
+from pathlib import Path
+
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.artifacts.results import ReprojectionTable, write_reprojection_table
-from plenocal.io.files import read_json, write_json
+from plenocal.io.files import make_temp_dir, read_json, write_json
 from plenocal.rulelog import log_to_file
 from plenocal.verify import reprojection as rp
 
@@ -21,6 +24,13 @@ else:
                 min_angle_deg=cfg["reprojection"]["min_angle_deg"],
                 track_error_px=cfg["reprojection"]["track_error_px"], seed=cfg["seed"],
                 num_threads=sm.threads)
-    write_json(sm.output[0], rp.evaluate_calibration(sm.wildcards.calib, sm.input.calib,
-                                                     sm.input.database, sm.params.central,
-                                                     **opts))
+    # COLMAP's working files beside the output, not in $TMPDIR: removed at the end, and a
+    # killed job's by the next run of the same calibration's job (make_temp_dir; the jobs of
+    # the other calibrations, which may run alongside, have prefixes of their own)
+    work = make_temp_dir(Path(sm.output[0]).parent, f".{sm.wildcards.calib}.")
+    try:
+        row = rp.evaluate_calibration(sm.wildcards.calib, sm.input.calib, sm.input.database,
+                                      sm.params.central, work_dir=work, **opts)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    write_json(sm.output[0], row)
