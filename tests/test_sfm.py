@@ -74,6 +74,17 @@ def test_registration_a_is_deterministic(capture, registered, tmp_path):
         (ra / "model" / "points3D.bin").read_bytes()
 
 
+def test_map_a_leaves_its_input_database_untouched(capture, registered, tmp_path):
+    """Issue 34: map_a opened reg_a/database.db with pycolmap, which rewrites its SQLite
+    header (the change counter) on every open: a rule must not modify its inputs."""
+    ra, _ = registered
+    db = tmp_path / "database.db"
+    db.write_bytes((ra / "database.db").read_bytes())
+    before = db.read_bytes()
+    map_a(db, ra / "images", tmp_path / "model")
+    assert db.read_bytes() == before
+
+
 def test_global_mapper(capture, registered, tmp_path):
     _, cams, _ = capture
     ra, _ = registered

@@ -260,16 +260,17 @@ def map_a(database: str | Path, image_dir: str | Path, model_dir: str | Path, *,
     registration A (what ``reg_a.json`` holds)."""
     import pycolmap  # noqa: PLC0415
 
-    with pycolmap.Database.open(str(database)) as db:
-        names = sorted(im.name for im in db.read_all_images())
-    check_shots([n[:-4] for n in names])
     t0 = time.perf_counter()
-    # the mapper works on a copy: the database input of the rule stays untouched
-    # (in a temporary folder that a killed job's successor removes: make_temp_dir)
+    # everything works on a copy: the database input of the rule stays untouched (pycolmap
+    # writes to any database it opens, if only its change counter: a rule must not modify
+    # its inputs), in a temporary folder that a killed job's successor removes (make_temp_dir)
     tmp = make_temp_dir(Path(model_dir).parent, ".map_a.")
     try:
         db_copy = tmp / "database.db"
         shutil.copyfile(database, db_copy)
+        with pycolmap.Database.open(str(db_copy)) as db:
+            names = sorted(im.name for im in db.read_all_images())
+        check_shots([n[:-4] for n in names])
         recs = run_mapper(db_copy, image_dir, mapper=mapper, seed=seed, num_threads=num_threads)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
