@@ -207,11 +207,124 @@ TARGETS = []
 
 
 def final_targets():
+    """The default target's inputs: each stage's final outputs (TARGETS), and, found when
+    the DAG is built, every output of the run that is missing (default_run_gaps)."""
     out = []
     for d in DATASETS:
         for fn in TARGETS:
             out.extend(fn(d))
+    return out + [lambda wildcards: default_run_gaps(out)]
+
+
+# --- every output of the default run: made again where it is missing (issue 34) ---------
+#
+# Snakemake makes a missing file again only where a target or a job that must run asks for
+# it: an intermediate whose consumers are up to date (reg_a/features.db, a depth map, a
+# baseline's cameras.json) was deleted, and "Nothing to be done". Every output of every job
+# of the default run (logs and benchmarks aside) is therefore listed by walking the rules
+# from the stages' targets, as Snakemake's DAG does, and those missing are asked for too
+# (only those: an existing file as a target costs the DAG a look-up, and the no-op its
+# time, issue 15). The walk reads each rule's declared outputs and inputs, so a rule added
+# later is covered without being named here.
+
+
+def _fixed_outputs():
+    """{path: (rl, wildcards)} of the rules whose files are named in full or by the
+    dataset alone (each dataset that its constraints allow), and the rules with other
+    wildcards (depth_view's cam and view, ...), which the walk matches by pattern."""
+    from snakemake.io import apply_wildcards
+
+    fixed, patterned = {}, []
+    for rl in workflow.rules:
+        if not rl.output:
+            continue
+        if not rl.wildcard_names:
+            choices = [{}]
+        elif rl.wildcard_names == {"dataset"}:
+            choices = [{"dataset": d} for d in DATASETS]
+        else:
+            patterned.append(rl)
+            continue
+        for wc in choices:
+            paths = [apply_wildcards(o, wc) for o in rl.output]
+            if wc and not rl.output[0].match(paths[0]):
+                continue  # a constraint (dataset=SYN) rules this dataset out
+            for path in paths:
+                fixed.setdefault(path, (rl, wc))
+    return fixed, patterned
+
+
+def default_run_outputs(targets):
+    """[(path, is_directory)] of every output (logs and benchmarks aside) of the jobs that
+    ``targets`` need, found as Snakemake's DAG finds them: from each file to the rule that
+    makes it, and from that rule's inputs on."""
+    from snakemake.io import apply_wildcards
+
+    fixed, patterned = _fixed_outputs()
+    jobs, seen, out = set(), set(), []
+    todo = list(targets)
+    while todo:
+        path = todo.pop()
+        if path in seen:
+            continue
+        seen.add(path)
+        job = fixed.get(path)
+        if job is None:
+            job = next(
+                (
+                    (r, m.groupdict())
+                    for r in patterned
+                    for o in r.output
+                    if (m := o.match(path))
+                ),
+                None,
+            )
+            if job is None:
+                continue  # a source file (data/<d>/ of a real capture)
+        rl, wc = job
+        key = (rl.name, tuple(sorted(wc.items())))
+        if key in jobs:
+            continue
+        jobs.add(key)
+        out.extend((apply_wildcards(o, wc), o.is_directory) for o in rl.output)
+        todo.extend(str(f) for f in rl.expand_input(wc)[0])
     return out
+
+
+def _altered_since_written(folder):
+    """Whether files were removed from (or added to) a directory output after its job:
+    Snakemake touches ``.snakemake_timestamp`` in it last, so the folder's own mtime is
+    newer only where its entries changed since."""
+    try:
+        stamp = os.stat(os.path.join(folder, ".snakemake_timestamp")).st_mtime_ns
+    except FileNotFoundError:
+        return False  # not written by Snakemake, or no stamp: nothing to compare
+    return os.stat(folder).st_mtime_ns > stamp
+
+
+def default_run_gaps(targets):
+    """The outputs of the default run (default_run_outputs) that are missing: asked for,
+    so that their jobs run, and after them every job that reads them. A directory output
+    from which a file was removed (a COLMAP model, the MPEG exports) exists, so it cannot
+    be asked for: its job is forced, as ``--forcerun <folder>`` would (Snakemake's DAG is
+    being built when this runs)."""
+    missing, altered = [], []
+    for path, is_dir in default_run_outputs(targets):
+        if not os.path.exists(path):
+            missing.append(path)
+        elif is_dir and _altered_since_written(path):
+            altered.append(path)
+    if altered:
+        from snakemake.logging import logger
+
+        logger.warning(
+            "files were removed from "
+            + ", ".join(altered)
+            + " after the job that wrote it: its job runs again"
+        )
+        workflow.dag.forcefiles.update(altered)
+    have = set(targets)
+    return [p for p in missing if p not in have]
 
 
 # --- helpers of rules/convert.smk -----------------------------------------------------
