@@ -49,6 +49,21 @@ def test_two_steps_give_the_one_step_database(views, tmp_path):
     assert finfo["keypoints_mean"] == info["keypoints_mean"] > 100
 
 
+def test_reading_the_names_leaves_the_database_alone(views, tmp_path):
+    """Issue 34: COLMAP's databases are in WAL mode, and reading one read-only left its
+    -wal and -shm files beside it (results/<d>/matches/database.db-shm): a rule's input
+    and its folder stay as they were."""
+    paths, _ = views
+    some = dict(sorted(paths.items())[:2])
+    db = tmp_path / "features.db"
+    viewdb.extract_view_features(some, db, tmp_path / "w", max_num_features=200)
+    before = db.read_bytes()
+    assert before[18:20] == b"\x02\x02"  # WAL
+    assert viewdb.database_names(db) == sorted(some)
+    assert db.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["features.db", "w"]
+
+
 def test_first_octave_reaches_sift(views, tmp_path):
     """first_octave 0 starts SIFT at the image's own resolution (COLMAP's -1 doubles it
     first): fewer keypoints, none finer than the image's own scale."""

@@ -265,8 +265,10 @@ def build_view_database(images: Mapping[str, str | Path], database: str | Path,
 def database_names(database: str | Path) -> list[str]:
     """``"<cam>/<view>"`` names of the images of a database, sorted. Read through
     SQLite in read-only mode: opening a database with pycolmap writes to it (its
-    schema check), which would make Snakemake rerun every job that reads it."""
-    uri = f"{Path(database).resolve().as_uri()}?mode=ro"
+    schema check), which would make Snakemake rerun every job that reads it. And as an
+    immutable file: COLMAP's databases are in WAL mode, and a read-only connection to one
+    left its -wal and -shm files beside the rule's input (matches/database.db-shm)."""
+    uri = f"{Path(database).resolve().as_uri()}?mode=ro&immutable=1"
     with contextlib.closing(sqlite3.connect(uri, uri=True)) as con:
         names = [row[0] for row in con.execute("SELECT name FROM images")]
     return sorted(n[:-4] if n.endswith(".png") else n for n in names)
