@@ -3,6 +3,7 @@ rerun suite and the real-capture test both start from it, so it is simulated onc
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
@@ -15,10 +16,13 @@ WORKFLOW_FILES = ["Snakefile", "rules", "scripts", "config.schema.yaml", "report
                   "profiles"]
 
 
-def snakemake(work: Path, *args: str, timeout: int = 1500) -> subprocess.CompletedProcess:
+def snakemake(work: Path, *args: str, timeout: int = 1500,
+              tmpdir: Path | None = None) -> subprocess.CompletedProcess:
+    """``snakemake -j2 <args>`` in ``work`` (``tmpdir``: the run's $TMPDIR)."""
+    env = None if tmpdir is None else {**os.environ, "TMPDIR": str(tmpdir)}
     return subprocess.run([sys.executable, "-m", "snakemake", "-j2", "--workflow-profile",
                            "none", *args], cwd=work, capture_output=True, text=True,
-                          timeout=timeout)
+                          timeout=timeout, env=env)
 
 
 def workflow_copy(dest: Path) -> Path:
@@ -37,10 +41,29 @@ def tiny_workflow(dest: Path) -> Path:
     return work
 
 
+def clone(src: Path, dest: Path) -> Path:
+    """A copy of the run folder ``src`` with the same mtimes (copying rewrites them in
+    copy order: Snakemake would see newer inputs)."""
+    shutil.copytree(src, dest, symlinks=True)
+    for p in src.rglob("*"):
+        q = dest / p.relative_to(src)
+        if q.exists() and not q.is_symlink():
+            st = p.stat()
+            os.utime(q, ns=(st.st_atime_ns, st.st_mtime_ns))
+    return dest
+
+
 @pytest.fixture(scope="session")
-def tiny_complete_run(tmp_path_factory) -> Path:
+def tiny_tmpdir(tmp_path_factory) -> Path:
+    """The $TMPDIR of the session's complete tiny run (tests/test_workflow_faults.py checks
+    that the workflow leaves nothing of its own there)."""
+    return tmp_path_factory.mktemp("tmpdir")
+
+
+@pytest.fixture(scope="session")
+def tiny_complete_run(tmp_path_factory, tiny_tmpdir) -> Path:
     """A folder in which the whole default target of tests/tiny/config.yaml has run."""
     work = tiny_workflow(tmp_path_factory.mktemp("complete"))
-    proc = snakemake(work)
+    proc = snakemake(work, tmpdir=tiny_tmpdir)
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-4000:]
     return work

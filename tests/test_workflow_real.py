@@ -137,3 +137,20 @@ def test_bad_input_stops_before_any_job(real_run: Path, tmp_path: Path):
 
     out, _ = _bad(real_run, tmp_path / "c", micrometres)
     assert "mla.pitch_mm" in out and "micrometres" in out, out[-2000:]
+
+    # issue 34: a typo in camera.yaml hid the Eqs. 2-3 check (and the report's warning)
+    def typo(d: Path):
+        doc = yaml.safe_load((d / "camera.yaml").read_text())
+        doc["scene"] = {"near": doc["scene"]["near_mm"], "far": doc["scene"]["far_mm"]}
+        (d / "camera.yaml").write_text(yaml.safe_dump(doc))
+
+    out, _ = _bad(real_run, tmp_path / "d", typo)
+    assert re.search(r"camera\.yaml: scene\.(far|near): unknown key - did you mean "
+                     r"scene\.(far|near)_mm\?", out), out[-2000:]
+
+    # issue 34: other scripts' digits passed the name check, then failed unnamed
+    def digits(d: Path):
+        (d / "lenslet" / "x00_y00.png").rename(d / "lenslet" / "x\u0660\u0660_y\u0660\u0660.png")
+
+    out, _ = _bad(real_run, tmp_path / "e", digits)
+    assert "move or rename x\u0660\u0660_y\u0660\u0660.png" in out, out[-2000:]

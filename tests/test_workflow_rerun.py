@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
@@ -15,7 +14,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from conftest import snakemake
+from conftest import clone, snakemake
 
 from plenocal.names import central_view, view_names
 
@@ -50,17 +49,6 @@ def complete_run(tiny_complete_run) -> Path:
     """The session's complete tiny run (tests/conftest.py), shared with the real-capture
     test so the tiny config is simulated once."""
     return tiny_complete_run
-
-
-def clone(src: Path, dest: Path) -> Path:
-    shutil.copytree(src, dest, symlinks=True)
-    # copying rewrites mtimes in the same order, keep them as they were
-    for p in src.rglob("*"):
-        q = dest / p.relative_to(src)
-        if q.exists() and not q.is_symlink():
-            st = p.stat()
-            os.utime(q, ns=(st.st_atime_ns, st.st_mtime_ns))
-    return dest
 
 
 def edit_config(work: Path, change) -> None:
