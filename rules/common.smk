@@ -330,8 +330,8 @@ def default_run_gaps(targets):
 # --- helpers of rules/convert.smk -----------------------------------------------------
 
 
-#: convert settings that only rule convert_setup reads: a change reruns it alone (its
-#: convert_setup.json keeps its bytes, and the conversions after it are not rerun)
+#: convert settings that only convert_setup reads (a change reruns that job alone, whose
+#: convert_setup.json keeps its bytes: the conversions after it are not rerun)
 SETUP_ONLY_CONVERT_KEYS = ("grid_foreign",)
 
 
