@@ -330,8 +330,9 @@ def default_run_gaps(targets):
 # --- helpers of rules/convert.smk -----------------------------------------------------
 
 
-#: convert settings that only convert_setup reads (a change reruns that job alone, whose
-#: convert_setup.json keeps its bytes: the conversions after it are not rerun)
+#: convert settings that only convert_setup reads: left out of the conversions' params, so
+#: that a change reruns them only as the jobs after convert_setup (whose convert_setup.json
+#: keeps its bytes: asked for alone, `snakemake <that file>`, nothing else reruns after it)
 SETUP_ONLY_CONVERT_KEYS = ("grid_foreign",)
 
 
