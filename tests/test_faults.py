@@ -144,7 +144,16 @@ GOOD = {
     "mla": {"pitch_mm": 0.13, "f_numbers": [2.8], "k": 5.0, "sensor_distance_mm": 0.455},
     "array": {"step_mm": 10.0}, "scene": {"near_mm": 470.0, "far_mm": 740.0},
 }
-CAMERA_KEYS = datasheet._key_paths(datasheet.SCHEMA)
+
+
+def camera_keys(node: dict = datasheet.SCHEMA, path: tuple = ()) -> Iterator[tuple]:
+    """Every key path of camera.yaml's schema (mappings and their keys)."""
+    for key, sub in node.get("properties", {}).items():
+        yield (*path, key)
+        yield from camera_keys(sub, (*path, key))
+
+
+CAMERA_KEYS = list(camera_keys())
 
 
 def typos(key: str) -> dict[str, str]:
