@@ -179,8 +179,8 @@ def _check_unknown_keys(doc: Any, schema: Mapping, path: tuple, source: str | Pa
             continue
         dotted = _dotted((*path, key))
         if not isinstance(key, str):
-            raise DatasheetError(f"{source}: {dotted}: YAML reads the key {key!r} as "
-                                 f"{'a boolean' if isinstance(key, bool) else 'a number'}; "
+            kind = {bool: "a boolean", type(None): "null"}.get(type(key), "a number")
+            raise DatasheetError(f"{source}: {dotted}: YAML reads the key {key!r} as {kind}; "
                                  "keys are names (see plenocal/calib/reg_b/datasheet.py SCHEMA)")
         where = _dotted(path) if path else "the top level"
         takes = f"{where} takes {', '.join(props)}"
