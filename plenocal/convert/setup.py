@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocal.artifacts.stage_warnings import WARNINGS_KEY, warning_list, warnings_of
+from plenocal.config import stage_defaults
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.gridcheck import GRID_MODES, GridCheck, grid_for_mode, round_floats
 from plenocal.convert.shot import ConvertSettings, ShotConversion, build_grid
@@ -108,10 +109,11 @@ def check_and_grid(image: np.ndarray, calib: RayCalib, mode: str
 
 #: convert.grid_foreign: stop at a foreign grid, or convert on it with a warning
 GRID_FOREIGN = ("error", "warn")
+_CONVERT = stage_defaults("convert")  # the schema's defaults (grid_foreign: error)
 
 
 def foreign_grid_error(check: GridCheck, calib_source: str, frame: str,
-                       policy: str = "error") -> str | None:
+                       policy: str = _CONVERT["grid_foreign"]) -> str | None:
     """The error that stops the run when the grid check found the calib.xml grid foreign
     (not on the micro images: another camera's file) and it is used as it is, or None
     (``policy`` ``warn``: the user goes on; ``convert.grid`` ``refine``: the views use the
@@ -134,7 +136,7 @@ def foreign_grid_error(check: GridCheck, calib_source: str, frame: str,
 
 
 def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: ConvertSettings,
-                 source: str, grid_foreign: str = "error"
+                 source: str, grid_foreign: str = _CONVERT["grid_foreign"]
                  ) -> tuple[ConverterSetup, ShotConversion]:
     """Decide the per-camera set-up on one shot; returns it and that shot's conversion.
     A foreign grid stops here (:func:`foreign_grid_error`, ``grid_foreign``: the config's
