@@ -544,9 +544,37 @@ def scale_shots(dataset):
 def merge_targets(dataset):
     return [
         res(dataset, "merge", "scale.json"),
-        res(dataset, "calibration", "cameras.json"),
-        res(dataset, "calibration", "mpeg", "cameras.json"),
-        res(dataset, "calibration", "colmap"),
+        res(dataset, "calibration", "eq6", "cameras.json"),
+        res(dataset, "calibration", "eq6", "mpeg", "cameras.json"),
+        res(dataset, "calibration", "eq6", "colmap"),
+    ]
+
+
+# --- helpers of rules/refine.smk ------------------------------------------------------
+
+
+def refine_enabled():
+    return bool(stage_config("refine")["enabled"])
+
+
+def refine_inputs(wildcards):
+    """The Eq. 6 calibration and the rig; the matches of every view where the refinement
+    runs (refine.enabled false: the Eq. 6 result is copied, and the calibration waits for
+    no matching)."""
+    d = wildcards.dataset
+    out = {
+        "eq6": res(d, "calibration", "eq6", "cameras.json"),
+        "rig": res(d, "reg_b", "rig.json"),
+    }
+    if refine_enabled():
+        out["database"] = res(d, "matches", "database.db")
+    return out
+
+
+def refine_targets(dataset):
+    return [
+        res(dataset, "calibration", f)
+        for f in ("cameras.json", "mpeg/cameras.json", "colmap", "refine.json")
     ]
 
 
@@ -580,7 +608,7 @@ def report_inputs(wildcards):
     out = {}
     if have("reprojection"):
         out["reprojection"] = res(d, "eval", "reprojection.json")
-    gt_rules = ("ground_truth", "map_a", "rig_b", "scale", "merge")
+    gt_rules = ("ground_truth", "map_a", "rig_b", "scale", "merge", "refine")
     if is_synthetic(d) and all(have(r) for r in gt_rules):
         out["gt_errors"] = res(d, "eval", "gt_errors.json")
     if is_synthetic(d) and have("ground_truth"):
@@ -588,8 +616,9 @@ def report_inputs(wildcards):
     for k in (1, 2, 3):
         if have(f"synthesis_exp{k}"):
             out[f"exp{k}"] = res(d, "eval", f"synthesis_exp{k}.json")
-    if have("merge"):
+    if have("refine"):
         out["calibration"] = res(d, "calibration", "cameras.json")
+        out["refine"] = res(d, "calibration", "refine.json")
     if have("scale"):
         out["scale"] = res(d, "merge", "scale.json")
     if have("rig_b"):
@@ -621,13 +650,15 @@ REPROJECTION_CALIB = {
     "reg_a": ("reg_a", "reg_a.json"),
     "reg_b": ("reg_b", "rig.json"),
     "complete": ("calibration", "cameras.json"),
+    "eq6": ("calibration", "eq6", "cameras.json"),
     "baseline_sfm": ("baseline", "cameras.json"),
     "ground_truth": ("ground_truth", "cameras.json"),
 }
 
 
 def reprojection_calibs(dataset):
-    out = ["reg_a", "reg_b", "complete", "baseline_sfm"]
+    out = ["reg_a", "reg_b", "complete"] + (["eq6"] if refine_enabled() else [])
+    out += ["baseline_sfm"]
     return out + (["ground_truth"] if is_synthetic(dataset) else [])
 
 

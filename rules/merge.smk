@@ -1,5 +1,6 @@
-"""Scale between the registrations (Eq. 5) and their merge (Eq. 6) into the complete
-calibration, written in every export format."""
+"""Scale between the registrations (Eq. 5) and their merge (Eq. 6): the paper's complete
+calibration, written in every export format to calibration/eq6/ (rule refine, in
+rules/refine.smk, makes calibration/ from it)."""
 
 
 rule scale:
@@ -36,13 +37,9 @@ rule merge:
         rig="results/{dataset}/reg_b/rig.json",
         scale="results/{dataset}/merge/scale.json",
     output:
-        plain=report(
-            "results/{dataset}/calibration/cameras.json",
-            caption="../report/calibration.rst",
-            category="Calibration",
-        ),
-        mpeg="results/{dataset}/calibration/mpeg/cameras.json",
-        colmap=directory("results/{dataset}/calibration/colmap"),
+        plain="results/{dataset}/calibration/eq6/cameras.json",
+        mpeg="results/{dataset}/calibration/eq6/mpeg/cameras.json",
+        colmap=directory("results/{dataset}/calibration/eq6/colmap"),
     log:
         log_path("merge"),
     benchmark:

@@ -8,6 +8,9 @@ rule gt_errors:
         rig="results/{dataset}/reg_b/rig.json",
         scale="results/{dataset}/merge/scale.json",
         calibration="results/{dataset}/calibration/cameras.json",
+        eq6="results/{dataset}/calibration/eq6/cameras.json",
+        refine="results/{dataset}/calibration/refine.json",
+        model="results/{dataset}/reg_a/model",
     output:
         errors=report(
             "results/{dataset}/eval/gt_errors.json",

@@ -77,12 +77,12 @@ def test_rig_scale_merge_rules(tmp_path):
     assert rig["check"]["verdict"] == "pass" and len(rig["views"]) == 9
     scale = json.loads((res / "merge/scale.json").read_text())
     assert scale["r"] == pytest.approx(0.02, rel=1e-6)
-    cal = json.loads((res / "calibration/cameras.json").read_text())
+    cal = json.loads((res / "calibration/eq6/cameras.json").read_text())
     assert len(cal["cameras"]) == 27
     # x01_y00 sits 0.5 SfM units = 1 cm right of x00_y00
     c0 = np.asarray(cal["cameras"]["x00_y00/1_1"]["cam_to_world"])
     c1 = np.asarray(cal["cameras"]["x01_y00/1_1"]["cam_to_world"])
     assert c1[0, 3] - c0[0, 3] == pytest.approx(0.01)
-    mpeg = json.loads((res / "calibration/mpeg/cameras.json").read_text())
+    mpeg = json.loads((res / "calibration/eq6/mpeg/cameras.json").read_text())
     assert len(mpeg["cameras"]) == 27
-    assert (res / "calibration/colmap/images.bin").is_file()
+    assert (res / "calibration/eq6/colmap/images.bin").is_file()

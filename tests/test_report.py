@@ -329,7 +329,7 @@ def test_absent_sources_are_named_with_their_rules(tmp_path):
                       ("eval/gt_errors.json", "gt_errors"),
                       ("eval/synthesis_exp1.json", "synthesis_exp1"),
                       ("eval/synthesis_exp3.json", "synthesis_exp3"),
-                      ("calibration/cameras.json", "merge"),
+                      ("calibration/cameras.json", "refine"),
                       ("convert/quality.json", "convert_quality")):
         assert f"<code>{rel}</code> is absent (made by rule <code>{rule}</code>" in html
     assert "<img " not in html
@@ -506,7 +506,7 @@ def test_page_renders_in_headless_chromium(tmp_path):
     assert int(m.group(3)) == 10
     for key in ("reg_a", "reg_b", "complete", "baseline_sfm"):
         assert f'id="t1-{key}"' in dom
-    assert "Complete A+B (proposed)" in dom
+    assert "Complete A+B, refined under the rig" in dom
     shot = tmp_path / "shot.png"
     run_chromium(binary, res / "report" / "index.html", tmp_path / "profile2",
                  f"--screenshot={shot}", "--window-size=1280,2400", "--hide-scrollbars")

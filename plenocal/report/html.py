@@ -31,7 +31,7 @@ from plenocal.artifacts.results import (
 )
 from plenocal.artifacts.rig import read_rig
 from plenocal.artifacts.scale import read_scale
-from plenocal.io.files import atomic_write_text
+from plenocal.io.files import atomic_write_text, read_json
 from plenocal.names import array_position, array_shot, central_view, key_shot, split_key
 from plenocal.report import figures as fg
 from plenocal.report import sources as src
@@ -262,9 +262,11 @@ def section_gt(page: Page, synthetic: bool) -> None:
         details.append(("Scale r (Eq. 5)", [
             ("r used (truth)", f"{s['r']:.6g} ({s['r_truth']:.6g})"),
             ("error [%]", f"{s['err_pct']:.4f}")]))
-    al = doc.complete
-    if al:
-        details.append(("Complete calibration (all views, rigid alignment)", [
+    for title, al in (("Complete calibration (all views, rigid alignment)", doc.complete),
+                      ("The paper's Eq. 6 result (all views, rigid alignment)", doc.eq6)):
+        if not al:
+            continue
+        details.append((title, [
             ("centre RMSE / max [mm]", f"{al['centre_rmse_mm']:.4f} / "
              f"{al['centre_max_mm']:.4f} (worst {escape(al['worst_view'])})"),
             ("rotation error mean / max [deg]", f"{al['rotation_err_deg']['mean']:.4f} / "
@@ -275,6 +277,35 @@ def section_gt(page: Page, synthetic: bool) -> None:
              f"{al['pp_err_px']['max']:.4f}"),
             ("metric scale error left [%]", f"{al['residual_scale_err_pct']:.4f}"),
             ("views compared", str(al["n_views"]))]))
+    rf = doc.refinement
+    if rf:
+        details.append(("Joint refinement: its scale against Eq. 5 and the truth", [
+            ("scale written", escape(str(rf.get("scale_source")))),
+            ("written: vs Eq. 5's r / error vs truth [%]",
+             f"{rf['result_scale_vs_eq5_pct']:+.4f} / {rf['result_scale_err_pct']:+.4f}"),
+            ("registration B's rig alone: vs Eq. 5's r / error vs truth [%]",
+             f"{rf['rig_scale_vs_eq5_pct']:+.4f} / {rf['rig_scale_err_pct']:+.4f}"),
+            ("focal length change [%]", f"{rf['focal_change_pct']:+.4f}")]))
+    so = doc.sources
+    if so:
+        hh = so["handheld"]
+        ang = hh.get("axis_angle_deg") or {}
+        details.append(("Where the Eq. 6 result's error comes from", [
+            ("registration A's focal length: error / its standard deviation [%]",
+             f"{so['a_focal_pct']:+.4f} / {_fmt(so.get('a_focal_std_pct'), 3)}"),
+            ("hand-held shots: count, axes turned from the array's mean / max [deg]",
+             f"{hh['count']}, {_fmt(ang.get('mean'), 2)} / {_fmt(ang.get('max'), 2)}"),
+            ("A's centres RMSE, array / hand-held shots [mm]",
+             f"{_fmt(so.get('a_array_centre_mm'), 4)} / {_fmt(so.get('a_hand_centre_mm'), 4)}"),
+            ("only A's poses estimated: centres [mm] / rotation [deg]",
+             f"{so['only']['a_poses']['centre_rmse_mm']:.4f} / "
+             f"{so['only']['a_poses']['rotation_max_deg']:.4f}"),
+            ("only Eq. 5's scale estimated ({:+.4f} %): centres [mm]".format(so["scale_pct"]),
+             f"{so['only']['scale']['centre_rmse_mm']:.4f}"),
+            ("only the rig estimated: centres [mm] / rotation [deg]",
+             f"{so['only']['rig']['centre_rmse_mm']:.4f} / "
+             f"{so['only']['rig']['rotation_max_deg']:.4f}"),
+            ("largest share of the centres' error", escape(so["dominant"]))]))
     for title, items in details:
         page.add(f"<h3>{escape(title)}</h3><table>" + "".join(
             f"<tr><td class=l>{escape(k)}</td><td class=l>{v}</td></tr>" for k, v in items)
@@ -563,6 +594,20 @@ def section_summary(page: Page) -> None:
                  f"{rig.n_views} views; Eqs. 2-3 check: "
                  f"{escape(rig.check.verdict)} "
                  f"{page.link(src.SOURCES['rig'][0], '[source]')}</span>")
+    rf = _read(page, "refine", read_json)
+    if rf is not None and rf.get("enabled"):
+        sv = rf["scale_vs_eq5"]
+        page.add('<span class="kpi" id="kpi-refine">joint refinement<b>'
+                 f"rig {escape(rf['settings']['rig'])}, focal "
+                 f"{escape(rf['settings']['focal'])}</b>scale {escape(rf['scale_source'])}; "
+                 f"B's rig alone gives {_fmt(sv['rig'], 5)} x Eq. 5's r; observations "
+                 f"{_fmt(rf['observations']['before']['mean_px'], 4)} -> "
+                 f"{_fmt(rf['observations']['after']['mean_px'], 4)} px "
+                 f"{page.link(src.SOURCES['refine'][0], '[source]')}</span>")
+    elif rf is not None:
+        page.add('<span class="kpi" id="kpi-refine">joint refinement<b>off</b>'
+                 "refine.enabled is false: the calibration is Eq. 6's "
+                 f"{page.link(src.SOURCES['refine'][0], '[source]')}</span>")
     if sc is None and rig is None and _absent(page, "scale") and _absent(page, "rig"):
         page.missing("scale")
         page.missing("rig")

@@ -251,6 +251,20 @@ def complete_errors(calib: Mapping[str, PinholeCamera],
     }
 
 
+def refine_errors(refine: Mapping, r: float, r_true: float) -> dict:
+    """The joint refinement's scales against the truth (``refine``: its ``refine.json``):
+    what it wrote, and the scale that registration B's rig gives on its own (the frames
+    adjusted under the rig as it is), each against Eq. 5's r and the true r."""
+    sv = refine["scale_vs_eq5"]
+    out = {"scale_source": refine.get("scale_source"),
+           "focal_change_pct": refine["focal_px"]["change_pct"]}
+    for key in ("rig", "result"):
+        s = float(sv[key])
+        out[f"{key}_scale_vs_eq5_pct"] = 100.0 * (s - 1.0)
+        out[f"{key}_scale_err_pct"] = 100.0 * (float(r) * s / float(r_true) - 1.0)
+    return out
+
+
 def checks(result: Mapping) -> list[dict]:
     """The targets of issues 4 and 5 with the measured values and a verdict each."""
     a, b = result.get("registration_a"), result.get("registration_b")

@@ -146,11 +146,11 @@ def observation_errors(rec, cameras: Mapping[str, PinholeCamera],
     obs, ids, xyz = read_model(rec, work_dir)
     names = [rec.image(image_id).name for image_id in sorted(rec.reg_image_ids())]
     errs = [np.linalg.norm(cameras[name].project(xyz[rows])[0] - uv, axis=1)
-            for name, rows, uv in _image_observations(obs, ids, names)]
+            for name, rows, uv in image_observations(obs, ids, names)]
     return np.concatenate(errs) if errs else np.zeros(0)
 
 
-def _image_observations(obs: Mapping[str, tuple[np.ndarray, np.ndarray]], ids: np.ndarray,
+def image_observations(obs: Mapping[str, tuple[np.ndarray, np.ndarray]], ids: np.ndarray,
                        names: Iterable[str]) -> Iterator[tuple[str, np.ndarray, np.ndarray]]:
     """The observations of a model read by :func:`read_model` (``obs``, point ``ids``),
     image by image in the order of ``names``: (name, each observation's row in ``ids``,
@@ -228,7 +228,7 @@ def adjust_points(rec, cameras: Mapping[str, PinholeCamera],
     observations, the cameras (``cameras``: image name -> PinholeCamera) fixed. Returns the
     number of points."""
     obs, ids, xyz = read_model(rec, work_dir)
-    seen = list(_image_observations(obs, ids, sorted(obs)))
+    seen = list(image_observations(obs, ids, sorted(obs)))
     if not seen:
         return 0
     P = np.stack([point_refinement.projection_matrices(cameras[n].K, cameras[n].world_to_cam)

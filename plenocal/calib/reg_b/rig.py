@@ -166,3 +166,16 @@ def model_views(rig: Mapping, model: str) -> dict[str, tuple[np.ndarray, np.ndar
     return view_cameras(model, n, W, H, F_m, rig["exact"]["B"],
                         pp_shift_px=rig["exact"]["pp_shift_px"])
 
+
+
+def rig_at_focal(doc: Mapping, F_m: float) -> dict:
+    """Registration B's rig (a ``rig.json`` document) built again for the focal length
+    ``F_m`` (pixels) from the datasheet, the conversion and the settings it was built
+    with: the views' baselines and principal points follow the focal length (Eqs. 1-4,
+    :func:`plenocal.calib.reg_b.exact_model.exact_model`). Used by the joint refinement
+    (:mod:`plenocal.calib.refine`) when it refines the focal length."""
+    ds = Datasheet(**{**doc["datasheet"], "f_numbers": tuple(doc["datasheet"]["f_numbers"])})
+    conv = Conversion(**doc["disparity"])
+    tol = doc["check"].get("tolerance", _RIG["check_tolerance"])
+    return build_rig(ds, [conv], float(F_m), int(doc["n_views"]), model=str(doc["model"]),
+                     tolerance=float(tol), shot_names=None)

@@ -1,0 +1,497 @@
+"""Joint refinement of every view of every shot under the rig (beyond the paper; rule
+``refine``, config ``refine:``).
+
+The paper's complete calibration (Eq. 6, ``M_ij = M_i^A M_j^B``) takes every shot's pose
+and the focal length from registration A, which sees only the 28 central views, and
+every view's place in its set from registration B; the other views only ride along.
+This step adjusts them together, as COLMAP 4 models a camera rig
+(:func:`rig_reconstruction`):
+
+* each shot is one **frame** (one rig pose, ``rig_from_world``, initialised by Eq. 6);
+* its N x N views are the rig's **sensors**, placed by registration B
+  (``sensor_from_rig`` = the inverse of ``rig.json``'s ``cam_to_central``; the central
+  view is the reference sensor);
+* each sensor has one camera, shared by all shots (its principal point as registration
+  B's view model gives it);
+* the 3-D points are the verified matches of every view (rule ``view_matches``, the
+  matches Table I triangulates) triangulated with the Eq. 6 cameras held fixed
+  (:func:`plenocal.verify.reprojection.triangulate`), at most ``max_points`` of them.
+
+COLMAP's bundle adjustment then moves the frames and the points, with the rig held
+constant (its sensors keep B's poses bit for bit) or refined (``rig: refine``). The
+focal length is one for the whole array, as the paper shares it (Section II-B); COLMAP
+gives each sensor its own camera, so the shared focal length is found in two passes
+(:func:`refine_calibration`): the first frees each sensor's focal length, the shared one
+is their mean weighted by observations, and the second holds it.
+
+Scale. With the rig held, its metric baselines fix the scale of the result, independently
+of Eq. 5 (reported as ``scale_vs_eq5``: the refined array's size over Eq. 6's). With the
+rig refined, a common scale of the rig and the frames is free (a gauge), and the result
+is scaled so that the shots' centres spread as Eq. 6's do: Eq. 5's scale is kept.
+
+Conventions: internal (OpenCV axes, camera-to-world, pixel centres at integers) in and
+out; COLMAP's (cam_from_world, pixel centres at +0.5) only inside, through
+:mod:`plenocal.calib.reg_a.colmap`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import shutil
+import tempfile
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from plenocal.artifacts.rig import RigB
+from plenocal.calib.reg_a import colmap as cm
+from plenocal.calib.reg_a import viewdb
+from plenocal.camera import PinholeCamera, invert_pose, k_to_colmap, rotation_angle_deg
+from plenocal.config import stage_defaults
+from plenocal.names import split_key
+
+log = logging.getLogger(__name__)
+
+RIG_MODES = ("hold", "refine")
+FOCAL_MODES = ("hold", "refine")
+SCALE_SOURCES = ("rig", "eq5")
+LOSSES = ("trivial", "huber", "cauchy", "soft_l1")
+_REFINE = stage_defaults("refine")  # the defaults: config.schema.yaml's refine block
+_SFM = stage_defaults("sfm")  # the seed and threads of COLMAP's steps
+
+
+@dataclass(frozen=True)
+class RefineSettings:
+    """The ``refine:`` block of the config (config.schema.yaml documents each key)."""
+
+    enabled: bool = _REFINE["enabled"]
+    focal: str = _REFINE["focal"]
+    rig: str = _REFINE["rig"]
+    scale: str = _REFINE["scale"]
+    max_points: int = _REFINE["max_points"]
+    max_error_px: float = _REFINE["max_error_px"]
+    min_angle_deg: float = _REFINE["min_angle_deg"]
+    loss: str = _REFINE["loss"]
+    loss_scale_px: float = _REFINE["loss_scale_px"]
+    max_iterations: int = _REFINE["max_iterations"]
+    seed: int = _SFM["seed"]
+    num_threads: int = _SFM["num_threads"]
+
+    def __post_init__(self) -> None:
+        for key, value, allowed in (("focal", self.focal, FOCAL_MODES),
+                                    ("rig", self.rig, RIG_MODES),
+                                    ("scale", self.scale, SCALE_SOURCES),
+                                    ("loss", self.loss, LOSSES)):
+            if value not in allowed:
+                raise ValueError(f"config refine.{key} = {value!r}: use one of "
+                                 f"{', '.join(allowed)}")
+        if self.scale == "eq5" and self.rig == "hold":
+            raise ValueError("config refine.scale = eq5 needs refine.rig = refine: a rig held "
+                             "constant fixes the scale by its metric baselines")
+        if self.max_points < 100:
+            raise ValueError(f"config refine.max_points = {self.max_points}: at least 100")
+
+    @classmethod
+    def from_config(cls, cfg: Mapping, seed: int = _SFM["seed"],
+                    num_threads: int = _SFM["num_threads"]) -> RefineSettings:
+        keys = {f for f in cls.__dataclass_fields__ if f not in ("seed", "num_threads")}
+        return cls(**{k: cfg[k] for k in keys if k in cfg}, seed=seed,
+                   num_threads=num_threads)
+
+
+# --- the COLMAP boundary -------------------------------------------------------------
+
+
+def rigid3d(M: np.ndarray):
+    """A 4x4 (or 3x4) rigid transform as a ``pycolmap.Rigid3d`` (rotation re-orthonormalised
+    by SVD, as :func:`plenocal.calib.reg_a.colmap._rigid` does)."""
+    import pycolmap  # noqa: PLC0415
+
+    M = np.asarray(M, dtype=float)
+    U, _, Vt = np.linalg.svd(M[:3, :3])
+    return pycolmap.Rigid3d(pycolmap.Rotation3d(U @ Vt), M[:3, 3].copy())
+
+
+def _camera_sensor(camera_id: int):
+    import pycolmap  # noqa: PLC0415
+
+    return pycolmap.sensor_t(type=pycolmap.SensorType.CAMERA, id=int(camera_id))
+
+
+def _colmap_params(K: np.ndarray) -> list[float]:
+    Kc = k_to_colmap(K)
+    return [float(Kc[0, 0]), float(Kc[1, 1]), float(Kc[0, 2]), float(Kc[1, 2])]
+
+
+@dataclass
+class RigModel:
+    """The rig reconstruction's bookkeeping: sensor camera ids by view, frame ids by shot,
+    the reference (central) view."""
+
+    camera_of_view: dict[str, int]
+    frame_of_shot: dict[str, int]
+    central: str
+
+
+def rig_reconstruction(tracks, views: Mapping[str, tuple[np.ndarray, np.ndarray]],
+                       shot_poses: Mapping[str, np.ndarray], width: int, height: int,
+                       point_ids: list[int]):
+    """A ``pycolmap.Reconstruction`` of one rig (``views``: view -> (K, cam_to_central), the
+    central view the one whose pose is the identity) with one frame per shot
+    (``shot_poses``: shot -> its central view's cam_to_world), every image of ``tracks``
+    (a reconstruction triangulated with the same cameras, images named ``<shot>/<view>.png``)
+    in its frame, and the points ``point_ids`` of ``tracks`` with their tracks. Returns the
+    reconstruction and its :class:`RigModel`."""
+    import pycolmap  # noqa: PLC0415
+
+    names = sorted(views)
+    central = [v for v in names if np.allclose(views[v][1], np.eye(4), atol=1e-12)]
+    if len(central) != 1:
+        raise ValueError("the rig has no view at the identity pose (its central view): "
+                         "rerun rule rig_b")
+    central = central[0]
+    rec = pycolmap.Reconstruction()
+    cam_of = {v: i + 1 for i, v in enumerate(names)}
+    for v in names:
+        rec.add_camera(pycolmap.Camera(model="PINHOLE", width=int(width), height=int(height),
+                                       params=_colmap_params(views[v][0]),
+                                       camera_id=cam_of[v]))
+    rig = pycolmap.Rig(rig_id=1)
+    rig.add_ref_sensor(_camera_sensor(cam_of[central]))
+    for v in names:
+        if v != central:
+            rig.add_sensor(_camera_sensor(cam_of[v]), rigid3d(invert_pose(views[v][1])))
+    rec.add_rig(rig)
+    images = {}
+    for image_id in sorted(tracks.images):
+        im = tracks.image(image_id)
+        shot, view = split_key(im.name[:-4])
+        if shot not in shot_poses or view not in cam_of:
+            raise ValueError(f"{im.name}: not a view of the rig's shots")
+        images[image_id] = (shot, view, im)
+    shots = sorted(shot_poses)
+    frame_of = {s: i + 1 for i, s in enumerate(shots)}
+    for s in shots:
+        frame = pycolmap.Frame(frame_id=frame_of[s], rig_id=1)
+        frame.rig_from_world = rigid3d(invert_pose(shot_poses[s]))
+        for image_id, (shot, view, _) in images.items():
+            if shot == s:
+                frame.add_data_id(pycolmap.data_t(sensor_id=_camera_sensor(cam_of[view]),
+                                                  id=image_id))
+        rec.add_frame(frame)
+    for image_id, (shot, view, im) in images.items():
+        pts = pycolmap.Point2DList([pycolmap.Point2D(p.xy) for p in im.points2D])
+        new = pycolmap.Image(name=im.name, points2D=pts, camera_id=cam_of[view],
+                             image_id=image_id)
+        new.frame_id = frame_of[shot]
+        rec.add_image(new)
+    for s in shots:
+        rec.register_frame(frame_of[s])
+    for pid in point_ids:
+        p = tracks.point3D(pid)
+        rec.add_point3D(p.xyz, pycolmap.Track(p.track.elements))
+    return rec, RigModel(cam_of, frame_of, central)
+
+
+def select_points(tracks, max_points: int) -> list[int]:
+    """At most ``max_points`` of the points of ``tracks`` seen in three or more images:
+    every k-th in id order (deterministic), k the smallest that keeps within the limit."""
+    ids = sorted(pid for pid in tracks.point3D_ids() if tracks.point3D(pid).track.length() >= 3)
+    stride = max(1, math.ceil(len(ids) / max_points))
+    return ids[::stride]
+
+
+def cameras_of(rec) -> dict[str, PinholeCamera]:
+    """Every image of a rig reconstruction -> its camera (internal convention)."""
+    out = {}
+    for image_id in sorted(rec.images):
+        im = rec.image(image_id)
+        out[im.name[:-4]] = cm.pinhole_from_colmap(im, rec.camera(im.camera_id))
+    return out
+
+
+def observation_errors(rec, work_dir: str | Path | None = None) -> np.ndarray:
+    """Reprojection error (px) of every observation of ``rec``'s points, in the internal
+    convention (read back through COLMAP's binary files, as Table I reads them)."""
+    from plenocal.verify import reprojection as rp  # noqa: PLC0415
+
+    obs, ids, xyz = rp.read_model(rec, work_dir)
+    cams = cameras_of(rec)
+    errs = [np.linalg.norm(cams[name[:-4]].project(xyz[rows])[0] - uv, axis=1)
+            for name, rows, uv in rp.image_observations(obs, ids, sorted(obs))]
+    return np.concatenate(errs) if errs else np.zeros(0)
+
+
+def _copy(rec):
+    import pycolmap  # noqa: PLC0415
+
+    return pycolmap.Reconstruction(rec)
+
+
+def _loss(name: str):
+    import pycolmap  # noqa: PLC0415
+
+    return getattr(pycolmap.LossFunctionType, name.upper())
+
+
+def bundle_adjust(rec, model: RigModel, settings: RefineSettings, *, refine_focal: bool,
+                  refine_rig: bool, hold_frame: str) -> dict:
+    """COLMAP's bundle adjustment of ``rec``: frames and points, each sensor's focal length
+    where ``refine_focal``, the rig's sensors where ``refine_rig``; the frame of
+    ``hold_frame`` held (the gauge's rotation and translation). Returns the solver's
+    summary."""
+    import pycolmap  # noqa: PLC0415
+
+    cfg = pycolmap.BundleAdjustmentConfig()
+    for image_id in sorted(rec.images):
+        cfg.add_image(image_id)
+    cfg.set_constant_rig_from_world_pose(model.frame_of_shot[hold_frame])
+    o = pycolmap.BundleAdjustmentOptions()
+    o.refine_focal_length = refine_focal
+    o.refine_principal_point = False
+    o.refine_extra_params = False
+    o.refine_sensor_from_rig = refine_rig
+    o.refine_rig_from_world = True
+    o.ceres.loss_function_type = _loss(settings.loss)
+    o.ceres.loss_function_scale = float(settings.loss_scale_px)
+    s = o.ceres.solver_options
+    s.max_num_iterations = int(settings.max_iterations)
+    s.num_threads = int(settings.num_threads)
+    t0 = time.perf_counter()
+    summary = pycolmap.create_default_bundle_adjuster(o, cfg, rec).solve().todict()
+    ceres = summary["ceres_summary"]
+    out = {"termination": str(summary["termination_type"]).rsplit(".", 1)[-1],
+           "iterations": int(ceres["num_successful_steps"] + ceres["num_unsuccessful_steps"]),
+           "initial_cost": float(ceres["initial_cost"]), "final_cost": float(ceres["final_cost"]),
+           "residuals": int(summary["num_residuals"])}
+    seconds = time.perf_counter() - t0
+    log.info("bundle adjustment (focal %s, rig %s): %s after %d iterations, cost %.6g -> "
+             "%.6g, %.1f s", "refined" if refine_focal else "held",
+             "refined" if refine_rig else "held", out["termination"], out["iterations"],
+             out["initial_cost"], out["final_cost"], seconds)
+    return out
+
+
+def frame_centres(rec, model: RigModel) -> dict[str, np.ndarray]:
+    """Each shot's rig (central view) centre, world coordinates."""
+    out = {}
+    for shot, fid in model.frame_of_shot.items():
+        M = np.eye(4)
+        M[:3, :] = np.asarray(rec.frame(fid).rig_from_world.matrix(), dtype=float)
+        out[shot] = invert_pose(M)[:3, 3]
+    return out
+
+
+def spread(centres: Mapping[str, np.ndarray]) -> float:
+    """RMS distance of the centres from their mean: the array's size."""
+    P = np.array([centres[k] for k in sorted(centres)])
+    return float(np.sqrt(((P - P.mean(axis=0)) ** 2).sum(axis=1).mean()))
+
+
+def rescale(rec, model: RigModel, factor: float) -> None:
+    """Scale ``rec`` (points, frames and the rig's sensor translations) by ``factor``
+    about the world origin: the gauge of a rig whose sensors are refined."""
+    import pycolmap  # noqa: PLC0415
+
+    rec.transform(pycolmap.Sim3d(float(factor), pycolmap.Rotation3d(), np.zeros(3)))
+    rig = rec.rig(1)
+    for sensor in sorted(rig.non_ref_sensors, key=lambda s: s.id):
+        T = rig.sensor_from_rig(sensor)
+        rig.set_sensor_from_rig(sensor, pycolmap.Rigid3d(T.rotation,
+                                                         np.asarray(T.translation) * factor))
+
+
+def sensor_params(rec) -> dict[int, np.ndarray]:
+    """The rig's sensor_from_rig parameters (quaternion xyzw, translation) by camera id."""
+    rig = rec.rig(1)
+    return {s.id: np.asarray(rig.sensor_from_rig(s).params, dtype=float).copy()
+            for s in rig.non_ref_sensors}
+
+
+def shared_focal(rec, model: RigModel) -> tuple[float, dict[str, float]]:
+    """The mean of the sensors' focal lengths (fx, fy) weighted by their observations,
+    and each sensor's."""
+    counts = {cid: 0 for cid in model.camera_of_view.values()}
+    for image_id in rec.images:
+        im = rec.image(image_id)
+        counts[im.camera_id] += im.num_points3D
+    per = {v: 0.5 * float(rec.camera(cid).params[0] + rec.camera(cid).params[1])
+           for v, cid in model.camera_of_view.items()}
+    w = np.array([counts[model.camera_of_view[v]] for v in sorted(per)], dtype=float)
+    f = np.array([per[v] for v in sorted(per)])
+    if w.sum() <= 0:
+        raise ValueError("refinement: no sensor has an observation")
+    return float((w * f).sum() / w.sum()), per
+
+
+def set_intrinsics(rec, model: RigModel, views: Mapping[str, tuple[np.ndarray, np.ndarray]]
+                   ) -> None:
+    for v, cid in model.camera_of_view.items():
+        rec.camera(cid).params = _colmap_params(views[v][0])
+
+
+def set_rig(rec, model: RigModel, views: Mapping[str, tuple[np.ndarray, np.ndarray]]) -> None:
+    rig = rec.rig(1)
+    for v, cid in model.camera_of_view.items():
+        if v != model.central:
+            rig.set_sensor_from_rig(_camera_sensor(cid), rigid3d(invert_pose(views[v][1])))
+
+
+# --- the refinement ------------------------------------------------------------------
+
+
+@dataclass
+class Refinement:
+    """The refined cameras and what the report and gt_errors read of the run."""
+
+    cameras: dict[str, PinholeCamera]
+    report: dict
+    rig_views: dict[str, tuple[np.ndarray, np.ndarray]]
+    sensors_before: dict[int, np.ndarray]
+    sensors_after: dict[int, np.ndarray]
+
+
+def _stats(e: np.ndarray) -> dict:
+    if e.size == 0:
+        return {"n": 0, "mean_px": None, "median_px": None}
+    return {"n": int(e.size), "mean_px": float(e.mean()), "median_px": float(np.median(e))}
+
+
+def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: str | Path,
+                       settings: RefineSettings, *, hold_shot: str,
+                       rig_at_focal: Callable[[float], RigB] | None = None,
+                       work_dir: str | Path | None = None) -> Refinement:
+    """Refine the Eq. 6 calibration ``eq6`` (every view of every shot, metres) under the rig
+    ``rig`` on the verified matches of the view ``database`` (module docstring).
+    ``hold_shot``: the shot whose pose is held (the gauge). ``rig_at_focal``: registration
+    B's rig rebuilt for another focal length (its baselines follow the focal length:
+    :func:`plenocal.calib.reg_b.exact_model.exact_model`); without it the rig keeps B's
+    geometry when the focal length changes."""
+    from plenocal.verify import reprojection as rp  # noqa: PLC0415
+
+    t0 = time.perf_counter()
+    views = rig.view_poses()
+    shots = sorted({split_key(k)[0] for k in eq6})
+    missing = [f"{s}/{v}" for s in shots for v in views if f"{s}/{v}" not in eq6]
+    if missing:
+        raise ValueError(f"the Eq. 6 calibration lacks {len(missing)} views of the rig "
+                         f"({', '.join(missing[:5])}...): rerun rule merge")
+    if hold_shot not in shots:
+        raise ValueError(f"refinement: the held shot {hold_shot} is not calibrated")
+    central = [v for v in views if np.allclose(views[v][1], np.eye(4), atol=1e-12)][0]
+    shot_poses = {s: eq6[f"{s}/{central}"].cam_to_world for s in shots}
+    tmp = Path(tempfile.mkdtemp(prefix="plenocal_refine_", dir=work_dir))
+    try:
+        db = tmp / "database.db"
+        names = sorted(eq6)
+        viewdb.subset_database(database, db, names, dict(eq6))
+        colmap_cams = {f"{k}.png": eq6[k] for k in names}
+        tracks = cm.known_pose_reconstruction(db, colmap_cams, update_intrinsics=False)
+        opts = rp.triangulation_options(settings.max_error_px, settings.min_angle_deg,
+                                        settings.seed, settings.num_threads)
+        rp.triangulate(tracks, db, opts, settings.seed, colmap_cams, tmp)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    t_tri = time.perf_counter() - t0
+    ids = select_points(tracks, settings.max_points)
+    if len(ids) < 100:
+        raise ValueError(f"refinement: only {len(ids)} points seen in three or more views; "
+                         "the views have too few matches (see matches/matches.json), or set "
+                         "refine.enabled: false")
+    rec, model = rig_reconstruction(tracks, views, shot_poses, rig.width, rig.height, ids)
+    log.info("rig reconstruction: %d shots x %d views, %d of %d points (%.1f s triangulation)",
+             len(shots), len(views), len(ids), tracks.num_points3D(), t_tri)
+    before = observation_errors(rec, work_dir)
+    size_eq6 = spread(frame_centres(rec, model))
+    sensors_before = sensor_params(rec)
+    focal_a = float(rig.focal_px)
+    passes = {}
+    # the rig's own scale, independent of Eq. 5: the frames adjusted under B's rig as it
+    # is (a copy, when the result is to be adjusted otherwise)
+    held = rec if settings.rig == "hold" and settings.focal == "hold" else _copy(rec)
+    passes["rig_held"] = bundle_adjust(held, model, settings, refine_focal=False,
+                                       refine_rig=False, hold_frame=hold_shot)
+    scale_rig = spread(frame_centres(held, model)) / size_eq6
+    del held
+    focal, per_sensor, rig_views = focal_a, {}, views
+    if settings.focal == "refine":
+        # each sensor's focal length freed; the shared one their weighted mean
+        passes["focal"] = bundle_adjust(rec, model, settings, refine_focal=True,
+                                        refine_rig=settings.rig == "refine",
+                                        hold_frame=hold_shot)
+        focal, per_sensor = shared_focal(rec, model)
+        rig_views = (rig_at_focal(focal).view_poses() if rig_at_focal is not None
+                     else {v: (_with_focal(K, focal), M) for v, (K, M) in views.items()})
+        set_intrinsics(rec, model, rig_views)
+        if settings.rig == "hold":
+            set_rig(rec, model, rig_views)
+            sensors_before = sensor_params(rec)
+    if settings.focal == "refine" or settings.rig == "refine":
+        passes["final"] = bundle_adjust(rec, model, settings, refine_focal=False,
+                                        refine_rig=settings.rig == "refine",
+                                        hold_frame=hold_shot)
+    scale_reached = spread(frame_centres(rec, model)) / size_eq6
+    applied = 1.0
+    if settings.scale == "eq5":
+        applied = 1.0 / scale_reached
+        rescale(rec, model, applied)
+    after = observation_errors(rec, work_dir)
+    cams = cameras_of(rec)
+    refined_rig = rig_views_from_model(rec, model)
+    rig_change = {v: {"centre_mm": 1000.0 * float(np.linalg.norm(refined_rig[v][:3, 3]
+                                                                 - rig_views[v][1][:3, 3])),
+                      "rotation_deg": rotation_angle_deg(refined_rig[v][:3, :3],
+                                                         rig_views[v][1][:3, :3])}
+                  for v in sorted(refined_rig)}
+    report = {
+        "settings": asdict(settings),
+        "shots": len(shots),
+        "views": len(cams),
+        "points": {"triangulated": int(tracks.num_points3D()), "used": len(ids)},
+        "observations": {"before": _stats(before), "after": _stats(after)},
+        "focal_px": {"registration_a": focal_a, "refined": focal,
+                     "change_pct": 100.0 * (focal / focal_a - 1.0),
+                     "per_sensor": per_sensor},
+        "scale_vs_eq5": {
+            "rig": scale_rig,
+            "result": spread(frame_centres(rec, model)) / size_eq6,
+            "what": "the shots' centres' spread over Eq. 6's, i.e. the scale over Eq. 5's r: "
+                    "'rig' with the frames adjusted under registration B's rig as it is "
+                    "(the rig's metric baselines give the scale), 'result' what was written"},
+        "scale_source": "Eq. 5 (rig refined, the result scaled to Eq. 6's spread)"
+        if settings.scale == "eq5" else "registration B's rig (its metric baselines)",
+        "scale_applied": applied,
+        "hold_shot": hold_shot,
+        "rig_change": rig_change,
+        "passes": passes,
+    }
+    log.info("refinement took %.1f s (%.1f s triangulation)", time.perf_counter() - t0, t_tri)
+    log.info("refined: focal %.4f -> %.4f px (%+.4f %%), scale vs Eq. 5 %.6f (rig held: "
+             "%.6f), observations mean %.4f -> %.4f px", focal_a, focal,
+             report["focal_px"]["change_pct"], report["scale_vs_eq5"]["result"], scale_rig,
+             report["observations"]["before"]["mean_px"] or math.nan,
+             report["observations"]["after"]["mean_px"] or math.nan)
+    return Refinement(cams, report, rig_views, sensors_before, sensor_params(rec))
+
+
+def _with_focal(K: np.ndarray, focal: float) -> np.ndarray:
+    out = np.array(K, dtype=float)
+    out[0, 0] = out[1, 1] = focal
+    return out
+
+
+def rig_views_from_model(rec, model: RigModel) -> dict[str, np.ndarray]:
+    """The rig's sensors as cam_to_central (internal), by view."""
+    rig = rec.rig(1)
+    out = {model.central: np.eye(4)}
+    for v, cid in model.camera_of_view.items():
+        if v != model.central:
+            M = np.eye(4)
+            M[:3, :] = np.asarray(rig.sensor_from_rig(_camera_sensor(cid)).matrix(), dtype=float)
+            out[v] = invert_pose(M)
+    return out
+

@@ -1,0 +1,38 @@
+"""Joint refinement of every view of every shot under the rig (beyond the paper): the
+Eq. 6 calibration of rule merge adjusted on the matches of rule view_matches, written in
+every export format to calibration/ (plenocal.calib.refine). With refine.enabled false,
+calibration/ holds the Eq. 6 result as it is."""
+
+
+rule refine:
+    input:
+        unpack(refine_inputs),
+    output:
+        plain=report(
+            "results/{dataset}/calibration/cameras.json",
+            caption="../report/calibration.rst",
+            category="Calibration",
+        ),
+        mpeg="results/{dataset}/calibration/mpeg/cameras.json",
+        colmap=directory("results/{dataset}/calibration/colmap"),
+        info="results/{dataset}/calibration/refine.json",
+    log:
+        log_path("refine"),
+    benchmark:
+        bench_path("refine")
+    priority: PRIORITY["calibration"]
+    conda:
+        "../envs/plenocal.yaml"
+    threads: lambda wc: stage_config("sfm")["num_threads"]
+    resources:
+        mem_mb=3000,
+        runtime=30,
+    params:
+        refine=lambda wc: stage_config("refine"),
+        sfm=lambda wc: sfm_params(),
+        hold_shot=lambda wc: full_set_cam(wc.dataset),
+    script:
+        "../scripts/refine.py"
+
+
+TARGETS.append(refine_targets)

@@ -1,0 +1,52 @@
+"""Rule refine: the Eq. 6 calibration refined under the rig (plenocal.calib.refine), or,
+with refine.enabled false, copied as it is; written in every export format."""
+
+import shutil
+from pathlib import Path
+
+import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
+
+from plenocal.artifacts.cameras import read_cameras, write_cameras
+from plenocal.artifacts.rig import RigB, read_rig
+from plenocal.calib.refine import RefineSettings, refine_calibration
+from plenocal.calib.reg_b.rig import rig_at_focal
+from plenocal.export.colmap_model import write_colmap
+from plenocal.export.mpeg import write_mpeg
+from plenocal.io.files import make_temp_dir, write_json
+from plenocal.rulelog import rule_logger
+
+snakemake = globals()["snakemake"]
+log = rule_logger(snakemake, "refine")
+sm = snakemake
+
+eq6 = read_cameras(sm.input.eq6)
+rig = read_rig(sm.input.rig)
+settings = RefineSettings.from_config(sm.params.refine, seed=int(sm.params.sfm["seed"]),
+                                      num_threads=int(sm.threads))
+if settings.enabled:
+    # COLMAP's working files beside the output, removed at the end (and a killed job's by
+    # the next run: make_temp_dir)
+    work = make_temp_dir(Path(sm.output.info).parent, ".refine.")
+    try:
+        result = refine_calibration(
+            eq6, rig, sm.input.database, settings, hold_shot=sm.params.hold_shot,
+            rig_at_focal=lambda f: RigB(rig_at_focal(rig.doc, f)), work_dir=work)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    cams, info = result.cameras, {"enabled": True, **result.report}
+    source = "plenocal refine (all views under the rig)"
+else:
+    cams, info = eq6, {"enabled": False, "settings": dict(sm.params.refine)}
+    source = "plenocal merge (Eq. 6)"
+    log.info("refine.enabled is false: calibration/ holds the Eq. 6 result")
+missing = sorted(set(eq6) - set(cams))
+if missing:
+    raise RuntimeError(f"the refinement lost {len(missing)} views ({', '.join(missing[:5])})")
+extra = {"source": source, "rig_model": rig.model}
+write_cameras(sm.output.plain, cams, extra=extra)
+near, far = rig.depth_range_m
+write_mpeg(sm.output.mpeg, cams, (near, far), content_name=sm.wildcards.dataset)
+write_colmap(sm.output.colmap, cams)
+write_json(sm.output.info, {"format": "plenocal.refine", "version": 1, **info})
+log.info("wrote %s, %s, %s (%d cameras)", sm.output.plain, sm.output.mpeg, sm.output.colmap,
+         len(cams))
