@@ -310,10 +310,6 @@ def _check_semantics(config: dict) -> None:
     c = config["convert"]
     if c["view_spacing_px"] is not None and c["view_spacing_px"] <= 0:
         raise _fail("convert.view_spacing_px", c["view_spacing_px"], "must be > 0")
-    r = config["refine"]
-    if r["scale"] == "eq5" and r["rig"] == "hold":
-        raise _fail("refine.scale", r["scale"], "needs refine.rig: refine (a rig held "
-                    "constant fixes the scale by its metric baselines: use refine.scale: rig)")
     s = config["scale"]
     if not s["low_percentile"] < s["high_percentile"]:
         raise _fail("scale.low_percentile", s["low_percentile"],

@@ -17,17 +17,35 @@ This step adjusts them together, as COLMAP 4 models a camera rig
   matches Table I triangulates) triangulated with the Eq. 6 cameras held fixed
   (:func:`plenocal.verify.reprojection.triangulate`), at most ``max_points`` of them.
 
-COLMAP's bundle adjustment then moves the frames and the points, with the rig held
-constant (its sensors keep B's poses bit for bit) or refined (``rig: refine``). The
-focal length is one for the whole array, as the paper shares it (Section II-B); COLMAP
-gives each sensor its own camera, so the shared focal length is found in two passes
-(:func:`refine_calibration`): the first frees each sensor's focal length, the shared one
-is their mean weighted by observations, and the second holds it.
+COLMAP's bundle adjustment then moves the frames and the points. What it may change of
+registration B's rig is ``refine.rig`` (:data:`RIG_MODES`):
 
-Scale. With the rig held, its metric baselines fix the scale of the result, independently
-of Eq. 5 (reported as ``scale_vs_eq5``: the refined array's size over Eq. 6's). With the
-rig refined, a common scale of the rig and the frames is free (a gauge), and the result
-is scaled so that the shots' centres spread as Eq. 6's do: Eq. 5's scale is kept.
+``hold``
+    nothing: the sensors keep B's poses bit for bit, and their metric baselines fix the
+    scale of the result, independently of Eq. 5;
+``scale``
+    the rig's size (B's baseline): its shape held, the result (frames, points and rig
+    together, a gauge of this problem) scaled so that the shots' centres spread as Eq. 6's
+    do, i.e. Eq. 5's r is kept;
+``scale_pp``
+    as ``scale``, and each view's principal point (the central view's held: a common shift
+    is a turn of every frame). The exact model's per-view shift is B's alpha; this lets the
+    views' own sub-pixel offsets, which the converter leaves, be absorbed where the
+    features put them rather than in the poses;
+``free``
+    each sensor's pose (COLMAP's ``refine_sensor_from_rig``): poorly fixed along the views'
+    axes, where a tenth of a millimetre barely changes an image.
+
+``scale_vs_eq5`` reports the scale the adjustment reached over Eq. 5's (the refined array's
+size over Eq. 6's): with the rig's poses held, the scale its metric baselines give.
+
+The focal length is one for the whole array, as the paper shares it (Section II-B); it is
+held at registration A's by default. ``focal: refine`` frees each sensor's (COLMAP gives each
+sensor its own camera), takes their mean weighted by observations, builds B's rig again
+for it and adjusts once more with it held. A parallel array does not fix the focal length
+(it trades off against depth), so only the hand-held shots do, weakly
+(:mod:`plenocal.calib.reg_a.uncertainty`); BENCHMARKS.md, "Accuracy over captures", has
+what it did.
 
 Conventions: internal (OpenCV axes, camera-to-world, pixel centres at integers) in and
 out; COLMAP's (cam_from_world, pixel centres at +0.5) only inside, through
@@ -56,9 +74,18 @@ from plenocal.names import split_key
 
 log = logging.getLogger(__name__)
 
-RIG_MODES = ("hold", "refine")
+#: what of registration B's rig the adjustment may change (config refine.rig):
+#: hold - nothing (its metric baselines give the scale); scale - its size (its shape held,
+#: the result keeps Eq. 5's scale: B's baseline refined, alpha held); scale_pp - its size and
+#: each view's principal point (B and, per view, alpha refined); free - each sensor's pose
+RIG_MODES = ("hold", "scale", "scale_pp", "free")
 FOCAL_MODES = ("hold", "refine")
-SCALE_SOURCES = ("rig", "eq5")
+#: the matches the adjustment uses (config refine.matches): all of view_matches', or those
+#: between different shots only (the same view of two shots: no pair within a set)
+MATCH_SETS = ("all", "across")
+#: the shots' poses (config refine.frames): refined, or held as Eq. 6 gives them (then only
+#: what refine.rig frees of the rig, and the points, move)
+FRAME_MODES = ("refine", "hold")
 LOSSES = ("trivial", "huber", "cauchy", "soft_l1")
 _REFINE = stage_defaults("refine")  # the defaults: config.schema.yaml's refine block
 _SFM = stage_defaults("sfm")  # the seed and threads of COLMAP's steps
@@ -71,7 +98,8 @@ class RefineSettings:
     enabled: bool = _REFINE["enabled"]
     focal: str = _REFINE["focal"]
     rig: str = _REFINE["rig"]
-    scale: str = _REFINE["scale"]
+    matches: str = _REFINE["matches"]
+    frames: str = _REFINE["frames"]
     max_points: int = _REFINE["max_points"]
     max_error_px: float = _REFINE["max_error_px"]
     min_angle_deg: float = _REFINE["min_angle_deg"]
@@ -84,16 +112,20 @@ class RefineSettings:
     def __post_init__(self) -> None:
         for key, value, allowed in (("focal", self.focal, FOCAL_MODES),
                                     ("rig", self.rig, RIG_MODES),
-                                    ("scale", self.scale, SCALE_SOURCES),
+                                    ("matches", self.matches, MATCH_SETS),
+                                    ("frames", self.frames, FRAME_MODES),
                                     ("loss", self.loss, LOSSES)):
             if value not in allowed:
                 raise ValueError(f"config refine.{key} = {value!r}: use one of "
                                  f"{', '.join(allowed)}")
-        if self.scale == "eq5" and self.rig == "hold":
-            raise ValueError("config refine.scale = eq5 needs refine.rig = refine: a rig held "
-                             "constant fixes the scale by its metric baselines")
         if self.max_points < 100:
             raise ValueError(f"config refine.max_points = {self.max_points}: at least 100")
+
+    @property
+    def scale_from_eq5(self) -> bool:
+        """Whether the result keeps Eq. 5's scale (every rig mode but hold, and whenever the
+        shots' poses are held)."""
+        return self.rig != "hold" or self.frames == "hold"
 
     @classmethod
     def from_config(cls, cfg: Mapping, seed: int = _SFM["seed"],
@@ -226,12 +258,6 @@ def observation_errors(rec, work_dir: str | Path | None = None) -> np.ndarray:
     return np.concatenate(errs) if errs else np.zeros(0)
 
 
-def _copy(rec):
-    import pycolmap  # noqa: PLC0415
-
-    return pycolmap.Reconstruction(rec)
-
-
 def _loss(name: str):
     import pycolmap  # noqa: PLC0415
 
@@ -239,20 +265,25 @@ def _loss(name: str):
 
 
 def bundle_adjust(rec, model: RigModel, settings: RefineSettings, *, refine_focal: bool,
-                  refine_rig: bool, hold_frame: str) -> dict:
+                  refine_rig: bool, hold_frame: str, refine_pp: bool = False) -> dict:
     """COLMAP's bundle adjustment of ``rec``: frames and points, each sensor's focal length
-    where ``refine_focal``, the rig's sensors where ``refine_rig``; the frame of
-    ``hold_frame`` held (the gauge's rotation and translation). Returns the solver's
-    summary."""
+    where ``refine_focal``, each sensor's principal point where ``refine_pp`` (the central
+    view's held: a common shift is a turn of every frame), the rig's sensors where
+    ``refine_rig``; the frame of ``hold_frame`` held (the gauge's rotation and
+    translation). Returns the solver's summary."""
     import pycolmap  # noqa: PLC0415
 
     cfg = pycolmap.BundleAdjustmentConfig()
     for image_id in sorted(rec.images):
         cfg.add_image(image_id)
-    cfg.set_constant_rig_from_world_pose(model.frame_of_shot[hold_frame])
+    held = (sorted(model.frame_of_shot) if settings.frames == "hold" else [hold_frame])
+    for shot in held:
+        cfg.set_constant_rig_from_world_pose(model.frame_of_shot[shot])
+    if refine_pp and not refine_focal:
+        cfg.set_constant_cam_intrinsics(model.camera_of_view[model.central])
     o = pycolmap.BundleAdjustmentOptions()
     o.refine_focal_length = refine_focal
-    o.refine_principal_point = False
+    o.refine_principal_point = refine_pp
     o.refine_extra_params = False
     o.refine_sensor_from_rig = refine_rig
     o.refine_rig_from_world = True
@@ -269,8 +300,9 @@ def bundle_adjust(rec, model: RigModel, settings: RefineSettings, *, refine_foca
            "initial_cost": float(ceres["initial_cost"]), "final_cost": float(ceres["final_cost"]),
            "residuals": int(summary["num_residuals"])}
     seconds = time.perf_counter() - t0
-    log.info("bundle adjustment (focal %s, rig %s): %s after %d iterations, cost %.6g -> "
-             "%.6g, %.1f s", "refined" if refine_focal else "held",
+    log.info("bundle adjustment (focal %s, principal points %s, rig %s): %s after %d "
+             "iterations, cost %.6g -> %.6g, %.1f s", "refined" if refine_focal else "held",
+             "refined" if refine_pp else "held",
              "refined" if refine_rig else "held", out["termination"], out["iterations"],
              out["initial_cost"], out["final_cost"], seconds)
     return out
@@ -292,17 +324,13 @@ def spread(centres: Mapping[str, np.ndarray]) -> float:
     return float(np.sqrt(((P - P.mean(axis=0)) ** 2).sum(axis=1).mean()))
 
 
-def rescale(rec, model: RigModel, factor: float) -> None:
-    """Scale ``rec`` (points, frames and the rig's sensor translations) by ``factor``
-    about the world origin: the gauge of a rig whose sensors are refined."""
+def rescale(rec, factor: float) -> None:
+    """Scale ``rec`` by ``factor`` about the world origin: its points, its frames and its
+    rig's sensor translations (COLMAP's ``Reconstruction.transform`` scales all three), a
+    gauge of the adjustment wherever the rig's size is not held."""
     import pycolmap  # noqa: PLC0415
 
     rec.transform(pycolmap.Sim3d(float(factor), pycolmap.Rotation3d(), np.zeros(3)))
-    rig = rec.rig(1)
-    for sensor in sorted(rig.non_ref_sensors, key=lambda s: s.id):
-        T = rig.sensor_from_rig(sensor)
-        rig.set_sensor_from_rig(sensor, pycolmap.Rigid3d(T.rotation,
-                                                         np.asarray(T.translation) * factor))
 
 
 def sensor_params(rec) -> dict[int, np.ndarray]:
@@ -388,7 +416,11 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
     try:
         db = tmp / "database.db"
         names = sorted(eq6)
-        viewdb.subset_database(database, db, names, dict(eq6))
+        across = None
+        if settings.matches == "across":
+            def across(a: str, b: str) -> bool:
+                return split_key(a)[0] != split_key(b)[0]
+        viewdb.subset_database(database, db, names, dict(eq6), keep_pair=across)
         colmap_cams = {f"{k}.png": eq6[k] for k in names}
         tracks = cm.known_pose_reconstruction(db, colmap_cams, update_intrinsics=False)
         opts = rp.triangulation_options(settings.max_error_px, settings.min_angle_deg,
@@ -410,35 +442,29 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
     sensors_before = sensor_params(rec)
     focal_a = float(rig.focal_px)
     passes = {}
-    # the rig's own scale, independent of Eq. 5: the frames adjusted under B's rig as it
-    # is (a copy, when the result is to be adjusted otherwise)
-    held = rec if settings.rig == "hold" and settings.focal == "hold" else _copy(rec)
-    passes["rig_held"] = bundle_adjust(held, model, settings, refine_focal=False,
-                                       refine_rig=False, hold_frame=hold_shot)
-    scale_rig = spread(frame_centres(held, model)) / size_eq6
-    del held
+    free_rig = settings.rig == "free"
     focal, per_sensor, rig_views = focal_a, {}, views
     if settings.focal == "refine":
         # each sensor's focal length freed; the shared one their weighted mean
         passes["focal"] = bundle_adjust(rec, model, settings, refine_focal=True,
-                                        refine_rig=settings.rig == "refine",
-                                        hold_frame=hold_shot)
+                                        refine_rig=free_rig, hold_frame=hold_shot)
         focal, per_sensor = shared_focal(rec, model)
         rig_views = (rig_at_focal(focal).view_poses() if rig_at_focal is not None
                      else {v: (_with_focal(K, focal), M) for v, (K, M) in views.items()})
         set_intrinsics(rec, model, rig_views)
-        if settings.rig == "hold":
+        if not free_rig:
             set_rig(rec, model, rig_views)
             sensors_before = sensor_params(rec)
-    if settings.focal == "refine" or settings.rig == "refine":
-        passes["final"] = bundle_adjust(rec, model, settings, refine_focal=False,
-                                        refine_rig=settings.rig == "refine",
-                                        hold_frame=hold_shot)
-    scale_reached = spread(frame_centres(rec, model)) / size_eq6
+    passes["final"] = bundle_adjust(rec, model, settings, refine_focal=False,
+                                    refine_rig=free_rig, hold_frame=hold_shot,
+                                    refine_pp=settings.rig == "scale_pp")
+    # the scale the adjustment reached: with the rig's sensors held, the one their metric
+    # baselines give (independent of Eq. 5); a free rig leaves it where Eq. 6 put it
+    scale_rig = spread(frame_centres(rec, model)) / size_eq6
     applied = 1.0
-    if settings.scale == "eq5":
-        applied = 1.0 / scale_reached
-        rescale(rec, model, applied)
+    if settings.scale_from_eq5:
+        applied = 1.0 / scale_rig
+        rescale(rec, applied)
     after = observation_errors(rec, work_dir)
     cams = cameras_of(rec)
     refined_rig = rig_views_from_model(rec, model)
@@ -460,10 +486,10 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
             "rig": scale_rig,
             "result": spread(frame_centres(rec, model)) / size_eq6,
             "what": "the shots' centres' spread over Eq. 6's, i.e. the scale over Eq. 5's r: "
-                    "'rig' with the frames adjusted under registration B's rig as it is "
-                    "(the rig's metric baselines give the scale), 'result' what was written"},
-        "scale_source": "Eq. 5 (rig refined, the result scaled to Eq. 6's spread)"
-        if settings.scale == "eq5" else "registration B's rig (its metric baselines)",
+                    "'rig' as the adjustment reached it (with the rig's sensor poses held, "
+                    "the scale their metric baselines give), 'result' what was written"},
+        "scale_source": "Eq. 5 (the result scaled to Eq. 6's spread, the rig with it)"
+        if settings.scale_from_eq5 else "registration B's rig (its metric baselines)",
         "scale_applied": applied,
         "hold_shot": hold_shot,
         "rig_change": rig_change,
@@ -495,3 +521,15 @@ def rig_views_from_model(rec, model: RigModel) -> dict[str, np.ndarray]:
             out[v] = invert_pose(M)
     return out
 
+
+
+def rig_views_from_cameras(cameras: Mapping[str, PinholeCamera], shot: str,
+                           central: str | None = None) -> dict[str, np.ndarray]:
+    """The rig as a calibration places one shot's views: view -> cam_to_central (the
+    central view ``central``, by default the middle of the shot's N x N names)."""
+    names = sorted(split_key(k)[1] for k in cameras if split_key(k)[0] == shot)
+    if not names:
+        raise ValueError(f"no view of shot {shot}")
+    c = central or names[len(names) // 2]
+    inv = invert_pose(cameras[f"{shot}/{c}"].cam_to_world)
+    return {v: inv @ cameras[f"{shot}/{v}"].cam_to_world for v in names}

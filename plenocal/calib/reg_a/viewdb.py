@@ -37,7 +37,7 @@ import re
 import shutil
 import sqlite3
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 
 import numpy as np
@@ -295,13 +295,15 @@ def _colmap_camera(cam: PinholeCamera | None, width: int, height: int, camera_id
 
 
 def subset_database(src: str | Path, dst: str | Path, names: Iterable[str],
-                    cameras: Mapping[str, PinholeCamera] | PinholeCamera | None = None
-                    ) -> int:
+                    cameras: Mapping[str, PinholeCamera] | PinholeCamera | None = None,
+                    keep_pair: Callable[[str, str], bool] | None = None) -> int:
     """Copy the images ``names`` (``"<cam>/<view>"``) of database ``src`` into a new
     database ``dst``: their keypoints and the verified matches among them (no
     descriptors). ``cameras`` a mapping: one camera per image, set to its intrinsics;
     a single PinholeCamera or None: one camera shared by all (None: COLMAP's default
-    focal guess). Image ids are kept. Returns the number of verified pairs copied.
+    focal guess). Image ids are kept. ``keep_pair``: which verified pairs to copy (by the
+    two names ``"<cam>/<view>"``; all by default). Returns the number of verified pairs
+    copied.
     ``src`` is left untouched (not even its modification time)."""
 
     want = {f"{n}.png" for n in names}
@@ -312,13 +314,14 @@ def subset_database(src: str | Path, dst: str | Path, names: Iterable[str],
     src_copy = dst.with_name(f".{dst.stem}.source.db")
     shutil.copyfile(src, src_copy)
     try:
-        return _copy_views(src_copy, dst, want, cameras)
+        return _copy_views(src_copy, dst, want, cameras, keep_pair)
     finally:
         src_copy.unlink()
 
 
 def _copy_views(src: Path, dst: Path, want: set[str],
-                cameras: Mapping[str, PinholeCamera] | PinholeCamera | None) -> int:
+                cameras: Mapping[str, PinholeCamera] | PinholeCamera | None,
+                keep_pair: Callable[[str, str], bool] | None = None) -> int:
     import pycolmap  # noqa: PLC0415
 
     with pycolmap.Database.open(str(src)) as s:
@@ -331,6 +334,7 @@ def _copy_views(src: Path, dst: Path, want: set[str],
         keypoints = {im.image_id: s.read_keypoints(im.image_id) for im in images}
         pair_ids, tvgs = s.read_two_view_geometries()
     ids = {im.image_id for im in images}
+    name_of = {im.image_id: im.name[:-4] for im in images}
     per_image = isinstance(cameras, Mapping)
     n_pairs = 0
     with pycolmap.Database.open(str(dst)) as d:
@@ -357,7 +361,8 @@ def _copy_views(src: Path, dst: Path, want: set[str],
             d.write_keypoints(im.image_id, keypoints[im.image_id])
         for pid, tvg in zip(pair_ids, tvgs, strict=True):
             a, b = pycolmap.pair_id_to_image_pair(pid)
-            if a in ids and b in ids and tvg.inlier_matches.shape[0] > 0:
+            if (a in ids and b in ids and tvg.inlier_matches.shape[0] > 0
+                    and (keep_pair is None or keep_pair(name_of[a], name_of[b]))):
                 d.write_two_view_geometry(a, b, tvg)
                 n_pairs += 1
     return n_pairs

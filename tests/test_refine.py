@@ -1,0 +1,132 @@
+"""The joint refinement of every view under the rig (plenocal.calib.refine, issue 32), on
+synthetic renders whose true cameras are known exactly: 2 x 2 array shots and two
+hand-held shots, each a 3 x 3 set of parallel views 3 mm apart (tests/synth/scenes.py)."""
+
+import cv2  # noqa: F401  (before pycolmap)
+import numpy as np
+import pytest
+from synth.scenes import default_scene, render, rig_cameras, view_sets
+
+from plenocal.artifacts.rig import RigB
+from plenocal.calib import refine as rf
+from plenocal.calib.reg_a import viewdb
+from plenocal.camera import PinholeCamera, invert_pose, pose
+from plenocal.io.files import write_image
+from plenocal.verify.gt_errors import complete_errors
+
+F, W, H = 420.0, 320, 240
+SHOTS = ("x00_y00", "x01_y00", "x00_y01", "x01_y01", "hand00", "hand01")
+BASELINE = 0.003
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    """(true views, the rig of their sets, the view database of their matches)."""
+    root = tmp_path_factory.mktemp("refine")
+    shots = rig_cameras(f=F, width=W, height=H, cols=2, rows=2, handheld=2)
+    shots = {k: shots[k] for k in SHOTS}
+    views = view_sets(shots, 3, BASELINE)
+    scene = default_scene()
+    paths = {}
+    for name, cam in views.items():
+        paths[name] = root / f"{name}.png"
+        write_image(paths[name], render(cam, scene))
+    db = root / "views.db"
+    viewdb.build_view_database(paths, db, root, max_num_features=1500)
+    return views, rig_of(views, "x00_y00"), db
+
+
+def rig_of(views: dict[str, PinholeCamera], shot: str, baseline_scale: float = 1.0) -> RigB:
+    """The true rig (every view relative to the central one), its baselines scaled."""
+    central = views[f"{shot}/1_1"].cam_to_world
+    doc = {"model": "exact", "n_views": 3, "width": W, "height": H, "focal_px": F,
+           "views": {}}
+    for name, cam in views.items():
+        if name.startswith(shot + "/"):
+            M = invert_pose(central) @ cam.cam_to_world
+            M[:3, 3] *= baseline_scale
+            doc["views"][name.split("/")[1]] = {"K": cam.K, "cam_to_central": M}
+    return RigB(doc)
+
+
+def _rot(axis, deg):
+    return cv2.Rodrigues(np.asarray(axis, float) / np.linalg.norm(axis) * np.radians(deg))[0]
+
+
+def eq6_of(views: dict[str, PinholeCamera], rig: RigB, seed: int = 1) -> dict[str, PinholeCamera]:
+    """Eq. 6 with every shot's pose off its truth (1 mm, 0.1 deg), the shots' centres
+    spread as the truth's (Eq. 5's scale right), the rig as given."""
+    rng = np.random.default_rng(seed)
+    true = {shot: views[f"{shot}/1_1"].cam_to_world for shot in SHOTS}
+    moved = {shot: pose(_rot(rng.normal(size=3), 0.1) @ M[:3, :3],
+                        M[:3, 3] + rng.normal(size=3) * 0.001 / np.sqrt(3))
+             for shot, M in true.items()}
+    spread = rf.spread({s: M[:3, 3] for s, M in true.items()})
+    c = np.mean([M[:3, 3] for M in moved.values()], axis=0)
+    k = spread / rf.spread({s: M[:3, 3] for s, M in moved.items()})
+    out = {}
+    for shot, M in moved.items():
+        M[:3, 3] = c + k * (M[:3, 3] - c)
+        for view, (K, B) in rig.view_poses().items():
+            out[f"{shot}/{view}"] = PinholeCamera(K, M @ B, W, H)
+    return out
+
+
+def settings(**kw) -> rf.RefineSettings:
+    return rf.RefineSettings(**{"max_points": 4000, "min_angle_deg": 0.1, "num_threads": 1,
+                                **kw})
+
+
+def test_refinement_moves_the_shots_towards_the_truth_and_keeps_every_view(capture):
+    views, rig, db = capture
+    eq6 = eq6_of(views, rig)
+    before = complete_errors(eq6, views)
+    for kw in ({"rig": "hold"}, {"rig": "scale"}, {"rig": "scale_pp"}):
+        out = rf.refine_calibration(eq6, rig, db, settings(**kw), hold_shot="x00_y00")
+        assert sorted(out.cameras) == sorted(eq6)
+        after = complete_errors(out.cameras, views)
+        assert after["centre_rmse_mm"] < 0.5 * before["centre_rmse_mm"], kw
+        assert after["rotation_err_deg"]["max"] < before["rotation_err_deg"]["max"], kw
+        obs = out.report["observations"]
+        assert obs["after"]["mean_px"] < obs["before"]["mean_px"], kw
+
+
+def test_a_rig_held_constant_keeps_its_sensor_poses_bit_for_bit(capture):
+    views, rig, db = capture
+    out = rf.refine_calibration(eq6_of(views, rig), rig, db,
+                                settings(rig="hold"), hold_shot="x00_y00")
+    assert sorted(out.sensors_before) == sorted(out.sensors_after)
+    for cid, params in out.sensors_before.items():
+        assert np.array_equal(params, out.sensors_after[cid])
+    # and every shot's views keep the rig's relative poses
+    c = out.cameras
+    for shot in SHOTS:
+        central = c[f"{shot}/1_1"].cam_to_world
+        for view, (_, B) in rig.view_poses().items():
+            rel = invert_pose(central) @ c[f"{shot}/{view}"].cam_to_world
+            assert np.abs(rel - B).max() < 1e-9
+
+
+def test_a_wrong_rig_is_pulled_back_towards_the_truth_when_refined(capture):
+    views, rig, db = capture
+    wrong = rig_of(views, "x00_y00", baseline_scale=1.05)
+    eq6 = eq6_of(views, wrong)
+    out = rf.refine_calibration(eq6, wrong, db, settings(rig="scale"),
+                                hold_shot="x00_y00")
+    refined = rf.rig_views_from_cameras(out.cameras, "x00_y00")
+    true = rig.view_poses()
+
+    def baseline_err(poses) -> float:
+        return max(abs(np.linalg.norm(poses[v][:3, 3]) - np.linalg.norm(true[v][1][:3, 3]))
+                   for v in true if v != "1_1")
+
+    assert baseline_err({v: B for v, (_, B) in wrong.view_poses().items()}) > 1e-4
+    assert baseline_err(refined) < 0.3 * baseline_err(
+        {v: B for v, (_, B) in wrong.view_poses().items()})
+
+
+def test_settings_are_checked():
+    with pytest.raises(ValueError, match="refine.rig"):
+        rf.RefineSettings(rig="loose")
+    with pytest.raises(ValueError, match="refine.focal"):
+        rf.RefineSettings(focal="free")
