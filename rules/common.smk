@@ -788,7 +788,9 @@ def experiment_gt_targets(dataset, exp):
     from plenocal.verify.experiments import experiment_plan
 
     layout = synthesis_layout(dataset)
-    plan = experiment_plan(layout, exp, layout.exp2_cams(stage_config("verify")["exp2_sets"]))
+    plan = experiment_plan(
+        layout, exp, layout.exp2_cams(stage_config("verify")["exp2_sets"])
+    )
     have = {f"{c}/{v}" for c, v in gt_render_views(dataset)}
     return [t for _, targets in plan.values() for t in targets if t in have]
 
