@@ -774,7 +774,25 @@ def synthesis_exp_inputs(wildcards, exp):
     out["depth"] = [depth_view_path(d, k) for k in keys]
     if is_synthetic(d):
         out["true_depth"] = [true_depth_path(d, k) for k in keys]
+        if exp in (1, 2):
+            # the targets' true depth, where rendered: their surface pixels (the dB lost
+            # to calibration without the renderer's choices at occlusion edges)
+            out["true_depth_targets"] = [
+                true_depth_path(d, k) for k in experiment_gt_targets(d, exp)
+            ]
     return out
+
+
+def experiment_gt_targets(dataset, exp):
+    """The targets of experiment ``exp`` (1 or 2) that have a true depth map."""
+    from plenocal.verify.experiments import experiment_plan
+
+    layout = synthesis_layout(dataset)
+    plan = experiment_plan(
+        layout, exp, layout.exp2_cams(stage_config("verify")["exp2_sets"])
+    )
+    have = {f"{c}/{v}" for c, v in gt_render_views(dataset)}
+    return [t for _, targets in plan.values() for t in targets if t in have]
 
 
 #: experiments whose camera sets run in jobs of their own (synthesis_exp<k>_part), which

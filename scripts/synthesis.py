@@ -41,6 +41,8 @@ def load_depths(paths):
 depths = {"estimated": load_depths(snakemake.input.depth)}
 if snakemake.input.get("true_depth"):
     depths["true"] = load_depths(snakemake.input.true_depth)
+    # the targets' true depth (Exps. 1 and 2): their surface pixels
+    depths["true"].update(load_depths(snakemake.input.get("true_depth_targets", [])))
 cameras = {"complete": read_cameras(snakemake.input.calibration)}
 if snakemake.input.get("truth"):
     cameras["ground_truth"] = read_cameras(snakemake.input.truth)

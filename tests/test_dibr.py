@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from synth.planes import camera_at, fronto_plane, photo_texture, render_plane
 
+from plenocal.camera import PinholeCamera
 from plenocal.verify.dibr import DibrOptions, View, forward_depth, psnr, push_pull, synthesize
 
 W, H, F = 320, 240, 500.0
@@ -87,3 +88,29 @@ def test_soft_z_test_keeps_near_input_against_distant_too_near_depth(texture):
     hard, _ = synthesize(views, tgt, DibrOptions(z_tolerance=0.02, depth_exponent=0.0))
     assert psnr(soft, truth, 16) > 33.0
     assert psnr(soft, truth, 16) > psnr(hard, truth, 16) + 5.0
+
+
+def test_exactly_aligned_cameras_keep_the_background_beside_an_occluder(texture):
+    """Issue 32: the ground-truth cameras of a row of views are exactly aligned (a point
+    on a pixel row of the input projects onto the same row of the target). The rows just
+    above and below an occluder's horizontal edges are background that the input sees:
+    they must be rendered from it whatever the last bit of the projection, not lost behind
+    a foreground splat reaching a whole pixel past the edge (then left to inpainting)."""
+    far_plane = fronto_plane(0.7, 1.0, texture, 0.0)
+    src = camera_at([0.01, 0, 0], F, W, H)
+    img, d = render_plane(src, far_plane)
+    img, d = img.copy(), d.copy()
+    img[100:140, 100:160] = [1.0, 0.0, 0.0]  # a red square at 0.5 m
+    d[100:140, 100:160] = 0.5
+    base = camera_at([0, 0, 0], F, W, H)
+    truth, _ = render_plane(base, far_plane)
+    # the square spans columns 110-169 of the target (f b / z = 10 px); columns 115-165
+    # of the rows beside it are background that the input sees
+    for dy in (0.0, 1e-9, -1e-9):  # the same camera to round-off
+        K = base.K.copy()
+        K[1, 2] += dy
+        tgt = PinholeCamera(K, base.cam_to_world, W, H)
+        out, seen = synthesize([View(src, img, d)], tgt)
+        for row in (99, 140):
+            assert seen[row, 115:165].all(), (dy, row, np.flatnonzero(~seen[row, 115:165]))
+            assert np.abs(out[row, 115:165] - truth[row, 115:165]).mean() < 0.02

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import io
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -172,7 +172,9 @@ class PsnrTable:
     """One run of an experiment: the targets' PSNR [dB] against the captured views,
     synthesised from ``inputs`` by ``renderer`` with the ``depth`` maps and the
     ``cameras``. ``run``: "" (Exp. 1), the set's shot (Exp. 2), or the inputs of Exp. 3,
-    ``central`` or ``lateral``."""
+    ``central`` or ``lateral``. ``surface_psnr_db``: the PSNR over each target's surface
+    pixels (:mod:`plenocal.verify.surface`; synthetic data, the targets with a true depth
+    map, Exps. 1 and 2; absent from the file where empty)."""
 
     renderer: str  # dibr | rvs
     depth: str  # one of DEPTHS
@@ -180,6 +182,7 @@ class PsnrTable:
     run: str
     inputs: tuple[str, ...]  # "<shot>/<view>"
     psnr_db: dict[str, float]  # target "<shot>/<view>" -> dB
+    surface_psnr_db: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.depth not in DEPTHS or self.cameras not in CAMERA_SETS:
@@ -191,8 +194,11 @@ class PsnrTable:
         return float(np.mean(list(self.psnr_db.values()))) if self.psnr_db else None
 
     def to_dict(self) -> dict:
-        return {"renderer": self.renderer, "depth": self.depth, "cameras": self.cameras,
-                "run": self.run, "inputs": list(self.inputs), "psnr_db": self.psnr_db}
+        out = {"renderer": self.renderer, "depth": self.depth, "cameras": self.cameras,
+               "run": self.run, "inputs": list(self.inputs), "psnr_db": self.psnr_db}
+        if self.surface_psnr_db:
+            out["surface_psnr_db"] = self.surface_psnr_db
+        return out
 
 
 @dataclass(frozen=True)
@@ -354,6 +360,24 @@ class SynthesisResult:
                                                  for k in common])), len(common)))
         return out
 
+    def surface_db_lost(self) -> list[tuple[PsnrTable, PsnrTable, float, int]]:
+        """As :meth:`db_lost`, over the targets' surface pixels (``surface_psnr_db``):
+        the dB lost to calibration without the renderer's per-pixel choices at occlusion
+        edges (:mod:`plenocal.verify.surface`); tables without surface figures are left
+        out."""
+        truth = {(t.renderer, t.depth, t.run): t for t in self.tables
+                 if t.cameras == "ground_truth"}
+        out = []
+        for t in self.tables:
+            g = truth.get((t.renderer, t.depth, t.run))
+            if t.cameras != "complete" or g is None:
+                continue
+            common = sorted(set(t.surface_psnr_db) & set(g.surface_psnr_db))
+            if common:
+                out.append((t, g, float(np.mean([g.surface_psnr_db[k] - t.surface_psnr_db[k]
+                                                 for k in common])), len(common)))
+        return out
+
     def to_dict(self) -> dict:
         return {"format": SYNTHESIS_FORMAT, "version": SYNTHESIS_VERSION,
                 "experiment": self.experiment, "metric": self.metric,
@@ -373,7 +397,8 @@ def read_synthesis(path: str | Path) -> SynthesisResult:
                       tables=tuple(PsnrTable(
                           str(t["renderer"]), str(t["depth"]), str(t["cameras"]),
                           str(t["run"]), tuple(t["inputs"]),
-                          {k: float(v) for k, v in t["psnr_db"].items()})
+                          {k: float(v) for k, v in t["psnr_db"].items()},
+                          {k: float(v) for k, v in t.get("surface_psnr_db", {}).items()})
                           for t in doc["tables"]),
                       setup=SynthesisSetup.from_dict(doc["setup"]),
                       images=tuple(SynthImage(str(i["path"]), str(i["view"]),

@@ -375,6 +375,8 @@ def _psnr_section(page: Page, key: str, result: SynthesisResult | None, paper: s
         vmax = vmin + 1.0
     # (the complete calibration's tables: their names are unique)
     lost = {src.table_name(t, result.renderer): (d, n) for t, _, d, n in result.db_lost()}
+    surface = {src.table_name(t, result.renderer): (d, n)
+               for t, _, d, n in result.surface_db_lost()}
     kpis = []
     for t, name in zip(tables, names, strict=True):
         extra = ""
@@ -382,6 +384,10 @@ def _psnr_section(page: Page, key: str, result: SynthesisResult | None, paper: s
             d, n = lost[name]
             extra = (f"<br>{d:.2f} dB lost to calibration (vs ground-truth cameras, {n} views) "
                      f"{_verdict(d <= 0.5)}")
+        if name in surface:
+            d, n = surface[name]
+            extra += (f"<br>{d:.2f} dB on the surfaces ({n} views: off occlusion edges, "
+                      "README 'Ground truth in the synthesis experiments')")
         kpis.append(f'<span class="kpi" id="kpi-{escape(key)}-{escape(name)}">'
                     f"{escape(name)}<b>{t.mean_db:.2f} dB</b>mean over {len(t.psnr_db)} views"
                     f"{extra}</span>")

@@ -4,9 +4,10 @@ warped to the target camera, z-tested, blended by quality, and the remaining hol
 are inpainted.
 
 Warping is "depth forward, colour backward": the input's 3-D points are splatted
-into the target as 2x2 pixel quads with a z-buffer (the equivalent of rasterising
-RVS's triangle mesh for magnifications below two, without its stretched triangles
-across depth discontinuities, which are simply not drawn), then each covered target
+into the target as 2x2 pixel quads with a z-buffer (the pixels within a pixel of the
+point, :data:`SPLAT_REACH`: the equivalent of rasterising RVS's triangle mesh for
+magnifications below two, without its stretched triangles across depth discontinuities,
+which are simply not drawn), then each covered target
 pixel is unprojected with its splatted depth and projected back into the input,
 where the colour is sampled bilinearly (``cv2.remap``). A target pixel is kept from
 an input only if the input's own depth there agrees (occlusion check).
@@ -253,24 +254,37 @@ def _entries(M):  # pragma: no cover - numba
             M[2, 2])
 
 
+#: A point covers the target pixels whose centres lie less than ``SPLAT_REACH`` pixels from
+#: it along each axis: the two pixels on either side of it, or, where it falls on a pixel
+#: centre (to 1e-6 px), that pixel alone. The footprint used to be ``floor(u)`` and
+#: ``floor(u) + 1``: a point exactly on pixel ``k`` then covered ``k + 1`` too, a whole
+#: pixel away, or ``k - 1`` when round-off left it at ``k - 1e-13``. The ground-truth
+#: cameras of a set or an array are exactly aligned (one image axis of every warp between
+#: views of a row or column maps pixel centres onto pixel centres), so the last bit of the
+#: projection grew every foreground edge along that axis by a whole pixel, on one side or
+#: the other, and that pixel's background, which the input sees, was lost behind it:
+#: -0.3 dB on Exp. 2 of the default data with the true depth, -0.7 dB on its ideal
+#: renders (README, "Ground truth in the synthesis experiments").
+SPLAT_REACH = 1.0 - 1e-6
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _splat(depth, Kinv, R, C, K_t, R_t, t_t, zbuf):  # pragma: no cover - numba
     """Forward warp of every pixel of an input z-depth map (float32; the input's
     ``Kinv``, camera-to-world ``R``, centre ``C``), unprojected to its world point
     (:func:`_unproject`, float64; none where the depth is not > 0), into the target
-    (world-to-camera ``R_t``, ``t_t``, intrinsics ``K_t``) as a 2x2 splat into the
-    target z-buffer ``zbuf`` (float64, min; +inf = none). The order of the points does
+    (world-to-camera ``R_t``, ``t_t``, intrinsics ``K_t``) as a splat into the
+    target z-buffer ``zbuf`` (float64, min; +inf = none) over the pixels within
+    :data:`SPLAT_REACH` of it along each axis (2 x 2 pixels; one row or column where it
+    falls on a pixel centre: exactly aligned cameras). The order of the points does
     not matter (min), so the result is deterministic. Row by row: the projections first
     (a loop without branches, which the compiler vectorises: numpy's error model, no
     check for a division by zero), then the splats. The world points are computed here
     rather than read from an (H, W, 3) float64 array made once per input: the array's
     reads took longer than the arithmetic. The products are summed term by term in this
-    order, not by BLAS: where a point projects exactly onto a pixel boundary - with the
-    ground-truth cameras of an array one image coordinate is an integer for half the
-    points - the last bit decides which pixels the splat covers, so such renders differ
-    from the earlier numpy version (Exp. 1 with true depth and ground-truth cameras
-    -0.026 dB, elsewhere at most 0.003 dB; with the calibration's cameras the same to
-    1e-7 dB)."""
+    order, not by BLAS. A point within 1e-6 px of a pixel centre covers that row or
+    column alone, so the round-off of exactly aligned cameras no longer decides which
+    pixels a splat covers."""
     H, W = depth.shape
     Ht, Wt = zbuf.shape
     us = np.empty(W)
@@ -279,6 +293,7 @@ def _splat(depth, Kinv, R, C, K_t, R_t, t_t, zbuf):  # pragma: no cover - numba
     q00, q01, q02, q10, q11, q12, q20, q21, q22 = _entries(R_t)
     p0, p1, p2 = t_t[0], t_t[1], t_t[2]
     k00, k01, k02, k10, k11, k12, k20, k21, k22 = _entries(K_t)
+    reach = SPLAT_REACH
     for y in range(H):
         for x in range(W):
             z = np.float64(depth[y, x])
@@ -296,19 +311,22 @@ def _splat(depth, Kinv, R, C, K_t, R_t, t_t, zbuf):  # pragma: no cover - numba
             zt = zs[x]
             u = us[x]
             v = vs[x]
-            if not (zt > 0 and u >= -1.0 and u < Wt and v >= -1.0 and v < Ht):
-                continue  # behind, or no corner of the splat inside (also NaN / inf)
-            x0 = int(math.floor(u))
-            y0 = int(math.floor(v))
-            if x0 >= 0 and y0 >= 0 and x0 + 1 < Wt and y0 + 1 < Ht:
+            if not (zt > 0 and u > -reach and u < Wt - 1 + reach and v > -reach
+                    and v < Ht - 1 + reach):
+                continue  # behind, or no pixel within reach (also NaN / inf)
+            x0 = int(math.ceil(u - reach))
+            x1 = int(math.floor(u + reach))
+            y0 = int(math.ceil(v - reach))
+            y1 = int(math.floor(v + reach))
+            if x0 >= 0 and y0 >= 0 and x1 < Wt and y1 < Ht:
                 # the whole splat inside (nearly every point): minima without branches
-                for yy in range(y0, y0 + 2):
-                    for xx in range(x0, x0 + 2):
+                for yy in range(y0, y1 + 1):
+                    for xx in range(x0, x1 + 1):
                         cur = zbuf[yy, xx]
                         zbuf[yy, xx] = zt if zt < cur else cur
                 continue
-            for yy in range(max(y0, 0), min(y0 + 2, Ht)):
-                for xx in range(max(x0, 0), min(x0 + 2, Wt)):
+            for yy in range(max(y0, 0), min(y1 + 1, Ht)):
+                for xx in range(max(x0, 0), min(x1 + 1, Wt)):
                     if zt < zbuf[yy, xx]:
                         zbuf[yy, xx] = zt
 
@@ -325,7 +343,8 @@ def _zbuffer(depth: np.ndarray, src_geometry: tuple[np.ndarray, ...], tgt: Pinho
 
 
 def forward_depth(src: PinholeCamera, depth: np.ndarray, tgt: PinholeCamera) -> np.ndarray:
-    """Target z-depth of the input's surface: 2x2 splats with a z-buffer (0 = none)."""
+    """Target z-depth of the input's surface: splats over the pixels within a pixel
+    (:data:`SPLAT_REACH`) with a z-buffer (0 = none)."""
     zbuf = _zbuffer(np.ascontiguousarray(depth, dtype=np.float64), _geometry(src), tgt,
                     _geometry(tgt))
     return np.where(np.isfinite(zbuf), zbuf, 0.0).astype(np.float32)

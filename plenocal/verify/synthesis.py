@@ -59,6 +59,7 @@ from plenocal.verify.experiments import (
     experiment_plan,
 )
 from plenocal.verify.scores import error_rings, psnr_from_rings
+from plenocal.verify.surface import masked_error, psnr_of_error, surface_mask
 
 log = logging.getLogger(__name__)
 
@@ -87,6 +88,8 @@ class SynthesisContext:
     config: dict = field(default_factory=dict)
     depths: dict[str, np.ndarray] = field(default_factory=dict)
     _images: dict = field(default_factory=dict)
+    #: target -> its surface pixels (plenocal.verify.surface): scored there too
+    surface_masks: dict[str, np.ndarray] = field(default_factory=dict)
     _prepared: dict[str, PreparedView] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -172,16 +175,21 @@ class SynthesisContext:
         errors, kept = {}, {}
         rendered = self.render(inputs, targets)
 
-        def compare(t: str) -> tuple[np.ndarray, np.ndarray]:
+        def compare(t: str) -> tuple[np.ndarray, np.ndarray, tuple[float, int] | None]:
             out, truth = rendered[t], self.image(t)
             if out.ndim == 3 and truth.ndim == 2:
                 out = out.mean(axis=2)
-            return out, error_rings(out, truth)
+            mask = self.surface_masks.get(t)
+            surface = None if mask is None else masked_error(out, truth, mask)
+            return out, error_rings(out, truth), surface
 
         # reading the captured targets and their errors, on the job's cores (in order)
         with ThreadPoolExecutor(self.workers) as pool:
-            for t, (out, sse) in zip(targets, pool.map(compare, targets), strict=True):
+            for t, (out, sse, surface) in zip(targets, pool.map(compare, targets),
+                                              strict=True):
                 errors[t] = {"shape": list(out.shape), "sse": sse}
+                if surface is not None:
+                    errors[t]["surface"] = list(surface)
                 log.info("synthesized %s: %.2f dB over the whole view", t,
                          psnr_from_rings(sse, out.shape))
                 if keep and t in keep:
@@ -254,13 +262,16 @@ def run_experiment(exp: int, cameras: dict[str, PinholeCamera],
                    image_path: Callable[[str, str], str], layout: ArrayLayout, near: float,
                    far: float, config: dict,
                    depths: dict[str, np.ndarray] | None = None,
-                   images: dict[str, np.ndarray] | None = None) -> tuple[
+                   images: dict[str, np.ndarray] | None = None,
+                   surface_masks: dict[str, np.ndarray] | None = None) -> tuple[
                        dict, dict[str, np.ndarray]]:
     """Experiment ``exp`` with one camera set and (optionally) given depth maps.
     ``images``: a cache of the captured views (``"<cam>/<view>"`` -> float image) shared
-    by the runs of one experiment, which read the same views."""
+    by the runs of one experiment, which read the same views; ``surface_masks``: targets
+    also scored over their surface pixels (:func:`surface_masks`)."""
     ctx = SynthesisContext(cameras, image_path, layout, near, far, config, dict(depths or {}),
-                           images if images is not None else {})
+                           images if images is not None else {},
+                           surface_masks=dict(surface_masks or {}))
     if exp == 1:
         return experiment1(ctx)
     if exp == 2:
@@ -293,6 +304,28 @@ def synthesis_job(exp: int, cameras: dict[str, dict[str, PinholeCamera]],
     return synthesis_result(runs, depths, near, far, config, synth_rel)
 
 
+def surface_masks(exp: int, layout: ArrayLayout, truth: dict[str, PinholeCamera] | None,
+                  true_depth: Mapping[str, np.ndarray] | None, config: Mapping
+                  ) -> dict[str, np.ndarray]:
+    """Target -> its surface pixels (:func:`plenocal.verify.surface.surface_mask`, inside
+    the PSNR's border) for the targets of Exps. 1 and 2 whose true depth, and their
+    inputs', is in ``true_depth``, by the ground-truth cameras ``truth``; none without
+    them (a real capture, Exp. 3's parts)."""
+    if exp not in (1, 2) or not truth or not true_depth:
+        return {}
+    config = synthesis_config(config)
+    plan = experiment_plan(layout, exp, layout.exp2_cams(config["exp2_sets"]))
+    out = {}
+    for inputs, targets in plan.values():
+        if not all(k in true_depth and k in truth for k in inputs):
+            continue
+        for t in targets:
+            if t in true_depth and t in truth:
+                out[t] = surface_mask(t, inputs, truth, true_depth.__getitem__,
+                                      int(config["psnr_border_px"]))
+    return out
+
+
 def synthesis_runs(exp: int, cameras: dict[str, dict[str, PinholeCamera]],
                    depths: dict[str, dict[str, np.ndarray]],
                    image_path: Callable[[str, str], str], layout: ArrayLayout, near: float,
@@ -306,13 +339,16 @@ def synthesis_runs(exp: int, cameras: dict[str, dict[str, PinholeCamera]],
     runs: dict[tuple[str, str, str], dict] = {}
     kept_all: dict[tuple[str, str], np.ndarray] = {}
     images: dict[str, np.ndarray] = {}  # the captured views, read once for every run
+    masks = surface_masks(exp, layout, cameras.get("ground_truth"), depths.get("true"),
+                          config)
     for renderer in renderers:
         for dname, dmaps in depths.items():
             for cname, cams in cameras.items():
                 t0 = time.perf_counter()
                 res, kept = run_experiment(exp, cams, image_path, layout, near, far,
                                            {**config, "renderer": renderer,
-                                            "threads": int(threads)}, dict(dmaps), images)
+                                            "threads": int(threads)}, dict(dmaps), images,
+                                           masks)
                 runs[(renderer, dname, cname)] = res
                 # the time is logged only: the result file stays the same bits
                 log.info("%s, %s depth, %s cameras: experiment %d, %.1f s", renderer, dname,
@@ -380,6 +416,9 @@ def psnr_tables(exp: int, runs: dict[tuple[str, str, str], dict],
                     continue
                 out += [PsnrTable(renderer, depth, cameras, run, tuple(r["inputs"]),
                                   {t: psnr_from_rings(e["sse"], e["shape"], border)
-                                   for t, e in r["errors"].items()})
+                                   for t, e in r["errors"].items()},
+                                  {t: psnr_of_error(*e["surface"])
+                                   for t, e in r["errors"].items()
+                                   if "surface" in e and e["surface"][1] > 0})
                         for run, r in sorted(parts(res).items())]
     return out

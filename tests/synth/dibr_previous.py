@@ -2,9 +2,10 @@
 398734f): per input and target a full forward splat from the depth, a backward pass
 over every target pixel, a nearest remap of the input's aux and a cubic remap of its
 whole image, a weights pass, the blend over full-size colour stacks (float64) and a
-push-pull with the full pull. The reference the faster kernels must reproduce bit for
-bit (tests/test_dibr_kernels.py); the input preparation (dense depth, aux) and the
-unchanged push and pull levels are shared."""
+push-pull with the full pull; its splat's footprint is the current one (the pixels
+within ``SPLAT_REACH`` of a point, not ``floor(u)`` and ``floor(u) + 1``). The reference
+the faster kernels must reproduce bit for bit (tests/test_dibr_kernels.py); the input
+preparation (dense depth, aux) and the unchanged push and pull levels are shared."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import numba
 import numpy as np
 
 from plenocal.verify.dibr import (
+    SPLAT_REACH,
     DibrOptions,
     _geometry,
     _pull_up,
@@ -70,12 +72,17 @@ def _splat(depth, Kinv_s, R_s, C_s, K_t, R_t, t_t, zbuf):  # pragma: no cover - 
             w = K_t[2, 0] * a + K_t[2, 1] * b + K_t[2, 2] * zt
             u = (K_t[0, 0] * a + K_t[0, 1] * b + K_t[0, 2] * zt) / w
             v = (K_t[1, 0] * a + K_t[1, 1] * b + K_t[1, 2] * zt) / w
-            if not (u >= -1.0 and u < Wt and v >= -1.0 and v < Ht):
+            # the pixels within SPLAT_REACH along each axis (floor(u) and floor(u) + 1
+            # before issue 32: see plenocal.verify.dibr.SPLAT_REACH)
+            if not (u > -SPLAT_REACH and u < Wt - 1 + SPLAT_REACH and v > -SPLAT_REACH
+                    and v < Ht - 1 + SPLAT_REACH):
                 continue
-            x0 = int(math.floor(u))
-            y0 = int(math.floor(v))
-            for yy in range(max(y0, 0), min(y0 + 2, Ht)):
-                for xx in range(max(x0, 0), min(x0 + 2, Wt)):
+            x0 = int(math.ceil(u - SPLAT_REACH))
+            x1 = int(math.floor(u + SPLAT_REACH))
+            y0 = int(math.ceil(v - SPLAT_REACH))
+            y1 = int(math.floor(v + SPLAT_REACH))
+            for yy in range(max(y0, 0), min(y1 + 1, Ht)):
+                for xx in range(max(x0, 0), min(x1 + 1, Wt)):
                     if zt < zbuf[yy, xx]:
                         zbuf[yy, xx] = zt
 
