@@ -506,7 +506,7 @@ def test_page_renders_in_headless_chromium(tmp_path):
     assert int(m.group(3)) == 10
     for key in ("reg_a", "reg_b", "complete", "baseline_sfm"):
         assert f'id="t1-{key}"' in dom
-    assert "Complete A+B, refined under the rig" in dom
+    assert "Complete A+B (proposed, Eq. 6)" in dom
     shot = tmp_path / "shot.png"
     run_chromium(binary, res / "report" / "index.html", tmp_path / "profile2",
                  f"--screenshot={shot}", "--window-size=1280,2400", "--hide-scrollbars")

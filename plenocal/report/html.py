@@ -604,7 +604,8 @@ def section_summary(page: Page) -> None:
     if rf is not None and rf.get("enabled"):
         sv = rf["scale_vs_eq5"]
         page.add('<span class="kpi" id="kpi-refine">joint refinement<b>'
-                 f"rig {escape(rf['settings']['rig'])}, focal "
+                 f"rig {escape(rf['settings']['rig'])}, shots "
+                 f"{escape(rf['settings']['frames'])}, focal "
                  f"{escape(rf['settings']['focal'])}</b>scale {escape(rf['scale_source'])}; "
                  f"B's rig alone gives {_fmt(sv['rig'], 5)} x Eq. 5's r; observations "
                  f"{_fmt(rf['observations']['before']['mean_px'], 4)} -> "

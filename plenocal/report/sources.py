@@ -41,14 +41,17 @@ SOURCES: dict[str, tuple[str, str]] = {
 PAPER_TABLE1 = {
     "reg_a": ("Registration A (central views, SfM)", 0.663, "21 + 7"),
     "reg_b": ("Registration B (N x N set, mean over sets)", 0.450, "25"),
-    "complete": ("Complete A+B, refined under the rig (beyond the paper; Eq. 6 alone where "
-                 "refine.enabled is false)", 0.714, "525 + 175"),
+    "complete": ("Complete A+B (proposed, Eq. 6)", 0.714, "525 + 175"),
     "eq6": ("Complete A+B, Eq. 6 (the paper's method)", 0.714, "525 + 175"),
     "baseline_sfm": ("Complete A+SfM (naive baseline)", 0.770, "525 + 175"),
     "sfm_scratch": ("SfM of all views from scratch", None, None),
     "ground_truth": ("Ground-truth cameras (the floor set by features and views)", None,
                      None),
 }
+
+#: the complete calibration's row where the joint refinement ran (rule refine)
+REFINED_LABEL = "Complete, every view refined under the rig (beyond the paper)"
+
 
 def _num(v) -> float | None:
     if isinstance(v, bool) or v is None:
@@ -95,6 +98,9 @@ def table1_rows(table: ReprojectionTable) -> list[Table1Row]:
     beside it; a row the paper has and the table lacks says so."""
     rows = []
     for key, (label, paper, paper_n) in PAPER_TABLE1.items():
+        if key == "complete" and "eq6" in table.rows:
+            # the refinement ran: the complete calibration is the refined one, Eq. 6 beside it
+            label, paper, paper_n = REFINED_LABEL, None, None
         entry = table.rows.get(key)
         if entry is None:
             if paper is not None:
