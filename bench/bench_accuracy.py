@@ -134,6 +134,10 @@ def _psnr(exp: dict, cameras: str, depth: str = "estimated") -> float | None:
     return None
 
 
+def _abs(v):
+    return None if v is None else abs(float(v))
+
+
 def collect(work: Path) -> dict:
     """One capture's figures (the columns of the table)."""
     gt, tab = _json(work, "eval/gt_errors.json"), _json(work, "eval/reprojection.json")
@@ -152,6 +156,8 @@ def collect(work: Path) -> dict:
         "centre_pct_step": 100.0 * c["centre_rmse_mm"] / step_mm,
         "rot_deg": c["rotation_err_deg"]["max"],
         "scale_pct": abs(gt["scale"]["err_pct"]),
+        "eq5_scale_pct": _abs(gt["scale"].get("r_eq5_err_pct")),
+        "step_scale_pct": _abs(gt["scale"].get("r_array_step_err_pct")),
         "residual_scale_pct": abs(c["residual_scale_err_pct"]),
         "table_complete": table("complete"),
         "table_naive": table("baseline_sfm"),
@@ -179,8 +185,9 @@ COLUMNS = [  # (key, header, format)
     ("centre_mm", "centres mm", "{:.3f}"),
     ("centre_pct_step", "% step", "{:.2f}"),
     ("rot_deg", "rot. deg", "{:.4f}"),
-    ("scale_pct", "Eq. 5 r %", "{:.3f}"),
-    ("residual_scale_pct", "scale left %", "{:.3f}"),
+    ("scale_pct", "scale r %", "{:.3f}"),
+    ("eq5_scale_pct", "Eq. 5 r %", "{:.3f}"),
+    ("step_scale_pct", "step r %", "{:.3f}"),
     ("table_complete", "T.I complete", "{:.4f}"),
     ("table_eq6", "T.I Eq. 6", "{:.4f}"),
     ("table_naive", "T.I naive", "{:.4f}"),
@@ -238,12 +245,13 @@ def ratio_rows(results: dict[str, dict]) -> list[str]:
 
 
 SOURCE_COLUMNS = [
-    ("a_focal_pct", "A focal %", "{:.3f}"),
+    ("a_focal_pct", "A focal %", "{:+.3f}"),
+    ("a_focal_std_pct", "its std %", "{:.3f}"),
+    ("handheld_axis_mean_deg", "hand-held axes deg", "{:.1f}"),
     ("a_array_centre_mm", "A array centres mm", "{:.3f}"),
     ("a_hand_centre_mm", "A hand-held centres mm", "{:.3f}"),
     ("a_rot_deg", "A rot. deg", "{:.4f}"),
-    ("scale_pct", "Eq. 5 r %", "{:.3f}"),
-    ("rig_centre_mm", "rig centres mm", "{:.4f}"),
+    ("scale_pct", "Eq. 5 r %", "{:+.3f}"),
     ("only_a_poses_mm", "only A poses: centres mm", "{:.3f}"),
     ("only_scale_mm", "only scale: centres mm", "{:.3f}"),
     ("only_rig_mm", "only rig: centres mm", "{:.4f}"),
@@ -256,7 +264,9 @@ def source_rows(results: dict[str, dict]) -> list[str]:
     for name, r in results.items():
         s = r.get("sources")
         if s is not None:
-            flat[name] = s
+            ang = (s.get("handheld") or {}).get("axis_angle_deg") or {}
+            flat[name] = {**s, "handheld_axis_mean_deg": ang.get("mean"),
+                          "scale_pct": s.get("scale_pct")}
     if not flat:
         return ["(no error sources: gt_errors.json has no 'sources')"]
     lines = ["| capture | " + " | ".join(h for _, h, _ in SOURCE_COLUMNS) + " |",

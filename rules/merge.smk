@@ -11,6 +11,9 @@ rule scale:
         depth_b=lambda wc: [
             res(wc.dataset, "depth", "b", f"{c}.npy") for c in scale_shots(wc.dataset)
         ],
+        # the stage's step over registration A's array spacing, beside Eq. 5
+        reg_a="results/{dataset}/reg_a/reg_a.json",
+        camera="data/{dataset}/camera.yaml",
     output:
         scale="results/{dataset}/merge/scale.json",
     log:

@@ -27,6 +27,11 @@ out = gt_errors(truth, reg_a=reg_a, rig=rig.doc, r=r,
                 calib=read_cameras(snakemake.input.calibration))
 out["scale"]["r_mean_err_pct"] = 100.0 * (scale.r / out["scale"]["r_truth"] - 1.0)
 out["scale"]["r_median_err_pct"] = 100.0 * (scale.r_median / out["scale"]["r_truth"] - 1.0)
+out["scale"]["source"] = scale.chosen
+out["scale"]["r_eq5_err_pct"] = 100.0 * (scale.r_eq5 / out["scale"]["r_truth"] - 1.0)
+if scale.r_array_step is not None:
+    out["scale"]["r_array_step_err_pct"] = 100.0 * (scale.r_array_step
+                                                    / out["scale"]["r_truth"] - 1.0)
 refine = read_json(snakemake.input.refine)
 if refine.get("enabled"):
     # the paper's Eq. 6 result beside the refined one, and the refinement's own scale

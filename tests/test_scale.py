@@ -93,3 +93,62 @@ def test_estimate_scale_is_the_typed_record_of_eq5(tmp_path):
     assert res.r == pytest.approx(0.02) and res.r_median == pytest.approx(0.02)
     assert res.r_used == res.r_median and res.percentiles == (10, 90)
     assert sorted(res.r_i) == sorted(pairs)
+
+
+def _lattice(step_sfm: float, cols: int, rows: int, seed: int = 0, noise: float = 0.0):
+    """Array shots' camera-to-world poses on a turned, shifted lattice (SfM units)."""
+    import cv2  # noqa: PLC0415
+
+    rng = np.random.default_rng(seed)
+    R = cv2.Rodrigues(np.array([0.1, -0.3, 0.2]))[0]
+    o = np.array([0.3, -0.2, 1.5])
+    out = {}
+    for c in range(cols):
+        for r in range(rows):
+            M = np.eye(4)
+            M[:3, 3] = o + step_sfm * (R @ np.array([c, r, 0.0])) + rng.normal(0, noise, 3)
+            out[f"x{c:02d}_y{r:02d}"] = M
+    return out
+
+
+def test_the_stage_step_over_a_lattice_gives_the_scale_exactly():
+    poses = _lattice(0.37, 7, 3)
+    poses["hand00"] = np.eye(4)  # hand-held shots are not on the lattice: skipped
+    out = scale.array_step_scale(poses, 0.01)
+    assert out["r"] == pytest.approx(0.01 / 0.37, rel=1e-12)
+    assert out["n_shots"] == 21 and out["fit_rms_pct_of_step"] < 1e-9
+    # one row only: its axis alone
+    row = {k: v for k, v in poses.items() if k.endswith("_y00")}
+    assert scale.array_step_scale(row, 0.01)["r"] == pytest.approx(0.01 / 0.37, rel=1e-12)
+    assert scale.array_step_scale({"x00_y00": np.eye(4)}, 0.01) is None
+    # noisy positions: near, and the fit's residual says how far from a lattice
+    noisy = scale.array_step_scale(_lattice(0.37, 7, 3, noise=0.003), 0.01)
+    assert noisy["r"] == pytest.approx(0.01 / 0.37, rel=5e-3)
+    assert 0.1 < noisy["fit_rms_pct_of_step"] < 3.0
+
+
+def test_the_merge_takes_the_step_where_it_is_known_and_warns_where_they_disagree(tmp_path):
+    d1, d2 = maps(0.02, 3)
+    a, b = tmp_path / "a.npy", tmp_path / "b.npy"
+    np.save(a, d1)
+    np.save(b, d2)
+    pairs = {"x00_y00": (a, b)}
+    poses = _lattice(0.5, 3, 2)
+    auto = scale.estimate_scale(pairs, reference="auto", array_poses=poses, step_m=0.0101)
+    assert auto.chosen == "array_step" and auto.r_used == pytest.approx(0.0202)
+    assert auto.r_eq5 == pytest.approx(0.02, rel=1e-3) and auto.warnings == ()
+    off = scale.estimate_scale(pairs, reference="auto", array_poses=poses, step_m=0.011)
+    assert len(off.warnings) == 1 and "+10.00 %" in off.warnings[0]
+    assert scale.estimate_scale(pairs, reference="eq5", array_poses=poses,
+                                step_m=0.011).r_used == pytest.approx(0.02, rel=1e-3)
+    none = scale.estimate_scale(pairs, reference="auto")
+    assert none.chosen == "eq5" and none.r_array_step is None
+    with pytest.raises(ValueError, match="array.step_mm"):
+        scale.estimate_scale(pairs, reference="array_step")
+    # and the file keeps all of it
+    from plenocal.artifacts.scale import read_scale, write_scale  # noqa: PLC0415
+
+    write_scale(tmp_path / "scale.json", off)
+    back = read_scale(tmp_path / "scale.json")
+    assert back.r_used == pytest.approx(off.r_used, rel=1e-9) and back.warnings == off.warnings
+    assert back.array_step["spacing_sfm"] == pytest.approx(0.5)

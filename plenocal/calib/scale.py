@@ -23,6 +23,7 @@ import numpy as np
 
 from plenocal.artifacts.scale import ScaleResult
 from plenocal.config import stage_defaults
+from plenocal.names import array_position
 
 _SCALE = stage_defaults("scale")  # the defaults below: config.schema.yaml's scale block
 _LOW, _HIGH = float(_SCALE["low_percentile"]), float(_SCALE["high_percentile"])
@@ -88,17 +89,73 @@ def load_depth(path: str | Path) -> np.ndarray:
     return d
 
 
+def array_step_scale(poses: Mapping[str, np.ndarray], step_m: float) -> dict | None:
+    """The scale (metres per SfM unit) that the stage's step gives: registration A's array
+    shots (``x<col>_y<row>``: ``poses``, camera-to-world, SfM units; hand-held shots are
+    skipped) fitted by a lattice ``centre = o + col a + row b`` (least squares), its
+    spacing ``|a|``, ``|b|`` averaged with the weight of each axis's leverage (the sum
+    of squared index deviations), and ``step_m`` over it. None where the array has one
+    shot. The fit's residual says how regular A found the array."""
+    grid = {array_position(s): np.asarray(M, dtype=float)[:3, 3] for s, M in poses.items()
+            if array_position(s) is not None}
+    if len(grid) < 2:
+        return None
+    keys = sorted(grid)
+    idx = np.array(keys, dtype=float)
+    P = np.array([grid[k] for k in keys])
+    lever = ((idx - idx.mean(axis=0)) ** 2).sum(axis=0)  # per axis (col, row)
+    use = [a for a in (0, 1) if lever[a] > 0]
+    X = np.column_stack([idx[:, use], np.ones(len(keys))])
+    coef, *_ = np.linalg.lstsq(X, P, rcond=None)
+    steps = {("col", "row")[a]: float(np.linalg.norm(coef[i])) for i, a in enumerate(use)}
+    spacing = sum(lever[a] * steps[("col", "row")[a]] for a in use) / sum(lever[a] for a in use)
+    residual = P - X @ coef
+    return {"r": float(step_m) / spacing, "step_m": float(step_m),
+            "spacing_sfm": float(spacing), "spacing_sfm_per_axis": steps,
+            "n_shots": len(keys),
+            "fit_rms_pct_of_step": 100.0 * float(np.sqrt((residual ** 2).sum(axis=1).mean()))
+            / spacing}
+
+
+#: Eq. 5's r and the stage's step disagreeing by more than this (relative) is a warning
+AGREEMENT = 0.02
+
+
 def estimate_scale(pairs: Mapping[str, tuple[str | Path, str | Path]], low: float = _LOW,
                    high: float = _HIGH, estimator: str = _SCALE["estimator"],
-                   log=None) -> ScaleResult:
+                   log=None, reference: str = _SCALE["reference"],
+                   array_poses: Mapping[str, np.ndarray] | None = None,
+                   step_m: float | None = None) -> ScaleResult:
     """Eq. 5 from the depth files (:func:`scale_from_files`) as the typed result that
-    ``scale.json`` holds, ``estimator`` naming the r that the merge uses."""
+    ``scale.json`` holds, ``estimator`` naming Eq. 5's r; with registration A's poses
+    (``array_poses``) and the stage's step (``step_m``), the scale the step gives beside
+    it (:func:`array_step_scale`). ``reference``: which the merge uses - ``eq5``,
+    ``array_step``, or ``auto``: the step where it is known, Eq. 5 otherwise."""
     out = scale_from_files(pairs, low, high, log=log)
+    step = (array_step_scale(array_poses, step_m) if array_poses is not None and step_m
+            else None)
+    if reference == "array_step" and step is None:
+        raise ValueError("config scale.reference = array_step needs the stage's step "
+                         "(camera.yaml: array.step_mm) and two or more array shots; use "
+                         "scale.reference: auto or eq5")
+    chosen = ("array_step" if step is not None and reference in ("array_step", "auto")
+              else "eq5")
+    eq5 = {"mean": out["r"], "median": out["r_median"],
+           "median_of_ratios": out["r_median_of_ratios"]}[estimator]
+    warnings = []
+    if step is not None and abs(step["r"] / eq5 - 1.0) > AGREEMENT:
+        warnings.append(f"the scale of Eq. 5 (r = {eq5:.6g}) and the stage's step "
+                        f"({1000 * step['step_m']:g} mm in camera.yaml: r = {step['r']:.6g}) "
+                        f"differ by {100 * (step['r'] / eq5 - 1.0):+.2f} %; the merge uses "
+                        f"{'the step' if chosen == 'array_step' else 'Eq. 5'}: check "
+                        "array.step_mm, or the depth maps of both registrations")
     return ScaleResult(
         r=out["r"], r_median=out["r_median"], r_median_of_ratios=out["r_median_of_ratios"],
         estimator=estimator, r_i=out["r_i"], r_i_median_of_ratios=out["r_i_median_of_ratios"],
         n_pixels=out["n_pixels"], spread=out["spread"], percentiles=(low, high),
-        method=out["method"])
+        method=out["method"], chosen=chosen,
+        r_array_step=None if step is None else step["r"],
+        array_step=step or {}, warnings=tuple(warnings))
 
 
 def scale_from_files(pairs: Mapping[str, tuple[str | Path, str | Path]], low: float = _LOW,

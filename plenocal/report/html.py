@@ -259,9 +259,16 @@ def section_gt(page: Page, synthetic: bool) -> None:
             ("sets compared", str(b["n_sets"]))]))
     s = doc.scale
     if s:
-        details.append(("Scale r (Eq. 5)", [
-            ("r used (truth)", f"{s['r']:.6g} ({s['r_truth']:.6g})"),
-            ("error [%]", f"{s['err_pct']:.4f}")]))
+        items = [("r used (truth)", f"{s['r']:.6g} ({s['r_truth']:.6g}), from "
+                  + escape({"array_step": "the stage's step"}.get(s.get("source", ""),
+                                                               "Eq. 5"))),
+                 ("error [%]", f"{s['err_pct']:.4f}")]
+        if s.get("r_eq5_err_pct") is not None:
+            items.append(("Eq. 5's r: error [%]", f"{s['r_eq5_err_pct']:.4f}"))
+        if s.get("r_array_step_err_pct") is not None:
+            items.append(("the stage's step's r: error [%]",
+                          f"{s['r_array_step_err_pct']:.4f}"))
+        details.append(("Scale r (Eq. 5; the stage's step)", items))
     for title, al in (("Complete calibration (all views, rigid alignment)", doc.complete),
                       ("The paper's Eq. 6 result (all views, rigid alignment)", doc.eq6)):
         if not al:
@@ -589,10 +596,15 @@ def section_summary(page: Page) -> None:
     page.section("summary", "Calibration summary")
     sc = _read(page, "scale", read_scale)
     if sc is not None:
-        page.add('<span class="kpi">scale r (Eq. 5)<b>'
-                 f"{sc.r_used:.6g}</b>{escape(sc.estimator)}; relative spread "
-                 f"{_fmt(sc.spread.get('relative'), 4)} over {_fmt(sc.spread.get('n_shots'))} "
-                 f"shots {page.link(src.SOURCES['scale'][0], '[source]')}</span>")
+        step = ("" if sc.r_array_step is None else
+                f"; the stage's step gives {sc.r_array_step:.6g} "
+                f"({100 * (sc.r_array_step / sc.r_eq5 - 1):+.3f} % from Eq. 5)")
+        used = "the stage's step" if sc.chosen == "array_step" else "Eq. 5"
+        page.add(f'<span class="kpi" id="kpi-scale">scale r (from {used})<b>'
+                 f"{sc.r_used:.6g}</b>Eq. 5 {escape(sc.estimator)} {sc.r_eq5:.6g}, relative "
+                 f"spread {_fmt(sc.spread.get('relative'), 4)} over "
+                 f"{_fmt(sc.spread.get('n_shots'))} shots{escape(step)} "
+                 f"{page.link(src.SOURCES['scale'][0], '[source]')}</span>")
     rig = _read(page, "rig", read_rig)
     if rig is not None:
         page.add('<span class="kpi">registration B<b>' + escape(rig.model) + " model</b>"

@@ -306,12 +306,19 @@ def _rig_warnings(path: Path) -> tuple[str, ...]:
 #: under results/<d>/; ``{cam}`` is filled in with every shot), each with the typed
 #: reader of its messages: each stage writes what its log warns about into its output
 #: (:mod:`plenocal.artifacts.stage_warnings`), so that it reaches the first screen
+def _scale_warnings(path: Path) -> Sequence[str]:
+    from plenocal.artifacts.scale import read_scale  # noqa: PLC0415
+
+    return read_scale(path).warnings
+
+
 WARNING_SOURCES: tuple[tuple[str, Callable[[Path], Sequence[str]]], ...] = (
     # converter set-up: grid drift / foreign grid, MLA kind
     ("views/convert_setup.json", _convert_setup_warnings),
     ("views/{cam}/disparity.json", read_disparity_warnings),  # confident patch sizes
     ("reg_a/features.json", _features_warnings),  # registration A: views with few features
     ("reg_b/rig.json", _rig_warnings),  # registration B: Eqs. 2-3 inverse check failed
+    ("merge/scale.json", _scale_warnings),  # Eq. 5 and the stage's step disagree
 )
 
 
