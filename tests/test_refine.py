@@ -130,3 +130,22 @@ def test_settings_are_checked():
         rf.RefineSettings(rig="loose")
     with pytest.raises(ValueError, match="refine.focal"):
         rf.RefineSettings(focal="free")
+
+
+def test_a_refinement_that_moves_a_shot_far_is_rejected(capture):
+    views, rig, _ = capture
+    eq6 = eq6_of(views, rig)
+    moved = dict(eq6)
+    for view in rig.view_poses():  # one shot slid 5 mm sideways, as a whole
+        c = eq6[f"hand01/{view}"]
+        M = c.cam_to_world.copy()
+        M[0, 3] += 0.005
+        moved[f"hand01/{view}"] = PinholeCamera(c.K, M, W, H)
+    out = rf.shot_shifts(eq6, moved, list(SHOTS), "1_1", 2.0)
+    assert out["rejected"] and "hand01" in out["warnings"][0]
+    assert out["max_shift_mm"] > 3.0 and out["limit_mm"] < out["max_shift_mm"]
+    # a rigid motion of the whole array is the gauge, not a shift
+    turned = {k: PinholeCamera(c.K, pose(_rot([0, 1, 0], 2.0), [0.01, 0, 0]) @ c.cam_to_world,
+                               W, H) for k, c in eq6.items()}
+    ok = rf.shot_shifts(eq6, turned, list(SHOTS), "1_1", 2.0)
+    assert not ok["rejected"] and ok["max_shift_mm"] < 1e-6 and ok["warnings"] == []

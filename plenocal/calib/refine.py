@@ -26,7 +26,8 @@ registration B's rig is ``refine.rig`` (:data:`RIG_MODES`):
 ``scale``
     the rig's size (B's baseline): its shape held, the result (frames, points and rig
     together, a gauge of this problem) scaled so that the shots' centres spread as Eq. 6's
-    do, i.e. Eq. 5's r is kept;
+    do, i.e. the merge's scale is kept (Eq. 5's r, or the stage's step's:
+    :mod:`plenocal.calib.scale`);
 ``scale_pp``
     as ``scale``, and each view's principal point (the central view's held: a common shift
     is a turn of every frame). The exact model's per-view shift is B's alpha; this lets the
@@ -36,8 +37,9 @@ registration B's rig is ``refine.rig`` (:data:`RIG_MODES`):
     each sensor's pose (COLMAP's ``refine_sensor_from_rig``): poorly fixed along the views'
     axes, where a tenth of a millimetre barely changes an image.
 
-``scale_vs_eq5`` reports the scale the adjustment reached over Eq. 5's (the refined array's
-size over Eq. 6's): with the rig's poses held, the scale its metric baselines give.
+``scale_vs_eq5`` reports the scale the adjustment reached over the merge's (the refined
+array's size over Eq. 6's): with the rig's poses held, the scale its metric baselines give,
+an estimate independent of Eq. 5 and of the stage's step.
 
 The focal length is one for the whole array, as the paper shares it (Section II-B); it is
 held at registration A's by default. ``focal: refine`` frees each sensor's (COLMAP gives each
@@ -106,6 +108,7 @@ class RefineSettings:
     loss: str = _REFINE["loss"]
     loss_scale_px: float = _REFINE["loss_scale_px"]
     max_iterations: int = _REFINE["max_iterations"]
+    max_shift_pct: float = _REFINE["max_shift_pct"]
     seed: int = _SFM["seed"]
     num_threads: int = _SFM["num_threads"]
 
@@ -495,6 +498,10 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
         "rig_change": rig_change,
         "passes": passes,
     }
+    report.update(shot_shifts(eq6, cams, shots, central, settings.max_shift_pct))
+    if report["rejected"]:
+        log.warning(report["warnings"][0])
+        cams = dict(eq6)
     log.info("refinement took %.1f s (%.1f s triangulation)", time.perf_counter() - t0, t_tri)
     log.info("refined: focal %.4f -> %.4f px (%+.4f %%), scale vs Eq. 5 %.6f (rig held: "
              "%.6f), observations mean %.4f -> %.4f px", focal_a, focal,
@@ -502,6 +509,42 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
              report["observations"]["before"]["mean_px"] or math.nan,
              report["observations"]["after"]["mean_px"] or math.nan)
     return Refinement(cams, report, rig_views, sensors_before, sensor_params(rec))
+
+
+def shot_shifts(eq6: Mapping[str, PinholeCamera], refined: Mapping[str, PinholeCamera],
+                shots: list[str], central: str, max_shift_pct: float) -> dict:
+    """How far the refinement moved each shot from Eq. 6 (its central view's centre, mm,
+    and orientation, deg), after the rigid motion that best maps the Eq. 6 shots onto the
+    refined ones (the gauge), and whether a shot moved more than ``max_shift_pct`` % of the
+    array's size (the RMS distance of the shots from their mean): then the refinement is
+    rejected, with a warning, and the Eq. 6 result is written instead. An adjustment whose
+    shots slide apart (on a capture of the wide geometry, a group of shots moved 7 mm
+    together) is not a refinement."""
+    from plenocal.verify.gt_errors import pose_similarity  # noqa: PLC0415
+
+    src = np.array([eq6[f"{s}/{central}"].centre for s in shots])
+    dst = np.array([refined[f"{s}/{central}"].centre for s in shots])
+    _, R, t = pose_similarity(src, dst, [eq6[f"{s}/{central}"].R for s in shots],
+                              [refined[f"{s}/{central}"].R for s in shots], with_scale=False)
+    moved = np.linalg.norm(src @ R.T + t - dst, axis=1)
+    turned = [rotation_angle_deg(R @ eq6[f"{s}/{central}"].R, refined[f"{s}/{central}"].R)
+              for s in shots]
+    size = spread({s: c for s, c in zip(shots, src, strict=True)})
+    limit = max_shift_pct / 100.0 * size
+    worst = int(np.argmax(moved))
+    rejected = bool(moved[worst] > limit)
+    out = {"shot_shift_mm": {s: 1000.0 * float(m) for s, m in zip(shots, moved, strict=True)},
+           "shot_turn_deg": dict(zip(shots, turned, strict=True)),
+           "max_shift_mm": 1000.0 * float(moved[worst]), "limit_mm": 1000.0 * limit,
+           "rejected": rejected, "warnings": []}
+    if rejected:
+        out["warnings"] = [
+            f"the joint refinement moved shot {shots[worst]} by {1000 * moved[worst]:.2f} mm "
+            f"from Eq. 6 (more than refine.max_shift_pct = {max_shift_pct:g} % of the "
+            f"array's {1000 * size:.1f} mm): it was rejected and calibration/ holds the Eq. 6 "
+            "result; the shots' matches do not tie the array together (see "
+            "matches/matches.json), or raise refine.max_shift_pct"]
+    return out
 
 
 def _with_focal(K: np.ndarray, focal: float) -> np.ndarray:

@@ -19,6 +19,7 @@ from plenocal.artifacts.disparity import read_disparity_warnings
 from plenocal.artifacts.results import PsnrTable, ReprojectionTable
 from plenocal.artifacts.rig import InverseCheck, read_rig
 from plenocal.artifacts.stage_warnings import read_warnings
+from plenocal.io.files import read_json
 from plenocal.names import array_position, key_shot, key_view, parse_view, split_key
 
 #: source key -> (path under results/<d>/, the rule that makes it)
@@ -312,6 +313,13 @@ def _scale_warnings(path: Path) -> Sequence[str]:
     return read_scale(path).warnings
 
 
+def _refine_warnings(path: Path) -> Sequence[str]:
+    doc = read_json(path)
+    if not doc.get("enabled"):
+        return ()
+    return read_warnings(path, "the refinement's record (refine.json)", "rerun rule refine")
+
+
 WARNING_SOURCES: tuple[tuple[str, Callable[[Path], Sequence[str]]], ...] = (
     # converter set-up: grid drift / foreign grid, MLA kind
     ("views/convert_setup.json", _convert_setup_warnings),
@@ -319,6 +327,7 @@ WARNING_SOURCES: tuple[tuple[str, Callable[[Path], Sequence[str]]], ...] = (
     ("reg_a/features.json", _features_warnings),  # registration A: views with few features
     ("reg_b/rig.json", _rig_warnings),  # registration B: Eqs. 2-3 inverse check failed
     ("merge/scale.json", _scale_warnings),  # Eq. 5 and the stage's step disagree
+    ("calibration/refine.json", _refine_warnings),  # the refinement rejected
 )
 
 
