@@ -34,7 +34,7 @@ if settings.enabled:
     finally:
         shutil.rmtree(work, ignore_errors=True)
     cams, info = result.cameras, {"enabled": True, **result.report}
-    source = ("plenocal merge (Eq. 6: the refinement was rejected, see refine.json)"
+    source = ("plenocal merge (Eq. 6: the refinement was not kept, see refine.json)"
               if info["rejected"] else "plenocal refine (all views under the rig)")
 else:
     cams, info = eq6, {"enabled": False, "settings": dict(sm.params.refine)}
