@@ -52,13 +52,15 @@ class Conversion:
 
 def disparity_record(layout: ViewLayout, calib: RayCalib, patch: np.ndarray,
                      confident: np.ndarray, percentiles: tuple[float, float] = (2.0, 98.0),
-                     warnings: Iterable[str] = ()) -> dict:
+                     warnings: Iterable[str] = (), safe_diameter: float | None = None) -> dict:
     """The content of ``disparity.json``: the disparity range between horizontally
     adjacent views (Eq. 1), the geometry it refers to, the patch-size statistics
     (``patch``/``confident``: per used lens) and the conversion's ``warnings``
     (:mod:`plenocal.artifacts.stage_warnings`). The range is taken between the given
-    percentiles of the patch sizes."""
+    percentiles of the patch sizes. ``safe_diameter``: the ``D'`` the views were cut
+    with (default: calib.xml's ``D - 2 lens_border``)."""
     q, T = layout.q, layout.tile
+    d_safe = float(calib.safe_diameter if safe_diameter is None else safe_diameter)
     p_lo, p_hi = (float(x) for x in np.percentile(patch, percentiles))
     sign = layout.sign
     # |u_(h+1) - u_h| of the farthest and nearest points: Keplerian far = small P
@@ -83,11 +85,13 @@ def disparity_record(layout: ViewLayout, calib: RayCalib, patch: np.ndarray,
         "shift_near_px": shift_near,
         "percentiles": list(percentiles),
         "q_px": q,
-        "q_formula": "q = D' sin(45 deg) / N (the paper), unless convert.view_spacing_px is set",
-        "q_paper_px": calib.safe_diameter * math.sin(math.radians(45.0)) / layout.n_views,
+        "q_formula": ("q = D' sin(45 deg) / N (the paper) with D' = safe_diameter_px "
+                      "(convert.safe_diameter), unless convert.view_spacing_px is set"),
+        "q_paper_px": d_safe * math.sin(math.radians(45.0)) / layout.n_views,
         "tile": T,
         "D_px": calib.diameter,
-        "safe_diameter_px": calib.safe_diameter,
+        "safe_diameter_px": d_safe,
+        "safe_diameter_file_px": float(calib.safe_diameter),
         "n_views": layout.n_views,
         "width": layout.width,
         "height": layout.height,
