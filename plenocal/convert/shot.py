@@ -45,6 +45,7 @@ from plenocal.convert.patchsize import (
     PatchSizeSettings,
     detect_mla_kind,
     estimate_patch_size,
+    reliability,
     to_gray,
 )
 from plenocal.convert.render import (
@@ -322,9 +323,13 @@ class ShotConversion:
         self._median_patch = float(np.median(self.used_patch))
         corner = float(np.hypot(*self.layout.offset_image(0, 0)))
         reaches = range(self._rim_reach(corner) + 1)
+        # each lens's blend weight: its focus (multi-focus MLAs) times its reliability
+        # (a filled size weighs a tenth of a measured one)
+        trust = reliability(self.patch.raw, self.patch.patch, self.patch.confident,
+                            st.patch.step_px)
+        weight = (self.patch.focus * trust)[self.layout.lens_index]
         plans = make_plans(self.layout, self.used_patch, d_safe,
-                           [st.render.for_reach(k) for k in reaches],
-                           self.patch.focus[self.layout.lens_index], self.profile,
+                           [st.render.for_reach(k) for k in reaches], weight, self.profile,
                            None if profile_row is None
                            else profile_row[self.layout.lens_index])
         self.plan: RenderPlan = plans[0]
