@@ -20,8 +20,10 @@ peak to peak between the lattice directions and the directions between them, rel
 the micro image's centre brightness. The measured safe radius is the first radius where
 it exceeds :data:`WEBER` (2 %, the just visible contrast of a luminance step: the
 vignetting correction divides out the radial part of the profile but not this part, which
-would show as a lattice of that contrast). ``D'`` is twice that radius, never more than
-the file's ``D - 2 lens_border``.
+would show as a lattice of that contrast) and lies :data:`ABOVE_NOISE` standard errors
+above zero (each lens's own six-fold component carries its scene; over few lenses their
+mean is noise). ``D'`` is twice that radius, never more than the file's
+``D - 2 lens_border``.
 
 The measure is one number per camera: rule ``convert_setup`` takes it on the central
 array shot (``convert_setup.json``) and every shot's views are cut with it.
@@ -39,10 +41,11 @@ from plenocal.grid import MicrolensGrid
 
 WEBER = 0.02  # six-fold variation (of the centre brightness) that ends the safe disc
 ANGLES = 72  # samples per circle
-RADIAL_STEP = 0.25  # pixels between the radii measured
+RADIAL_STEP = 0.5  # pixels between the radii measured (linear in between)
 MAX_LENSES = 4000  # lenses averaged (an even spread over the sensor)
 MIN_LENSES = 50  # fewer whole lenses: no measure, the file's D'
 DARK = 0.02  # mean centre brightness (0..1) below which the frame says nothing
+ABOVE_NOISE = 3.0  # standard errors the six-fold variation must stand above zero
 
 
 @dataclass(frozen=True)
@@ -67,14 +70,14 @@ class SafeDiameter:
                 "weber_limit": WEBER}
 
 
-def mean_polar(gray: np.ndarray, grid: MicrolensGrid, radii: np.ndarray,
-               angles: np.ndarray, max_lenses: int = MAX_LENSES) -> tuple[np.ndarray, int]:
-    """(len(radii), len(angles)) the frame ``gray`` (float32, 0..1) sampled at polar
-    offsets from the lens centres (angles from the first lattice direction), averaged
-    over an even spread of at most ``max_lenses`` whole lenses; and how many."""
+def polar_samples(gray: np.ndarray, grid: MicrolensGrid, radii: np.ndarray,
+                  angles: np.ndarray, max_lenses: int = MAX_LENSES) -> np.ndarray:
+    """(lenses, len(radii), len(angles)) the frame ``gray`` (float32, 0..1) sampled at
+    polar offsets from the centres (angles from the first lattice direction) of an even
+    spread of at most ``max_lenses`` whole lenses."""
     inside = np.flatnonzero(grid.inside(0.0))
     if len(inside) == 0:
-        return np.zeros((len(radii), len(angles))), 0
+        return np.zeros((0, len(radii), len(angles)))
     pick = inside[np.linspace(0, len(inside) - 1, min(max_lenses, len(inside))).astype(int)]
     nb = grid.neighbour_vectors[0]
     theta = angles + math.atan2(nb[1], nb[0])
@@ -84,14 +87,24 @@ def mean_polar(gray: np.ndarray, grid: MicrolensGrid, radii: np.ndarray,
     mx = np.ascontiguousarray(c[:, :1] + dx[None, :])
     my = np.ascontiguousarray(c[:, 1:] + dy[None, :])
     s = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    return s.mean(axis=0, dtype=np.float64).reshape(len(radii), len(angles)), len(pick)
+    return s.reshape(len(pick), len(radii), len(angles))
 
 
-def six_fold(polar: np.ndarray, angles: np.ndarray) -> np.ndarray:
-    """Per radius, the peak-to-peak six-fold variation of ``polar`` (rows: radii) around
-    its circle (twice the amplitude of the ``exp(6 i theta)`` component)."""
-    c6 = (polar * np.exp(-6j * angles)[None, :]).mean(axis=1)
-    return 2.0 * 2.0 * np.abs(c6)
+def mean_polar(gray: np.ndarray, grid: MicrolensGrid, radii: np.ndarray,
+               angles: np.ndarray, max_lenses: int = MAX_LENSES) -> tuple[np.ndarray, int]:
+    """:func:`polar_samples` averaged over the lenses ((len(radii), len(angles))), and
+    how many lenses."""
+    s = polar_samples(gray, grid, radii, angles, max_lenses)
+    if len(s) == 0:
+        return np.zeros((len(radii), len(angles))), 0
+    return s.mean(axis=0, dtype=np.float64), len(s)
+
+
+def six_fold(polar: np.ndarray, angles: np.ndarray, order: int = 6) -> np.ndarray:
+    """Per radius, the peak-to-peak ``order``-fold variation of ``polar`` (rows: radii)
+    around its circle (twice the amplitude of the ``exp(order i theta)`` component)."""
+    c = (polar * np.exp(-1j * order * angles)[None, :]).mean(axis=1)
+    return 2.0 * 2.0 * np.abs(c)
 
 
 def measure_safe_diameter(gray: np.ndarray, grid: MicrolensGrid) -> SafeDiameter:
@@ -100,16 +113,24 @@ def measure_safe_diameter(gray: np.ndarray, grid: MicrolensGrid) -> SafeDiameter
     file_d = float(grid.calib.safe_diameter)
     radii = np.arange(0.0, file_d / 2.0 + RADIAL_STEP, RADIAL_STEP)
     angles = np.arange(ANGLES) * (2.0 * math.pi / ANGLES)
-    polar, used = mean_polar(gray, grid, radii, angles)
+    samples = polar_samples(gray, grid, radii, angles)
+    used = len(samples)
     if used < MIN_LENSES:
         return SafeDiameter(file_d, None, file_d, "file",
                             f"only {used} whole lenses on the frame (need {MIN_LENSES})")
+    polar = samples.mean(axis=0, dtype=np.float64)
     centre = float(polar[0].mean())
     if centre < DARK:
         return SafeDiameter(file_d, None, file_d, "file",
                             f"micro-image centres too dark to measure (mean {centre:.3f})")
     var = six_fold(polar, angles) / centre
-    over = np.flatnonzero(var > WEBER)
+    # each lens's six-fold component; their standard error, in the same peak-to-peak units
+    cos6 = (np.cos(6.0 * angles) / len(angles)).astype(np.float32)
+    sin6 = (np.sin(6.0 * angles) / len(angles)).astype(np.float32)
+    spread = np.sqrt((samples @ cos6).var(axis=0, dtype=np.float64)
+                     + (samples @ sin6).var(axis=0, dtype=np.float64))  # (radii,)
+    noise = 4.0 * spread / math.sqrt(used) / centre
+    over = np.flatnonzero((var > WEBER) & (var > ABOVE_NOISE * noise))
     if len(over) == 0:
         return SafeDiameter(file_d, None, file_d, "file",
                             "the micro images hold their own light across the file's D'")
