@@ -37,7 +37,7 @@ import numpy as np
 
 from plenocal.config import stage_defaults
 from plenocal.convert.vignetting import BIN_PX
-from plenocal.viewgeom import ViewLayout, nearest_slots
+from plenocal.viewgeom import ViewLayout, nearest_lenses, nearest_slots
 
 _FLOOR = 1e-3
 LUT_STEP = 0.05  # pixels of radius between entries of the radial tables
@@ -62,6 +62,7 @@ class RenderSettings:
     wider_slots: int = _BLEND["wider_slots"]
     wider_fade_radius: float = _BLEND["wider_fade_radius"]
     wider_centre_power: float = _BLEND["wider_centre_power"]
+    unreliable_blur: float = _BLEND["unreliable_blur"]  # tile units; 0: off
 
     def wide(self) -> RenderSettings:
         """The blend of the views whose patches reach past the micro image."""
@@ -276,6 +277,28 @@ def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int) -> np.ndar
             cv2.accumulateProduct(s.reshape(band.shape),
                                   w[k] if ch == 1 else cv2.merge([w[k]] * ch), band)
     return out if ch > 1 else out[..., None]
+
+
+def reliability_map(layout: ViewLayout, trust: np.ndarray, floor: float) -> np.ndarray:
+    """(H, W) float32 in [0, 1]: whether the patch size of the lens under each output pixel
+    was measured (1) or filled (0), from ``trust`` (m,) per used lens (1 measured,
+    ``floor`` filled: :func:`plenocal.convert.patchsize.reliability`), smoothed over half
+    a tile so that the change is gradual."""
+    idx, _ = nearest_lenses(layout, k=1)
+    idx = idx[..., 0]
+    t = np.where(idx >= 0, np.asarray(trust, dtype=np.float32)[np.maximum(idx, 0)], 1.0)
+    r = np.clip((t - floor) / max(1.0 - floor, 1e-6), 0.0, 1.0).astype(np.float32)
+    return cv2.GaussianBlur(r, (0, 0), 0.5 * layout.tile)
+
+
+def soften_unreliable(view: np.ndarray, rmap: np.ndarray, sigma_px: float) -> np.ndarray:
+    """``view`` (H, W, C) float32 blended with its Gaussian blur (``sigma_px``) where
+    ``rmap`` (:func:`reliability_map`) is below 1: ``r view + (1 - r) blur``."""
+    if sigma_px <= 0 or bool(np.all(rmap >= 1.0)):
+        return view
+    blurred = cv2.GaussianBlur(view, (0, 0), sigma_px).reshape(view.shape)
+    r = rmap[..., None]
+    return (view * r + blurred * (1.0 - r)).astype(np.float32)
 
 
 def blend_disagreement(plan: RenderPlan, source: np.ndarray, r: int, c: int) -> float:

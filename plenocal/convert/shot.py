@@ -41,6 +41,7 @@ from plenocal.convert.analysis import ConvertAnalysis
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.levels import significant_bits, to_unit_float
 from plenocal.convert.patchsize import (
+    UNRELIABLE_WEIGHT,
     PatchSizeResult,
     PatchSizeSettings,
     detect_mla_kind,
@@ -52,8 +53,10 @@ from plenocal.convert.render import (
     RenderPlan,
     RenderSettings,
     make_plans,
+    reliability_map,
     render_view,
     rim_reach,
+    soften_unreliable,
 )
 from plenocal.convert.safediameter import SafeDiameter, measure_safe_diameter
 from plenocal.convert.vignetting import lens_type_profiles
@@ -334,6 +337,8 @@ class ShotConversion:
                            else profile_row[self.layout.lens_index])
         self.plan: RenderPlan = plans[0]
         self._plans: list[RenderPlan] = plans
+        self._reliable = reliability_map(self.layout, trust[self.layout.lens_index],
+                                         UNRELIABLE_WEIGHT)
 
     @property
     def gray(self) -> np.ndarray:
@@ -396,7 +401,11 @@ class ShotConversion:
         return self._plans[min(reach, len(self._plans) - 1)]
 
     def view_float(self, r: int, c: int) -> np.ndarray:
-        return render_view(self.plan_for(r, c), self._source, r, c)
+        """View (r, c) as float32 (H, W, C), softened where the patch sizes were filled
+        (:func:`plenocal.convert.render.soften_unreliable`)."""
+        v = render_view(self.plan_for(r, c), self._source, r, c)
+        sigma = self.settings.render.unreliable_blur * self.layout.tile
+        return soften_unreliable(v, self._reliable, sigma)
 
     def view(self, r: int, c: int) -> np.ndarray:
         """View (r, c) as uint8 RGB (layout.height x layout.width x 3)."""
