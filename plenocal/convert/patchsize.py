@@ -251,6 +251,17 @@ def reliability(raw: np.ndarray, patch: np.ndarray, confident: np.ndarray,
     return np.where(kept, 1.0, UNRELIABLE_WEIGHT).astype(np.float32)
 
 
+def out_of_range(result: PatchSizeResult) -> np.ndarray:
+    """(n,) bool: lenses whose best match lay on an end of the whole search (the smallest
+    or the largest candidate): their patch size lies beyond what was searched (an
+    out-of-focus background past the lens types' depth ranges) or the micro images' own
+    structure matched (nothing to match), and the filled size is a guess at its scale."""
+    c = result.candidates
+    raw = result.raw
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(raw) & ((raw <= c[0] + 1e-6) | (raw >= c[-1] - 1e-6))
+
+
 def _block_offsets(radius: float, samples: int) -> tuple[np.ndarray, np.ndarray]:
     g = np.linspace(-radius, radius, samples)
     bx, by = np.meshgrid(g, g)

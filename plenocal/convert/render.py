@@ -279,16 +279,15 @@ def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int) -> np.ndar
     return out if ch > 1 else out[..., None]
 
 
-def reliability_map(layout: ViewLayout, trust: np.ndarray, floor: float) -> np.ndarray:
-    """(H, W) float32 in [0, 1]: whether the patch size of the lens under each output pixel
-    was measured (1) or filled (0), from ``trust`` (m,) per used lens (1 measured,
-    ``floor`` filled: :func:`plenocal.convert.patchsize.reliability`), smoothed over half
-    a tile so that the change is gradual."""
+def reliability_map(layout: ViewLayout, guessed: np.ndarray) -> np.ndarray:
+    """(H, W) float32 in [0, 1]: 0 where the lens under an output pixel has a guessed
+    patch size (``guessed`` (m,) bool per used lens:
+    :func:`plenocal.convert.patchsize.out_of_range`), else 1, smoothed over half a tile
+    so that the change is gradual."""
     idx, _ = nearest_lenses(layout, k=1)
     idx = idx[..., 0]
-    t = np.where(idx >= 0, np.asarray(trust, dtype=np.float32)[np.maximum(idx, 0)], 1.0)
-    r = np.clip((t - floor) / max(1.0 - floor, 1e-6), 0.0, 1.0).astype(np.float32)
-    return cv2.GaussianBlur(r, (0, 0), 0.5 * layout.tile)
+    bad = np.asarray(guessed, dtype=bool)[np.maximum(idx, 0)] & (idx >= 0)
+    return cv2.GaussianBlur((~bad).astype(np.float32), (0, 0), 0.5 * layout.tile)
 
 
 def soften_unreliable(view: np.ndarray, rmap: np.ndarray, sigma_px: float) -> np.ndarray:

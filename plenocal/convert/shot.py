@@ -41,11 +41,11 @@ from plenocal.convert.analysis import ConvertAnalysis
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.levels import significant_bits, to_unit_float
 from plenocal.convert.patchsize import (
-    UNRELIABLE_WEIGHT,
     PatchSizeResult,
     PatchSizeSettings,
     detect_mla_kind,
     estimate_patch_size,
+    out_of_range,
     reliability,
     to_gray,
 )
@@ -337,8 +337,8 @@ class ShotConversion:
                            else profile_row[self.layout.lens_index])
         self.plan: RenderPlan = plans[0]
         self._plans: list[RenderPlan] = plans
-        self._reliable = reliability_map(self.layout, trust[self.layout.lens_index],
-                                         UNRELIABLE_WEIGHT)
+        self._reliable = reliability_map(self.layout,
+                                         out_of_range(self.patch)[self.layout.lens_index])
 
     @property
     def gray(self) -> np.ndarray:
