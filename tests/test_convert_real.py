@@ -164,11 +164,16 @@ def test_tspc_corner_views_need_the_refined_grid():
     found = {}
     for mode in ("file", "refine"):
         grid, _ = check_and_grid(img, calib, mode)
-        shot = ShotConversion(img, calib, 5, grid=grid)
+        # at the paper's q (the file's D'): the measured D' (0.71 of it) keeps the corner
+        # samples nearer the centre, where a drifted centre matters less (issue 33: file
+        # grid 0.12-0.18, refined 0.13-0.16)
+        shot = ShotConversion(img, calib, 5, ConvertSettings(safe_diameter="file"), grid=grid)
         found[mode] = [blend_disagreement(shot.plan_for(r, c), shot._source, r, c)
                        for r, c in corners]
         assert blend_disagreement(shot.plan, shot._source, 2, 2) < 0.25, mode
-    assert max(found["refine"]) < 0.3, found
+    # 0.3 with the 1.5-2 tile fades of the wide blends; 0.34 with the one-tile fade that
+    # has no seams at the tiles' borders (issue 33)
+    assert max(found["refine"]) < 0.36, found
     assert max(found["file"]) > 1.5 * max(found["refine"]), found  # the drift's lattice
 
 
