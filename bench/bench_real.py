@@ -26,6 +26,14 @@ frame not in the table gets the default. Everything else is config.schema.yaml's
 ``convert`` defaults (:func:`plenocal.cli.validate_convert_block`, as the command line
 ``plenocal convert`` uses them).
 
+Local measures (issue 33), for the central view and the two corner views 0_0 and
+(N-1)_(N-1) of every frame against TLCT's views of the same frame (``centre.png``,
+``v000.png``, ``v024.png``; :mod:`plenocal.convert.localcheck`): the worst textured tile
+(SSIM on a 6 x 6 grid over the tiles where the reference has texture; target >= 0.85 for
+the central view) and the microlens lattice's trace (dB at the lattice's frequencies;
+target: at most TLCT's, on every view). The later frames (``<seq>_f150.png``) use their
+sequence's xml.
+
 Pictures (``--pictures``, git-ignored bench/out/): ``<frame>.png`` side by side at the
 central view's height: the raw frame (area-downscaled) | our central view | the
 reference's (where there is one) | the patch-size map; and ``<frame>_centre.png``, our
@@ -54,6 +62,7 @@ from benchmd import Lines, update_sections  # noqa: E402
 from plenocal.cli import validate_convert_block  # noqa: E402
 from plenocal.convert import ConvertSettings, ShotConversion  # noqa: E402
 from plenocal.convert.gridcheck import grid_for_mode, refine_grid  # noqa: E402
+from plenocal.convert.localcheck import local_compare  # noqa: E402
 from plenocal.convert.shot import build_grid, load_calib, load_lenslet  # noqa: E402
 from plenocal.io.files import read_image, write_image  # noqa: E402
 from plenocal.names import central_view  # noqa: E402
@@ -70,6 +79,20 @@ MLA = {
     "R42_klein_crop": "galilean",  # Raytrix R42
 }
 HEADING = "Real frames (bench_real.py)"
+LATER = "_f150"  # later frames of a sequence: <seq>_f150.png, read with <seq>.xml
+#: our view, TLCT's view of the same position (shared/real/reference/<frame>/)
+LOCAL_VIEWS = (("centre", "centre"), ("first corner", "v000"), ("last corner", "v024"))
+
+
+def sequence(name: str) -> str:
+    """The sequence a frame belongs to (its xml and MLA kind)."""
+    return name[: -len(LATER)] if name.endswith(LATER) else name
+
+
+def local_views(n: int) -> dict[str, tuple[int, int]]:
+    """Our view (r, c) for each entry of :data:`LOCAL_VIEWS`."""
+    h = (n - 1) // 2
+    return {"centre": (h, h), "first corner": (0, 0), "last corner": (n - 1, n - 1)}
 
 
 def _fit_height(img: np.ndarray, h: int) -> np.ndarray:
@@ -119,26 +142,29 @@ def tspc_corners(name: str, grid, check) -> tuple[float, float] | None:
 def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
                 compare, mla_mode: str = "table", grid_ab: bool = False) -> dict:
     lenslet = REAL / "frames" / f"{name}.png"
-    calib = load_calib(REAL / "frames" / f"{name}.xml")
+    calib = load_calib(REAL / "frames" / f"{sequence(name)}.xml")
     image = load_lenslet(lenslet)
     H, W = image.shape[:2]
-    cfg = validate_convert_block({"mla": MLA[name]} if name in MLA and mla_mode == "table" else {})
+    seq = sequence(name)
+    cfg = validate_convert_block({"mla": MLA[seq]} if seq in MLA and mla_mode == "table" else {})
     settings = ConvertSettings.from_config(cfg)
     t0 = time.perf_counter()
     file_grid = build_grid(calib, W, H)
     grid, check = grid_for_mode(image, file_grid, grid_mode)
     t_check = time.perf_counter() - t0
     refined = check.refined
-    corners = tspc_corners(name, file_grid, check)
+    corners = tspc_corners(sequence(name), file_grid, check)
     t1 = time.perf_counter()
     shot = ShotConversion(image, calib, views, settings, source=str(lenslet), grid=grid)
     t_prep = time.perf_counter() - t1
     t2 = time.perf_counter()
     centre_name = central_view(views)
-    centre = None
+    wanted = {f"{r}_{c}": key for key, (r, c) in local_views(views).items()}
+    kept = {}
     for vname, img in shot.views():
-        if vname == centre_name:
-            centre = img
+        if vname in wanted:
+            kept[wanted[vname]] = img
+    centre = kept["centre"]
     t_views = time.perf_counter() - t2
     stats = shot.disparity()
     row = {
@@ -148,8 +174,19 @@ def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
         "t_total": t_check + t_prep + t_views, "view": (stats["width"], stats["height"]),
         "confident": stats["patch_size_px"]["confident_share"],
         "median_patch": stats["patch_size_px"]["median"], "check": check, "refined": refined,
-        "cmp": None, "corners": corners,
+        "cmp": None, "corners": corners, "local": {},
+        "safe": shot.safe, "q": shot.layout.q,
+        "filled": stats["patch_size_px"]["filled_share"],
     }
+    for key, ref_name in LOCAL_VIEWS:
+        ref_view = REAL / "reference" / name / f"{ref_name}.png"
+        if not ref_view.is_file():
+            continue
+        try:
+            row["local"][key] = local_compare(kept[key], read_image(ref_view),
+                                              shot.layout.basis)
+        except ValueError as exc:  # ConvertError: alignment failed
+            row["local"][key] = {"error": str(exc)}
     ref_path = REAL / "reference" / name / "centre.png"
     ref = read_image(ref_path) if ref_path.is_file() else None
     if ref is not None and compare is not None:
@@ -179,6 +216,9 @@ def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
         panels.append(("patch size", shot.patch_picture()))
         write_image(pictures / f"{name}.png", side_by_side(panels, h))
         write_image(pictures / f"{name}_centre.png", centre)
+        for key, (r, c) in local_views(views).items():
+            if key != "centre":
+                write_image(pictures / f"{name}_{r}_{c}.png", kept[key])
     return row
 
 
@@ -263,6 +303,32 @@ def main() -> None:
         out.say(f"| {r['name']} | {100 * ck.measured_share:.0f}% | {cells} | "
                 f"x{ck.pitch_ratio:.5f} | {ck.rotation_deg:+.4f} | {ck.residual_rms_px:.2f} "
                 f"| {tspc} |")
+    out.say("")
+    out.say("Local measures against TLCT's views of the same frame (issue 33; "
+            "plenocal.convert.localcheck): the worst textured tile's SSIM (6 x 6 grid; "
+            "target >= 0.85 for the centre) and the lattice trace, ours / TLCT's, dB "
+            "(target: ours at most TLCT's). D' the safe diameter the views were cut with "
+            "(measured, or calib.xml's D - 2), q the view spacing; filled: the share of "
+            "lenses whose patch size was filled, not measured.")
+    out.say("")
+    out.say("| frame | D' px (file) | q px | filled | " + " | ".join(
+        f"{k}: worst tile | {k}: lattice dB" for k, _ in LOCAL_VIEWS) + " |")
+    out.say("|---|---|---|---|" + "---|---|" * len(LOCAL_VIEWS))
+    for r in rows:
+        cells = []
+        for key, _ in LOCAL_VIEWS:
+            lc = r["local"].get(key)
+            if lc is None:
+                cells += ["-", "-"]
+            elif "error" in lc:
+                cells += ["failed", "failed"]
+            else:
+                flag = "" if lc["lattice_db"] <= lc["ref_lattice_db"] else " (over)"
+                cells += [f"{lc['worst_tile_ssim']:.3f}",
+                          f"{lc['lattice_db']:.1f} / {lc['ref_lattice_db']:.1f}{flag}"]
+        safe = r["safe"]
+        out.say(f"| {r['name']} | {safe.diameter_px:.1f} ({safe.file_px:.1f}) | {r['q']:.2f} "
+                f"| {100 * r['filled']:.0f}% | " + " | ".join(cells) + " |")
     ab = [r for r in rows if "file_grid" in r]
     if ab:
         out.say("")

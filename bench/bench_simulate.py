@@ -93,11 +93,12 @@ def psnr_by_samples(cfg: dict, dataset: str, out: Path, shots: list[str],
                                              read_sensor_size(data / "camera.yaml")),
                                 load_calib(data / "calib.xml"), n, settings, source=full)
         write_setup(run / "convert_setup.json", setup)
-        tile = read_setup(run / "convert_setup.json").tile
+        setup = read_setup(run / "convert_setup.json")
+        tile = setup.tile
         pairs = []
         for cam in shots:
             gt = run / "gt" / f"{cam}.json"
-            ground_truth_cameras(data, [cam], n, tile, conv.get("view_spacing_px"), gt,
+            ground_truth_cameras(data, [cam], n, tile, setup.q_px, gt,
                               log=lambda m: None, even=bool(conv["even_size"]))
             shot = convert_files(run / f"{cam}.png", data / "calib.xml", data / "camera.yaml",
                                  n, settings, setup_json=run / "convert_setup.json")

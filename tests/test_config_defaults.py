@@ -65,8 +65,9 @@ def _changed(value, sub: dict):
         return enum[(enum.index(value) + 1) % len(enum)]
     if isinstance(value, bool):
         return not value
-    if isinstance(value, int):
-        return value + 2  # stays odd where the schema wants odd
+    if isinstance(value, int):  # +-2: stays odd where the schema wants odd
+        high = sub.get("maximum")
+        return value + 2 if high is None or value + 2 <= high else value - 2
     if isinstance(value, float):
         if value == 0.0:
             return 0.5

@@ -52,14 +52,21 @@ class Conversion:
 
 def disparity_record(layout: ViewLayout, calib: RayCalib, patch: np.ndarray,
                      confident: np.ndarray, percentiles: tuple[float, float] = (2.0, 98.0),
-                     warnings: Iterable[str] = ()) -> dict:
+                     warnings: Iterable[str] = (), safe_diameter: float | None = None) -> dict:
     """The content of ``disparity.json``: the disparity range between horizontally
     adjacent views (Eq. 1), the geometry it refers to, the patch-size statistics
     (``patch``/``confident``: per used lens) and the conversion's ``warnings``
     (:mod:`plenocal.artifacts.stage_warnings`). The range is taken between the given
-    percentiles of the patch sizes."""
+    percentiles of the confident lenses' patch sizes (all lenses' where none is
+    confident): a size filled in where matching had nothing to match is no measured
+    depth (a doll on black once gave D_min = -178 px from its filled background).
+    ``safe_diameter``: the ``D'`` the views were cut with (default: calib.xml's
+    ``D - 2 lens_border``)."""
     q, T = layout.q, layout.tile
-    p_lo, p_hi = (float(x) for x in np.percentile(patch, percentiles))
+    d_safe = float(calib.safe_diameter if safe_diameter is None else safe_diameter)
+    confident = np.asarray(confident, dtype=bool)
+    measured = patch[confident] if confident.any() else patch
+    p_lo, p_hi = (float(x) for x in np.percentile(measured, percentiles))
     sign = layout.sign
     # |u_(h+1) - u_h| of the farthest and nearest points: Keplerian far = small P
     shift_far, shift_near = (q * T / p_lo, q * T / p_hi) if sign < 0 else (q * T / p_hi,
@@ -83,11 +90,13 @@ def disparity_record(layout: ViewLayout, calib: RayCalib, patch: np.ndarray,
         "shift_near_px": shift_near,
         "percentiles": list(percentiles),
         "q_px": q,
-        "q_formula": "q = D' sin(45 deg) / N (the paper), unless convert.view_spacing_px is set",
-        "q_paper_px": calib.safe_diameter * math.sin(math.radians(45.0)) / layout.n_views,
+        "q_formula": ("q = D' sin(45 deg) / N (the paper) with D' = safe_diameter_px "
+                      "(convert.safe_diameter), unless convert.view_spacing_px is set"),
+        "q_paper_px": d_safe * math.sin(math.radians(45.0)) / layout.n_views,
         "tile": T,
         "D_px": calib.diameter,
-        "safe_diameter_px": calib.safe_diameter,
+        "safe_diameter_px": d_safe,
+        "safe_diameter_file_px": float(calib.safe_diameter),
         "n_views": layout.n_views,
         "width": layout.width,
         "height": layout.height,
@@ -97,6 +106,9 @@ def disparity_record(layout: ViewLayout, calib: RayCalib, patch: np.ndarray,
             "median": float(np.median(patch)), "mean": float(np.mean(patch)),
             "percentiles": pct,
             "confident_share": float(np.mean(confident)) if len(confident) else 0.0,
+            "filled_share": float(1.0 - np.mean(confident)) if len(confident) else 1.0,
+            "range_from": "confident lenses" if confident.any() else "all lenses (none "
+                          "confident)",
         },
         WARNINGS_KEY: warning_list(warnings),
     }

@@ -34,10 +34,20 @@ pixel by a parabola. All lenses are matched at once per candidate
 Confidence in [0, 1]: the best correlation times the peak's distinctness (best
 minus the best correlation at least 1.5 px away) times the block's texture
 (grey-level standard deviation); zero where the best lies on the edge of the
-searched range (a better match was cut off). Lenses below ``min_confidence`` are
-filled from confident neighbours by an iterative weighted median over the lattice,
-then every lens gets ``smooth_iterations`` passes of a weighted median over itself
-and its six neighbours (edge-preserving; removes isolated mismatches).
+searched range, the type's or the whole search's (a better match was cut off; and
+where nothing textured is seen the micro images' own structure, their vignetting,
+matches best at the smallest candidate, which once filled the face of a doll on black
+with 2 px patches on 70 px micro images). Lenses below ``min_confidence`` are
+filled by :func:`fill_unreliable`: each from the nearest confident lenses around it (a
+weighted median, never a value carried on from lens to lens through a texture-less
+region, which drew streaks), within the range the confident lenses span (the scene's
+depth range); then every lens gets ``smooth_iterations`` passes of a weighted median
+over itself and its six neighbours (edge-preserving; removes isolated mismatches).
+
+Reliability: :func:`reliability` weighs each lens in the blend, 1 where its match was
+confident and the map kept it, :data:`UNRELIABLE_WEIGHT` where the size was filled or
+the smoothing overrode the match: an estimate nobody measured must not win a blend
+against a measured neighbour with a tile many times too large.
 
 Focus (multi-focus MLAs): :func:`focus_weights` gives each lens a weight for the
 blend, 1 where its type's depth range covers the virtual depth ``D / P`` it found,
@@ -51,6 +61,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from scipy.spatial import cKDTree
 
 from plenocal.config import stage_defaults
 from plenocal.convert.errors import ConvertError
@@ -157,45 +168,98 @@ def _neighbourhood(values: np.ndarray, nb: np.ndarray) -> np.ndarray:
 
 
 def fill_and_smooth(raw: np.ndarray, confidence: np.ndarray, neighbours: np.ndarray,
-                    min_confidence: float, smooth_iterations: int, fallback: float
-                    ) -> tuple[np.ndarray, list[str]]:
-    """Fill low-confidence lenses from confident neighbours, then smooth (weighted
-    medians over the lattice). ``fallback``: value for lenses no confident lens reaches."""
-    notes: list[str] = []
-    n = len(raw)
-    w = np.where((confidence >= min_confidence) & np.isfinite(raw), confidence, 0.0)
-    P = np.where(w > 0, raw, np.nan)
-    if not (w > 0).any():
-        notes.append("no lens matched with confidence: the whole map is the fallback "
-                     f"{fallback:.3f} px (texture-less image, or calib.xml from another camera)")
-        return np.full(n, fallback, dtype=np.float32), notes
-    for _ in range(n):
-        missing = w <= 0
-        if not missing.any():
-            break
-        vals = _neighbourhood(P, neighbours)[missing, 1:]
-        wts = _neighbourhood(w, neighbours)[missing, 1:]
-        wts = np.where(np.isfinite(vals), np.nan_to_num(wts), 0.0)
-        vals = np.nan_to_num(vals)
-        med = weighted_median(vals, wts)
-        got = np.isfinite(med)
-        if not got.any():
-            break
-        idx = np.flatnonzero(missing)[got]
-        P[idx] = med[got]
-        w[idx] = 0.5 * wts[got].max(axis=1)
-    if (w <= 0).any():
-        k = int((w <= 0).sum())
-        notes.append(f"{k} lenses not connected to a confident lens: set to {fallback:.3f} px")
-        P[w <= 0] = fallback
-        w[w <= 0] = 1e-3
-    for _ in range(smooth_iterations):
+                    centres: np.ndarray, min_confidence: float, smooth_iterations: int,
+                    fallback: float) -> tuple[np.ndarray, list[str]]:
+    """Fill low-confidence lenses (:func:`fill_unreliable`, ``centres`` in lens pitches),
+    then smooth (weighted medians over the lattice). ``fallback``: the value where no
+    lens is confident."""
+    P, w, notes = fill_unreliable(raw, confidence, centres, min_confidence, fallback)
+    return _smooth(P, w, neighbours, smooth_iterations), notes
+
+
+def _smooth(P: np.ndarray, w: np.ndarray, neighbours: np.ndarray, iterations: int
+            ) -> np.ndarray:
+    """``iterations`` passes of a weighted median over each lens and its six neighbours
+    (the lens's own weight doubled), float32."""
+    for _ in range(iterations):
         vals = _neighbourhood(P, neighbours)
         wts = _neighbourhood(w, neighbours)
         wts[:, 0] *= 2.0
         wts = np.where(np.isfinite(vals), np.nan_to_num(wts), 0.0)
         P = weighted_median(np.nan_to_num(vals), wts)
-    return P.astype(np.float32), notes
+    return np.asarray(P, dtype=np.float32)
+
+
+#: blend weight of a lens whose patch size was not measured (filled, or overridden by the
+#: smoothing) against 1 for a measured one: a tenth, so that any measured lens covering
+#: the pixel decides it
+UNRELIABLE_WEIGHT = 0.1
+FILL_NEIGHBOURS = 12  # confident lenses a filled lens takes its size from (two rings)
+FILL_REACH = 24.0  # lens pitches: farther confident lenses do not fill (the scene's median)
+
+
+def fill_unreliable(raw: np.ndarray, confidence: np.ndarray, centres: np.ndarray,
+                    min_confidence: float, fallback: float) -> tuple[np.ndarray, np.ndarray,
+                                                                     list[str]]:
+    """Patch sizes with every unconfident lens filled (module docstring).
+
+    ``centres``: (n, 2) lens centres in lens pitches. A lens below ``min_confidence``
+    takes the weighted median (weights: confidence over squared distance) of the
+    :data:`FILL_NEIGHBOURS` nearest confident lenses within :data:`FILL_REACH` pitches,
+    found in one pass (filled values never fill others), clipped to the 2nd-98th
+    percentile of the confident sizes; where none is that near, the confident median;
+    where no lens is confident, ``fallback``. Returns (sizes, weights for the
+    smoothing: the confidence, a tenth of the neighbours' mean for filled lenses, notes)."""
+    notes: list[str] = []
+    n = len(raw)
+    ok = (confidence >= min_confidence) & np.isfinite(raw)
+    if not ok.any():
+        notes.append("no lens matched with confidence: the whole map is the fallback "
+                     f"{fallback:.3f} px (texture-less image, or calib.xml from another camera)")
+        return np.full(n, fallback), np.full(n, 1e-3), notes
+    good = raw[ok]
+    lo, hi = np.percentile(good, [2.0, 98.0])
+    P = np.where(ok, raw, np.nan)
+    w = np.where(ok, confidence, 0.0)
+    missing = np.flatnonzero(~ok)
+    if len(missing):
+        k = min(FILL_NEIGHBOURS, int(ok.sum()))
+        dist, idx = cKDTree(centres[ok]).query(centres[missing], k=k,
+                                               distance_upper_bound=FILL_REACH)
+        dist, idx = dist.reshape(len(missing), k), idx.reshape(len(missing), k)
+        found = idx < len(good)
+        safe = np.where(found, idx, 0)
+        wts = np.where(found, confidence[ok][safe] / np.maximum(dist, 0.5) ** 2, 0.0)
+        med = weighted_median(good[safe], wts)
+        far = ~np.isfinite(med)
+        med[far] = float(np.median(good))
+        P[missing] = np.clip(med, lo, hi)
+        w[missing] = 0.1 * np.where(found, confidence[ok][safe], 0.0).sum(axis=1) / k + 1e-3
+        if far.any():
+            notes.append(f"{int(far.sum())} lenses farther than {FILL_REACH:g} lens pitches "
+                         f"from any confident lens: set to the confident median "
+                         f"{float(np.median(good)):.3f} px")
+    return P, w, notes
+
+
+def reliability(raw: np.ndarray, patch: np.ndarray, confident: np.ndarray,
+                step_px: float) -> np.ndarray:
+    """Each lens's weight in the blend: 1 where its size was measured with confidence and
+    the map kept it (within two candidate steps of the match), else
+    :data:`UNRELIABLE_WEIGHT` (float32)."""
+    kept = confident & np.isfinite(raw) & (np.abs(patch - np.nan_to_num(raw)) <= 2 * step_px)
+    return np.where(kept, 1.0, UNRELIABLE_WEIGHT).astype(np.float32)
+
+
+def out_of_range(result: PatchSizeResult) -> np.ndarray:
+    """(n,) bool: lenses whose best match lay on an end of the whole search (the smallest
+    or the largest candidate): their patch size lies beyond what was searched (an
+    out-of-focus background past the lens types' depth ranges) or the micro images' own
+    structure matched (nothing to match), and the filled size is a guess at its scale."""
+    c = result.candidates
+    raw = result.raw
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(raw) & ((raw <= c[0] + 1e-6) | (raw >= c[-1] - 1e-6))
 
 
 def _block_offsets(radius: float, samples: int) -> tuple[np.ndarray, np.ndarray]:
@@ -445,17 +509,19 @@ def estimate_patch_size(image: np.ndarray, grid: MicrolensGrid,
     conf = (np.clip(np.nan_to_num(s_best, neginf=0.0), 0, 1)
             * np.clip(distinct / 0.1, 0, 1)
             * np.clip(texture / settings.texture_scale, 0, 1))
-    # a best match on the edge of the lens type's range (not the global edge) is the
-    # range cutting off a better match: not trusted, the lens is filled from neighbours
+    # a best match on the edge of the lens type's range or of the whole search is the
+    # range cutting off a better match, or (smallest size) the micro images' own structure
+    # matching where the scene has nothing to match: not trusted, the lens is filled
     first = np.argmax(allowed, axis=1)
     last = len(candidates) - 1 - np.argmax(allowed[:, ::-1], axis=1)
-    cut = ((best == first) & (first > 0)) | ((best == last) & (last < len(candidates) - 1))
+    cut = (best == first) | (best == last)
     conf = np.where(has & (pairs >= 2) & ~cut, conf, 0.0).astype(np.float32)
     v_mid = np.sqrt([t.depth_min * min(t.depth_max, 10 * t.depth_min)
                      for t in grid.calib.lens_types])
     fallback = float(np.clip(np.median(grid.diameter / v_mid), t_lo.min(), t_hi.max()))
-    patch, more = fill_and_smooth(raw, conf, grid.neighbours, settings.min_confidence,
-                                  settings.smooth_iterations, fallback)
+    patch, more = fill_and_smooth(raw, conf, grid.neighbours, grid.centres / grid.diameter,
+                                  settings.min_confidence, settings.smooth_iterations,
+                                  fallback)
     # filled lenses may leave their type's range (a neighbour of another type saw the
     # point in focus); the global candidate range still bounds every value
     patch = np.clip(patch, candidates[0], candidates[-1]).astype(np.float32)

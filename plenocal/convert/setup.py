@@ -14,6 +14,10 @@ Decided here, from ``convert`` settings that may say ``auto``:
   (:func:`plenocal.convert.patchsize.detect_mla_kind`) where the setting is ``auto``;
 * ``tile``: output pixels per lens pitch, ``ceil(upsample x median patch size)`` where
   ``tile_size`` is ``auto`` (:func:`plenocal.convert.shot.resolve_tile`);
+* ``safe_diameter_px`` (``D'``) and with it the view spacing ``q_px``: measured on the
+  image where ``safe_diameter`` is ``auto`` (:mod:`plenocal.convert.safediameter`: where
+  the micro images carry their own light, not their neighbours'); registration B and the
+  ground truth read ``q`` from the shots' ``disparity.json`` and from here;
 * the grid: the calib.xml grid checked against the micro images
   (:func:`plenocal.convert.gridcheck.check_grid`) and refined where ``convert.grid``
   says so (``refine``, or ``auto`` past the drift bar of :mod:`.gridcheck`).
@@ -37,7 +41,7 @@ from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_json, write_json
 from plenocal.io.raytrix import RayCalib
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: safe_diameter_px, q_px and the safe-diameter measure
 LATTICE_DIGITS = 8
 log = logging.getLogger("plenocal.convert")
 
@@ -45,7 +49,10 @@ log = logging.getLogger("plenocal.convert")
 @dataclass(frozen=True)
 class ConverterSetup:
     """The per-camera decisions (see the module docstring); ``lattice`` is the refined
-    grid's (origin (2,), A (2, 2) columns) where ``refined``, else None."""
+    grid's (origin (2,), A (2, 2) columns) where ``refined``, else None.
+    ``safe_diameter_px`` / ``q_px``: ``D'`` and the view spacing every shot is cut with
+    (None: per the settings, as without a set-up); ``safe_diameter_measure``: how ``D'`` was
+    found (:meth:`plenocal.convert.safediameter.SafeDiameter.to_dict`)."""
 
     mla: str
     tile: int
@@ -58,6 +65,9 @@ class ConverterSetup:
     mla_match_scores: dict[str, float] | None
     grid_check: dict
     warnings: tuple[str, ...] = ()
+    safe_diameter_px: float | None = None
+    q_px: float | None = None
+    safe_diameter_measure: dict | None = None
 
     def settings(self, base: ConvertSettings) -> ConvertSettings:
         """``base`` with the decided MLA kind and tile (nothing left ``auto``)."""
@@ -94,7 +104,15 @@ class ConverterSetup:
                    refined=bool(d["refined"]), lattice=lattice, decided_on=str(d["decided_on"]),
                    mla_source=str(d["mla_source"]), tile_source=str(d["tile_source"]),
                    mla_match_scores=d.get("mla_match_scores"), grid_check=dict(d["grid_check"]),
-                   warnings=warnings_of(d, source, "rerun rule convert_setup"))
+                   warnings=warnings_of(d, source, "rerun rule convert_setup"),
+                   safe_diameter_px=_float_or_none(d["safe_diameter_px"]),
+                   q_px=_float_or_none(d["q_px"]),
+                   safe_diameter_measure=(None if d["safe_diameter_measure"] is None
+                                          else dict(d["safe_diameter_measure"])))
+
+
+def _float_or_none(value) -> float | None:
+    return None if value is None else float(value)
 
 
 def check_and_grid(image: np.ndarray, calib: RayCalib, mode: str
@@ -162,7 +180,11 @@ def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: Con
         mla_source="image" if shot.mla_scores is not None else "setting",
         tile_source="auto" if settings.tile_size == "auto" else "setting",
         mla_match_scores=shot.mla_scores, grid_check=check.to_dict(),
-        warnings=tuple(warnings))
+        warnings=tuple(warnings),
+        # rounded as the lattice is (the last digits move with floating-point paths)
+        safe_diameter_px=round_floats(float(shot.safe.diameter_px), LATTICE_DIGITS),
+        q_px=round_floats(float(shot.layout.q), LATTICE_DIGITS),
+        safe_diameter_measure=round_floats(shot.safe.to_dict(), LATTICE_DIGITS))
     return setup, shot
 
 

@@ -45,15 +45,20 @@ from plenocal.convert.patchsize import (
     PatchSizeSettings,
     detect_mla_kind,
     estimate_patch_size,
+    out_of_range,
+    reliability,
     to_gray,
 )
 from plenocal.convert.render import (
     RenderPlan,
     RenderSettings,
     make_plans,
+    reliability_map,
     render_view,
     rim_reach,
+    soften_unreliable,
 )
+from plenocal.convert.safediameter import SafeDiameter, measure_safe_diameter
 from plenocal.convert.vignetting import lens_type_profiles
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_image
@@ -88,6 +93,7 @@ class ConvertSettings:
     tile_size: int | str = _CONVERT["tile_size"]
     upsample: float = _CONVERT["upsample"]
     view_spacing_px: float | None = _CONVERT["view_spacing_px"]
+    safe_diameter: float | str = _CONVERT["safe_diameter"]  # auto | file | D' in pixels
     percentiles: tuple[float, float] = _percentiles(_CONVERT["disparity_percentiles"])
     mla: str = _CONVERT["mla"]
     even_size: bool = _CONVERT["even_size"]
@@ -106,6 +112,11 @@ class ConvertSettings:
         if self.mla not in ("auto", *MLA_KINDS):
             raise ConvertError(f"convert.mla: auto, {' or '.join(MLA_KINDS)}, not {self.mla!r} "
                                "(auto: read from the image; see README 'MLA kinds')")
+        d = self.safe_diameter
+        if not (d in ("auto", "file") or (isinstance(d, (int, float))
+                                          and not isinstance(d, bool) and d > 0)):
+            raise ConvertError(f"convert.safe_diameter: 'auto', 'file' or a number of pixels "
+                               f"> 0, not {d!r}")
         b = self.bit_depth
         if not (b == "auto" or (isinstance(b, int) and 8 <= b <= 16)):
             raise ConvertError(f"convert.bit_depth: 'auto' or 8..16, not {b!r}")
@@ -120,6 +131,8 @@ class ConvertSettings:
             tile_size=tile if isinstance(tile, str) else int(tile),
             upsample=float(cfg["upsample"]),
             view_spacing_px=cfg["view_spacing_px"],
+            safe_diameter=(cfg["safe_diameter"] if isinstance(cfg["safe_diameter"], str)
+                           else float(cfg["safe_diameter"])),
             percentiles=_percentiles(cfg["disparity_percentiles"]),
             mla=str(cfg["mla"]),
             even_size=bool(cfg["even_size"]),
@@ -243,12 +256,16 @@ class ShotConversion:
     without measuring the image again (the same views). ``check_mla``: where the settings
     name the MLA kind, read it from the image all the same and warn where the image
     contradicts it (:func:`mla_contradiction`); off for the shots converted with a
-    camera's set-up, whose kind was checked on its central shot."""
+    camera's set-up, whose kind was checked on its central shot. ``safe_diameter``: the
+    camera's safe diameter ``D'`` decided before (rule ``convert_setup``); None: per
+    ``settings.safe_diameter`` (``auto``: measured on this image,
+    :mod:`plenocal.convert.safediameter`)."""
 
     def __init__(self, image: np.ndarray, calib: RayCalib, n_views: int,
                  settings: ConvertSettings | None = None, source: str = "<image>",
                  grid: MicrolensGrid | None = None,
-                 analysis: ConvertAnalysis | None = None, check_mla: bool = True) -> None:
+                 analysis: ConvertAnalysis | None = None, check_mla: bool = True,
+                 safe_diameter: float | None = None) -> None:
         self.settings = st = settings or ConvertSettings()
         self.grid_check: dict | None = None  # set by whoever checked the grid
         self.warnings: list[str] = []
@@ -264,8 +281,11 @@ class ShotConversion:
             log.info("%s: 16-bit image with %d significant bits (max %d)", source, self.bits,
                      int(image.max()))
         self._source = to_unit_float(image, self.bits)
+        self._gray: np.ndarray | None = None
+        self.safe: SafeDiameter = self._safe_diameter(safe_diameter, source)
+        d_safe = self.safe.diameter_px
         q = st.view_spacing_px if st.view_spacing_px is not None else view_spacing(
-            calib.safe_diameter, n_views)
+            d_safe, n_views)
         max_q = math.hypot(1, 1) * (n_views - 1) / 2 * q
         if max_q >= calib.safe_diameter / 2:
             raise ConvertError(f"view spacing q = {q:.3f} px puts the corner views "
@@ -306,19 +326,53 @@ class ShotConversion:
         self._median_patch = float(np.median(self.used_patch))
         corner = float(np.hypot(*self.layout.offset_image(0, 0)))
         reaches = range(self._rim_reach(corner) + 1)
-        plans = make_plans(self.layout, self.used_patch, calib.safe_diameter,
-                           [st.render.for_reach(k) for k in reaches],
-                           self.patch.focus[self.layout.lens_index], self.profile,
+        # each lens's blend weight: its focus (multi-focus MLAs) times its reliability
+        # (a filled size weighs a tenth of a measured one)
+        trust = reliability(self.patch.raw, self.patch.patch, self.patch.confident,
+                            st.patch.step_px)
+        weight = (self.patch.focus * trust)[self.layout.lens_index]
+        plans = make_plans(self.layout, self.used_patch, d_safe,
+                           [st.render.for_reach(k) for k in reaches], weight, self.profile,
                            None if profile_row is None
                            else profile_row[self.layout.lens_index])
         self.plan: RenderPlan = plans[0]
         self._plans: list[RenderPlan] = plans
+        self._reliable = reliability_map(self.layout,
+                                         out_of_range(self.patch)[self.layout.lens_index])
+
+    @property
+    def gray(self) -> np.ndarray:
+        """The image in grey, float32 0..1 (made once)."""
+        if self._gray is None:
+            self._gray = to_gray(self._source)
+        return self._gray
+
+    def _safe_diameter(self, decided: float | None, source: str) -> SafeDiameter:
+        """``D'``: ``decided`` (the camera's), or per ``convert.safe_diameter``."""
+        file_d = float(self.calib.safe_diameter)
+        setting = self.settings.safe_diameter
+        if decided is not None:
+            return SafeDiameter(float(decided), None, file_d, "setup")
+        if setting == "file":
+            return SafeDiameter(file_d, None, file_d, "file")
+        if setting != "auto":
+            d = float(setting)
+            if d > self.calib.diameter:
+                raise ConvertError(f"convert.safe_diameter = {d:g} px is more than the "
+                                   f"micro-image pitch D = {self.calib.diameter:.2f} px of "
+                                   f"{self.calib.source}: lower it, or set it to auto")
+            return SafeDiameter(d, None, file_d, "setting")
+        safe = measure_safe_diameter(self.gray, self.grid)
+        log.info("%s: safe diameter D' = %.2f px (%s; calib.xml's D - 2 lens_border = %.2f px)"
+                 "%s", source, safe.diameter_px, safe.source, file_d,
+                 f": {safe.note}" if safe.note else "")
+        return safe
 
     def _measure(self, source: str, check_mla: bool) -> ConvertAnalysis:
         """The image's MLA kind (where ``auto``; where set, checked with ``check_mla``),
         patch sizes and vignetting profiles."""
         st = self.settings
-        gray = to_gray(self._source)
+        gray = self.gray
         mla, scores = st.mla, None
         if st.mla == "auto":
             mla, k, g = detect_mla_kind(gray, self.grid, st.patch)
@@ -338,7 +392,7 @@ class ShotConversion:
         return ConvertAnalysis(mla, scores, patch, profile, row)
 
     def _rim_reach(self, offset: float) -> int:
-        return rim_reach(offset, self._median_patch, self.calib.safe_diameter)
+        return rim_reach(offset, self._median_patch, self.safe.diameter_px)
 
     def plan_for(self, r: int, c: int) -> RenderPlan:
         """The render plan of view (r, c): the tight blend, or a wider one where the view's
@@ -347,7 +401,11 @@ class ShotConversion:
         return self._plans[min(reach, len(self._plans) - 1)]
 
     def view_float(self, r: int, c: int) -> np.ndarray:
-        return render_view(self.plan_for(r, c), self._source, r, c)
+        """View (r, c) as float32 (H, W, C), softened where the patch sizes were filled
+        (:func:`plenocal.convert.render.soften_unreliable`)."""
+        v = render_view(self.plan_for(r, c), self._source, r, c)
+        sigma = self.settings.render.unreliable_blur * self.layout.tile
+        return soften_unreliable(v, self._reliable, sigma)
 
     def view(self, r: int, c: int) -> np.ndarray:
         """View (r, c) as uint8 RGB (layout.height x layout.width x 3)."""
@@ -367,7 +425,9 @@ class ShotConversion:
     def disparity(self) -> dict:
         out = disparity_record(self.layout, self.calib, self.used_patch,
                                 self.patch.confident[self.layout.lens_index],
-                                self.settings.percentiles, self.warnings)
+                                self.settings.percentiles, self.warnings,
+                                safe_diameter=self.safe.diameter_px)
+        out["safe_diameter"] = self.safe.to_dict()
         out["mla_source"] = "image" if self.mla_scores is not None else "setting"
         if self.mla_scores is not None:
             out["mla_match_scores"] = dict(self.mla_scores)
@@ -440,7 +500,8 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
         setup = read_setup(setup_json)
         shot = ShotConversion(image, calib, n_views, setup.settings(settings),
                               source=str(lenslet), grid=setup.grid(calib, W, H),
-                              analysis=analysis, check_mla=False)
+                              analysis=analysis, check_mla=False,
+                              safe_diameter=setup.safe_diameter_px)
         shot.grid_check = setup.grid_check
         return shot
     grid, check = check_and_grid(image, calib, settings.grid)

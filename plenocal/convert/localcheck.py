@@ -1,0 +1,172 @@
+"""Measures that see a converter's local failures, against a reference converter's view
+of the same lenslet frame (issue 33).
+
+A whole-view score hides a defect on a small part of the view: the SSIM of a TSPC frame
+of a doll on black read 0.949 while the face was a honeycomb. Two measures look locally:
+
+* **Worst textured tile** (:func:`tile_ssim`): our view aligned to the reference
+  (:func:`plenocal.convert.compare.alignment`: SIFT + RANSAC affine, the reference's
+  pixels are not square), the SSIM map of the grey levels cut into a ``GRID x GRID``
+  grid over the overlap, each tile at its best shift within ``SHIFT_PX`` pixels (one
+  affine map leaves a pixel or two of local offset: TLCT's views are cut with their own
+  view geometry and pixel aspect, and a border tile's SSIM swung from 0.82 to 0.91 with
+  RANSAC's draw), and the lowest tile mean among the tiles where the reference
+  has texture (grey-level standard deviation at least ``TEXTURE_STD`` of the full range:
+  flat and black tiles say nothing about the conversion). Clean central views read
+  0.90-0.96 against TLCT; the doll's honeycomb 0.62.
+* **Lattice trace** (:func:`lattice_trace`): how much energy the view holds at the
+  spatial frequencies of the microlens lattice, the reciprocal lattice of the tiles
+  (first and second shell: the 12 nearest non-zero frequencies). Per frequency, the
+  largest power within ``PEAK_BINS`` bins of it over the median power of the ring of
+  frequencies of the same magnitude (``RING_WIDTH``), the lattice's own neighbourhoods
+  left out: a smooth scene spectrum gives a few dB, a tile lattice, hexagons or a
+  sawtooth stands out by ten or more. The mean in dB over the frequencies. Our view is
+  measured on the reference's pixel grid (aligned as above, on the same crop), so that
+  both views are read at the same frequencies: our lattice is mapped there by the
+  alignment's linear part.
+
+:func:`local_compare` gives both for one view and its reference view.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from plenocal.convert.compare import alignment, grey, onto_reference
+from plenocal.convert.errors import ConvertError
+
+GRID = 6  # tiles per side of the worst-tile grid
+TEXTURE_STD = 0.03  # grey std (0..1) of the reference tile that counts as texture
+MIN_COVER = 0.8  # share of a tile that the aligned view must cover
+PEAK_BINS = 1.5  # radius (FFT bins) searched around each lattice frequency
+RING_WIDTH = 0.08  # relative half width of the ring that gives the background power
+SHELLS = 12  # lattice frequencies measured (the first two shells of a hexagonal lattice)
+SHIFT_PX = 2  # each tile's SSIM at its best whole-pixel shift within this many pixels
+_C1, _C2 = 0.01 ** 2, 0.03 ** 2  # SSIM's constants for data range 1
+
+
+def ssim_map(a: np.ndarray, b: np.ndarray, sigma: float = 1.5) -> np.ndarray:
+    """SSIM map of two grey float images (Gaussian window ``sigma``, population
+    statistics: skimage's ``gaussian_weights=True, use_sample_covariance=False``)."""
+    a, b = a.astype(np.float32), b.astype(np.float32)
+
+    def blur(x: np.ndarray) -> np.ndarray:
+        return cv2.GaussianBlur(x, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
+
+    ma, mb = blur(a), blur(b)
+    va, vb, cov = blur(a * a) - ma * ma, blur(b * b) - mb * mb, blur(a * b) - ma * mb
+    return ((2 * ma * mb + _C1) * (2 * cov + _C2)
+            / ((ma * ma + mb * mb + _C1) * (va + vb + _C2)))
+
+
+def overlap_box(mask: np.ndarray, share: float = 0.98) -> tuple[int, int, int, int]:
+    """(y0, y1, x0, x1): the rows and columns in which the aligned view covers at least
+    ``share`` of the other axis's extent (the overlap's inner rectangle)."""
+    rows = np.flatnonzero(mask.mean(axis=1) >= share * mask.mean(axis=1).max())
+    cols = np.flatnonzero(mask.mean(axis=0) >= share * mask.mean(axis=0).max())
+    if len(rows) < 16 or len(cols) < 16:
+        raise ConvertError("the aligned views overlap on too small a rectangle to measure")
+    return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+
+
+def tile_ssim(ref: np.ndarray, ours: np.ndarray, mask: np.ndarray, grid: int = GRID,
+              texture_std: float = TEXTURE_STD) -> dict:
+    """SSIM per tile of a ``grid x grid`` grid over the overlap of ``ours`` (aligned onto
+    ``ref``'s pixels, grey float) with ``ref``; ``mask`` marks the pixels ``ours``
+    covers. Returns the tile SSIMs (NaN where covered less than :data:`MIN_COVER`), which
+    tiles are textured, the worst textured tile's SSIM and its index (row, col)."""
+    y0, y1, x0, x1 = overlap_box(mask)
+    shifts = range(-SHIFT_PX, SHIFT_PX + 1)
+    maps = [ssim_map(ref, np.roll(ours, (dy, dx), axis=(0, 1))) for dy in shifts
+            for dx in shifts]
+    ys = np.linspace(y0, y1, grid + 1).round().astype(int)
+    xs = np.linspace(x0, x1, grid + 1).round().astype(int)
+    ssim = np.full((grid, grid), np.nan)
+    textured = np.zeros((grid, grid), bool)
+    for i in range(grid):
+        for j in range(grid):
+            sl = (slice(ys[i], ys[i + 1]), slice(xs[j], xs[j + 1]))
+            m = mask[sl]
+            if m.mean() < MIN_COVER:
+                continue
+            ssim[i, j] = max(float(smap[sl][m].mean()) for smap in maps)
+            textured[i, j] = float(ref[sl][m].std()) >= texture_std
+    pick = np.where(textured & np.isfinite(ssim), ssim, np.inf)
+    k = int(np.argmin(pick))
+    worst = float(pick.flat[k]) if np.isfinite(pick.flat[k]) else float("nan")
+    return {"tiles": ssim, "textured": textured, "worst": worst,
+            "worst_tile": (k // grid, k % grid) if np.isfinite(worst) else None,
+            "textured_tiles": int(textured.sum())}
+
+
+def lattice_frequencies(basis: np.ndarray, count: int = SHELLS) -> np.ndarray:
+    """(count, 2) the ``count`` shortest non-zero frequencies (cycles per pixel, (fx, fy))
+    of a lattice whose steps are the rows of ``basis`` (pixels, (x, y))."""
+    K = np.linalg.inv(np.asarray(basis, dtype=float).T)  # rows k_i: k_i . b_j = delta_ij
+    n = np.arange(-4, 5)
+    a, b = np.meshgrid(n, n)
+    f = a.reshape(-1, 1) * K[0] + b.reshape(-1, 1) * K[1]
+    r = np.linalg.norm(f, axis=1)
+    order = np.argsort(np.round(r, 9), kind="stable")
+    order = order[r[order] > 0]
+    return f[order[:count]]
+
+
+def lattice_trace(img: np.ndarray, basis: np.ndarray, count: int = SHELLS) -> dict:
+    """The lattice's trace in a grey float image ``img`` whose lattice steps are the rows
+    of ``basis`` (pixels): mean over the lattice frequencies of the peak power over the
+    ring background, in dB, and each frequency's value (module docstring)."""
+    h, w = img.shape
+    win = np.outer(np.hanning(h), np.hanning(w)).astype(np.float64)
+    x = (img - img.mean()) * win
+    power = np.abs(np.fft.fftshift(np.fft.fft2(x))) ** 2
+    fy = (np.arange(h) - h // 2) / h
+    fx = (np.arange(w) - w // 2) / w
+    FX, FY = np.meshgrid(fx, fy)
+    rad = np.hypot(FX, FY)
+    freqs = lattice_frequencies(basis, count)
+    all_f = lattice_frequencies(basis, 60)  # every lattice frequency near the rings
+    bin_r = np.hypot(1.0 / w, 1.0 / h) / np.sqrt(2.0)  # one bin
+    near_lattice = np.zeros((h, w), bool)
+    for f in all_f:
+        near_lattice |= np.hypot(FX - f[0], FY - f[1]) <= 3.0 * bin_r
+    values = []
+    for f in freqs:
+        if abs(f[0]) >= 0.5 or abs(f[1]) >= 0.5:
+            continue  # beyond Nyquist on this grid
+        peak = np.hypot(FX - f[0], FY - f[1]) <= PEAK_BINS * bin_r
+        mag = float(np.hypot(*f))
+        ring = (np.abs(rad - mag) <= RING_WIDTH * mag) & ~near_lattice
+        if not peak.any() or ring.sum() < 16:
+            continue
+        values.append(10.0 * np.log10(power[peak].max() / max(np.median(power[ring]), 1e-30)))
+    if not values:
+        raise ConvertError("no lattice frequency of the view lies below Nyquist")
+    return {"db": float(np.mean(values)), "per_frequency_db": [float(v) for v in values]}
+
+
+def local_compare(ours_img: np.ndarray, ref_img: np.ndarray, basis: np.ndarray) -> dict:
+    """Our view (uint8/uint16 RGB or grey) against the reference converter's view of the
+    same frame and view position: the worst textured tile (:func:`tile_ssim`) and the
+    lattice trace of both views (:func:`lattice_trace`) on the overlap's inner rectangle
+    of the reference's grid; ``basis``: our lattice steps in our view's pixels (rows,
+    :attr:`plenocal.viewgeom.ViewLayout.basis`)."""
+    ours, ref = grey(ours_img), grey(ref_img)
+    cv2.setRNGSeed(0)  # RANSAC's draw: the same figures for the same views
+    M, inliers = alignment(ours, ref)
+    warped, mask = onto_reference(ours, ref.shape, M)
+    if mask.mean() < 0.25:
+        raise ConvertError(f"the aligned views overlap on {100 * mask.mean():.0f}% only")
+    tiles = tile_ssim(ref, warped, mask)
+    y0, y1, x0, x1 = overlap_box(mask)
+    ref_basis = np.asarray(basis, dtype=float) @ M[:, :2].T  # our lattice on ref's grid
+    crop = (slice(y0, y1), slice(x0, x1))
+    fill = np.where(mask[crop], warped[crop], float(warped[crop][mask[crop]].mean()))
+    ours_trace = lattice_trace(fill, ref_basis)
+    ref_trace = lattice_trace(ref[crop], ref_basis)
+    return {"worst_tile_ssim": tiles["worst"], "worst_tile": tiles["worst_tile"],
+            "textured_tiles": tiles["textured_tiles"], "tile_ssim": tiles["tiles"],
+            "lattice_db": ours_trace["db"], "ref_lattice_db": ref_trace["db"],
+            "inliers": inliers, "alignment": M}
+

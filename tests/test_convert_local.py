@@ -1,0 +1,153 @@
+"""Issue 33: the measures that see local failure (worst textured tile, lattice trace), the
+safe diameter measured on the frame and the patch-size fill, on synthetic images built to
+have (or not have) each defect. The same measures on the real frames:
+tests/test_convert_real.py."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+from synth.lenslets import calib_for_optics, random_texture
+
+from plenocal.convert.localcheck import lattice_frequencies, lattice_trace, ssim_map, tile_ssim
+from plenocal.convert.patchsize import UNRELIABLE_WEIGHT, fill_unreliable, reliability
+from plenocal.convert.safediameter import WEBER, measure_safe_diameter
+from plenocal.grid import MicrolensGrid
+from plenocal.optics import PlenopticOptics
+
+HEX = np.array([[12.0, 0.0], [6.0, 12.0 * math.sqrt(3) / 2]])  # tile lattice steps, pixels
+
+
+def smooth_scene(h: int = 360, w: int = 480, seed: int = 0) -> np.ndarray:
+    """A grey scene with texture at every scale below ~20 px (float32, 0..1)."""
+    tex = random_texture(max(h, w), 3.0, seed)[:h, :w].mean(axis=2)
+    return cv2.GaussianBlur(tex, (0, 0), 1.0).astype(np.float32)
+
+
+def lattice_coords(h: int, w: int, basis: np.ndarray) -> np.ndarray:
+    """(h, w, 2) each pixel's coordinates in the lattice ``basis`` (rows: steps)."""
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    return np.stack([xs, ys], axis=-1) @ np.linalg.inv(basis)
+
+
+def test_lattice_frequencies_are_the_reciprocal_lattice():
+    f = lattice_frequencies(HEX, 6)
+    assert f.shape == (6, 2)
+    # every first-shell frequency is dual to the lattice: k . b is an integer, |k| the same
+    dots = f @ HEX.T
+    assert np.allclose(dots, np.rint(dots), atol=1e-9)
+    assert np.allclose(np.linalg.norm(f, axis=1), 2 / (12 * math.sqrt(3)), rtol=1e-9)
+
+
+def test_lattice_trace_sees_a_sawtooth_of_tiles_and_not_a_clean_scene():
+    """A ramp across every tile (the TSPC corner views' sawtooth) raises the trace over
+    the clean scene's few dB (a smooth spectrum; the peak is the largest of a few bins),
+    the more the stronger the ramp: 3 % of the range by more than 2 dB."""
+    scene = smooth_scene()
+    frac = lattice_coords(*scene.shape, HEX)
+    ramp = frac[..., 0] - np.floor(frac[..., 0])
+    clean = lattice_trace(scene, HEX)["db"]
+    weak = lattice_trace(scene + 0.03 * ramp, HEX)["db"]
+    strong = lattice_trace(scene + 0.06 * ramp, HEX)["db"]
+    assert clean < 6.0
+    assert weak > clean + 2.0
+    assert strong > weak + 2.0
+
+
+def test_worst_tile_sees_a_local_honeycomb_that_the_whole_view_hides():
+    """One tile of flat hexagons (each cell its mean: the doll's face) drags the worst
+    textured tile far down while the SSIM of the whole view stays high; a flat black
+    region with its own defect is not a textured tile and is not counted."""
+    ref = smooth_scene(seed=1)
+    h, w = ref.shape
+    ours = ref.copy()
+    cell = np.floor(lattice_coords(h, w, HEX * 1.5)).astype(np.int64)
+    box = (slice(0, h // 6), slice(w // 6, 2 * w // 6))
+    keys = cell[box][..., 0] * 100003 + cell[box][..., 1]
+    part = ours[box]
+    _, inv = np.unique(keys.ravel(), return_inverse=True)
+    means = np.bincount(inv, part.ravel()) / np.bincount(inv)
+    ours[box] = means[inv].reshape(part.shape)
+    mask = np.ones(ref.shape, bool)
+    whole = float(ssim_map(ref, ours).mean())
+    found = tile_ssim(ref, ours, mask)
+    assert whole > 0.9
+    assert found["worst"] < 0.75
+    assert found["worst_tile"] == (0, 1)
+    # a black, texture-less region: not a textured tile, whatever is drawn there
+    ref2, ours2 = ref.copy(), ref.copy()
+    ref2[box] = 0.01
+    ours2[box] = 0.01 + 0.005 * (cell[box][..., 0] % 2)
+    found2 = tile_ssim(ref2, ours2, mask)
+    assert not found2["textured"][0, 1]
+    assert found2["worst"] > 0.95
+
+
+def _overlapping_frame(grid: MicrolensGrid, light_radius: float, seed: int = 0
+                       ) -> np.ndarray:
+    """A frame whose micro images are discs of ``light_radius`` around the lens centres,
+    each with its own texture, summed where they overlap (light from the neighbours)."""
+    rng = np.random.default_rng(seed)
+    H, W = grid.height, grid.width
+    ys, xs = np.mgrid[0:H, 0:W].astype(np.float32)
+    img = np.zeros((H, W), np.float32)
+    tex = random_texture(64, 1.5, seed).mean(axis=2)
+    for cx, cy in grid.centres:
+        r2 = (xs - cx) ** 2 + (ys - cy) ** 2
+        inside = r2 <= light_radius ** 2
+        if not inside.any():
+            continue
+        ox, oy = rng.integers(0, 32, 2)
+        tx = np.clip((xs[inside] - cx + 32 + ox) % 64, 0, 63).astype(int)
+        ty = np.clip((ys[inside] - cy + 32 + oy) % 64, 0, 63).astype(int)
+        img[inside] += 0.3 + 0.2 * tex[ty, tx]
+    return img
+
+
+@pytest.fixture(scope="module")
+def small_grid() -> MicrolensGrid:
+    opt = PlenopticOptics(focal_length=0.035, focus_distance=0.6, mla_pitch=130e-6,
+                          mla_f_number=2.8, k=5.0, pixel_size=5.5e-6, width=400, height=300)
+    return MicrolensGrid(calib_for_optics(opt), opt.width, opt.height)
+
+
+def test_safe_diameter_ends_where_the_neighbours_light_arrives(small_grid):
+    """Micro images of radius 0.65 D overlap their neighbours from 0.35 D out along the
+    lattice directions: the measured D' lies near 0.7 D (less than the file's D - 2);
+    micro images inside their cells (radius 0.45 D, dark gaps) keep the file's."""
+    D = small_grid.diameter
+    wide = measure_safe_diameter(_overlapping_frame(small_grid, 0.65 * D), small_grid)
+    assert wide.source == "measured"
+    assert 0.55 * D < wide.diameter_px < 0.8 * D
+    assert wide.diameter_px < wide.file_px
+    tight = measure_safe_diameter(_overlapping_frame(small_grid, 0.45 * D), small_grid)
+    assert tight.source == "file"
+    assert tight.diameter_px == pytest.approx(small_grid.calib.safe_diameter)
+    assert WEBER == 0.02
+
+
+def test_fill_takes_the_nearest_confident_lenses_and_stays_in_their_range():
+    """A texture-less region (no confident lens) between two surfaces is filled from the
+    confident lenses around each lens, within their range: never the smallest candidate
+    that the micro images' own vignetting matched there, never a streak."""
+    n = 40
+    xs, ys = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float))
+    centres = np.stack([xs.ravel(), ys.ravel()], axis=1)
+    raw = np.where(centres[:, 0] < n / 2, 10.0, 14.0)
+    conf = np.ones(len(raw))
+    hole = (np.abs(centres[:, 0] - n / 2) < 8) & (np.abs(centres[:, 1] - n / 2) < 8)
+    raw[hole] = 2.0  # what the vignetting matched: the smallest candidate
+    conf[hole] = 0.0
+    P, w, notes = fill_unreliable(raw, conf, centres, 0.25, 6.0)
+    assert not notes
+    assert P[hole].min() >= 10.0 and P[hole].max() <= 14.0
+    left = hole & (centres[:, 0] < n / 2 - 2)
+    right = hole & (centres[:, 0] > n / 2 + 1)
+    assert np.all(P[left] == 10.0) and np.all(P[right] == 14.0)
+    assert np.all(w[hole] < 0.2)
+    trust = reliability(raw, P, conf >= 0.25, 0.5)
+    assert np.all(trust[hole] == UNRELIABLE_WEIGHT) and np.all(trust[~hole] == 1.0)
+
