@@ -106,6 +106,11 @@ class PatchSizeResult:
     candidates: np.ndarray  # (c,) candidate patch sizes tried
     focus: np.ndarray  # (n,) in (0, 1]: how sharp lens i sees its point (its type's range)
     warnings: list[str] = field(default_factory=list)
+    # (n, c) float32: each lens's matching score per candidate, -inf outside its allowed
+    # range; and the size used where no lens is confident. Kept for the video path's
+    # temporal hold (plenocal.convert.video); not written to analysis.npz
+    scores: np.ndarray | None = None
+    fallback: float | None = None
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:
@@ -529,5 +534,5 @@ def estimate_patch_size(image: np.ndarray, grid: MicrolensGrid,
         patch=patch, raw=raw.astype(np.float32), confidence=conf,
         confident=conf >= settings.min_confidence, lo=lo, hi=hi, candidates=candidates,
         focus=focus_weights(grid, patch, settings.focus_softness, settings.focus_floor),
-        warnings=notes + more,
+        warnings=notes + more, scores=s.astype(np.float32), fallback=fallback,
     )
