@@ -3,7 +3,9 @@ as RLC / TLCT users expect, writing what the workflow's rule ``convert`` writes.
 
     plenocal convert LENSLET CALIB.xml -o DIR [--views N] [--galilean | --mla KIND]
         [--tile-size auto|N] [--grid file|refine|auto] [--bit-depth auto|N]
-        [--set key=value ...]
+        [--set key=value ...] [--setup convert_setup.json]
+    plenocal convert RECORDING.yuv CALIB.xml -o DIR [--size WxH] [--bit-depth N]
+        [--frames A:B] [--format png|yuv] [--setup-frame K] [--temporal hold|off] ...
 
 Options map onto the keys of the config's ``convert`` block (``mla``, ``tile_size``,
 ``grid``, ``bit_depth``; ``--set`` reaches any other key, dotted for nested blocks, e.g.
@@ -18,6 +20,7 @@ key) print one line naming the file or key and exit with status 2.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import sys
 import time
@@ -27,6 +30,8 @@ import yaml
 
 from plenocal.config import stage_defaults
 from plenocal.convert.errors import ConvertError
+from plenocal.convert.video import TEMPORAL_MODES
+from plenocal.io.yuv import DEFAULT_MATRIX, DEFAULT_RANGE, MATRICES, RANGES
 
 EXIT_USAGE = 2
 
@@ -40,6 +45,19 @@ Fig. 1 (a)). DIR receives what the workflow's rule `convert` writes:
   patch_size.png     the patch-size map with a colour bar (dark: filled from neighbours)
   disparity.json     the disparity range between adjacent views (paper's Eq. 1 sign),
                      the view geometry, patch-size statistics and the grid check
+
+A raw YUV 4:2:0 recording (LENSLET ending in .yuv: planar I420, 8 bit, or 9-16 bit as
+little-endian 16-bit words; size and bit depth from an MPEG-style name such as
+Boys2_3976x2956_30fps_10bit.yuv or clip_1920x1080_yuv420p10le.yuv, or from --size and
+--bit-depth) is converted frame by frame with one set-up (grid, MLA kind, tile and view
+size, safe diameter: decided on --setup-frame, or read from --setup). DIR receives:
+
+  --format png       frame_<k>/<r>_<c>.png and frame_<k>/disparity.json per frame (k:
+                     the frame's index in the file, 5 digits)
+  --format yuv       v_<r>_<c>_<W>x<H>_<b>bit_<pix_fmt>.yuv: one YUV 4:2:0 video per
+                     view, of the input's bit depth (the byte layout RVS and TMIV read)
+  convert_setup.json the set-up every frame was converted with (the workflow's format)
+  video.json         input format, colour, per-frame patch-size statistics and times
 """
 
 
@@ -131,8 +149,47 @@ def build_parser() -> argparse.ArgumentParser:
                    help="any other key of the config's convert block (config.schema.yaml), "
                         "dotted for nested ones (e.g. --set upsample=1.5 --set "
                         "patch_size.block_samples=9); values are read as YAML; repeatable")
+    c.add_argument("--setup", metavar="convert_setup.json", default=None,
+                   help="convert with these per-camera decisions (grid, MLA kind, tile, safe "
+                        "diameter and view spacing) instead of deciding them on the frame: "
+                        "the workflow's results/<dataset>/views/convert_setup.json, or one "
+                        "this command wrote for a recording; PNG and YUV input")
+    v = c.add_argument_group("raw YUV 4:2:0 input (LENSLET ending in .yuv)")
+    v.add_argument("--size", type=_size, default=None, metavar="WxH",
+                   help="frame size, where the file name does not state it (e.g. 3976x2956)")
+    v.add_argument("--frames", default=None, metavar="A:B",
+                   help="the frames to convert, a Python slice of the file's frames: A:B is A "
+                        "up to B with B excluded (0:10 = the first ten), A:, :B, A:B:STEP, "
+                        "negatives count from the end; a single number is that frame. "
+                        "Default: all")
+    v.add_argument("--format", choices=("png", "yuv"), default="png", dest="out_format",
+                   help="png (default): a folder of PNG views per frame; yuv: one YUV 4:2:0 "
+                        "video per view, of the input's bit depth")
+    v.add_argument("--setup-frame", type=int, default=None, metavar="K",
+                   help="the frame (index in the file) the set-up is decided on. Default: "
+                        "the first converted frame")
+    v.add_argument("--yuv-matrix", choices=tuple(MATRICES), default=DEFAULT_MATRIX,
+                   help="YCbCr colour matrix of the input and the output (default "
+                        "%(default)s, MPEG's usual for these sequences)")
+    v.add_argument("--yuv-range", choices=RANGES, default=DEFAULT_RANGE,
+                   help="YCbCr range: limited (16-235 luma at 8 bit; the default) or full")
+    v.add_argument("--temporal", choices=TEMPORAL_MODES, default="hold",
+                   help="hold (default): a lens keeps the previous frame's patch size where "
+                        "it still matches nearly as well (no flicker on static scenes); "
+                        "off: every frame converted alone, as its PNG")
     c.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     return ap
+
+
+def _size(text: str) -> tuple[int, int]:
+    w, sep, h = text.lower().partition("x")
+    try:
+        size = int(w), int(h)
+    except ValueError:
+        size = (0, 0)
+    if not sep or min(size) < 2:
+        raise argparse.ArgumentTypeError(f"--size: WIDTHxHEIGHT, e.g. 3976x2956, not {text!r}")
+    return size
 
 
 def convert_config(args: argparse.Namespace) -> dict:
@@ -173,11 +230,17 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     t0 = time.perf_counter()
     if args.views < 1:
         raise ConvertError(f"--views: must be >= 1 (got {args.views})")
-    settings = ConvertSettings.from_config(validate_convert_block(convert_config(args)))
-    for path, what in ((args.lenslet, "lenslet image"), (args.calib, "calib.xml")):
-        if not Path(path).is_file():
+    block = validate_convert_block(convert_config(args))
+    settings = ConvertSettings.from_config(block)
+    for path, what in ((args.lenslet, "lenslet image"), (args.calib, "calib.xml"),
+                       (args.setup, "convert_setup.json")):
+        if path is not None and not Path(path).is_file():
             raise ConvertError(f"{path}: {what} not found")
-    shot = convert_files(args.lenslet, args.calib, None, args.views, settings)
+    if Path(args.lenslet).suffix.lower() == ".yuv":
+        run_convert_video(args, settings, block, log)
+        return
+    shot = convert_files(args.lenslet, args.calib, None, args.views, settings,
+                         setup_json=args.setup)
     log.info("%s: %dx%d, %s: D = %.2f px; grid: %s (convert.grid %s)", args.lenslet,
              shot.grid.width, shot.grid.height, args.calib, shot.calib.diameter,
              "refined from the image" if shot.grid_check["refined"] else "calib.xml's",
@@ -198,6 +261,30 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     write_json(out / "disparity.json", stats)
     log.info("%s: %d views, disparity.json, patch_size.npy/.png; %.2f s in all", out, n,
              time.perf_counter() - t0)
+
+
+def run_convert_video(args: argparse.Namespace, settings, block: dict,
+                      log: logging.Logger) -> None:
+    """A raw YUV recording (plenocal.convert.video.convert_recording)."""
+    from plenocal.convert.setup import read_setup  # noqa: PLC0415
+    from plenocal.convert.shot import load_calib  # noqa: PLC0415
+    from plenocal.convert.video import VideoSettings, convert_recording  # noqa: PLC0415
+
+    bits = args.bit_depth if isinstance(args.bit_depth, int) else None
+    if bits is not None and not 8 <= bits <= 16:
+        raise ConvertError(f"--bit-depth {bits}: a YUV file holds 8..16 bits")
+    doc = convert_recording(
+        args.lenslet, load_calib(args.calib), args.out, args.views,
+        dataclasses.replace(settings, bit_depth="auto"),
+        VideoSettings(matrix=args.yuv_matrix, range=args.yuv_range, temporal=args.temporal),
+        size=args.size, bits=bits, frames=args.frames, out_format=args.out_format,
+        setup_frame=args.setup_frame,
+        setup=None if args.setup is None else read_setup(args.setup),
+        grid_foreign=block["grid_foreign"])
+    v = doc["views"]
+    log.info("%s: %d frames, %d views of %dx%d (%s); %.2f s in all", args.out,
+             len(doc["frames"]), v["n"] ** 2, v["width"], v["height"], v["format"],
+             doc["seconds"])
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -31,7 +31,9 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -45,12 +47,28 @@ from plenocal.convert.patchsize import (
     focus_weights,
     to_gray,
 )
-from plenocal.convert.setup import ConverterSetup, decide_setup
+from plenocal.convert.setup import ConverterSetup, decide_setup, write_setup
 from plenocal.convert.shot import ConvertSettings, ShotConversion
 from plenocal.convert.vignetting import lens_type_profiles
 from plenocal.grid import MicrolensGrid
+from plenocal.io.files import write_image, write_json
 from plenocal.io.raytrix import RayCalib
-from plenocal.io.yuv import DEFAULT_MATRIX, DEFAULT_RANGE, MATRICES, RANGES, yuv_to_rgb
+from plenocal.io.yuv import (
+    DEFAULT_MATRIX,
+    DEFAULT_RANGE,
+    MATRICES,
+    RANGES,
+    YuvError,
+    YuvFormat,
+    frame_count,
+    mpeg_name,
+    read_frame,
+    resolve_format,
+    rgb_to_yuv,
+    write_frame,
+    yuv_to_rgb,
+)
+from plenocal.names import parse_view, view_names
 
 log = logging.getLogger("plenocal.convert")
 
@@ -206,3 +224,162 @@ class VideoConverter:
         self._previous = patch
         profile, row = lens_type_profiles(gray, self._grid) if st.devignette else (None, None)
         return ConvertAnalysis(st.mla, None, patch, profile, row)
+
+
+# ---------------------------------------------------------------------------
+# A recording: frames in, per-view videos or per-frame PNGs out
+# ---------------------------------------------------------------------------
+
+OUTPUT_FORMATS = ("png", "yuv")
+
+
+def parse_frames(text: str | None, count: int, source: str = "--frames") -> range:
+    """The frames ``text`` names among ``count``, as a Python slice of ``range(count)``:
+    ``A:B`` (A up to B, B excluded), ``A:``, ``:B``, ``A:B:S``, negative numbers from the
+    end; a single ``A`` is frame A alone. None: all."""
+    frames = range(count)
+    if text is None:
+        return frames
+    try:
+        parts = [int(p) if p.strip() else None for p in text.split(":")]
+        if len(parts) == 1:
+            k = parts[0]
+            if k is None:
+                raise ValueError
+            chosen = frames[k:k + 1] if k != -1 else frames[-1:]
+        elif len(parts) <= 3:
+            chosen = frames[slice(*parts)]
+        else:
+            raise ValueError
+    except (ValueError, TypeError):
+        raise ConvertError(f"{source} {text!r}: expected A:B (Python slice, end excluded), "
+                           "A:B:STEP or one frame number") from None
+    if len(chosen) == 0:
+        raise ConvertError(f"{source} {text!r}: no frame of the {count} in the file")
+    return chosen
+
+
+class ViewVideos:
+    """One YUV 4:2:0 file per view in ``folder`` (:func:`plenocal.io.yuv.mpeg_name`),
+    written as ``.part`` files and renamed when :meth:`close` is called after the last
+    frame (a run that fails leaves no file that looks complete)."""
+
+    def __init__(self, folder: Path, names: list[str], fmt: YuvFormat) -> None:
+        self.fmt = fmt
+        self.paths = {n: folder / mpeg_name(f"v_{n}", fmt) for n in names}
+        self._files = {n: open(p.with_name(p.name + ".part"), "wb")  # noqa: SIM115
+                       for n, p in self.paths.items()}
+
+    def write(self, name: str, planes: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+        write_frame(self._files[name], planes, self.fmt)
+
+    def close(self, complete: bool = True) -> None:
+        for n, fh in self._files.items():
+            fh.close()
+            part = self.paths[n].with_name(self.paths[n].name + ".part")
+            if complete:
+                part.replace(self.paths[n])
+            else:
+                part.unlink(missing_ok=True)
+
+
+def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_views: int,
+                      settings: ConvertSettings, video: VideoSettings | None = None,
+                      size: tuple[int, int] | None = None, bits: int | None = None,
+                      frames: str | None = None, out_format: str = "png",
+                      setup_frame: int | None = None, setup: ConverterSetup | None = None,
+                      grid_foreign: str | None = None) -> dict:
+    """Convert the frames ``frames`` (:func:`parse_frames`) of the raw YUV 4:2:0 file
+    ``path`` (format: :func:`plenocal.io.yuv.resolve_format` with ``size`` / ``bits``) into
+    ``out``: ``yuv``, one video per view of the input's bit depth
+    (``v_<r>_<c>_<W>x<H>_<b>bit_<pix_fmt>.yuv``), or ``png``, a folder ``frame_<k>`` per frame
+    (``k``: the frame's index in the file, 5 digits) with the views and ``disparity.json``.
+    The set-up (``setup``, or decided on frame ``setup_frame``, default the first converted
+    one) is written to ``out/convert_setup.json``, what was done to ``out/video.json``.
+    Progress per frame on the ``plenocal.convert`` logger. Returns the video.json record."""
+    path = Path(path)
+    out = Path(out)
+    video = video or VideoSettings()
+    if out_format not in OUTPUT_FORMATS:
+        raise ConvertError(f"output format {out_format!r}: one of {', '.join(OUTPUT_FORMATS)}")
+    try:
+        fmt = resolve_format(path, size, bits)
+    except YuvError as exc:
+        raise ConvertError(str(exc)) from None
+    count = frame_count(path, fmt)
+    chosen = parse_frames(frames, count)
+    conv = VideoConverter(calib, n_views, settings, video, setup, grid_foreign)
+    if setup is None:
+        k = chosen[0] if setup_frame is None else setup_frame
+        if not 0 <= k < count:
+            raise ConvertError(f"--setup-frame {k}: the file holds frames 0..{count - 1}")
+        t0 = time.perf_counter()
+        conv.decide(lenslet_frame(read_frame(path, fmt, k), fmt.bits, video.matrix,
+                                  video.range), f"{path.name}[{k}]")
+        log.info("%s: set-up decided on frame %d (MLA %s, tile %d px per lens pitch, D' "
+                 "%.2f px); %.2f s", path.name, k, conv.setup.mla, conv.setup.tile,
+                 conv.setup.safe_diameter_px or float("nan"), time.perf_counter() - t0)
+    assert conv.setup is not None
+    out.mkdir(parents=True, exist_ok=True)
+    write_setup(out / "convert_setup.json", conv.setup)
+    names = view_names(n_views)
+    writer: ViewVideos | None = None
+    records: list[dict] = []
+    view_fmt: YuvFormat | None = None
+    t_all = time.perf_counter()
+    try:
+        for i, k in enumerate(chosen):
+            t0 = time.perf_counter()
+            image = lenslet_frame(read_frame(path, fmt, k), fmt.bits, video.matrix, video.range)
+            shot = conv.convert(image, f"{path.name}[{k}]")
+            L = shot.layout
+            if view_fmt is None:
+                view_fmt = YuvFormat(L.width, L.height, fmt.bits)
+                if out_format == "yuv":
+                    writer = ViewVideos(out, names, view_fmt)
+            elif (L.width, L.height) != (view_fmt.width, view_fmt.height):
+                raise ConvertError(f"{path.name}[{k}]: views of {L.width}x{L.height}, the "
+                                   f"video's are {view_fmt.width}x{view_fmt.height}")
+            folder = out / f"frame_{k:05d}"
+            if out_format == "png":
+                folder.mkdir(exist_ok=True)
+            for name in names:
+                r, c = parse_view(name)
+                if writer is not None:
+                    writer.write(name, rgb_to_yuv(shot.view_float(r, c), fmt.bits,
+                                                  video.matrix, video.range))
+                else:
+                    write_image(folder / f"{name}.png", shot.view(r, c))
+            stats = shot.disparity()
+            if out_format == "png":
+                write_json(folder / "disparity.json", stats)
+            p = stats["patch_size_px"]
+            rec = {"frame": k, "patch_median_px": p["median"],
+                   "confident_share": p["confident_share"], "held_share": conv.held_share,
+                   "seconds": round(time.perf_counter() - t0, 3)}
+            records.append(rec)
+            log.info("frame %d (%d/%d): patch sizes median %.2f px, %.0f%% confident%s; "
+                     "%.2f s", k, i + 1, len(chosen), p["median"], 100 * p["confident_share"],
+                     "" if conv.held_share is None
+                     else f", {100 * conv.held_share:.0f}% held from the previous frame",
+                     rec["seconds"])
+    except BaseException:
+        if writer is not None:
+            writer.close(complete=False)
+        raise
+    if writer is not None:
+        writer.close()
+    assert view_fmt is not None
+    doc = {"format": "plenocal.video", "version": 1, "input": str(path),
+           "input_format": {"width": fmt.width, "height": fmt.height, "bits": fmt.bits,
+                            "pix_fmt": fmt.pix_fmt, "frames": count},
+           "colour": {"matrix": video.matrix, "range": video.range},
+           "temporal": {"mode": video.temporal, "hold_margin": video.hold_margin},
+           "views": {"n": n_views, "width": view_fmt.width, "height": view_fmt.height,
+                     "format": out_format,
+                     "files": ({n: writer.paths[n].name for n in names}
+                               if writer is not None else None)},
+           "set_up": {"decided_on": conv.setup.decided_on, "file": "convert_setup.json"},
+           "frames": records, "seconds": round(time.perf_counter() - t_all, 3)}
+    write_json(out / "video.json", doc)
+    return doc
