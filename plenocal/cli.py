@@ -31,7 +31,14 @@ import yaml
 from plenocal.config import stage_defaults
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.video import TEMPORAL_MODES
-from plenocal.io.yuv import DEFAULT_MATRIX, DEFAULT_RANGE, MATRICES, RANGES
+from plenocal.io.yuv import (
+    DEFAULT_MATRIX,
+    DEFAULT_RANGE,
+    MATRICES,
+    RANGES,
+    YuvError,
+    resolve_format,
+)
 
 EXIT_USAGE = 2
 
@@ -273,6 +280,10 @@ def run_convert_video(args: argparse.Namespace, settings, block: dict,
     bits = args.bit_depth if isinstance(args.bit_depth, int) else None
     if bits is not None and not 8 <= bits <= 16:
         raise ConvertError(f"--bit-depth {bits}: a YUV file holds 8..16 bits")
+    try:  # the recording's format first: the commonest mistake with raw video
+        resolve_format(args.lenslet, args.size, bits)
+    except YuvError as exc:
+        raise ConvertError(str(exc)) from None
     doc = convert_recording(
         args.lenslet, load_calib(args.calib), args.out, args.views,
         dataclasses.replace(settings, bit_depth="auto"),

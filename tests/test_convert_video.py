@@ -1,0 +1,257 @@
+"""Lenslet video (issue 35): raw YUV 4:2:0 in, per-view YUV or per-frame PNGs out.
+
+The clips are built here from crops of the real frames in shared/real/frames (frame 0 and
+frame 150 of the MPEG sequences; skipped where the folder is absent): each crop's RGB made
+into YUV 4:2:0 (:func:`plenocal.io.yuv.rgb_to_yuv`), with the crop's calibration
+(:func:`test_convert_real.crop`)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from test_convert_real import REAL, crop
+
+from plenocal.convert import ConvertSettings
+from plenocal.convert.video import VideoConverter, VideoSettings, lenslet_frame, parse_frames
+from plenocal.io.files import read_image, write_image
+from plenocal.io.raytrix import write_calib
+from plenocal.io.yuv import (
+    YuvError,
+    YuvFormat,
+    parse_name,
+    read_frame,
+    resolve_format,
+    rgb_to_yuv,
+    write_frame,
+    yuv_to_rgb,
+)
+from plenocal.names import view_names
+
+needs_real = pytest.mark.skipif(REAL is None, reason="shared/real (real lenslet frames) is "
+                                "not beside the repository")
+BOX = (300, 300, 420, 320)  # Fujita2: books and the kangaroo's edge, ~200 lenses
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "plenocal.cli", *args], capture_output=True,
+                          text=True, timeout=300)
+
+
+def _frames(box=BOX) -> tuple[np.ndarray, np.ndarray, object]:
+    a, calib = crop("Fujita2", *box)
+    x0, y0, w, h = box
+    b = cv2.imread(str(REAL / "frames" / "Fujita2_f150.png"))[y0:y0 + h, x0:x0 + w, ::-1]
+    return a, np.ascontiguousarray(b), calib
+
+
+def _clip(folder: Path, images: list[np.ndarray], bits: int, name: str | None = None) -> Path:
+    h, w = images[0].shape[:2]
+    fmt = YuvFormat(w, h, bits)
+    path = folder / (name or f"clip_{w}x{h}_{bits}bit.yuv")
+    with open(path, "wb") as fh:
+        for img in images:
+            write_frame(fh, rgb_to_yuv(img.astype(np.float32) / 255.0, bits), fmt)
+    return path
+
+
+def _rvs_read(path: Path, w: int, h: int, bits: int, frame: int) -> np.ndarray:
+    """RVS 4.0's read_color_YUV (image_loading.cpp): seek ``area x elemSize x 3 / 2 x
+    frame``, read Y (h x w), then U and V (h/2 x w/2, cv::Size / 2), native-endian samples
+    of cvdepth_from_bit_depth (8 bits: uchar, else ushort); chroma resized to full size."""
+    elem = 1 if bits <= 8 else 2
+    dt = np.uint8 if elem == 1 else np.dtype("<u2")
+    with open(path, "rb") as fh:
+        fh.seek(w * h * elem * 3 // 2 * frame)
+        y = np.frombuffer(fh.read(w * h * elem), dtype=dt).reshape(h, w)
+        u = np.frombuffer(fh.read((w // 2) * (h // 2) * elem), dtype=dt).reshape(h // 2, w // 2)
+        v = np.frombuffer(fh.read((w // 2) * (h // 2) * elem), dtype=dt).reshape(h // 2, w // 2)
+    return np.stack([y, cv2.resize(u, (w, h)), cv2.resize(v, (w, h))], axis=-1)
+
+
+# --------------------------------------------------------------------------- I/O
+
+
+def test_names_give_size_and_depth():
+    assert parse_name("Boys2_3976x2956_30fps_8bit.yuv") == ((3976, 2956), 8)
+    assert parse_name("v_2_2_1440x1064_10bit_yuv420p10le.yuv") == ((1440, 1064), 10)
+    assert parse_name("a_1920x1080_yuv420p.yuv") == ((1920, 1080), 8)
+    assert parse_name("b_1920x1080_yuv420p10le.yuv") == ((1920, 1080), 10)
+    assert parse_name("recording.yuv") == (None, None)
+    # two different sizes state neither
+    assert parse_name("c_10x20_8bit_30x40.yuv") == (None, 8)
+
+
+def test_format_errors_name_the_file_and_the_remedy(tmp_path):
+    raw = tmp_path / "recording.yuv"
+    raw.write_bytes(bytes(64 * 48 * 3 // 2 * 3))  # three 8-bit frames
+    with pytest.raises(YuvError, match=r"recording\.yuv.*size \(--size WxH\).*bit depth"):
+        resolve_format(raw)
+    assert resolve_format(raw, (64, 48), 8) == YuvFormat(64, 48, 8)
+    with pytest.raises(YuvError, match=r"recording\.yuv: 13824 bytes is not a whole number of "
+                                       r"64x48 10-bit.*--size and --bit-depth"):
+        resolve_format(raw, (64, 48), 10)
+    named = tmp_path / "x_64x48_10bit.yuv"
+    named.write_bytes(bytes(64 * 48 * 3))
+    assert resolve_format(named) == YuvFormat(64, 48, 10)
+    # the command line says it as one line with status 2
+    r = _cli("convert", str(raw), str(raw), "-o", str(tmp_path / "o"))
+    assert r.returncode == 2 and "recording.yuv" in r.stderr and "--size" in r.stderr
+
+
+def test_frames_are_python_slices():
+    assert list(parse_frames("2:5", 10)) == [2, 3, 4]
+    assert list(parse_frames(":2", 10)) == [0, 1]
+    assert list(parse_frames("-2:", 10)) == [8, 9]
+    assert list(parse_frames("0:10:4", 10)) == [0, 4, 8]
+    assert list(parse_frames("7", 10)) == [7]
+    assert list(parse_frames(None, 3)) == [0, 1, 2]
+    for bad in ("a:b", "12:20", "1:2:3:4"):
+        with pytest.raises(Exception, match="--frames"):
+            parse_frames(bad, 10)
+
+
+def test_yuv_round_trip_and_rvs_layout(tmp_path):
+    """Flat colours survive RGB -> YUV -> RGB to the 10-bit step; the bytes are where
+    RVS's reader looks for them (frame 1's planes at 1.5 x 2 x W x H bytes)."""
+    rng = np.random.default_rng(0)
+    blocks = rng.random((6, 5, 3)).astype(np.float32)
+    rgb = np.repeat(np.repeat(blocks, 8, axis=0), 8, axis=1)  # 48 x 40, flat 8x8 blocks
+    fmt = YuvFormat(40, 48, 10)
+    planes = [rgb_to_yuv(rgb, 10), rgb_to_yuv(rgb[::-1].copy(), 10)]
+    path = tmp_path / "t.yuv"
+    with open(path, "wb") as fh:
+        for p in planes:
+            write_frame(fh, p, fmt)
+    assert path.stat().st_size == 2 * 40 * 48 * 3
+    for k in range(2):
+        y, u, v = read_frame(path, fmt, k)
+        rvs = _rvs_read(path, 40, 48, 10, k)
+        assert np.array_equal(rvs[..., 0], planes[k][0]) and np.array_equal(y, planes[k][0])
+        assert np.array_equal(u, planes[k][1]) and np.array_equal(v, planes[k][2])
+    back = yuv_to_rgb(read_frame(path, fmt, 0), 10)
+    inner = (slice(None), slice(None))
+    err = np.abs(back - rgb)
+    # away from the blocks' borders (chroma is interpolated across them)
+    mask = np.zeros(rgb.shape[:2], bool)
+    mask[2:-2, 2:-2] = True
+    edge = np.zeros(rgb.shape[:2], bool)
+    edge[::8] = edge[7::8] = edge[:, ::8] = edge[:, 7::8] = True
+    edge[1::8] |= True
+    edge[6::8] |= True
+    edge[:, 1::8] |= True
+    edge[:, 6::8] |= True
+    assert err[inner][mask & ~edge].max() < 2.0 / 876
+    assert planes[0][0].dtype == np.uint16 and planes[0][0].max() <= 940  # limited range
+
+
+# --------------------------------------------------------------------------- conversion
+
+
+@needs_real
+def test_10bit_clip_to_10bit_view_videos_matching_the_frames_pngs(tmp_path):
+    """A 10-bit clip (frames 0, 150, 0 of a Fujita2 crop) converts to one 10-bit YUV 4:2:0
+    video per view, readable as RVS reads it, one view size for all frames; each frame's
+    views match, to the rounding of the outputs, those converted from the frame's PNG (the
+    same YUV frame as a 16-bit RGB PNG) with the video's set-up."""
+    a, b, calib = _frames()
+    clip = _clip(tmp_path, [a, b, a], 10)
+    xml = tmp_path / "calib.xml"
+    write_calib(calib, xml)
+    out = tmp_path / "video"
+    r = _cli("convert", str(clip), str(xml), "-o", str(out), "--format", "yuv",
+             "--temporal", "off")
+    assert r.returncode == 0, r.stderr
+    for k in range(3):
+        assert f"frame {k} ({k + 1}/3)" in r.stderr  # progress per frame
+    doc = json.loads((out / "video.json").read_text())
+    W, H = doc["views"]["width"], doc["views"]["height"]
+    assert W % 2 == 0 and H % 2 == 0
+    files = doc["views"]["files"]
+    assert files["2_2"] == f"v_2_2_{W}x{H}_10bit_yuv420p10le.yuv"
+    vfmt = YuvFormat(W, H, 10)
+    fmt = resolve_format(clip)
+    for k in range(3):
+        png = tmp_path / f"f{k}.png"
+        write_image(png, lenslet_frame(read_frame(clip, fmt, k), 10))
+        ref = tmp_path / f"png{k}"
+        r = _cli("convert", str(png), str(xml), "-o", str(ref), "--bit-depth", "16",
+                 "--setup", str(out / "convert_setup.json"))
+        assert r.returncode == 0, r.stderr
+        worst = 0
+        for name in ("2_2", "0_0", "4_4", "1_3"):
+            path = out / files[name]
+            assert path.stat().st_size == 3 * vfmt.frame_bytes
+            got = read_frame(path, vfmt, k)
+            assert np.array_equal(_rvs_read(path, W, H, 10, k)[..., 0], got[0])
+            view = read_image(ref / f"{name}.png")
+            assert view.shape == (H, W, 3)
+            want = rgb_to_yuv(view.astype(np.float32) / 255.0, 10)
+            for g, w in zip(got, want, strict=True):
+                worst = max(worst, int(np.abs(g.astype(int) - w.astype(int)).max()))
+        # the PNG views are 8-bit RGB: half an 8-bit step is 1.7 10-bit luma levels
+        assert worst <= 3, (k, worst)
+
+
+@needs_real
+def test_identical_frames_give_identical_views(tmp_path):
+    """Frames A A B B: frame 1 equals frame 0 and frame 3 frame 2 byte for byte, with the
+    temporal hold (the default) and per-frame PNG output; every run the same bytes."""
+    a, b, calib = _frames()
+    clip = _clip(tmp_path, [a, a, b, b], 8)
+    xml = tmp_path / "calib.xml"
+    write_calib(calib, xml)
+    runs = []
+    for k in range(2):
+        out = tmp_path / f"o{k}"
+        r = _cli("convert", str(clip), str(xml), "-o", str(out), "--format", "yuv")
+        assert r.returncode == 0, r.stderr
+        runs.append(out)
+    doc = json.loads((runs[0] / "video.json").read_text())
+    vfmt = YuvFormat(doc["views"]["width"], doc["views"]["height"], 8)
+    assert [f["held_share"] for f in doc["frames"]][1] == 1.0
+    for name in view_names(5):
+        path = runs[0] / doc["views"]["files"][name]
+        data = path.read_bytes()
+        assert data == (runs[1] / path.name).read_bytes()
+        frames = [data[k * vfmt.frame_bytes:(k + 1) * vfmt.frame_bytes] for k in range(4)]
+        assert frames[0] == frames[1] and frames[2] == frames[3] and frames[0] != frames[2]
+    r = _cli("convert", str(clip), str(xml), "-o", str(tmp_path / "png"), "--frames", "2:4")
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in (tmp_path / "png").glob("frame_*")) == ["frame_00002",
+                                                                       "frame_00003"]
+    for name in ("2_2", "0_4"):
+        assert ((tmp_path / "png/frame_00002" / f"{name}.png").read_bytes()
+                == (tmp_path / "png/frame_00003" / f"{name}.png").read_bytes())
+
+
+@needs_real
+def test_hold_steadies_patch_sizes_on_static_content():
+    """Frames 0 and 150 of Fujita2's top left (books, shelf: static but for coding noise;
+    bench/bench_video_flicker.py measures the same on larger crops): with the hold, fewer
+    static lenses change their patch size between the frames, and the set-up (so the view
+    size) is the same for both frames."""
+    box = (0, 0, 700, 560)
+    a, b, calib = _frames(box)
+    frames = [lenslet_frame(rgb_to_yuv(x.astype(np.float32) / 255.0, 10), 10) for x in (a, b)]
+    g = [cv2.cvtColor(f, cv2.COLOR_RGB2GRAY).astype(np.float32) / 257.0 for f in frames]
+    changed = {}
+    for mode in ("off", "hold"):
+        conv = VideoConverter(calib, 5, ConvertSettings(), VideoSettings(temporal=mode))
+        s0, s1 = (conv.convert(f, str(k)) for k, f in enumerate(frames))
+        assert (s0.layout.width, s0.layout.height) == (s1.layout.width, s1.layout.height)
+        D = int(round(s0.grid.diameter))
+        box_diff = cv2.blur(np.abs(g[0] - g[1]), (D, D))
+        c = np.clip(np.rint(s0.grid.centres).astype(int), 0, [box_diff.shape[1] - 1,
+                                                              box_diff.shape[0] - 1])
+        static = (box_diff[c[:, 1], c[:, 0]] < 4.0)[s0.layout.lens_index]
+        assert static.sum() > 200
+        dP = np.abs(s1.used_patch - s0.used_patch)[static]
+        changed[mode] = float((dP > 0.25).mean())
+    assert changed["off"] > 0.1
+    assert changed["hold"] < 0.75 * changed["off"], changed
