@@ -626,13 +626,17 @@ def stage_rules(stage):
 
 
 def stage_outputs(wildcards, stage):
-    """Every output of the stage's jobs in the default run; the stage's rules added to
-    those that --forcerun named (Snakemake's DAG is being built when this runs, as in
-    common.smk's default_run_gaps)."""
+    """The input of a stage's own rule (rules/stages.smk), evaluated while Snakemake's DAG
+    is built (as default_run_gaps is). Named in --until: every output of the stage's jobs
+    in the default run, so that the run stops after them. Named in --forcerun: the stage's
+    rules are added to those forced, and nothing is asked for (the stage's jobs run where
+    the run's targets need them: the default target needs them all)."""
     dag = workflow.dag
     rules = stage_rules(stage)
     if any(rl.name == stage for rl in dag.forcerules):
         dag.forcerules.update(rules)
+    if stage not in dag.untilrules:
+        return []
     only = {rl.name for rl in rules}
     return [path for path, _ in default_run_outputs(stage_targets(), only=only)]
 
