@@ -32,6 +32,8 @@ include: "rules/refine.smk"
 include: "rules/reprojection.smk"
 include: "rules/synthesis.smk"
 include: "rules/report.smk"
+# last: stage names for --until / --forcerun, read from the rules above
+include: "rules/stages.smk"
 
 
 rule all:

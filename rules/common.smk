@@ -206,13 +206,15 @@ def sfm_params(*sections):
 TARGETS = []
 
 
+def stage_targets():
+    """Each stage's final outputs (TARGETS) for every dataset."""
+    return [path for d in DATASETS for fn in TARGETS for path in fn(d)]
+
+
 def final_targets():
     """The default target's inputs: each stage's final outputs (TARGETS), and, found when
     the DAG is built, every output of the run that is missing (default_run_gaps)."""
-    out = []
-    for d in DATASETS:
-        for fn in TARGETS:
-            out.extend(fn(d))
+    out = stage_targets()
     return out + [lambda wildcards: default_run_gaps(out)]
 
 
@@ -254,10 +256,11 @@ def _fixed_outputs():
     return fixed, patterned
 
 
-def default_run_outputs(targets):
+def default_run_outputs(targets, only=None):
     """[(path, is_directory)] of every output (logs and benchmarks aside) of the jobs that
     ``targets`` need, found as Snakemake's DAG finds them: from each file to the rule that
-    makes it, and from that rule's inputs on."""
+    makes it, and from that rule's inputs on. ``only``: the outputs of the jobs of these
+    rules alone (names; rules/stages.smk), the walk the same."""
     from snakemake.io import apply_wildcards
 
     fixed, patterned = _fixed_outputs()
@@ -286,7 +289,8 @@ def default_run_outputs(targets):
         if key in jobs:
             continue
         jobs.add(key)
-        out.extend((apply_wildcards(o, wc), o.is_directory) for o in rl.output)
+        if only is None or rl.name in only:
+            out.extend((apply_wildcards(o, wc), o.is_directory) for o in rl.output)
         todo.extend(str(f) for f in rl.expand_input(wc)[0])
     return out
 
@@ -595,6 +599,46 @@ def mpeg_views_targets(dataset):
     if not all(workflow.is_rule(r) for r in ("depth_view", convert)):
         return []
     return [res(dataset, "calibration", "mpeg", f) for f in ("depth", "texture", "rvs")]
+
+
+# --- helpers of rules/stages.smk ------------------------------------------------------
+
+
+#: stage -> the names of its rules (full match; <i>, the dataset's index, and <k>, the
+#: job's, as common.smk's chunk_rule and depth.smk name them)
+STAGE_RULES = {
+    "convert": r"convert_setup|convert(_views)?(_\d+){1,2}",
+    "reg_a": r"features_a|match_a|map_a",
+    "reg_b": r"rig_b",
+    "depth": r"depth_a(_other)?(_\d+)?|depth_b(_other)?(_\d+){1,2}",
+    "verify": (
+        r"view_features(_\d+){1,2}|view_matches|reprojection(_calib)?"
+        r"|baseline_(sfm|scratch)|depth_view|synthesis_exp\d+(_part)?|mpeg_views"
+        r"|gt_errors|convert_quality"
+    ),
+}
+
+
+def stage_rules(stage):
+    """The rules of ``stage`` that this workflow defines, in definition order."""
+    pattern = re.compile(STAGE_RULES[stage])
+    return [rl for rl in workflow.rules if pattern.fullmatch(rl.name)]
+
+
+def stage_outputs(wildcards, stage):
+    """The input of a stage's own rule (rules/stages.smk), evaluated while Snakemake's DAG
+    is built (as default_run_gaps is). Named in --until: every output of the stage's jobs
+    in the default run, so that the run stops after them. Named in --forcerun: the stage's
+    rules are added to those forced, and nothing is asked for (the stage's jobs run where
+    the run's targets need them: the default target needs them all)."""
+    dag = workflow.dag
+    rules = stage_rules(stage)
+    if any(rl.name == stage for rl in dag.forcerules):
+        dag.forcerules.update(rules)
+    if stage not in dag.untilrules:
+        return []
+    only = {rl.name for rl in rules}
+    return [path for path, _ in default_run_outputs(stage_targets(), only=only)]
 
 
 # --- helpers of rules/report.smk ------------------------------------------------------
