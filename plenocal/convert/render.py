@@ -75,7 +75,7 @@ class RenderSettings:
         wide = self.wide()
         return replace(self, slots=max(wide.slots, self.wider_slots),
                        fade_radius=max(wide.fade_radius, self.wider_fade_radius),
-                       centre_power=max(wide.centre_power, self.wider_centre_power))
+                       centre_power=self.wider_centre_power)
 
     def for_reach(self, reach: int) -> RenderSettings:
         """The blend of a view of :func:`rim_reach` ``reach``."""
