@@ -172,8 +172,10 @@ def test_tspc_corner_views_need_the_refined_grid():
                        for r, c in corners]
         assert blend_disagreement(shot.plan, shot._source, 2, 2) < 0.25, mode
     # 0.3 with the 1.5-2 tile fades of the wide blends; 0.34 with the one-tile fade that
-    # has no seams at the tiles' borders (issue 33)
-    assert max(found["refine"]) < 0.36, found
+    # has no seams at the tiles' borders; 0.37 with the corner views' 7-lens 1.6-tile
+    # blend, which lowers their lattice trace (Boys2 4_4 7.3 -> 5.8 dB) but blends more
+    # lenses that disagree (issue 33)
+    assert max(found["refine"]) < 0.40, found
     assert max(found["file"]) > 1.5 * max(found["refine"]), found  # the drift's lattice
 
 
