@@ -347,24 +347,17 @@ class SynthesisResult:
         """(complete, ground truth, mean dB lost to calibration, views compared) for every
         table of the complete calibration whose twin with the ground-truth cameras (same
         renderer, depth and run) shares targets with it."""
-        truth = {(t.renderer, t.depth, t.run): t for t in self.tables
-                 if t.cameras == "ground_truth"}
-        out = []
-        for t in self.tables:
-            g = truth.get((t.renderer, t.depth, t.run))
-            if t.cameras != "complete" or g is None:
-                continue
-            common = sorted(set(t.psnr_db) & set(g.psnr_db))
-            if common:
-                out.append((t, g, float(np.mean([g.psnr_db[k] - t.psnr_db[k]
-                                                 for k in common])), len(common)))
-        return out
+        return self._lost("psnr_db")
 
     def surface_db_lost(self) -> list[tuple[PsnrTable, PsnrTable, float, int]]:
         """As :meth:`db_lost`, over the targets' surface pixels (``surface_psnr_db``):
         the dB lost to calibration without the renderer's per-pixel choices at occlusion
         edges (:mod:`plenocal.verify.surface`); tables without surface figures are left
         out."""
+        return self._lost("surface_psnr_db")
+
+    def _lost(self, field: str) -> list[tuple[PsnrTable, PsnrTable, float, int]]:
+        """:meth:`db_lost` over the per-target PSNRs in the tables' attribute ``field``."""
         truth = {(t.renderer, t.depth, t.run): t for t in self.tables
                  if t.cameras == "ground_truth"}
         out = []
@@ -372,10 +365,11 @@ class SynthesisResult:
             g = truth.get((t.renderer, t.depth, t.run))
             if t.cameras != "complete" or g is None:
                 continue
-            common = sorted(set(t.surface_psnr_db) & set(g.surface_psnr_db))
+            ours, true = getattr(t, field), getattr(g, field)
+            common = sorted(set(ours) & set(true))
             if common:
-                out.append((t, g, float(np.mean([g.surface_psnr_db[k] - t.surface_psnr_db[k]
-                                                 for k in common])), len(common)))
+                out.append((t, g, float(np.mean([true[k] - ours[k] for k in common])),
+                            len(common)))
         return out
 
     def to_dict(self) -> dict:
