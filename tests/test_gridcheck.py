@@ -317,3 +317,29 @@ def test_foreign_grid_stops_convert_setup():
     assert foreign_grid_error(exact, "calib.xml", "x", "error") is None
     with pytest.raises(ConvertError, match="grid_foreign"):
         foreign_grid_error(check, "calib.xml", "x", "ignore")
+
+
+def _at_offset(a: np.ndarray, offset_bytes: int) -> np.ndarray:
+    """A copy of ``a`` whose data starts ``offset_bytes`` past a 64-byte boundary."""
+    raw = np.empty(a.nbytes + 128, np.uint8)
+    start = (-raw.ctypes.data) % 64 + offset_bytes
+    out = raw[start:start + a.nbytes].view(a.dtype).reshape(a.shape)
+    out[...] = a
+    return out
+
+
+def test_magnitude_is_the_same_at_every_alignment():
+    """cv2.magnitude rounds differently with its output's alignment (5 different results
+    for these arrays over 16 offsets): the grid check's gradient then gave a grid 2e-9 px
+    apart, and other views, one run in two on Boys2 (plenocal.convert.exact)."""
+    from plenocal.convert.exact import magnitude
+
+    rng = np.random.default_rng(3)
+    x, y = (rng.normal(size=(37, 211)).astype(np.float32) * 40 for _ in range(2))
+    ref = magnitude(x, y)
+    assert ref.dtype == np.float32
+    assert np.allclose(ref, np.hypot(x, y), rtol=1e-6)
+    for off in range(0, 64, 4):
+        out = _at_offset(np.zeros_like(x), off)
+        got = magnitude(_at_offset(x, (off * 3) % 64), _at_offset(y, off), out=out)
+        assert got is out and np.array_equal(got, ref)

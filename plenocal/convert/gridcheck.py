@@ -88,6 +88,7 @@ from dataclasses import asdict, dataclass, field, replace
 import cv2
 import numpy as np
 
+from plenocal.convert.exact import magnitude
 from plenocal.grid import MicrolensGrid
 from plenocal.io.raytrix import RayCalib
 
@@ -294,8 +295,8 @@ def _measure(image: np.ndarray, origin: np.ndarray, A: np.ndarray, centres: np.n
     if FEATURE in ("intensity", "both"):
         features.append(g)
     if FEATURE in ("gradient", "both"):
-        features.append(cv2.magnitude(cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3),
-                                      cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)))
+        features.append(magnitude(cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3),
+                                  cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)))
     z = sum(_coefficients(f, ks, o_s, Ds, box, pts) for f in features)
     phi = np.angle(z)
     closure = _wrap(phi.sum(axis=1))
