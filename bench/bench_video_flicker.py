@@ -103,7 +103,7 @@ def measure(seq: str, margin: float) -> dict:
         out[mode] = {
             "patch_view_diff": float(np.abs(v1 - vs).mean(axis=2)[mask].mean()),
             "changed_confident": float(((dP > CHANGE_PX) & conf0 & conf1).mean()),
-            "blend_disagreement": float(blend_disagreement(s1.plan_for(2, 2), s1._source, 2,
+            "blend_disagreement": float(blend_disagreement(s1.plan_for(2, 2), s1.source_float, 2,
                                                            2)),
             "static_lenses": int(static.sum()), "lenses": int(len(used)),
             "changed_share": float((dP > CHANGE_PX).mean()),

@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import logging
+import os
 import sys
 import time
 from pathlib import Path
@@ -184,8 +185,29 @@ def build_parser() -> argparse.ArgumentParser:
                    help="hold (default): a lens keeps the previous frame's patch size where "
                         "it still matches nearly as well (no flicker on static scenes); "
                         "off: every frame converted alone, as its PNG")
+    c.add_argument("--threads", type=_threads, default=None, metavar="N",
+                   help="threads that render and write the views (the same bytes with any "
+                        "number). Default: the cores this process may use")
     c.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     return ap
+
+
+def _threads(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"--threads: a whole number >= 1, not {text!r}")
+    return n
+
+
+def default_threads() -> int:
+    """The cores this process may use (its CPU affinity, e.g. a cluster job's share)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -232,7 +254,7 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     import cv2  # noqa: F401, PLC0415  (cv2 before anything that may import pycolmap)
 
     from plenocal.convert import ConvertSettings, convert_files  # noqa: PLC0415
-    from plenocal.io.files import write_image, write_json, write_npy  # noqa: PLC0415
+    from plenocal.io.files import write_image, write_images, write_json, write_npy  # noqa: PLC0415
 
     t0 = time.perf_counter()
     if args.views < 1:
@@ -262,9 +284,13 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     write_npy(out / "patch_size.npy", shot.used_patch)
     write_image(out / "patch_size.png", shot.patch_picture())
     n = args.views * args.views
-    for k, (name, img) in enumerate(shot.views(), start=1):
-        write_image(out / f"{name}.png", img)
-        log.info("view %s (%d/%d) written", name, k, n)
+    threads = args.threads or default_threads()
+    t1, done = time.perf_counter(), 0
+    for views in shot.view_groups(threads=threads):
+        write_images(((out / f"{name}.png", img) for name, img in views.items()), threads)
+        done += len(views)
+        log.info("%d/%d views of %dx%d rendered and written on %d thread(s); %.2f s", done,
+                 n, stats["width"], stats["height"], threads, time.perf_counter() - t1)
     write_json(out / "disparity.json", stats)
     log.info("%s: %d views, disparity.json, patch_size.npy/.png; %.2f s in all", out, n,
              time.perf_counter() - t0)
@@ -291,7 +317,7 @@ def run_convert_video(args: argparse.Namespace, settings, block: dict,
         size=args.size, bits=bits, frames=args.frames, out_format=args.out_format,
         setup_frame=args.setup_frame,
         setup=None if args.setup is None else read_setup(args.setup),
-        grid_foreign=block["grid_foreign"])
+        grid_foreign=block["grid_foreign"], threads=args.threads or default_threads())
     v = doc["views"]
     log.info("%s: %d frames, %d views of %dx%d (%s); %.2f s in all", args.out,
              len(doc["frames"]), v["n"] ** 2, v["width"], v["height"], v["format"],

@@ -154,13 +154,19 @@ _STEPS = np.array([(0, 0), (1, 0), (0, 1), (-1, 1), (-1, 0), (0, -1), (1, -1),
 _MARGIN = 5  # empty lattice cells around the used lenses in the lookup table
 
 
-def _lattice_lookup(layout: ViewLayout, k: int
+def _rows(layout: ViewLayout, rows: slice, dtype) -> np.ndarray:
+    """The output rows ``rows`` (a slice of ``range(layout.height)``) as a column."""
+    return np.arange(layout.height, dtype=dtype)[rows][:, None]
+
+
+def _lattice_lookup(layout: ViewLayout, k: int, rows: slice = slice(None)
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The lens table of the tile lattice, flattened with a margin of empty cells (-1),
-    each output pixel's cell (its nearest lattice point; (H, W) int32 into the flat
-    table, kept ``_MARGIN - 3`` cells inside it) and the flat offsets of the first ``k``
-    lattice steps: the candidate lens of step n at pixel u is ``table[cell[u] + off[n]]``."""
-    ys = np.arange(layout.height, dtype=np.float64)[:, None]
+    each output pixel's cell (its nearest lattice point; (h, W) int32 into the flat
+    table for the output ``rows``, kept ``_MARGIN - 3`` cells inside it) and the flat
+    offsets of the first ``k`` lattice steps: the candidate lens of step n at pixel u is
+    ``table[cell[u] + off[n]]``."""
+    ys = _rows(layout, rows, np.float64)
     xs = np.arange(layout.width, dtype=np.float64)[None, :]
     c0 = layout.tile_centres
     ref = c0[0]
@@ -181,11 +187,12 @@ def _lattice_lookup(layout: ViewLayout, k: int
     return table.ravel(), cell, (steps[:, 0] * shape[1] + steps[:, 1]).astype(np.int32)
 
 
-def _tile_dist2(layout: ViewLayout, li: np.ndarray) -> np.ndarray:
-    """Squared distance (tile units, float32) from each output pixel to the tile centre
-    of lens ``li`` (H, W); inf where ``li`` is -1."""
+def _tile_dist2(layout: ViewLayout, li: np.ndarray, rows: slice = slice(None)
+                ) -> np.ndarray:
+    """Squared distance (tile units, float32) from each output pixel of ``rows`` to the
+    tile centre of lens ``li`` (h, W); inf where ``li`` is -1."""
     f = np.float32
-    ys = np.arange(layout.height, dtype=f)[:, None]
+    ys = _rows(layout, rows, f)
     xs = np.arange(layout.width, dtype=f)[None, :]
     cx = np.append(layout.tile_centres[:, 0], np.nan).astype(f)  # index -1: no lens
     cy = np.append(layout.tile_centres[:, 1], np.nan).astype(f)
@@ -199,14 +206,14 @@ def _tile_dist2(layout: ViewLayout, li: np.ndarray) -> np.ndarray:
     return dx
 
 
-def _candidates(layout: ViewLayout, k: int):
-    """Yield, for the first ``k`` lattice steps around each output pixel's nearest tile
-    centre, (lens index (H, W) int32, -1 where none; squared distance to its tile
-    centre in tile units (H, W) float32, inf where none)."""
-    table, cell, off = _lattice_lookup(layout, k)
+def _candidates(layout: ViewLayout, k: int, rows: slice = slice(None)):
+    """Yield, for the first ``k`` lattice steps around each output pixel's (of ``rows``)
+    nearest tile centre, (lens index (h, W) int32, -1 where none; squared distance to its
+    tile centre in tile units (h, W) float32, inf where none)."""
+    table, cell, off = _lattice_lookup(layout, k, rows)
     for o in off:
         li = table.take(cell + o)
-        yield li, _tile_dist2(layout, li)
+        yield li, _tile_dist2(layout, li, rows)
 
 
 def nearest_lenses(layout: ViewLayout, k: int = 7) -> tuple[np.ndarray, np.ndarray]:
@@ -225,11 +232,12 @@ _KEY_SCALE = float(1 << 22)  # squared tile distances quantised to 2^-22 for the
 _KEY_MAX = (1 << 27) - 1  # keys above: d2 >= 32 tiles^2 or no lens
 
 
-def nearest_slots(layout: ViewLayout, keep: int = 3, k: int = 7
+def nearest_slots(layout: ViewLayout, keep: int = 3, k: int = 7, rows: slice = slice(None)
                   ) -> tuple[np.ndarray, np.ndarray]:
     """The ``keep`` nearest of :func:`nearest_lenses`'s ``k`` candidates, nearest first,
-    slot-major: (lens index (keep, H, W) int32, -1 where none; squared distance in tile
-    units (keep, H, W) float32, inf where none). Ties (to 2^-22 tile^2) keep the
+    slot-major, for the output ``rows`` (all by default; a band gives the same numbers as
+    those rows of the whole): (lens index (keep, h, W) int32, -1 where none; squared
+    distance in tile units (keep, h, W) float32, inf where none). Ties (to 2^-22 tile^2) keep the
     candidate order. A sorting network on int32 keys ``quantised d2 << 3 | candidate``
     (one pass, 5 min/max per candidate) instead of sorting (H, W, k) arrays."""
     if k > 8:
@@ -237,7 +245,7 @@ def nearest_slots(layout: ViewLayout, keep: int = 3, k: int = 7
     keep = min(keep, k)
     big = np.int32((_KEY_MAX << 3) | 7)
     slots = None
-    for n, (_, d2) in enumerate(_candidates(layout, k)):
+    for n, (_, d2) in enumerate(_candidates(layout, k, rows)):
         key = np.minimum(d2 * _KEY_SCALE, _KEY_MAX).astype(np.int32)
         key <<= 3
         key |= np.int32(n)
@@ -248,7 +256,7 @@ def nearest_slots(layout: ViewLayout, keep: int = 3, k: int = 7
         for s in range(keep):  # insert x: slots stay sorted
             lo_, hi_ = np.minimum(slots[s], x), np.maximum(slots[s], x)
             slots[s], x = lo_, hi_
-    table, cell, off = _lattice_lookup(layout, k)
+    table, cell, off = _lattice_lookup(layout, k, rows)
     off = np.append(off, 0).astype(np.int32)  # entry 7 (empty slot): any cell, set to -1
     idx = np.empty((keep,) + cell.shape, np.int32)
     dist2 = np.empty(idx.shape, np.float32)
@@ -256,5 +264,5 @@ def nearest_slots(layout: ViewLayout, keep: int = 3, k: int = 7
         li = table.take(cell + off.take(slots[s] & 7))
         li[(slots[s] >> 3) >= _KEY_MAX] = -1
         idx[s] = li
-        dist2[s] = _tile_dist2(layout, li)
+        dist2[s] = _tile_dist2(layout, li, rows)
     return idx, dist2

@@ -10,13 +10,13 @@ import cv2
 from plenocal.convert import ConvertSettings, convert_files
 from plenocal.convert.analysis import read_analysis
 from plenocal.convert.viewset import view_set_path, write_view_set
-from plenocal.io.files import write_image
-from plenocal.names import parse_view
+from plenocal.io.files import write_images
 from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]
 log = rule_logger(snakemake, "convert_views")
-cv2.setNumThreads(max(1, int(snakemake.threads)))
+threads = max(1, int(snakemake.threads))
+cv2.setNumThreads(threads)
 
 params = snakemake.params
 settings = ConvertSettings.from_config(params.convert)
@@ -30,8 +30,8 @@ for k, (cam, lenslet, analysis) in enumerate(zip(params.cams, inp.lenslet, inp.a
     out_dir = Path(analysis).parent
     # the views not on disk are declared outputs, the others are overwritten (atomically):
     # the consumers read them through views.json (rules/common.smk missing_views)
-    for name in params.names:
-        write_image(out_dir / f"{name}.png", shot.view(*parse_view(name)))
+    for views in shot.view_groups(params.names, threads=threads):
+        write_images(((out_dir / f"{name}.png", img) for name, img in views.items()), threads)
     # the shot's views as one unit, central view included: what the rules that read
     # whole shots take as their input (plenocal.convert.viewset)
     if str(view_set_path(out_dir)) not in outputs:

@@ -24,6 +24,7 @@ from plenocal.convert.shot import mla_contradiction
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import write_image
 from plenocal.io.raytrix import LensType, RayCalib, read_calib, write_calib
+from plenocal.names import view_names
 from plenocal.optics import PlenopticOptics
 
 FIXTURES = sorted(Path("/work/shared/fixtures/raytrix-calib").glob("*.xml"))
@@ -346,6 +347,60 @@ def test_conversion_is_deterministic():
     b = ShotConversion(img, calib, 3)
     assert np.array_equal(a.used_patch, b.used_patch)
     assert np.array_equal(a.view(0, 2), b.view(0, 2))
+
+
+def test_views_are_the_same_by_band_thread_and_group(monkeypatch):
+    """Issue 35: the views are rendered band by band for all views at once
+    (ShotConversion.render_views), on threads, in groups under a memory budget; a band's
+    plan holds the same numbers as those rows of the whole view's, and every way of
+    rendering gives the same bytes (single views included)."""
+
+    calib = calib_for_optics(small_optics(480, 300))
+    grid = MicrolensGrid(calib, 480, 300)
+    img = lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 5))
+    shot = ShotConversion(img, calib, 5, FIXED_TILE)
+    whole = shot.plans_for_rows()
+    band = shot.plans_for_rows(slice(17, 45))
+    for w, b in zip(whole, band, strict=True):
+        for name in ("map_x", "map_y", "off_x", "off_y", "tile_weight"):
+            assert np.array_equal(getattr(w, name)[:, 17:45], getattr(b, name)), name
+    monkeypatch.setattr("plenocal.convert.shot.PLAN_ROWS", 16)  # 4 bands here
+    assert shot.layout.height > 3 * 16
+    names = view_names(5)
+    one = shot.render_views(names, threads=1)
+    two = shot.render_views(names, threads=2)
+    grouped = {k: v for g in shot.view_groups(threads=2, budget_bytes=1) for k, v in g.items()}
+    assert list(grouped) == list(names)
+    for name in names:
+        assert one[name].dtype == np.uint8 and one[name].shape == (
+            shot.layout.height, shot.layout.width, 3)
+        assert np.array_equal(one[name], two[name]), name
+        assert np.array_equal(one[name], grouped[name]), name
+    assert np.array_equal(shot.view(0, 4), one["0_4"])
+    # 16-bit views: the same picture to 1/255 (rounded once to 16 bits, not to 8)
+    deep = shot.render_views(["0_0"], dtype=np.uint16)["0_0"]
+    assert deep.dtype == np.uint16
+    assert np.abs(deep / 65535.0 * 255.0 - one["0_0"]).max() <= 1.0
+
+
+def test_remap_takes_maps_of_any_number_of_rows():
+    """cv2.remap refuses maps of 2^15 - 1 rows or more (the per-lens maps of a 40-MP
+    Raytrix R42 frame: about 39,000 lenses); plenocal.convert.exact.remap slices them."""
+    import cv2
+
+    from plenocal.convert.exact import remap
+
+    rng = np.random.default_rng(0)
+    src = rng.random((60, 80)).astype(np.float32)
+    mx = (rng.random((40000, 3)) * 79).astype(np.float32)
+    my = (rng.random((40000, 3)) * 59).astype(np.float32)
+    with pytest.raises(cv2.error):
+        cv2.remap(src, mx, my, cv2.INTER_LINEAR)
+    got = remap(src, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    assert got.shape == (40000, 3)
+    part = cv2.remap(src, mx[32766:32800], my[32766:32800], cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REPLICATE)
+    assert np.array_equal(got[32766:32800], part)
 
 
 def test_views_from_the_stored_analysis_are_the_same(tmp_path):

@@ -127,8 +127,8 @@ def test_mosaic_measure_fails_the_wrong_kind_and_passes_the_right_one(fujita):
     shot, img, calib = fujita
     wrong = ShotConversion(img, calib, 5, ConvertSettings(tile_size=8, mla="keplerian"))
     for r, c in ((2, 2), (0, 0)):
-        assert blend_disagreement(wrong.plan_for(r, c), wrong._source, r, c) > 0.6
-        assert blend_disagreement(shot.plan_for(r, c), shot._source, r, c) < 0.4
+        assert blend_disagreement(wrong.plan_for(r, c), wrong.source_float, r, c) > 0.6
+        assert blend_disagreement(shot.plan_for(r, c), shot.source_float, r, c) < 0.4
     # and the conversion says so: the kind was set by hand, the image reads the other way
     assert any("convert.mla = keplerian, but the image matches as galilean" in w
                for w in wrong.warnings)
@@ -143,7 +143,7 @@ def test_tspc_crop_converts_clean_and_upright():
     assert shot.mla == "keplerian"
     assert shot.layout.tile >= 20
     assert shot.disparity()["patch_size_px"]["confident_share"] > 0.3
-    assert blend_disagreement(shot.plan, shot._source, 2, 2) < 0.4
+    assert blend_disagreement(shot.plan, shot.source_float, 2, 2) < 0.4
 
 
 def test_tspc_corner_views_need_the_refined_grid():
@@ -168,9 +168,9 @@ def test_tspc_corner_views_need_the_refined_grid():
         # samples nearer the centre, where a drifted centre matters less (issue 33: file
         # grid 0.12-0.18, refined 0.13-0.16)
         shot = ShotConversion(img, calib, 5, ConvertSettings(safe_diameter="file"), grid=grid)
-        found[mode] = [blend_disagreement(shot.plan_for(r, c), shot._source, r, c)
+        found[mode] = [blend_disagreement(shot.plan_for(r, c), shot.source_float, r, c)
                        for r, c in corners]
-        assert blend_disagreement(shot.plan, shot._source, 2, 2) < 0.25, mode
+        assert blend_disagreement(shot.plan, shot.source_float, 2, 2) < 0.25, mode
     # 0.3 with the 1.5-2 tile fades of the wide blends; 0.34 with the one-tile fade that
     # has no seams at the tiles' borders; 0.37 with the corner views' 7-lens 1.6-tile
     # blend, which lowers their lattice trace (Boys2 4_4 7.3 -> 5.8 dB) but blends more

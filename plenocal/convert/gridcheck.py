@@ -88,7 +88,7 @@ from dataclasses import asdict, dataclass, field, replace
 import cv2
 import numpy as np
 
-from plenocal.convert.exact import magnitude
+from plenocal.convert.exact import magnitude, remap
 from plenocal.grid import MicrolensGrid
 from plenocal.io.raytrix import RayCalib
 
@@ -337,11 +337,11 @@ def _coefficients(f: np.ndarray, ks: np.ndarray, o_s: np.ndarray, Ds: float, box
         parts = []
         for comp in (re, -im):
             sm = cv2.blur(cv2.blur(comp, (box, box)), (box, box))
-            parts.append(cv2.remap(sm, mx, my, cv2.INTER_LINEAR,
+            parts.append(remap(sm, mx, my, cv2.INTER_LINEAR,
                                    borderMode=cv2.BORDER_REPLICATE)[:, 0])
         z[:, j] = parts[0] + 1j * parts[1]
     amp_ref = cv2.blur(cv2.blur(np.abs(n), (box, box)), (box, box))
-    ref = cv2.remap(amp_ref, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[:, 0]
+    ref = remap(amp_ref, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[:, 0]
     z /= np.maximum(ref, 1e-6)[:, None]
     triple = z[:, 0] * z[:, 1] * z[:, 2]
     return z if float(np.sum(triple).real) >= 0 else -z

@@ -65,6 +65,7 @@ from scipy.spatial import cKDTree
 
 from plenocal.config import stage_defaults
 from plenocal.convert.errors import ConvertError
+from plenocal.convert.exact import remap
 from plenocal.grid import MicrolensGrid
 from plenocal.viewgeom import mla_sign
 
@@ -324,7 +325,7 @@ def match_scores(gray: np.ndarray, grid: MicrolensGrid, candidates: np.ndarray,
                                   .reshape(n, -1))
         my = np.ascontiguousarray(np.broadcast_to(base_y + sign * shift * dy, (n, k, b))
                                   .reshape(n, -1))
-        s = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+        s = remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                       borderValue=0.0)
         return s.reshape(n, k, b)
 
@@ -369,7 +370,7 @@ def detect_mla(gray: np.ndarray, grid: MicrolensGrid, radius: float, samples: in
 
     def sample(pts: np.ndarray) -> np.ndarray:
         m = pts.reshape(pts.shape[0], -1, 2).astype(np.float32)
-        v = cv2.remap(gray, np.ascontiguousarray(m[..., 0]), np.ascontiguousarray(m[..., 1]),
+        v = remap(gray, np.ascontiguousarray(m[..., 0]), np.ascontiguousarray(m[..., 1]),
                       cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
         return v.reshape(pts.shape[:-1])
 

@@ -30,12 +30,13 @@ positions of the central view; view (r, c) only adds the constant ``R q_rc``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
 
 from plenocal.config import stage_defaults
+from plenocal.convert.exact import magnitude
 from plenocal.convert.vignetting import BIN_PX
 from plenocal.viewgeom import ViewLayout, nearest_lenses, nearest_slots
 
@@ -109,15 +110,19 @@ def reaches_rim(offset_px: float, patch_px: float, safe_diameter: float) -> bool
 
 @dataclass
 class RenderPlan:
+    """The per-shot geometry of output rows ``rows`` (every view's; all rows, or a band of
+    them: :meth:`plenocal.convert.shot.ShotConversion.render_views` plans band by band
+    so that the arrays stay small; h below is the band's height)."""
     layout: ViewLayout
-    map_x: np.ndarray  # (K, H, W) float32 sensor x sampled for the central view
+    map_x: np.ndarray  # (K, h, W) float32 sensor x sampled for the central view
     map_y: np.ndarray
-    off_x: np.ndarray  # (K, H, W) offset from the micro-image centre, central view
+    off_x: np.ndarray  # (K, h, W) offset from the micro-image centre, central view
     off_y: np.ndarray
-    tile_weight: np.ndarray  # (K, H, W) float32
+    tile_weight: np.ndarray  # (K, h, W) float32
     weight_table: np.ndarray  # radial weight (rim x centre + floor), every LUT_STEP px
     gain_table: np.ndarray  # (T, n) 1 / vignetting profile per lens type, same radii
-    gain_row: np.ndarray | None = None  # (K, H, W) float32 gain_table row of each slot's lens
+    gain_row: np.ndarray | None = None  # (K, h, W) float32 gain_table row of each slot's lens
+    rows: slice = field(default_factory=lambda: slice(None))  # the output rows covered
 
 
 def make_plan(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
@@ -137,22 +142,24 @@ def make_plan(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
 def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
                blends: list[RenderSettings], focus: np.ndarray | None = None,
                profile: np.ndarray | None = None,
-               profile_row: np.ndarray | None = None) -> list[RenderPlan]:
+               profile_row: np.ndarray | None = None,
+               rows: slice = slice(None)) -> list[RenderPlan]:
     """One :class:`RenderPlan` per blend in ``blends``, sharing the geometry: the nearest
     tiles and their sampling positions are computed once for the most slots, and a
     blend of fewer slots takes the first (nearest) of them (views of the arrays, no
-    copy). See :func:`make_plan` for the arguments."""
+    copy). ``rows``: the output rows to plan (a slice with step 1; all by default); a
+    band's plan holds the same numbers as those rows of the whole view's. See
+    :func:`make_plan` for the other arguments."""
     patch = np.asarray(patch, dtype=np.float64)
     if patch.shape != (len(layout.lens_index),):
         raise ValueError(f"need one patch size per used lens ({len(layout.lens_index)}), "
                          f"got {patch.shape}")
-    idx, dist2 = nearest_slots(layout, keep=max(b.slots for b in blends))
-    K = idx.shape[0]
+    idx, dist2 = nearest_slots(layout, keep=max(b.slots for b in blends), rows=rows)
+    K, H, W = idx.shape
     have = idx >= 0
     lens = np.where(have, idx, 0)
-    H, W = layout.height, layout.width
     f = np.float32  # remap reads positions to 1/32 px: float32 is ample
-    ys = np.arange(H, dtype=f)[:, None]
+    ys = np.arange(layout.height, dtype=f)[rows][:, None]
     xs = np.arange(W, dtype=f)[None, :]
     # the central view (q_rc = 0) samples m_i + s (u - o_i) P_i / T (ViewLayout.sensor_points)
     scale = (layout.sign * patch / layout.tile).astype(f)
@@ -191,7 +198,7 @@ def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
         plans.append(RenderPlan(
             layout=layout, map_x=map_x[:k], map_y=map_y[:k], off_x=off_x[:k],
             off_y=off_y[:k], tile_weight=wt, weight_table=weight_table, gain_table=gain_tab,
-            gain_row=None if gain_row is None else gain_row[:k]))
+            gain_row=None if gain_row is None else gain_row[:k], rows=rows))
     return plans
 
 
@@ -228,10 +235,10 @@ BAND_ROWS = 32  # rows rendered at a time: every per-pixel array of a band stays
 
 
 def view_weights(plan: RenderPlan, r: int, c: int, with_gain: bool = False,
-                 rows: slice = slice(None)) -> np.ndarray:
-    """(K, h, W) normalised blend weights of view (r, c) over output ``rows`` (all by
-    default); with ``with_gain`` each multiplied by its sample's vignetting gain
-    (1 / micro-image profile)."""
+                 rows: slice = slice(None), scale: float = 1.0) -> np.ndarray:
+    """(K, h, W) normalised blend weights of view (r, c) over ``rows`` of the plan's
+    arrays (all by default), times ``scale``; with ``with_gain`` each multiplied by its
+    sample's vignetting gain (1 / micro-image profile)."""
     o = plan.layout.offset_image(r, c)
     off_x, off_y, tile_weight = plan.off_x[:, rows], plan.off_y[:, rows], plan.tile_weight[:, rows]
     K, H, W = off_x.shape
@@ -240,7 +247,7 @@ def view_weights(plan: RenderPlan, r: int, c: int, with_gain: bool = False,
     gain = np.empty((K, H, W), np.float32) if with_gain else None
     total = np.zeros((H, W), np.float32)
     for k in range(K):
-        rad = cv2.magnitude(off_x[k] + np.float32(o[0]), off_y[k] + np.float32(o[1]))
+        rad = magnitude(off_x[k] + np.float32(o[0]), off_y[k] + np.float32(o[1]))
         rad *= np.float32(1.0 / LUT_STEP)  # fractional table entry
         np.multiply(_lookup(plan.weight_table, rad, zeros), tile_weight[k], out=w[k])
         total += w[k]
@@ -248,31 +255,38 @@ def view_weights(plan: RenderPlan, r: int, c: int, with_gain: bool = False,
             gain[k] = _lookup(plan.gain_table, rad,
                               zeros if plan.gain_row is None else plan.gain_row[k, rows])
     np.maximum(total, np.float32(1e-12), out=total)
-    np.divide(np.float32(1.0), total, out=total)
+    np.divide(np.float32(scale), total, out=total)
     w *= total
     if gain is not None:
         w *= gain
     return w
 
 
-def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int) -> np.ndarray:
-    """View (r, c) as float32 (H, W, C) in the units of ``source`` (float32 image),
-    corrected for the micro images' vignetting where the plan has a profile. Rendered in
-    bands of :data:`BAND_ROWS` rows (the same numbers as whole; 1.3-1.5x faster). A
-    four-channel source is no faster than three here: the samples' reads from the frame,
-    not the interpolation, bound the remap (measured on Boxer: 3.09 against 3.10 s)."""
+def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int,
+                scale: float = 1.0) -> np.ndarray:
+    """View (r, c) over the plan's rows as float32 (h, W, C): ``scale`` times the units of
+    ``source`` (a float32, or an 8- or 16-bit image: OpenCV interpolates integers 1.3-1.6x
+    faster, reading a quarter or half the bytes, to 1/32 px as floats; ``scale`` brings
+    them to [0, 1]), corrected for the micro images' vignetting where the plan has a
+    profile. Rendered in bands of :data:`BAND_ROWS` rows (the same numbers as whole;
+    1.3-1.5x faster). A four-channel source is no faster than three here: the samples'
+    reads from the frame, not the interpolation, bound the remap (measured on Boxer:
+    3.09 against 3.10 s)."""
     o = plan.layout.offset_image(r, c)
     ch = 1 if source.ndim == 2 else source.shape[2]
-    H, W = plan.layout.height, plan.layout.width
+    H, W = plan.map_x.shape[1:]
     out = np.zeros((H, W) + ((ch,) if ch > 1 else ()), dtype=np.float32)
     ox, oy = np.float32(o[0]), np.float32(o[1])
+    convert = source.dtype != np.float32
     for y0 in range(0, H, BAND_ROWS):
         rows = slice(y0, min(y0 + BAND_ROWS, H))
-        w = view_weights(plan, r, c, with_gain=True, rows=rows)
+        w = view_weights(plan, r, c, with_gain=True, rows=rows, scale=scale)
         band = out[rows]
         for k in range(w.shape[0]):
             s = cv2.remap(source, plan.map_x[k, rows] + ox, plan.map_y[k, rows] + oy,
                           cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            if convert:
+                s = s.astype(np.float32)
             # band += s * w_k in one pass (numpy's broadcast over channels takes 3x as long)
             cv2.accumulateProduct(s.reshape(band.shape),
                                   w[k] if ch == 1 else cv2.merge([w[k]] * ch), band)
@@ -291,8 +305,10 @@ def reliability_map(layout: ViewLayout, guessed: np.ndarray) -> np.ndarray:
 
 
 def soften_unreliable(view: np.ndarray, rmap: np.ndarray, sigma_px: float) -> np.ndarray:
-    """``view`` (H, W, C) float32 blended with its Gaussian blur (``sigma_px``) where
-    ``rmap`` (:func:`reliability_map`) is below 1: ``r view + (1 - r) blur``."""
+    """``view`` (H, W, C; uint8, uint16 or float32) blended with its Gaussian blur
+    (``sigma_px``) where ``rmap`` (:func:`reliability_map`) is below 1:
+    ``r view + (1 - r) blur``, rounded for integers; in place (rows where ``rmap`` is 1 are
+    not touched), and returned."""
     if sigma_px <= 0 or float(rmap.min()) >= 1.0 - 1e-6:
         return view
     # blurred at a quarter of sigma's scale and brought back (a 13 px Gaussian over a
@@ -302,8 +318,19 @@ def soften_unreliable(view: np.ndarray, rmap: np.ndarray, sigma_px: float) -> np
     small = cv2.resize(view, (max(1, w // f), max(1, h // f)), interpolation=cv2.INTER_AREA)
     small = cv2.GaussianBlur(small, (0, 0), sigma_px / f)
     blurred = cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR).reshape(view.shape)
-    r = rmap[..., None]
-    return (view * r + blurred * (1.0 - r)).astype(np.float32)
+    soft = np.flatnonzero((rmap < 1.0 - 1e-6).any(axis=1))
+    rows = slice(int(soft[0]), int(soft[-1]) + 1)  # the rows with something to soften
+    r = np.ascontiguousarray(rmap[rows], dtype=np.float32)
+    if view.dtype == np.uint16:  # cv2.blendLinear takes 8-bit and float images only
+        v = view[rows].astype(np.float32)
+        mixed = v * r[..., None] + blurred[rows].astype(np.float32) * (1.0 - r[..., None])
+        np.rint(mixed, out=mixed)
+        view[rows] = mixed.astype(np.uint16)
+        return view
+    mixed = cv2.blendLinear(np.ascontiguousarray(view[rows]),
+                            np.ascontiguousarray(blurred[rows]), r, 1.0 - r)
+    view[rows] = mixed.reshape(view[rows].shape)
+    return view
 
 
 def blend_disagreement(plan: RenderPlan, source: np.ndarray, r: int, c: int) -> float:

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from plenocal.convert.exact import remap
 from plenocal.grid import MicrolensGrid
 
 WEBER = 0.02  # six-fold variation (of the centre brightness) that ends the safe disc
@@ -86,7 +87,7 @@ def polar_samples(gray: np.ndarray, grid: MicrolensGrid, radii: np.ndarray,
     c = grid.centres[pick].astype(np.float32)
     mx = np.ascontiguousarray(c[:, :1] + dx[None, :])
     my = np.ascontiguousarray(c[:, 1:] + dy[None, :])
-    s = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    s = remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     return s.reshape(len(pick), len(radii), len(angles))
 
 

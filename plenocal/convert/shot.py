@@ -28,6 +28,8 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -39,7 +41,7 @@ from plenocal.artifacts.disparity import disparity_record
 from plenocal.config import settings_from, stage_defaults, with_defaults
 from plenocal.convert.analysis import ConvertAnalysis
 from plenocal.convert.errors import ConvertError
-from plenocal.convert.levels import significant_bits, to_unit_float
+from plenocal.convert.levels import render_source, significant_bits, to_unit_float
 from plenocal.convert.patchsize import (
     PatchSizeResult,
     PatchSizeSettings,
@@ -280,7 +282,10 @@ class ShotConversion:
         if image.dtype == np.uint16:
             log.info("%s: 16-bit image with %d significant bits (max %d)", source, self.bits,
                      int(image.max()))
-        self._source = to_unit_float(image, self.bits)
+        self._image = image
+        # what the views sample: the image's own integers (no float copy of the frame)
+        self._render_source, self._render_scale = render_source(image, self.bits)
+        self._source_float: np.ndarray | None = None
         self._gray: np.ndarray | None = None
         self.safe: SafeDiameter = self._safe_diameter(safe_diameter, source)
         d_safe = self.safe.diameter_px
@@ -330,21 +335,53 @@ class ShotConversion:
         # (a filled size weighs a tenth of a measured one)
         trust = reliability(self.patch.raw, self.patch.patch, self.patch.confident,
                             st.patch.step_px)
-        weight = (self.patch.focus * trust)[self.layout.lens_index]
-        plans = make_plans(self.layout, self.used_patch, d_safe,
-                           [st.render.for_reach(k) for k in reaches], weight, self.profile,
-                           None if profile_row is None
-                           else profile_row[self.layout.lens_index])
-        self.plan: RenderPlan = plans[0]
-        self._plans: list[RenderPlan] = plans
+        self._blends = [st.render.for_reach(k) for k in reaches]
+        self._lens_weight = (self.patch.focus * trust)[self.layout.lens_index]
+        self._profile_row = (None if profile_row is None
+                             else profile_row[self.layout.lens_index])
+        self._plans: list[RenderPlan] | None = None  # the whole view's, made on first use
         self._reliable = reliability_map(self.layout,
                                          out_of_range(self.patch)[self.layout.lens_index])
+        self._gray = None  # the analysis's; made again if asked for (125 MB at 31 MP)
+
+    def plans_for_rows(self, rows: slice = slice(None)) -> list[RenderPlan]:
+        """The render plans (one per blend, :func:`plenocal.convert.render.make_plans`)
+        of output ``rows``."""
+        return make_plans(self.layout, self.used_patch, self.safe.diameter_px, self._blends,
+                          self._lens_weight, self.profile, self._profile_row, rows=rows)
+
+    @property
+    def plan(self) -> RenderPlan:
+        """The whole view's plan of the tight blend (made once, on first use)."""
+        return self._whole_plans()[0]
+
+    def _whole_plans(self) -> list[RenderPlan]:
+        if self._plans is None:
+            self._plans = self.plans_for_rows()
+        return self._plans
+
+    @property
+    def source_float(self) -> np.ndarray:
+        """The image as float32 0..1 (made once, on first use: for the measures that take
+        a float frame; the views sample the image's integers)."""
+        if self._source_float is None:
+            self._source_float = to_unit_float(self._image, self.bits)
+        return self._source_float
 
     @property
     def gray(self) -> np.ndarray:
-        """The image in grey, float32 0..1 (made once)."""
+        """The image in grey, float32 0..1 (made once, in bands of rows: the same numbers
+        as from the whole float frame, without a float copy of a colour frame)."""
         if self._gray is None:
-            self._gray = to_gray(self._source)
+            img = self._image
+            if img.ndim == 2:
+                self._gray = to_gray(to_unit_float(img, self.bits))
+            else:
+                gray = np.empty(img.shape[:2], np.float32)
+                for y in range(0, img.shape[0], GRAY_ROWS):
+                    band = slice(y, y + GRAY_ROWS)
+                    gray[band] = to_gray(to_unit_float(img[band], self.bits))
+                self._gray = gray
         return self._gray
 
     def _safe_diameter(self, decided: float | None, source: str) -> SafeDiameter:
@@ -394,33 +431,77 @@ class ShotConversion:
     def _rim_reach(self, offset: float) -> int:
         return rim_reach(offset, self._median_patch, self.safe.diameter_px)
 
-    def plan_for(self, r: int, c: int) -> RenderPlan:
-        """The render plan of view (r, c): the tight blend, or a wider one where the view's
+    def _blend_of(self, r: int, c: int) -> int:
+        """Which blend view (r, c) takes: the tight one, or a wider one where the view's
         patches reach past the micro image (:func:`rim_reach`, median patch)."""
         reach = self._rim_reach(float(np.hypot(*self.layout.offset_image(r, c))))
-        return self._plans[min(reach, len(self._plans) - 1)]
+        return min(reach, len(self._blends) - 1)
 
-    def view_float(self, r: int, c: int) -> np.ndarray:
-        """View (r, c) as float32 (H, W, C), softened where the patch sizes were filled
-        (:func:`plenocal.convert.render.soften_unreliable`)."""
-        v = render_view(self.plan_for(r, c), self._source, r, c)
-        sigma = self.settings.render.unreliable_blur * self.layout.tile
-        return soften_unreliable(v, self._reliable, sigma)
+    def plan_for(self, r: int, c: int) -> RenderPlan:
+        """The whole view's render plan of view (r, c) (:meth:`_blend_of`)."""
+        return self._whole_plans()[self._blend_of(r, c)]
+
+    def render_views(self, names: Sequence[str], dtype: type = np.uint8, threads: int = 1
+                     ) -> dict[str, np.ndarray]:
+        """The views ``names`` (``"r_c"``) as RGB (layout.height x layout.width x 3) of
+        ``dtype``: uint8 (0-255) or uint16 (0-65535, for the video formats above 8 bits),
+        each softened where the patch sizes were filled
+        (:func:`plenocal.convert.render.soften_unreliable`).
+
+        Rendered band by band (:data:`PLAN_ROWS` output rows): each band's geometry is
+        planned once for every view (so that the plans stay a few MB on any sensor) and
+        its views rendered while their part of the frame is in the cache. ``threads``
+        bands at a time (OpenCV and numpy let go of the GIL): every band is computed
+        alone, so the views are the same bytes with any number of threads."""
+        if dtype not in (np.uint8, np.uint16):
+            raise ValueError(f"views are uint8 or uint16, not {dtype}")
+        H, W = self.layout.height, self.layout.width
+        ch = 1 if self._render_source.ndim == 2 else self._render_source.shape[2]
+        top = float(np.iinfo(dtype).max)
+        todo = [(name, *parse_view(name)) for name in names]
+        out = {name: np.empty((H, W, ch), dtype) for name, _, _ in todo}
+
+        def band(rows: slice) -> None:
+            plans = self.plans_for_rows(rows)
+            for name, r, c in todo:
+                v = render_view(plans[self._blend_of(r, c)], self._render_source, r, c,
+                                self._render_scale)
+                out[name][rows] = _round_to(v, top, dtype)
+
+        def finish(name: str) -> None:
+            sigma = self.settings.render.unreliable_blur * self.layout.tile
+            v = soften_unreliable(out[name], self._reliable, sigma)
+            out[name] = np.repeat(v, 3, axis=2) if v.shape[2] == 1 else v
+
+        bands = [slice(y, min(y + PLAN_ROWS, H)) for y in range(0, H, PLAN_ROWS)]
+        _run(band, bands, threads)
+        _run(finish, list(out), threads)
+        return out
 
     def view(self, r: int, c: int) -> np.ndarray:
         """View (r, c) as uint8 RGB (layout.height x layout.width x 3)."""
-        v = self.view_float(r, c)
-        # round(255 v), saturated, in one pass (v >= 0: samples and weights are)
-        out = cv2.convertScaleAbs(v, alpha=255.0).reshape(v.shape)
-        if out.shape[2] == 1:
-            out = np.repeat(out, 3, axis=2)
-        return out
+        name = f"{r}_{c}"
+        return self.render_views([name])[name]
 
-    def views(self):
-        """Yield (name, uint8 RGB) for every view, row-major."""
-        for name in view_names(self.n_views):
-            r, c = parse_view(name)
-            yield name, self.view(r, c)
+    def view_groups(self, names: Sequence[str] | None = None, threads: int = 1,
+                    budget_bytes: int | None = None):
+        """Yield the views ``names`` (default: all, row-major) as dicts name -> uint8 RGB,
+        rendered together (:meth:`render_views`) in as few groups as keep each group's
+        views within ``budget_bytes`` (default :data:`VIEW_BUDGET_BYTES`): one group on
+        12-MP frames; on a 31-MP frame with large patches, 25 views take 615 MB."""
+        names = list(view_names(self.n_views) if names is None else names)
+        budget = VIEW_BUDGET_BYTES if budget_bytes is None else budget_bytes
+        per_view = self.layout.height * self.layout.width * 3
+        size = max(1, min(len(names), budget // max(per_view, 1)))
+        groups = -(-len(names) // size)
+        size = -(-len(names) // groups)  # even groups
+        for a in range(0, len(names), size):
+            yield self.render_views(names[a:a + size], threads=threads)
+
+    def views(self, threads: int = 1):
+        """Yield (name, uint8 RGB) for every view, row-major (:meth:`view_groups`)."""
+        for group in self.view_groups(threads=threads):
+            yield from group.items()
 
     def disparity(self) -> dict:
         out = disparity_record(self.layout, self.calib, self.used_patch,
@@ -440,6 +521,44 @@ class ShotConversion:
     def patch_picture(self) -> np.ndarray:
         return patch_size_picture(self.layout, self.used_patch,
                                   self.patch.confident[self.layout.lens_index])
+
+
+#: output rows planned and rendered at a time by :meth:`ShotConversion.render_views`
+PLAN_ROWS = 64
+#: the most bytes of views :meth:`ShotConversion.view_groups` renders at once (each group
+#: plans the views' geometry again: 0.3 s on Boys2, one group there)
+VIEW_BUDGET_BYTES = 256 << 20
+#: rows of a colour frame turned grey at a time
+GRAY_ROWS = 256
+
+
+def _round_to(v: np.ndarray, top: float, dtype: type) -> np.ndarray:
+    """round(top x v) saturated to ``dtype`` (v >= 0: samples and weights are)."""
+    if dtype == np.uint8:  # one pass
+        return cv2.convertScaleAbs(v, alpha=top).reshape(v.shape)
+    v = np.multiply(v, np.float32(top))
+    np.rint(v, out=v)
+    np.clip(v, 0.0, top, out=v)
+    return v.astype(dtype)
+
+
+def _run(work, items: list, threads: int) -> None:
+    """``work(item)`` for every item, on ``threads`` threads (in order on one).
+
+    The first item runs alone: OpenCV fills its interpolation tables on first use without
+    a lock, and two threads filling them at once left some entries off by one for the
+    rest of the process (views that differed by 1-2 levels at scattered pixels from run to
+    run on Boys2 with two threads; the same bytes once the first item ran alone)."""
+    if not items:
+        return
+    work(items[0])
+    if threads <= 1 or len(items) <= 2:
+        for item in items[1:]:
+            work(item)
+        return
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        for _ in pool.map(work, items[1:]):  # re-raises a worker's error
+            pass
 
 
 def _label(img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.4) -> None:

@@ -68,7 +68,7 @@ from plenocal.io.yuv import (
     write_frame,
     yuv_to_rgb,
 )
-from plenocal.names import parse_view, view_names
+from plenocal.names import view_names
 
 log = logging.getLogger("plenocal.convert")
 
@@ -288,7 +288,7 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
                       size: tuple[int, int] | None = None, bits: int | None = None,
                       frames: str | None = None, out_format: str = "png",
                       setup_frame: int | None = None, setup: ConverterSetup | None = None,
-                      grid_foreign: str | None = None) -> dict:
+                      grid_foreign: str | None = None, threads: int = 1) -> dict:
     """Convert the frames ``frames`` (:func:`parse_frames`) of the raw YUV 4:2:0 file
     ``path`` (format: :func:`plenocal.io.yuv.resolve_format` with ``size`` / ``bits``) into
     ``out``: ``yuv``, one video per view of the input's bit depth
@@ -296,7 +296,9 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
     (``k``: the frame's index in the file, 5 digits) with the views and ``disparity.json``.
     The set-up (``setup``, or decided on frame ``setup_frame``, default the first converted
     one) is written to ``out/convert_setup.json``, what was done to ``out/video.json``.
-    Progress per frame on the ``plenocal.convert`` logger. Returns the video.json record."""
+    Progress per frame on the ``plenocal.convert`` logger; ``threads``: the views of a frame
+    are rendered on that many threads (the same bytes with any number). Returns the
+    video.json record."""
     path = Path(path)
     out = Path(out)
     video = video or VideoSettings()
@@ -343,13 +345,16 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
             folder = out / f"frame_{k:05d}"
             if out_format == "png":
                 folder.mkdir(exist_ok=True)
+            # 16-bit views for the YUV videos (rounded again to the input's depth there)
+            views = shot.render_views(names, np.uint16 if writer is not None else np.uint8,
+                                      threads=threads)
             for name in names:
-                r, c = parse_view(name)
+                view = views.pop(name)
                 if writer is not None:
-                    writer.write(name, rgb_to_yuv(shot.view_float(r, c), fmt.bits,
-                                                  video.matrix, video.range))
+                    rgb = np.multiply(view, np.float32(1.0 / 65535.0), dtype=np.float32)
+                    writer.write(name, rgb_to_yuv(rgb, fmt.bits, video.matrix, video.range))
                 else:
-                    write_image(folder / f"{name}.png", shot.view(r, c))
+                    write_image(folder / f"{name}.png", view)
             stats = shot.disparity()
             if out_format == "png":
                 write_json(folder / "disparity.json", stats)

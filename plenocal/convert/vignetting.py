@@ -33,6 +33,7 @@ import math
 import cv2
 import numpy as np
 
+from plenocal.convert.exact import remap
 from plenocal.grid import MicrolensGrid
 
 BIN_PX = 0.5
@@ -111,7 +112,7 @@ def _lens_bins(gray: np.ndarray, grid: MicrolensGrid, lenses: np.ndarray, r_max:
     c = grid.centres[lenses].astype(np.float32)
     mx = np.ascontiguousarray(c[:, :1] + dx[None, :])
     my = np.ascontiguousarray(c[:, 1:] + dy[None, :])
-    samples = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    samples = remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     filled, starts, counts = np.unique(idx, return_index=True, return_counts=True)
     sums = np.add.reduceat(samples.astype(np.float64), starts, axis=1)
     out = np.zeros((len(lenses), nbins))
@@ -136,7 +137,7 @@ def radial_profile(gray: np.ndarray, grid: MicrolensGrid) -> np.ndarray:
     c = grid.centres[lenses].astype(np.float32)
     mx = np.ascontiguousarray(c[:, :1] + dx[None, :])
     my = np.ascontiguousarray(c[:, 1:] + dy[None, :])
-    samples = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    samples = remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     mean = samples.mean(axis=0)
     rho = np.hypot(dx, dy)
     nbins = int(math.ceil(r_max / BIN_PX)) + 1

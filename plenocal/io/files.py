@@ -13,7 +13,7 @@ import io
 import json
 import os
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -201,6 +201,22 @@ def write_image(path: str | Path, image: np.ndarray, level: int = PNG_LEVEL) -> 
     atomic_write_bytes(path, enc.tobytes())
 
 
+def write_images(items: Iterable[tuple[str | Path, np.ndarray]], threads: int = 1,
+                 level: int = PNG_LEVEL) -> None:
+    """:func:`write_image` for every (path, image), on ``threads`` threads (zlib and the
+    file writes let go of the GIL; each file is written atomically on its own)."""
+    items = list(items)
+    if threads <= 1 or len(items) <= 1:
+        for path, image in items:
+            write_image(path, image, level)
+        return
+    from concurrent.futures import ThreadPoolExecutor  # noqa: PLC0415
+
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        for _ in pool.map(lambda item: write_image(item[0], item[1], level), items):
+            pass  # re-raises a worker's error
+
+
 def read_image(path: str | Path) -> np.ndarray:
     """Read a PNG as stored (uint8 or uint16; RGB order for colour)."""
     import cv2  # noqa: PLC0415
@@ -212,9 +228,9 @@ def read_image(path: str | Path) -> np.ndarray:
     if img is None:
         raise OSError(f"{path}: not a readable image")
     if img.ndim == 3 and img.shape[2] == 4:
-        img = img[:, :, :3]
-    if img.ndim == 3:
-        img = img[:, :, ::-1]
+        return np.ascontiguousarray(img[:, :, 2::-1])
+    if img.ndim == 3:  # BGR -> RGB in place: no second copy of a 40-MP frame
+        return cv2.cvtColor(img, cv2.COLOR_BGR2RGB, dst=img)
     return np.ascontiguousarray(img)
 
 
