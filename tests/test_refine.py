@@ -149,3 +149,30 @@ def test_a_refinement_that_moves_a_shot_far_is_rejected(capture):
                                W, H) for k, c in eq6.items()}
     ok = rf.shot_shifts(eq6, turned, list(SHOTS), "1_1", 2.0)
     assert not ok["rejected"] and ok["max_shift_mm"] < 1e-6 and ok["warnings"] == []
+
+
+def test_shots_whose_matches_split_into_groups_keep_eq6s_placement_of_the_groups(
+        capture, tmp_path):
+    """Two groups of shots that share no match (view_matches' pairs can leave the shot
+    graph split: each shot matched with its 2 nearest only) each have a rigid motion no
+    point fixes, besides the held shot's. With the rig's baselines 5 % off Eq. 6's spread,
+    the adjustment rescales each group about a point of its own and the free group slides
+    along its axis; its placement must stay Eq. 6's, the adjustment refining within it."""
+    views, rig, db = capture
+    group = {"x00_y00": 0, "x00_y01": 0, "hand00": 0, "x01_y00": 1, "x01_y01": 1, "hand01": 1}
+    split = tmp_path / "split.db"
+    viewdb.subset_database(db, split, sorted(views),
+                           keep_pair=lambda a, b: group[a.split("/")[0]]
+                           == group[b.split("/")[0]])
+    wrong = rig_of(views, "x00_y00", baseline_scale=1.05)
+    eq6 = eq6_of(views, wrong)
+    out = rf.refine_calibration(eq6, wrong, split, settings(rig="scale"),
+                                hold_shot="x00_y00")
+    rep = out.report
+    assert sorted(map(sorted, rep["shot_groups"])) == [
+        ["hand00", "x00_y00", "x00_y01"], ["hand01", "x01_y00", "x01_y01"]]
+    assert rep["warnings"] and "share no" in rep["warnings"][-1]
+    assert not rep["rejected"], rep["warnings"]
+    assert rep["max_shift_mm"] < rep["limit_mm"]
+    before = complete_errors(eq6, views)["centre_rmse_mm"]
+    assert complete_errors(out.cameras, views)["centre_rmse_mm"] < before

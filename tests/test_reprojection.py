@@ -271,3 +271,25 @@ def test_table_i_rows_by_hand():
     assert doc["complete"] == evals["complete"] and "num_registered" not in evals[
         "baseline_sfm"]  # the inputs are left as they were
     assert "sfm_scratch" not in table_i(evals, {"a_sfm_registered": 9})
+
+
+def test_nearest_shots_join_the_groups_that_nearest_neighbours_leave_apart():
+    # a 4 x 2 grid, step 1, the gap between columns 1 and 2 a hair wider: each shot's two
+    # nearest pair the columns 0-1 and 2-3 among themselves, as registration A's slightly
+    # uneven centres split wide-s3's 5 x 2 array in two
+    c = {f"x{x:02d}_y{y:02d}": np.array([x + 0.001 * (x >= 2), float(y), 0.0])
+         for x in range(4) for y in range(2)}
+    pairs = viewdb.nearest_shots(c, 2)
+    group = {s: s for s in c}
+
+    def root(s):
+        while group[s] != s:
+            s = group[s]
+        return s
+
+    for a, b in pairs:
+        group[root(a)] = root(b)
+    assert len({root(s) for s in c}) == 1
+    # one link joins the two halves: the shortest, ties by name
+    assert ("x01_y00", "x02_y00") in pairs
+    assert not {("x01_y01", "x02_y01")} & pairs

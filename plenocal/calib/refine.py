@@ -17,7 +17,12 @@ This step adjusts them together, as COLMAP 4 models a camera rig
   matches Table I triangulates) triangulated with the Eq. 6 cameras held fixed
   (:func:`plenocal.verify.reprojection.triangulate`), at most ``max_points`` of them.
 
-COLMAP's bundle adjustment then moves the frames and the points. What it may change of
+COLMAP's bundle adjustment then moves the frames and the points, one frame held (the
+gauge). Where the matches leave the shots in groups that share no point (rule view_matches
+matches each shot with its nearest shots only, which split two captures of ten in two), one
+held frame fixes its own group only: each other group is put back where Eq. 6 places it
+relative to the held one (:func:`shot_groups`, :func:`place_groups`; refine.json's
+``shot_groups`` and a warning say so). What it may change of
 registration B's rig is ``refine.rig`` (:data:`RIG_MODES`):
 
 ``hold``
@@ -70,7 +75,7 @@ import numpy as np
 from plenocal.artifacts.rig import RigB
 from plenocal.calib.reg_a import colmap as cm
 from plenocal.calib.reg_a import viewdb
-from plenocal.camera import PinholeCamera, invert_pose, k_to_colmap, rotation_angle_deg
+from plenocal.camera import PinholeCamera, invert_pose, k_to_colmap, pose, rotation_angle_deg
 from plenocal.config import stage_defaults
 from plenocal.names import split_key
 
@@ -328,6 +333,87 @@ def spread(centres: Mapping[str, np.ndarray]) -> float:
     return float(np.sqrt(((P - P.mean(axis=0)) ** 2).sum(axis=1).mean()))
 
 
+def frame_poses(rec, model: RigModel) -> dict[str, np.ndarray]:
+    """Each shot's rig (central view) cam_to_world, world coordinates."""
+    out = {}
+    for shot, fid in model.frame_of_shot.items():
+        M = np.eye(4)
+        M[:3, :] = np.asarray(rec.frame(fid).rig_from_world.matrix(), dtype=float)
+        out[shot] = invert_pose(M)
+    return out
+
+
+def shot_groups(rec, model: RigModel) -> list[list[str]]:
+    """The shots as the points tie them: two shots are in one group where a chain of
+    points links them. Several groups where the matches leave them apart (rule
+    view_matches pairs each shot with its nearest shots only, which can split the array
+    in two): then no point fixes where one group lies relative to another. Each group
+    sorted, the groups by their first shot."""
+    shot_of_frame = {fid: shot for shot, fid in model.frame_of_shot.items()}
+    parent = {s: s for s in model.frame_of_shot}
+
+    def root(s: str) -> str:
+        while parent[s] != s:
+            parent[s] = parent[parent[s]]
+            s = parent[s]
+        return s
+
+    for pid in rec.point3D_ids():
+        frames = {rec.image(el.image_id).frame_id for el in rec.point3D(pid).track.elements}
+        first, *rest = sorted(root(shot_of_frame[f]) for f in frames)
+        for r in rest:
+            parent[root(r)] = root(first)
+    groups: dict[str, list[str]] = {}
+    for s in sorted(parent):
+        groups.setdefault(root(s), []).append(s)
+    return sorted(groups.values())
+
+
+def place_groups(rec, model: RigModel, eq6_poses: Mapping[str, np.ndarray],
+                 groups: list[list[str]], hold_shot: str) -> dict[str, float]:
+    """Put every group of shots (:func:`shot_groups`) that the held shot's does not hold
+    where Eq. 6 puts it relative to that group: the gauge of the adjustment is one rigid
+    motion per group (the rig, shared by all, fixes one scale for all), and the held frame
+    fixes only its own group's; the others drift along theirs as the solver's steps take
+    them (on a capture of the wide geometry, 6.7 mm along the views' axes while the rig's
+    baselines rescaled the array by 1.7 %). The similarity that best maps the held group's
+    Eq. 6 poses onto its adjusted ones (:func:`plenocal.verify.gt_errors.pose_similarity`)
+    carries Eq. 6's other poses into the adjustment's frame; each other group, frames and
+    points, is moved by the rigid motion that best fits it onto them (which leaves every
+    reprojection as it is). Returns each moved group's correction (mm, largest centre
+    move) by its first shot."""
+    from plenocal.verify.gt_errors import pose_similarity  # noqa: PLC0415
+
+    ref = next(g for g in groups if hold_shot in g)
+    now = frame_poses(rec, model)
+
+    def fit(shots, src, dst, with_scale):
+        return pose_similarity(np.array([src[k][:3, 3] for k in shots]),
+                               np.array([dst[k][:3, 3] for k in shots]),
+                               [src[k][:3, :3] for k in shots],
+                               [dst[k][:3, :3] for k in shots], with_scale=with_scale)
+
+    s, R, t = fit(ref, eq6_poses, now, len(ref) > 1)
+    target = {k: pose(R @ M[:3, :3], s * R @ M[:3, 3] + t) for k, M in eq6_poses.items()}
+    moved = {}
+    for group in groups:
+        if group is ref:
+            continue
+        _, Rg, tg = fit(group, now, target, False)
+        G = pose(Rg, tg)
+        for shot in group:
+            rec.frame(model.frame_of_shot[shot]).rig_from_world = rigid3d(
+                invert_pose(G @ now[shot]))
+        frames = {model.frame_of_shot[k] for k in group}
+        for pid in rec.point3D_ids():
+            p = rec.point3D(pid)
+            if rec.image(p.track.elements[0].image_id).frame_id in frames:
+                p.xyz = Rg @ np.asarray(p.xyz, dtype=float) + tg
+        moved[group[0]] = 1000.0 * max(float(np.linalg.norm(G[:3, :3] @ now[k][:3, 3] + tg
+                                                            - now[k][:3, 3])) for k in group)
+    return moved
+
+
 def rescale(rec, factor: float) -> None:
     """Scale ``rec`` by ``factor`` about the world origin: its points, its frames and its
     rig's sensor translations (COLMAP's ``Reconstruction.transform`` scales all three), a
@@ -462,6 +548,11 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
     passes["final"] = bundle_adjust(rec, model, settings, refine_focal=False,
                                     refine_rig=free_rig, hold_frame=hold_shot,
                                     refine_pp=settings.rig == "scale_pp")
+    groups = shot_groups(rec, model)
+    placed = {}
+    if len(groups) > 1 and settings.frames == "refine":
+        # no point ties one group to another: each keeps Eq. 6's place (place_groups)
+        placed = place_groups(rec, model, shot_poses, groups, hold_shot)
     # the scale the adjustment reached: with the rig's sensors held, the one their metric
     # baselines give (independent of Eq. 5); a free rig leaves it where Eq. 6 put it
     scale_rig = spread(frame_centres(rec, model)) / size_eq6
@@ -500,6 +591,16 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
         "passes": passes,
     }
     report.update(shot_shifts(eq6, cams, shots, central, settings.max_shift_pct))
+    report["shot_groups"] = groups
+    if len(groups) > 1:
+        report["group_placement_mm"] = placed
+        msg = (f"the matches split the {len(shots)} shots into {len(groups)} groups that "
+               f"share no point ({'; '.join(', '.join(g) for g in groups)}): each group was "
+               "adjusted within itself and keeps Eq. 6's place relative to the others "
+               "(rule view_matches matches each shot with its sfm.view_matching."
+               "shot_neighbours nearest shots only; more, or null, links them)")
+        report["warnings"].append(msg)
+        log.warning(msg)
     report["gain"] = fit_gain(before, after, settings.min_gain_pct)
     if report["rejected"]:
         log.warning(report["warnings"][0])
@@ -549,8 +650,9 @@ def shot_shifts(eq6: Mapping[str, PinholeCamera], refined: Mapping[str, PinholeC
     refined ones (the gauge), and whether a shot moved more than ``max_shift_pct`` % of the
     array's size (the RMS distance of the shots from their mean): then the refinement is
     rejected, with a warning, and the Eq. 6 result is written instead. An adjustment whose
-    shots slide apart (on a capture of the wide geometry, a group of shots moved 7 mm
-    together) is not a refinement."""
+    shots slide apart is not a refinement (a group of shots that no point tied to the held
+    one slid 5-7 mm along the views' axes on two captures of ten, until
+    :func:`place_groups` kept such groups at Eq. 6's place)."""
     from plenocal.verify.gt_errors import pose_similarity  # noqa: PLC0415
 
     src = np.array([eq6[f"{s}/{central}"].centre for s in shots])

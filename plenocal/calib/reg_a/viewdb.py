@@ -22,7 +22,8 @@ out) and adds the verified matches (:func:`match_views`, rule ``view_matches``).
 
 Which pairs are matched (:func:`view_pairs`): within a shot, the views at most
 ``view_radius`` apart on the N x N grid; across shots, the same view of each shot and
-its ``shot_neighbours`` nearest shots (by registration A's camera centres). Exhaustive
+its ``shot_neighbours`` nearest shots (by registration A's camera centres), with the
+shortest links that join the groups these may leave apart (:func:`nearest_shots`). Exhaustive
 matching of the default dataset's 700 views is 244,650 pairs and the "sets" pairing
 (every pair within a shot, the same view across every two shots) 17,850; this one
 about 4,000, and tracks still chain across the whole array through the overlaps.
@@ -68,14 +69,33 @@ def _grid(view: str) -> tuple[int, int] | None:
 
 def nearest_shots(centres: Mapping[str, np.ndarray], k: int) -> set[tuple[str, str]]:
     """Unordered shot pairs (sorted tuples) linking each shot to its ``k`` nearest
-    shots by camera centre; ties are broken by name, so the result is fixed."""
+    shots by camera centre, and where these leave the shots in separate groups, the
+    shortest pair between two groups, again until one group is left (as Kruskal's
+    spanning tree would): on a regular array each shot has up to four neighbours at the
+    same step, and two nearest of them split two captures of ten in two, with no match
+    to tie one half's place to the other's (rule refine, :mod:`plenocal.calib.refine`).
+    Ties are broken by name, so the result is fixed."""
     shots = sorted(centres)
+    dist = {(a, b): float(np.linalg.norm(np.asarray(centres[a]) - np.asarray(centres[b])))
+            for a, b in itertools.combinations(shots, 2)}
     out: set[tuple[str, str]] = set()
     for a in shots:
-        others = sorted((float(np.linalg.norm(np.asarray(centres[a]) - np.asarray(centres[b]))),
-                         b) for b in shots if b != a)
+        others = sorted((dist[tuple(sorted((a, b)))], b) for b in shots if b != a)
         for _, b in others[:k]:
             out.add(tuple(sorted((a, b))))
+    group = {s: s for s in shots}
+
+    def root(s: str) -> str:
+        while group[s] != s:
+            s = group[s]
+        return s
+
+    for a, b in out:
+        group[root(a)] = root(b)
+    for (a, b), _ in sorted(dist.items(), key=lambda kv: (kv[1], kv[0])):
+        if root(a) != root(b):
+            group[root(a)] = root(b)
+            out.add((a, b))
     return out
 
 
