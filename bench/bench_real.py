@@ -3,6 +3,7 @@
     python bench/bench_real.py [--out BENCHMARKS.md] [--frames Boys2 Fujita2 ...]
                                [--views 5] [--grid auto|file|refine] [--grid-ab] [--mla table|auto]
                                [--pictures bench/out]
+    python bench/bench_real.py --tlct PATH/tlct [--rounds 3] [--frames ...] [--out BENCHMARKS.md]
 
 For each frame (its RayCalibData xml beside it): the grid check (plenocal.convert.gridcheck:
 the file grid's drift from the micro-image centres, refined or not under ``--grid``), then
@@ -38,24 +39,50 @@ Pictures (``--pictures``, git-ignored bench/out/): ``<frame>.png`` side by side 
 central view's height: the raw frame (area-downscaled) | our central view | the
 reference's (where there is one) | the patch-size map; and ``<frame>_centre.png``, our
 central view at full size, to look at at 100 %.
+
+Speed against TLCT (``--tlct``, issue 35; instead of the above): whole processes, as a user
+runs them, alternating on the same machine. For each frame, R rounds (``--rounds``) of:
+TLCT v1.6.0 (shared/tools/tlct: the sequence's ``cfg/<seq>.calib.cfg`` and
+``<seq>.convert.sh`` arguments, ``OMP_NUM_THREADS=2`` as its README says, N x N views) on
+the frame converted once beforehand, not timed, to raw yuv420p 8-bit (ffmpeg: ``--ffmpeg``,
+else the imageio-ffmpeg wheel's, else the PATH's); then ``plenocal convert FRAME XML -o
+DIR --views N --mla KIND`` (PNG in, PNG out) and the same on TLCT's yuv file with
+``--format yuv --size WxH --bit-depth 8`` (YUV in, YUV out), in the environment this
+script was started in (not its one-thread settings) with this checkout first on
+PYTHONPATH. Each run: the wall time (perf_counter around it) and the child's peak RSS
+(``/usr/bin/time -f %M``; a process that forks the command otherwise: os.wait4 on a child
+of this script itself would count this script's memory, which the child starts with).
+Reported per frame: the median wall time of each, ours / TLCT's (target <= 1, aim 0.5),
+the largest peak RSS of each (target: ours <= 1 GB on a 31-MP frame) and the central
+view's size of each. Frames without a TLCT cfg (R42_klein_crop) get ours only.
 """
 
 from __future__ import annotations
 
 import os
 
+#: the environment a user runs ``plenocal convert`` in (``--tlct``): before the one-thread
+#: settings below, which are for the in-process measures
+USER_ENV = dict(os.environ)
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
     os.environ[_v] = "1"
 
 import argparse  # noqa: E402
+import re  # noqa: E402
+import shutil  # noqa: E402
+import statistics  # noqa: E402
+import struct  # noqa: E402
+import subprocess  # noqa: E402
 import sys  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
 
 from benchmd import Lines, update_sections  # noqa: E402
 
@@ -67,7 +94,8 @@ from plenocal.convert.shot import build_grid, load_calib, load_lenslet  # noqa: 
 from plenocal.io.files import read_image, write_image  # noqa: E402
 from plenocal.names import central_view  # noqa: E402
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "real"
+REAL = ROOT.parent / "shared" / "real"
+TLCT_CFG = REAL.parent / "tools" / "tlct" / "cfg"
 # RayCalibData does not say which kind an MLA is; in the converter's naming (see the
 # module docstring: the reverse of shared/real/README.md's, as the converter measures it)
 MLA = {
@@ -79,6 +107,7 @@ MLA = {
     "R42_klein_crop": "galilean",  # Raytrix R42
 }
 HEADING = "Real frames (bench_real.py)"
+SPEED_HEADING = "Speed against TLCT (issue 35)"
 LATER = "_f150"  # later frames of a sequence: <seq>_f150.png, read with <seq>.xml
 #: our view, TLCT's view of the same position (shared/real/reference/<frame>/)
 LOCAL_VIEWS = (("centre", "centre"), ("first corner", "v000"), ("last corner", "v024"))
@@ -222,6 +251,173 @@ def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
     return row
 
 
+# --- speed against TLCT (--tlct, issue 35): whole processes, alternating -------------------
+
+TIME = Path("/usr/bin/time")
+#: where /usr/bin/time is missing: fork the command from a small process and report its
+#: ru_maxrss (os.wait4 on a child of this script would count this script's own memory,
+#: which a forked child starts with)
+_LAUNCHER = ("import os, sys\npid = os.fork()\nif pid == 0:\n    os.execvp(sys.argv[2], "
+             "sys.argv[2:])\n_, st, ru = os.wait4(pid, 0)\nopen(sys.argv[1], 'w').write("
+             "str(ru.ru_maxrss))\nsys.exit(os.waitstatus_to_exitcode(st))\n")
+VARIANTS = ("tlct", "png", "yuv")  # the order of the runs in a round
+
+
+def png_size(path: Path) -> tuple[int, int]:
+    """Width, height from a PNG's header."""
+    with open(path, "rb") as f:
+        return struct.unpack(">II", f.read(24)[16:24])
+
+
+def ffmpeg_exe(given: str | None) -> str:
+    if given:
+        return given
+    try:
+        import imageio_ffmpeg  # noqa: PLC0415
+
+        return imageio_ffmpeg.get_ffmpeg_exe()
+    except ImportError:
+        found = shutil.which("ffmpeg")
+        if found is None:
+            sys.exit("no ffmpeg: pip install imageio-ffmpeg, or give --ffmpeg")
+        return found
+
+
+def plenocal_cmd() -> list[str]:
+    """``plenocal`` as installed beside this Python (not a version manager's shim)."""
+    script = Path(sys.executable).parent / "plenocal"
+    if script.is_file():
+        return [str(script)]
+    return [sys.executable, "-c", "import sys; from plenocal.cli import main; sys.exit(main())"]
+
+
+def measure(cmd: list[str], env: dict, work: Path) -> tuple[float, int]:
+    """Run ``cmd``: its wall time (s) and its peak RSS (bytes); output to work/log.txt."""
+    rss_file = work / "rss.txt"
+    rss_file.unlink(missing_ok=True)
+    if TIME.is_file():
+        wrapped = [str(TIME), "-f", "%M", "-o", str(rss_file), *cmd]
+    else:
+        wrapped = [sys.executable, "-I", "-S", "-c", _LAUNCHER, str(rss_file), *cmd]
+    with open(work / "log.txt", "wb") as log:
+        t0 = time.perf_counter()
+        proc = subprocess.run(wrapped, env=env, stdout=log, stderr=subprocess.STDOUT)
+        wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        tail = (work / "log.txt").read_text(errors="replace")[-2000:]
+        raise RuntimeError(f"{' '.join(cmd)}: exit {proc.returncode}\n{tail}")
+    kb = int(rss_file.read_text().split()[-1])
+    return wall, kb * 1024
+
+
+def speed_frame(name: str, tlct: str, rounds: int, views: int, ffmpeg: str, work: Path,
+                mla_mode: str) -> dict:
+    """R rounds of TLCT, ours PNG -> PNG, ours YUV -> YUV on one frame (see the docstring)."""
+    seq = sequence(name)
+    frame, xml = REAL / "frames" / f"{name}.png", REAL / "frames" / f"{seq}.xml"
+    W, H = png_size(frame)
+    cfg, cfg_args = TLCT_CFG / f"{seq}.calib.cfg", TLCT_CFG / f"{seq}.convert.sh"
+    has_tlct = cfg.is_file()
+    yuv = work / f"{name}_{W}x{H}_8bit.yuv"
+    subprocess.run([ffmpeg, "-v", "error", "-y", "-i", str(frame), "-pix_fmt", "yuv420p",
+                    "-f", "rawvideo", str(yuv)], check=True)  # not timed
+    mla = ["--mla", MLA[seq]] if mla_mode == "table" and seq in MLA else []
+    ours = [*plenocal_cmd(), "convert"]
+    outs = {v: work / f"out_{v}" for v in VARIANTS}
+    cmds = {
+        "tlct": [tlct, str(cfg), "-i", str(yuv), "-o", str(outs["tlct"]), "--views",
+                 str(views), "-b", "0", "-e", "1",
+                 *(cfg_args.read_text().split() if cfg_args.is_file() else [])],
+        "png": [*ours, str(frame), str(xml), "-o", str(outs["png"]), "--views", str(views),
+                *mla],
+        "yuv": [*ours, str(yuv), str(xml), "-o", str(outs["yuv"]), "--views", str(views),
+                *mla, "--format", "yuv", "--size", f"{W}x{H}", "--bit-depth", "8"],
+    }
+    pypath = os.pathsep.join(p for p in (str(ROOT), USER_ENV.get("PYTHONPATH")) if p)
+    envs = {"tlct": {**USER_ENV, "OMP_NUM_THREADS": "2"},
+            "png": {**USER_ENV, "PYTHONPATH": pypath}, "yuv": {**USER_ENV, "PYTHONPATH": pypath}}
+    runs = [v for v in VARIANTS if has_tlct or v != "tlct"]
+    walls = {v: [] for v in runs}
+    rss = {v: [] for v in runs}
+    for _ in range(rounds):
+        for v in runs:
+            shutil.rmtree(outs[v], ignore_errors=True)
+            wall, peak = measure(cmds[v], envs[v], work)
+            walls[v].append(wall)
+            rss[v].append(peak)
+    # the central view's size, from the last round's files
+    h = (views - 1) // 2
+    sizes = {"png": png_size(outs["png"] / f"{h}_{h}.png")}
+    pats = {"tlct": rf"v{h * views + h:03d}-(\d+)x(\d+)\.yuv", "yuv": rf"v_{h}_{h}_(\d+)x(\d+)_"}
+    for v, pat in pats.items():
+        if v in runs:
+            found = [m for f in outs[v].iterdir() if (m := re.match(pat, f.name))]
+            sizes[v] = tuple(int(x) for x in found[0].groups()) if found else None
+    counts = {"tlct": len(list(outs["tlct"].glob("v*.yuv"))) if has_tlct else None,
+              "png": sum(bool(re.fullmatch(r"\d+_\d+\.png", f.name))
+                         for f in outs["png"].iterdir()),
+              "yuv": len(list(outs["yuv"].glob("v_*.yuv")))}
+    for v in runs:
+        shutil.rmtree(outs[v], ignore_errors=True)
+    yuv.unlink()
+    return {"name": name, "mp": W * H / 1e6, "mla": mla[1] if mla else "auto",
+            "wall": {v: statistics.median(t) for v, t in walls.items()}, "walls": walls,
+            "rss": {v: max(r) for v, r in rss.items()}, "size": sizes, "count": counts}
+
+
+def speed_main(args: argparse.Namespace, frames: list[str]) -> None:
+    tlct = str(Path(args.tlct).resolve())
+    ffmpeg = ffmpeg_exe(args.ffmpeg)
+    out = Lines()
+    out.say(f"Whole processes alternating on one machine ({os.cpu_count()} cores, load average "
+            f"{os.getloadavg()[0]:.1f} at the start; other jobs share the cores), {args.rounds} "
+            f"round(s) per frame of: TLCT v1.6.0 (its cfg and convert.sh arguments from "
+            f"shared/tools/tlct, OMP_NUM_THREADS=2, on the frame as raw yuv420p 8-bit made "
+            f"beforehand), `plenocal convert FRAME XML -o DIR --views {args.views} --mla KIND` "
+            f"(PNG in, PNG out), and the same on TLCT's yuv file with `--format yuv --size WxH "
+            f"--bit-depth 8` (YUV in, YUV out), in the user's environment; {args.views} x "
+            f"{args.views} views. Time: the median wall time of the process; memory: its peak "
+            f"RSS (largest over the rounds; `/usr/bin/time -f %M`). View: the central view's "
+            f"size.")
+    out.say("Targets (issue 35): ours / TLCT <= 1.0 (aim 0.5); ours at most 1 GB peak on a "
+            "31-MP frame.")
+    out.say("")
+    out.say("| frame | MP | MLA | TLCT s | ours PNG s | ours YUV s | PNG / TLCT | YUV / TLCT "
+            "| TLCT GB | ours PNG GB | ours YUV GB | view TLCT | view ours PNG / YUV |")
+    out.say("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    rows = []
+    for name in frames:
+        with tempfile.TemporaryDirectory(prefix=f"bench_tlct_{name}_") as tmp:
+            r = speed_frame(name, tlct, args.rounds, args.views, ffmpeg, Path(tmp), args.mla)
+        rows.append(r)
+        w, m, sz = r["wall"], r["rss"], r["size"]
+
+        def dims(v: str, sz: dict = sz) -> str:
+            return "x".join(map(str, sz[v])) if sz.get(v) else "-"
+
+        t = "tlct" in w
+        out.say(f"| {name} | {r['mp']:.1f} | {r['mla']} | "
+                + (f"{w['tlct']:.2f}" if t else "-")
+                + f" | {w['png']:.2f} | {w['yuv']:.2f} | "
+                + (f"{w['png'] / w['tlct']:.2f} | {w['yuv'] / w['tlct']:.2f}" if t else "- | -")
+                + " | " + (f"{m['tlct'] / 1e9:.2f}" if t else "-")
+                + f" | {m['png'] / 1e9:.2f} | {m['yuv'] / 1e9:.2f} | {dims('tlct')} | "
+                f"{dims('png')} / {dims('yuv')} |")
+        n2 = args.views ** 2
+        short = {v: c for v, c in r["count"].items() if c is not None and c != n2}
+        if short:
+            out.say(f"(!) {name}: views written {short}, not {n2}")
+    both = [r for r in rows if "tlct" in r["wall"]]
+    if both:
+        out.say("")
+        out.say("Median over the frames of ours / TLCT: PNG "
+                f"{statistics.median(r['wall']['png'] / r['wall']['tlct'] for r in both):.2f}, "
+                f"YUV {statistics.median(r['wall']['yuv'] / r['wall']['tlct'] for r in both):.2f}"
+                f"; load average {os.getloadavg()[0]:.1f} at the end.")
+    if args.out:
+        update_sections(args.out, {SPEED_HEADING: list(out)})
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=None, help="also write the figures into this BENCHMARKS.md")
@@ -235,6 +431,12 @@ def main() -> None:
                     help="MLA kind from the table in this script, or read by the converter")
     ap.add_argument("--pictures", default=str(Path(__file__).resolve().parent / "out"),
                     help="folder for the side-by-side pictures ('' for none)")
+    ap.add_argument("--tlct", default=None, metavar="PATH",
+                    help="TLCT's binary: measure speed and peak memory against it instead "
+                         "(whole processes, see the docstring)")
+    ap.add_argument("--rounds", type=int, default=3, help="rounds per frame under --tlct")
+    ap.add_argument("--ffmpeg", default=None,
+                    help="ffmpeg for the yuv input under --tlct (default: imageio-ffmpeg's)")
     args = ap.parse_args()
     cv2.setNumThreads(1)
     try:
@@ -244,6 +446,9 @@ def main() -> None:
     frames = sorted(p.stem for p in (REAL / "frames").glob("*.png"))
     if args.frames:
         frames = [f for f in frames if f in args.frames]
+    if args.tlct:
+        speed_main(args, frames)
+        return
     pictures = Path(args.pictures) if args.pictures else None
     out = Lines()
     kinds = ("the table in bench/bench_real.py (converter naming)" if args.mla == "table"
