@@ -339,30 +339,41 @@ def speed_frame(name: str, tlct: str, rounds: int, views: int, ffmpeg: str, work
     runs = [v for v in VARIANTS if has_tlct or v != "tlct"]
     walls = {v: [] for v in runs}
     rss = {v: [] for v in runs}
+    failed: dict[str, str] = {}  # a converter that stops on this frame: its last words
     for _ in range(rounds):
         for v in runs:
+            if v in failed:
+                continue
             shutil.rmtree(outs[v], ignore_errors=True)
-            wall, peak = measure(cmds[v], envs[v], work)
+            try:
+                wall, peak = measure(cmds[v], envs[v], work)
+            except RuntimeError as exc:
+                lines = [x for x in str(exc).splitlines() if x.strip()]
+                failed[v] = lines[-1][:300] if lines else "failed"
+                print(f"{name} {v}: failed: {failed[v]}", file=sys.stderr)
+                continue
             walls[v].append(wall)
             rss[v].append(peak)
+    runs = [v for v in runs if v not in failed]
     # the central view's size, from the last round's files
     h = (views - 1) // 2
-    sizes = {"png": png_size(outs["png"] / f"{h}_{h}.png")}
+    sizes = {"png": png_size(outs["png"] / f"{h}_{h}.png")} if "png" in runs else {}
     pats = {"tlct": rf"v{h * views + h:03d}-(\d+)x(\d+)\.yuv", "yuv": rf"v_{h}_{h}_(\d+)x(\d+)_"}
     for v, pat in pats.items():
         if v in runs:
             found = [m for f in outs[v].iterdir() if (m := re.match(pat, f.name))]
             sizes[v] = tuple(int(x) for x in found[0].groups()) if found else None
-    counts = {"tlct": len(list(outs["tlct"].glob("v*.yuv"))) if has_tlct else None,
+    counts = {"tlct": len(list(outs["tlct"].glob("v*.yuv"))) if "tlct" in runs else None,
               "png": sum(bool(re.fullmatch(r"\d+_\d+\.png", f.name))
-                         for f in outs["png"].iterdir()),
-              "yuv": len(list(outs["yuv"].glob("v_*.yuv")))}
-    for v in runs:
+                         for f in outs["png"].iterdir()) if "png" in runs else None,
+              "yuv": len(list(outs["yuv"].glob("v_*.yuv"))) if "yuv" in runs else None}
+    for v in VARIANTS:
         shutil.rmtree(outs[v], ignore_errors=True)
     yuv.unlink()
     return {"name": name, "mp": W * H / 1e6, "mla": mla[1] if mla else "auto",
-            "wall": {v: statistics.median(t) for v, t in walls.items()}, "walls": walls,
-            "rss": {v: max(r) for v, r in rss.items()}, "size": sizes, "count": counts}
+            "wall": {v: statistics.median(t) for v, t in walls.items() if t}, "walls": walls,
+            "rss": {v: max(r) for v, r in rss.items() if r}, "size": sizes, "count": counts,
+            "failed": failed}
 
 
 def speed_main(args: argparse.Namespace, frames: list[str]) -> None:
@@ -395,25 +406,32 @@ def speed_main(args: argparse.Namespace, frames: list[str]) -> None:
         def dims(v: str, sz: dict = sz) -> str:
             return "x".join(map(str, sz[v])) if sz.get(v) else "-"
 
-        t = "tlct" in w
-        out.say(f"| {name} | {r['mp']:.1f} | {r['mla']} | "
-                + (f"{w['tlct']:.2f}" if t else "-")
-                + f" | {w['png']:.2f} | {w['yuv']:.2f} | "
-                + (f"{w['png'] / w['tlct']:.2f} | {w['yuv'] / w['tlct']:.2f}" if t else "- | -")
-                + " | " + (f"{m['tlct'] / 1e9:.2f}" if t else "-")
-                + f" | {m['png'] / 1e9:.2f} | {m['yuv'] / 1e9:.2f} | {dims('tlct')} | "
-                f"{dims('png')} / {dims('yuv')} |")
+        def sec(v: str, w: dict = w, r: dict = r) -> str:
+            return f"{w[v]:.2f}" if v in w else ("failed" if v in r["failed"] else "-")
+
+        def ratio(v: str, w: dict = w) -> str:
+            return f"{w[v] / w['tlct']:.2f}" if v in w and "tlct" in w else "-"
+
+        def gb(v: str, m: dict = m) -> str:
+            return f"{m[v] / 1e9:.2f}" if v in m else "-"
+
+        out.say(f"| {name} | {r['mp']:.1f} | {r['mla']} | {sec('tlct')} | {sec('png')} | "
+                f"{sec('yuv')} | {ratio('png')} | {ratio('yuv')} | {gb('tlct')} | {gb('png')} "
+                f"| {gb('yuv')} | {dims('tlct')} | {dims('png')} / {dims('yuv')} |")
+        for v, why in r["failed"].items():
+            out.say(f"(!) {name}: {v} stopped: {why}")
         n2 = args.views ** 2
         short = {v: c for v, c in r["count"].items() if c is not None and c != n2}
         if short:
             out.say(f"(!) {name}: views written {short}, not {n2}")
-    both = [r for r in rows if "tlct" in r["wall"]]
-    if both:
+    def median_ratio(v: str) -> str:
+        rs = [r["wall"][v] / r["wall"]["tlct"] for r in rows if {v, "tlct"} <= set(r["wall"])]
+        return f"{statistics.median(rs):.2f} (worst {max(rs):.2f})" if rs else "-"
+
+    if any("tlct" in r["wall"] for r in rows):
         out.say("")
-        out.say("Median over the frames of ours / TLCT: PNG "
-                f"{statistics.median(r['wall']['png'] / r['wall']['tlct'] for r in both):.2f}, "
-                f"YUV {statistics.median(r['wall']['yuv'] / r['wall']['tlct'] for r in both):.2f}"
-                f"; load average {os.getloadavg()[0]:.1f} at the end.")
+        out.say(f"Median over the frames of ours / TLCT: PNG {median_ratio('png')}, YUV "
+                f"{median_ratio('yuv')}; load average {os.getloadavg()[0]:.1f} at the end.")
     if args.out:
         update_sections(args.out, {SPEED_HEADING: list(out)})
 

@@ -268,8 +268,9 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     if Path(args.lenslet).suffix.lower() == ".yuv":
         run_convert_video(args, settings, block, log)
         return
+    threads = args.threads or default_threads()
     shot = convert_files(args.lenslet, args.calib, None, args.views, settings,
-                         setup_json=args.setup)
+                         setup_json=args.setup, threads=threads)
     log.info("%s: %dx%d, %s: D = %.2f px; grid: %s (convert.grid %s)", args.lenslet,
              shot.grid.width, shot.grid.height, args.calib, shot.calib.diameter,
              "refined from the image" if shot.grid_check["refined"] else "calib.xml's",
@@ -284,7 +285,6 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     write_npy(out / "patch_size.npy", shot.used_patch)
     write_image(out / "patch_size.png", shot.patch_picture())
     n = args.views * args.views
-    threads = args.threads or default_threads()
     t1, done = time.perf_counter(), 0
     for views in shot.view_groups(threads=threads):
         write_images(((out / f"{name}.png", img) for name, img in views.items()), threads)

@@ -25,7 +25,7 @@ r, c = parse_view(params.centre)
 for k, cam in enumerate(params.cams):
     t0 = time.perf_counter()
     shot = convert_files(inp.lenslet[k], inp.calib, inp.camera, n_views, settings,
-                         setup_json=inp.setup)
+                         setup_json=inp.setup, threads=max(1, int(snakemake.threads)))
     stats = shot.disparity()
     log.info("%s: %d lenses (%d used), patch size %.2f..%.2f px (median %.2f, %.0f%% "
              "confident), %.2f s", cam, len(shot.grid), stats["used_lenses"],

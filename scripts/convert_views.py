@@ -26,7 +26,8 @@ for k, (cam, lenslet, analysis) in enumerate(zip(params.cams, inp.lenslet, inp.a
                                                   strict=True)):
     t0 = time.perf_counter()
     shot = convert_files(lenslet, inp.calib, inp.camera, int(params.views), settings,
-                         setup_json=inp.setup, analysis=read_analysis(analysis))
+                         setup_json=inp.setup, analysis=read_analysis(analysis),
+                         threads=threads)
     out_dir = Path(analysis).parent
     # the views not on disk are declared outputs, the others are overwritten (atomically):
     # the consumers read them through views.json (rules/common.smk missing_views)

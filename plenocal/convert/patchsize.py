@@ -57,6 +57,7 @@ falling off outside, so that views are rendered from the lenses that see sharp.
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import cv2
@@ -293,8 +294,8 @@ def _ring_neighbours(grid: MicrolensGrid, steps: np.ndarray) -> np.ndarray:
 
 
 def match_scores(gray: np.ndarray, grid: MicrolensGrid, candidates: np.ndarray,
-                 radius: float, samples: int, sign: float = -1.0, ring2: bool = False
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 radius: float, samples: int, sign: float = -1.0, ring2: bool = False,
+                 threads: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """ZNCC of every lens against its neighbours for every candidate patch size.
 
     ``sign``: -1 Keplerian (a point moves towards the neighbour by ``P``), +1 Galilean
@@ -333,7 +334,9 @@ def match_scores(gray: np.ndarray, grid: MicrolensGrid, candidates: np.ndarray,
     texture = centre_block.std(axis=1)
     pairs = (grid.neighbours >= 0).sum(axis=1)
     scores = np.full((n, len(candidates)), np.nan, dtype=np.float32)
-    for ci, P in enumerate(candidates):
+
+    def score(ci: int) -> None:  # one candidate size: its own column, alone
+        P = candidates[ci]
         total = np.zeros(n, dtype=np.float32)
         count = np.zeros(n, dtype=np.float32)
         for nb, dirs, scale in rings:
@@ -351,6 +354,14 @@ def match_scores(gray: np.ndarray, grid: MicrolensGrid, candidates: np.ndarray,
                 count += valid[:, k]
         with np.errstate(invalid="ignore", divide="ignore"):
             scores[:, ci] = np.where(count > 0, total / np.maximum(count, 1), np.nan)
+
+    if threads > 1 and len(candidates) > 1:
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            for _ in pool.map(score, range(len(candidates))):  # re-raises an error
+                pass
+    else:
+        for ci in range(len(candidates)):
+            score(ci)
     return scores, pairs, texture
 
 
@@ -453,9 +464,10 @@ def focus_weights(grid: MicrolensGrid, patch: np.ndarray, softness: float, floor
 
 
 def estimate_patch_size(image: np.ndarray, grid: MicrolensGrid,
-                        settings: PatchSizeSettings | None = None, mla: str = "keplerian"
-                        ) -> PatchSizeResult:
-    """Patch size of every lens of ``grid`` in ``image`` (see the module docstring)."""
+                        settings: PatchSizeSettings | None = None, mla: str = "keplerian",
+                        threads: int = 1) -> PatchSizeResult:
+    """Patch size of every lens of ``grid`` in ``image`` (see the module docstring);
+    the candidate sizes are matched on ``threads`` threads (the same numbers)."""
     settings = settings or PatchSizeSettings()
     sign = mla_sign(mla)
     gray = to_gray(image)
@@ -474,7 +486,7 @@ def estimate_patch_size(image: np.ndarray, grid: MicrolensGrid,
     multi = len({(t.depth_min, t.depth_max) for t in grid.calib.lens_types}) > 1
     scores, pairs, texture = match_scores(gray, grid, candidates, radius,
                                           settings.block_samples, sign,
-                                          settings.same_type_ring and multi)
+                                          settings.same_type_ring and multi, threads=threads)
     # lenses cut by the sensor's edge match blocks partly off the image: they lend their
     # scores to no neighbour
     tex = np.clip(texture / settings.texture_scale, 0, 1) * grid.inside() + 1e-3

@@ -29,7 +29,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -261,13 +261,15 @@ class ShotConversion:
     camera's set-up, whose kind was checked on its central shot. ``safe_diameter``: the
     camera's safe diameter ``D'`` decided before (rule ``convert_setup``); None: per
     ``settings.safe_diameter`` (``auto``: measured on this image,
-    :mod:`plenocal.convert.safediameter`)."""
+    :mod:`plenocal.convert.safediameter`). ``threads``: the measurements that do not wait
+    for each other (the safe diameter, the MLA check, the vignetting profiles, the patch
+    sizes) run side by side on that many threads; the same numbers with any number."""
 
     def __init__(self, image: np.ndarray, calib: RayCalib, n_views: int,
                  settings: ConvertSettings | None = None, source: str = "<image>",
                  grid: MicrolensGrid | None = None,
                  analysis: ConvertAnalysis | None = None, check_mla: bool = True,
-                 safe_diameter: float | None = None) -> None:
+                 safe_diameter: float | None = None, threads: int = 1) -> None:
         self.settings = st = settings or ConvertSettings()
         self.grid_check: dict | None = None  # set by whoever checked the grid
         self.warnings: list[str] = []
@@ -287,7 +289,18 @@ class ShotConversion:
         self._render_source, self._render_scale = render_source(image, self.bits)
         self._source_float: np.ndarray | None = None
         self._gray: np.ndarray | None = None
-        self.safe: SafeDiameter = self._safe_diameter(safe_diameter, source)
+        self._threads = threads
+        given = analysis is not None
+        if not given or (safe_diameter is None and st.safe_diameter == "auto"):
+            self.gray  # noqa: B018  (made once, here, before the threads read it)
+        pool = ThreadPoolExecutor(max_workers=threads - 1) if threads > 1 else _Inline()
+        try:
+            safe_job = pool.submit(self._safe_diameter, safe_diameter, source)
+            if analysis is None:
+                analysis = self._measure(source, check_mla, pool)
+            self.safe: SafeDiameter = safe_job.result()
+        finally:
+            pool.shutdown()
         d_safe = self.safe.diameter_px
         q = st.view_spacing_px if st.view_spacing_px is not None else view_spacing(
             d_safe, n_views)
@@ -297,9 +310,7 @@ class ShotConversion:
                                f"{max_q:.2f} px from the lens centre, outside the safe micro "
                                f"image (radius {calib.safe_diameter / 2:.2f} px): lower "
                                "convert.view_spacing_px or the number of views")
-        if analysis is None:
-            analysis = self._measure(source, check_mla)
-        else:
+        if given:
             problem = (f"holds {analysis.lenses} lenses, the grid {len(self.grid)}"
                        if analysis.lenses != len(self.grid) else
                        f"was made for a {analysis.mla} MLA, the settings say {st.mla}"
@@ -405,27 +416,32 @@ class ShotConversion:
                  f": {safe.note}" if safe.note else "")
         return safe
 
-    def _measure(self, source: str, check_mla: bool) -> ConvertAnalysis:
+    def _measure(self, source: str, check_mla: bool, pool=None) -> ConvertAnalysis:
         """The image's MLA kind (where ``auto``; where set, checked with ``check_mla``),
-        patch sizes and vignetting profiles."""
+        patch sizes and vignetting profiles; what does not wait for the kind runs on
+        ``pool`` (an executor) beside the patch sizes."""
         st = self.settings
         gray = self.gray
-        mla, scores = st.mla, None
+        pool = pool or _Inline()
+        profiles = pool.submit(lens_type_profiles, gray, self.grid) if st.devignette else None
+        mla, scores, check = st.mla, None, None
         if st.mla == "auto":
             mla, k, g = detect_mla_kind(gray, self.grid, st.patch)
             scores = {"keplerian": k, "galilean": g}
             log.info("%s: MLA kind from the image: %s (mean best ZNCC: points moving towards "
                      "the neighbour %.3f, away %.3f)", source, mla, k, g)
         elif check_mla:
-            _, k, g = detect_mla_kind(gray, self.grid, st.patch)
+            check = pool.submit(detect_mla_kind, gray, self.grid, st.patch)
+        patch = estimate_patch_size(gray, self.grid, st.patch, mla=mla, threads=self._threads)
+        for note in patch.warnings:
+            log.warning("%s: %s", source, note)
+        if check is not None:
+            _, k, g = check.result()
             note = mla_contradiction(st.mla, {"keplerian": k, "galilean": g})
             if note:
                 log.warning("%s: %s", source, note)
                 self.warnings.append(f"{source}: {note}")
-        patch = estimate_patch_size(gray, self.grid, st.patch, mla=mla)
-        for note in patch.warnings:
-            log.warning("%s: %s", source, note)
-        profile, row = lens_type_profiles(gray, self.grid) if st.devignette else (None, None)
+        profile, row = profiles.result() if profiles is not None else (None, None)
         return ConvertAnalysis(mla, scores, patch, profile, row)
 
     def _rim_reach(self, offset: float) -> int:
@@ -542,6 +558,21 @@ def _round_to(v: np.ndarray, top: float, dtype: type) -> np.ndarray:
     return v.astype(dtype)
 
 
+class _Inline:
+    """An executor that runs each job at once, in the caller's thread (one thread)."""
+
+    def submit(self, fn, *args, **kwargs) -> Future:
+        job: Future = Future()
+        try:
+            job.set_result(fn(*args, **kwargs))
+        except BaseException as exc:  # noqa: BLE001  (handed on by result())
+            job.set_exception(exc)
+        return job
+
+    def shutdown(self) -> None:
+        pass
+
+
 def _run(work, items: list, threads: int) -> None:
     """``work(item)`` for every item, on ``threads`` threads (in order on one).
 
@@ -600,14 +631,15 @@ def patch_size_picture(layout: ViewLayout, patch: np.ndarray, confident: np.ndar
 def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str | Path | None,
                   n_views: int, settings: ConvertSettings | None = None,
                   setup_json: str | Path | None = None,
-                  analysis: ConvertAnalysis | None = None) -> ShotConversion:
+                  analysis: ConvertAnalysis | None = None, threads: int = 1) -> ShotConversion:
     """Read the inputs of one shot (with every check) and prepare its conversion.
 
     ``setup_json``: the camera's ``convert_setup.json`` (rule ``convert_setup``): its MLA
     kind, tile and grid are used. Without it (one image, the command line) the grid is
     checked and chosen here per ``settings.grid``, and ``auto`` settings are read from
     this image. ``analysis``: the shot's measurements made before
-    (:mod:`plenocal.convert.analysis`; rule ``convert_views``)."""
+    (:mod:`plenocal.convert.analysis`; rule ``convert_views``). ``threads``: see
+    :class:`ShotConversion`."""
     from plenocal.convert.setup import check_and_grid, read_setup  # noqa: PLC0415
 
     settings = settings or ConvertSettings()
@@ -620,7 +652,7 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
         shot = ShotConversion(image, calib, n_views, setup.settings(settings),
                               source=str(lenslet), grid=setup.grid(calib, W, H),
                               analysis=analysis, check_mla=False,
-                              safe_diameter=setup.safe_diameter_px)
+                              safe_diameter=setup.safe_diameter_px, threads=threads)
         shot.grid_check = setup.grid_check
         return shot
     grid, check = check_and_grid(image, calib, settings.grid)
@@ -628,7 +660,7 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
     for note in check.warnings:
         log.warning("%s: %s", lenslet, note)
     shot = ShotConversion(image, calib, n_views, settings, source=str(lenslet), grid=grid,
-                          analysis=analysis)
+                          analysis=analysis, threads=threads)
     shot.grid_check = check.to_dict()
     shot.warnings = [f"{lenslet}: {w}" for w in check.warnings] + shot.warnings
     return shot

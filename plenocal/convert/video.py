@@ -172,8 +172,9 @@ class VideoConverter:
 
     def __init__(self, calib: RayCalib, n_views: int, settings: ConvertSettings,
                  video: VideoSettings | None = None, setup: ConverterSetup | None = None,
-                 grid_foreign: str | None = None) -> None:
+                 grid_foreign: str | None = None, threads: int = 1) -> None:
         self.calib = calib
+        self.threads = threads
         self.n_views = n_views
         self.base = video_settings(settings)
         self.video = video or VideoSettings()
@@ -205,7 +206,7 @@ class VideoConverter:
             analysis = self._measure(image, st, source)
         shot = ShotConversion(image, self.calib, self.n_views, st, source=source,
                               grid=self._grid, analysis=analysis, check_mla=False,
-                              safe_diameter=setup.safe_diameter_px)
+                              safe_diameter=setup.safe_diameter_px, threads=self.threads)
         shot.grid_check = setup.grid_check
         return shot
 
@@ -214,7 +215,8 @@ class VideoConverter:
         set-up's), each lens's size held from the previous frame where it still fits."""
         assert self._grid is not None
         gray = to_gray(to_unit_float(image, 16))
-        patch = estimate_patch_size(gray, self._grid, st.patch, mla=st.mla)
+        patch = estimate_patch_size(gray, self._grid, st.patch, mla=st.mla,
+                                    threads=self.threads)
         for note in patch.warnings:
             log.warning("%s: %s", source, note)
         first = self._previous is None
@@ -310,7 +312,7 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
         raise ConvertError(str(exc)) from None
     count = frame_count(path, fmt)
     chosen = parse_frames(frames, count)
-    conv = VideoConverter(calib, n_views, settings, video, setup, grid_foreign)
+    conv = VideoConverter(calib, n_views, settings, video, setup, grid_foreign, threads)
     if setup is None:
         k = chosen[0] if setup_frame is None else setup_frame
         if not 0 <= k < count:
