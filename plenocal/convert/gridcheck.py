@@ -31,10 +31,14 @@ Fit. ``c_i^measured = o + M (i, j)`` by least squares with outlier trimming (3 r
 sigmas): an affine lattice (offset, pitch, rotation, and anisotropic scale / shear), and
 the similarity part of it (offset, pitch, rotation: what a RayCalibData file can hold).
 The shift modulo one lens is unwrapped from the centre outwards, so grids off by several
-pixels at the edges (a pitch error) are followed. The drift of the file's grid is the
-distance from each lens's file centre to the fitted lattice (max, rms, and per region: the
-four corners and the centre); the raw per-lens measurements give the model-free medians per
-region.
+pixels at the edges (a pitch error) are followed: the file's lattice moved by the central
+lenses' mean shift until a disc around the centre holds ``MIN_START`` (100) measured
+lenses, then the affine fit of each widening disc. (An affine fit to the 30-odd lenses of a
+frame with a dark or flat centre, HandTools_f150, was 0.9-2.7 px per lens off and sent the
+unwrapping into the wrong cells: a 134 px drift, FOREIGN, after a yuv420p round trip.)
+The drift of the file's grid is the distance from each lens's file centre to the fitted
+lattice (max, rms, and per region: the four corners and the centre); the raw per-lens
+measurements give the model-free medians per region.
 
 Where is the RayCalibData offset measured from? On the three Raytrix frames whose files
 fit their micro images (Fujita2, Origami, Boxer-IrishMan-Gladiator2), the fitted lattice
@@ -103,6 +107,11 @@ CLOSURE_TOL = 0.6  # rad: phase closure of a measured lens
 FEATURE = "gradient"  # intensity | gradient | both: the image the phase is measured on
 BOX_LENSES = 3.0  # low-pass: two box filters this many lenses wide
 MIN_LENSES = 30  # fewer measured lenses: no fit
+# lenses the first (central) affine fit of the unwrapping needs: on 30 lenses bunched at
+# the edge of the central disc, two of them a third of a lens off, the six parameters came
+# out 2.7 px per lens off (HandTools_f150 after a yuv420p round trip) and led the unwrapping
+# into the wrong cells: the whole lattice then fitted 134 px off, FOREIGN
+MIN_START = 100
 GRID_MODES = ("file", "refine", "auto")
 REGIONS = ("top_left", "top_right", "centre", "bottom_left", "bottom_right")
 
@@ -429,7 +438,9 @@ def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
     cov = np.eye(3)
     while True:
         sel = ok & (r_lens <= radius)
-        if sel.sum() >= MIN_LENSES:
+        # the first fit waits for MIN_START lenses (the file's lattice moved by the torus
+        # mean unwraps until then), the last one takes what there is
+        if sel.sum() >= (MIN_START if P is None and radius < r_max else MIN_LENSES):
             P, keep, cov = _fit_affine(ij, c_file + d, sel)
         if P is not None and radius < r_max:
             pred = _mul(np.column_stack([np.ones(len(ij)), ij]), P.T) - c_file
