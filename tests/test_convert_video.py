@@ -255,3 +255,20 @@ def test_hold_steadies_patch_sizes_on_static_content():
         changed[mode] = float((dP > 0.25).mean())
     assert changed["off"] > 0.1
     assert changed["hold"] < 0.75 * changed["off"], changed
+
+
+def test_yuv_to_rgb_by_rows_is_the_whole_frame():
+    """lenslet_frame turns a frame into RGB in bands of rows (memory on 31-MP frames):
+    every band is the same numbers as those rows of the whole frame, for even and odd
+    sizes and bands that start on odd rows."""
+    from plenocal.io.yuv import yuv_to_rgb
+
+    rng = np.random.default_rng(0)
+    for H, W in [(100, 120), (101, 121), (64, 66)]:
+        ch, cw = (H + 1) // 2, (W + 1) // 2
+        planes = (rng.integers(0, 1024, (H, W)).astype(np.uint16),
+                  *(rng.integers(0, 1024, (ch, cw)).astype(np.uint16) for _ in range(2)))
+        whole = yuv_to_rgb(planes, 10)
+        for a, b in [(0, 10), (10, 32), (32, H), (3, 7), (0, H), (H - 2, H)]:
+            assert np.array_equal(yuv_to_rgb(planes, 10, rows=slice(a, b)), whole[a:b]), (
+                H, W, a, b)

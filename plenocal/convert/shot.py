@@ -500,19 +500,20 @@ class ShotConversion:
         return self.render_views([name])[name]
 
     def view_groups(self, names: Sequence[str] | None = None, threads: int = 1,
-                    budget_bytes: int | None = None):
-        """Yield the views ``names`` (default: all, row-major) as dicts name -> uint8 RGB,
-        rendered together (:meth:`render_views`) in as few groups as keep each group's
-        views within ``budget_bytes`` (default :data:`VIEW_BUDGET_BYTES`): one group on
-        12-MP frames; on a 31-MP frame with large patches, 25 views take 615 MB."""
+                    budget_bytes: int | None = None, dtype: type = np.uint8):
+        """Yield the views ``names`` (default: all, row-major) as dicts name -> RGB of
+        ``dtype`` (:meth:`render_views`), rendered together in as few groups as keep each
+        group's views within ``budget_bytes`` (default :data:`VIEW_BUDGET_BYTES`): one group
+        of uint8 views on 12-MP frames; on a 31-MP frame with large patches 25 views take
+        615 MB (uint8) or 1.2 GB (uint16)."""
         names = list(view_names(self.n_views) if names is None else names)
         budget = VIEW_BUDGET_BYTES if budget_bytes is None else budget_bytes
-        per_view = self.layout.height * self.layout.width * 3
+        per_view = self.layout.height * self.layout.width * 3 * np.dtype(dtype).itemsize
         size = max(1, min(len(names), budget // max(per_view, 1)))
         groups = -(-len(names) // size)
         size = -(-len(names) // groups)  # even groups
         for a in range(0, len(names), size):
-            yield self.render_views(names[a:a + size], threads=threads)
+            yield self.render_views(names[a:a + size], dtype, threads=threads)
 
     def views(self, threads: int = 1):
         """Yield (name, uint8 RGB) for every view, row-major (:meth:`view_groups`)."""

@@ -104,8 +104,17 @@ def lenslet_frame(planes: tuple[np.ndarray, np.ndarray, np.ndarray], bits: int,
     """One YUV frame as the 16-bit RGB lenslet image the converter reads (uint16, full
     16-bit scale: convert it with ``bit_depth: 16``). Written as a 16-bit PNG it is the
     frame's PNG, whose conversion the video's matches."""
-    rgb = yuv_to_rgb(planes, bits, matrix, rng)
-    return np.rint(rgb * np.float32(65535.0)).astype(np.uint16)
+    H, W = planes[0].shape
+    out = np.empty((H, W, 3), np.uint16)
+    for a in range(0, H, FRAME_ROWS):  # in bands: a float frame is 6 bytes a pixel
+        rows = slice(a, min(a + FRAME_ROWS, H))
+        rgb = yuv_to_rgb(planes, bits, matrix, rng, rows=rows)
+        out[rows] = np.rint(rgb * np.float32(65535.0)).astype(np.uint16)
+    return out
+
+
+#: rows of a frame turned from YUV into RGB at a time (even: see yuv_to_rgb)
+FRAME_ROWS = 256
 
 
 def video_settings(base: ConvertSettings) -> ConvertSettings:
@@ -347,16 +356,17 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
             folder = out / f"frame_{k:05d}"
             if out_format == "png":
                 folder.mkdir(exist_ok=True)
-            # 16-bit views for the YUV videos (rounded again to the input's depth there)
-            views = shot.render_views(names, np.uint16 if writer is not None else np.uint8,
-                                      threads=threads)
-            for name in names:
-                view = views.pop(name)
-                if writer is not None:
-                    rgb = np.multiply(view, np.float32(1.0 / 65535.0), dtype=np.float32)
-                    writer.write(name, rgb_to_yuv(rgb, fmt.bits, video.matrix, video.range))
-                else:
-                    write_image(folder / f"{name}.png", view)
+            # 16-bit views for the YUV videos (rounded again to the input's depth there), in
+            # groups within the converter's memory budget
+            for views in shot.view_groups(threads=threads, dtype=np.uint16
+                                          if writer is not None else np.uint8):
+                for name, view in views.items():
+                    if writer is not None:
+                        rgb = np.multiply(view, np.float32(1.0 / 65535.0), dtype=np.float32)
+                        writer.write(name, rgb_to_yuv(rgb, fmt.bits, video.matrix,
+                                                      video.range))
+                    else:
+                        write_image(folder / f"{name}.png", view)
             stats = shot.disparity()
             if out_format == "png":
                 write_json(folder / "disparity.json", stats)

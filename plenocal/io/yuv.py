@@ -180,20 +180,30 @@ def _levels(bits: int, rng: str) -> tuple[float, float, float, float]:
 
 
 def yuv_to_rgb(planes: tuple[np.ndarray, np.ndarray, np.ndarray], bits: int,
-               matrix: str = DEFAULT_MATRIX, rng: str = DEFAULT_RANGE) -> np.ndarray:
+               matrix: str = DEFAULT_MATRIX, rng: str = DEFAULT_RANGE,
+               rows: slice | None = None) -> np.ndarray:
     """RGB float32 (H, W, 3) in [0, 1] of one frame's (Y, Cb, Cr) planes (the module
     docstring: chroma upsampling, matrices and ranges). Values outside the RGB cube (the
-    limited range's foot- and headroom, out-of-gamut chroma) are clipped."""
+    limited range's foot- and headroom, out-of-gamut chroma) are clipped. ``rows``: only
+    those rows of the frame (a slice with step 1), the same numbers as those rows of the
+    whole frame's (a frame of even size samples only the chroma rows they need)."""
     y, cb, cr = planes
     H, W = y.shape
+    a, b, _ = (rows or slice(None)).indices(H)
     kr, kg, kb = _coefficients(matrix)
     black, yspan, zero, cspan = _levels(bits, rng)
-    Y = (y.astype(np.float32) - np.float32(black)) * np.float32(1.0 / yspan)
+    Y = (y[a:b].astype(np.float32) - np.float32(black)) * np.float32(1.0 / yspan)
+    ch = cb.shape[0]
+    # an exact 2x upsampling reads chroma rows (y + 0.5) / 2 - 0.5: a band from an even
+    # row needs its own chroma rows and one on either side
+    exact = H == 2 * ch and W == 2 * cb.shape[1] and a % 2 == 0
+    lo, hi = (max(a // 2 - 1, 0), min((b + 1) // 2 + 1, ch)) if exact else (0, ch)
+    up_h, top = (2 * (hi - lo), a - 2 * lo) if exact else (H, a)
 
     def chroma(p: np.ndarray) -> np.ndarray:
-        c = (p.astype(np.float32) - np.float32(zero)) * np.float32(1.0 / cspan)
+        c = (p[lo:hi].astype(np.float32) - np.float32(zero)) * np.float32(1.0 / cspan)
         # centred siting: output pixel x samples chroma at (x + 0.5) / 2 - 0.5
-        return cv2.resize(c, (W, H), interpolation=cv2.INTER_LINEAR)
+        return cv2.resize(c, (W, up_h), interpolation=cv2.INTER_LINEAR)[top:top + b - a]
 
     Cb, Cr = chroma(cb), chroma(cr)
     R = Y + np.float32(2 * (1 - kr)) * Cr
