@@ -289,6 +289,7 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     for views in shot.view_groups(threads=threads):
         write_images(((out / f"{name}.png", img) for name, img in views.items()), threads)
         done += len(views)
+        views.clear()  # before the next group is rendered
         log.info("%d/%d views of %dx%d rendered and written on %d thread(s); %.2f s", done,
                  n, stats["width"], stats["height"], threads, time.perf_counter() - t1)
     write_json(out / "disparity.json", stats)

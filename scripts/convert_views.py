@@ -33,6 +33,7 @@ for k, (cam, lenslet, analysis) in enumerate(zip(params.cams, inp.lenslet, inp.a
     # the consumers read them through views.json (rules/common.smk missing_views)
     for views in shot.view_groups(params.names, threads=threads):
         write_images(((out_dir / f"{name}.png", img) for name, img in views.items()), threads)
+        views.clear()  # before the next group is rendered
     # the shot's views as one unit, central view included: what the rules that read
     # whole shots take as their input (plenocal.convert.viewset)
     if str(view_set_path(out_dir)) not in outputs:

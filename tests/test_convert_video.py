@@ -272,3 +272,19 @@ def test_yuv_to_rgb_by_rows_is_the_whole_frame():
         for a, b in [(0, 10), (10, 32), (32, H), (3, 7), (0, H), (H - 2, H)]:
             assert np.array_equal(yuv_to_rgb(planes, 10, rows=slice(a, b)), whole[a:b]), (
                 H, W, a, b)
+
+
+def test_view_to_yuv_by_rows_is_the_whole_view(monkeypatch):
+    """The views are written as YUV in bands of rows (memory on 31-MP frames): the same
+    planes as rgb_to_yuv of the whole view, for even and odd sizes."""
+    from plenocal.convert import video
+    from plenocal.io.yuv import rgb_to_yuv
+
+    monkeypatch.setattr(video, "FRAME_ROWS", 6)
+    rng = np.random.default_rng(1)
+    for H, W in [(40, 30), (41, 31)]:
+        view = rng.integers(0, 65536, (H, W, 3)).astype(np.uint16)
+        whole = rgb_to_yuv(np.multiply(view, np.float32(1.0 / 65535.0), dtype=np.float32), 10)
+        banded = video.view_to_yuv(view, 10)
+        for a, b in zip(whole, banded, strict=True):
+            assert a.dtype == b.dtype and np.array_equal(a, b), (H, W)

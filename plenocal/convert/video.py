@@ -113,8 +113,31 @@ def lenslet_frame(planes: tuple[np.ndarray, np.ndarray, np.ndarray], bits: int,
     return out
 
 
-#: rows of a frame turned from YUV into RGB at a time (even: see yuv_to_rgb)
+#: rows of a frame turned from YUV into RGB, or of a view from RGB into YUV, at a time
+#: (even: a 2 x 2 chroma block is never cut)
 FRAME_ROWS = 256
+
+
+def view_to_yuv(view: np.ndarray, bits: int, matrix: str = DEFAULT_MATRIX,
+                rng: str = DEFAULT_RANGE) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The (Y, Cb, Cr) planes of a 16-bit RGB view (:func:`plenocal.io.yuv.rgb_to_yuv` of
+    view / 65535), made in bands of :data:`FRAME_ROWS` rows: the same planes as the whole
+    view's, without a float copy of it (98 MB and as much again in temporaries for a
+    view of a 31-MP frame)."""
+    H = view.shape[0]
+    planes = None
+    for a in range(0, H, FRAME_ROWS):
+        b = min(a + FRAME_ROWS, H)
+        rgb = np.multiply(view[a:b], np.float32(1.0 / 65535.0), dtype=np.float32)
+        part = rgb_to_yuv(rgb, bits, matrix, rng)
+        if planes is None:
+            planes = (np.empty((H,) + part[0].shape[1:], part[0].dtype),
+                      *(np.empty((H // 2,) + p.shape[1:], p.dtype) for p in part[1:]))
+        planes[0][a:b] = part[0]
+        for full, p in zip(planes[1:], part[1:], strict=True):
+            full[a // 2:a // 2 + len(p)] = p
+    assert planes is not None
+    return planes
 
 
 def video_settings(base: ConvertSettings) -> ConvertSettings:
@@ -362,11 +385,11 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
                                           if writer is not None else np.uint8):
                 for name, view in views.items():
                     if writer is not None:
-                        rgb = np.multiply(view, np.float32(1.0 / 65535.0), dtype=np.float32)
-                        writer.write(name, rgb_to_yuv(rgb, fmt.bits, video.matrix,
-                                                      video.range))
+                        writer.write(name, view_to_yuv(view, fmt.bits, video.matrix,
+                                                       video.range))
                     else:
                         write_image(folder / f"{name}.png", view)
+                views.clear()  # before the next group is rendered
             stats = shot.disparity()
             if out_format == "png":
                 write_json(folder / "disparity.json", stats)
