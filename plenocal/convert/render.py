@@ -235,9 +235,9 @@ BAND_ROWS = 32  # rows rendered at a time: every per-pixel array of a band stays
 
 
 def view_weights(plan: RenderPlan, r: int, c: int, with_gain: bool = False,
-                 rows: slice = slice(None), scale: float = 1.0) -> np.ndarray:
+                 rows: slice = slice(None), unit: float = 1.0) -> np.ndarray:
     """(K, h, W) normalised blend weights of view (r, c) over ``rows`` of the plan's
-    arrays (all by default), times ``scale``; with ``with_gain`` each multiplied by its
+    arrays (all by default), times ``unit``; with ``with_gain`` each multiplied by its
     sample's vignetting gain (1 / micro-image profile)."""
     o = plan.layout.offset_image(r, c)
     off_x, off_y, tile_weight = plan.off_x[:, rows], plan.off_y[:, rows], plan.tile_weight[:, rows]
@@ -255,7 +255,7 @@ def view_weights(plan: RenderPlan, r: int, c: int, with_gain: bool = False,
             gain[k] = _lookup(plan.gain_table, rad,
                               zeros if plan.gain_row is None else plan.gain_row[k, rows])
     np.maximum(total, np.float32(1e-12), out=total)
-    np.divide(np.float32(scale), total, out=total)
+    np.divide(np.float32(unit), total, out=total)
     w *= total
     if gain is not None:
         w *= gain
@@ -263,10 +263,10 @@ def view_weights(plan: RenderPlan, r: int, c: int, with_gain: bool = False,
 
 
 def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int,
-                scale: float = 1.0) -> np.ndarray:
-    """View (r, c) over the plan's rows as float32 (h, W, C): ``scale`` times the units of
+                unit: float = 1.0) -> np.ndarray:
+    """View (r, c) over the plan's rows as float32 (h, W, C): ``unit`` times the units of
     ``source`` (a float32, or an 8- or 16-bit image: OpenCV interpolates integers 1.3-1.6x
-    faster, reading a quarter or half the bytes, to 1/32 px as floats; ``scale`` brings
+    faster, reading a quarter or half the bytes, to 1/32 px as floats; ``unit`` brings
     them to [0, 1]), corrected for the micro images' vignetting where the plan has a
     profile. Rendered in bands of :data:`BAND_ROWS` rows (the same numbers as whole;
     1.3-1.5x faster). A four-channel source is no faster than three here: the samples'
@@ -280,7 +280,7 @@ def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int,
     convert = source.dtype != np.float32
     for y0 in range(0, H, BAND_ROWS):
         rows = slice(y0, min(y0 + BAND_ROWS, H))
-        w = view_weights(plan, r, c, with_gain=True, rows=rows, scale=scale)
+        w = view_weights(plan, r, c, with_gain=True, rows=rows, unit=unit)
         band = out[rows]
         for k in range(w.shape[0]):
             s = cv2.remap(source, plan.map_x[k, rows] + ox, plan.map_y[k, rows] + oy,
