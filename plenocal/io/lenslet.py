@@ -228,4 +228,4 @@ def scan_lenslet_folder(folder: str | Path, dataset: str, video: dict | None,
                 "the full, uncropped sensor readout (or correct the size in the name, "
                 f"{key}.size or camera.yaml)")
         out[shot] = VideoShot(path, fmt, frame, count, video["matrix"], video["range"])
-    return out
+    return dict(sorted(out.items()))
