@@ -283,6 +283,10 @@ def _check_semantics(config: dict) -> None:
         sim = ds.get("simulate")
         if sim is None:
             continue
+        if ds.get("video") is not None:
+            raise _fail(f"datasets.{name}.video", "{...}",
+                        "only a real capture's shots are given as videos (the simulator "
+                        "writes lenslet PNGs): remove the key, or the simulate block")
         key = f"datasets.{name}.simulate"
         F_m = sim["main_lens"]["focal_length_mm"] / 1000.0
         X_o = sim["main_lens"]["focus_distance_m"]

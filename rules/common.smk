@@ -8,6 +8,7 @@ from pathlib import Path
 
 from plenocal.config import ConfigError, canonicalize, validate_config
 from plenocal.calib.reg_b.datasheet import DatasheetError, load_datasheet
+from plenocal.io.lenslet import CaptureError, VideoShot, scan_lenslet_folder
 from plenocal import names
 from plenocal.names import central_view, view_names
 
@@ -78,42 +79,61 @@ def hand_cams(dataset):
 
 
 def real_cams(dataset):
-    """The shots of a real capture: the files in data/<dataset>/lenslet/, each of which
-    must be a lenslet image named x<col>_y<row>.png or hand<k>.png (hidden files, such
-    as a file manager's .DS_Store, are skipped)."""
-    folder = Path("data") / dataset / "lenslet"
-    if not folder.is_dir():
-        raise ValueError(
-            f"dataset {dataset!r}: {folder}/ does not exist; put the lenslet images "
-            "there (x00_y00.png ... and hand00.png ...) or give the dataset a "
-            "'simulate' block"
+    """The shots of a real capture: the files in data/<dataset>/lenslet/, each a lenslet
+    image named x<col>_y<row>.png or hand<k>.png, or a raw YUV recording of the shot
+    (plenocal.io.lenslet; hidden files, such as a file manager's .DS_Store, are
+    skipped)."""
+    return list(lenslet_sources(dataset))
+
+
+#: {dataset: {shot: its PNG, or its plenocal.io.lenslet.VideoShot}}, read once a run
+_LENSLET_SOURCES = {}
+
+
+def _scan_lenslet(dataset, sensor_size=None):
+    try:
+        return scan_lenslet_folder(
+            Path("data") / dataset / "lenslet",
+            dataset,
+            ds_config(dataset).get("video"),
+            sensor_size,
         )
-    entries = sorted(p for p in folder.iterdir() if not p.name.startswith("."))
-    bad = []
-    for p in entries:
-        if p.is_dir():
-            bad.append(f"{p.name}/ (a folder)")
-        elif p.suffix != ".png":
-            hint = " (rename it to .png)" if p.suffix.lower() == ".png" else ""
-            bad.append(f"{p.name}{hint}")
-        elif not names.is_shot(p.stem):
-            bad.append(p.name)
-    if bad:
-        raise ValueError(
-            f"dataset {dataset!r}: {folder}/ may hold only lenslet images named "
-            f"x<col>_y<row>.png or hand<k>.png (two-digit numbers, lower-case .png); "
-            f"move or rename {', '.join(bad)}"
-        )
-    shots = [p.stem for p in entries]
-    if not shots:
-        raise ValueError(f"dataset {dataset!r}: {folder}/ holds no lenslet image")
-    return shots
+    except CaptureError as err:
+        raise ValueError(str(err)) from None
+
+
+def lenslet_sources(dataset):
+    """{shot: data/<d>/lenslet/<shot>.png, or the VideoShot of its recording} of a real
+    capture, checked (check_real_dataset: before any job)."""
+    if dataset not in _LENSLET_SOURCES:
+        _LENSLET_SOURCES[dataset] = _scan_lenslet(dataset)
+    return _LENSLET_SOURCES[dataset]
+
+
+def video_shots(dataset):
+    """The shots given as a video (whose frame rule lenslet_frame extracts)."""
+    if is_synthetic(dataset):
+        return []
+    return [
+        c for c, src in lenslet_sources(dataset).items() if isinstance(src, VideoShot)
+    ]
+
+
+def lenslet_image(dataset, cam):
+    """The lenslet image the conversion reads: data/<d>/lenslet/<cam>.png (the
+    simulator's, or a real capture's PNG), or for a shot given as a video the frame that
+    rule lenslet_frame extracts, results/<d>/lenslet/<cam>.png."""
+    if cam in video_shots(dataset):
+        return res(dataset, "lenslet", f"{cam}.png")
+    return data(dataset, "lenslet", f"{cam}.png")
 
 
 def check_real_dataset(dataset):
-    """A real capture's files, checked before any job: the lenslet folder, calib.xml,
-    and camera.yaml against its schema (plenocal.calib.reg_b.datasheet)."""
-    real_cams(dataset)
+    """A real capture's files, checked before any job: the lenslet folder (and its
+    recordings against config datasets.<d>.video), calib.xml, and camera.yaml against its
+    schema (plenocal.calib.reg_b.datasheet), which gives the size of a recording's
+    frames."""
+    _scan_lenslet(dataset)
     calib = Path("data") / dataset / "calib.xml"
     if not calib.is_file():
         raise ValueError(
@@ -121,14 +141,36 @@ def check_real_dataset(dataset):
             "RayCalibData file there (README, 'Bringing a real capture')"
         )
     try:
-        load_datasheet(Path("data") / dataset / "camera.yaml")
+        sheet = load_datasheet(Path("data") / dataset / "camera.yaml")
     except (DatasheetError, FileNotFoundError) as err:
         raise ValueError(f"dataset {dataset!r}: {err}") from None
+    sensor = (sheet["sensor_width_px"], sheet["sensor_height_px"])
+    _LENSLET_SOURCES[dataset] = _scan_lenslet(dataset, sensor)
 
 
 for _d in DATASETS:
     if _d not in SYNTHETIC:
         check_real_dataset(_d)
+
+#: the datasets with shots given as videos (rule lenslet_frame's), and those shots
+VIDEO = "|".join(re.escape(d) for d in DATASETS if video_shots(d)) or "^$"
+VIDEO_SHOTS = "|".join(sorted({c for d in DATASETS for c in video_shots(d)})) or "^$"
+
+
+def lenslet_frame_input(wildcards):
+    src = lenslet_sources(wildcards.dataset).get(wildcards.cam)
+    if not isinstance(src, VideoShot):
+        raise ValueError(
+            f"dataset {wildcards.dataset!r}: shot {wildcards.cam} is not given as a "
+            "video: its lenslet image is "
+            + data(wildcards.dataset, "lenslet", f"{wildcards.cam}.png")
+        )
+    return str(src.path)
+
+
+def lenslet_frame_params(wildcards):
+    """The frame and format rule lenslet_frame reads (plenocal.io.lenslet.VideoShot)."""
+    return lenslet_sources(wildcards.dataset)[wildcards.cam].params()
 
 
 def cams(dataset):
@@ -340,16 +382,23 @@ def default_run_gaps(targets):
 SETUP_ONLY_CONVERT_KEYS = ("grid_foreign",)
 
 
-def convert_settings(dataset, setup=False):
+def convert_settings(dataset, setup=False, shots=()):
     """The convert block with the dataset's own overrides (its `mla` set-up) applied:
     only the converter of that dataset reruns when it changes. ``setup``: rule
-    convert_setup's, with the keys only it reads (SETUP_ONLY_CONVERT_KEYS)."""
+    convert_setup's, with the keys only it reads (SETUP_ONLY_CONVERT_KEYS). ``shots``:
+    the job's; those given as a video are listed in ``video_frames`` (their lenslet image
+    is lenslet_frame's 16-bit frame: converted with 16 significant bits, which
+    ``bit_depth: auto`` would not always find), a key that only such a job's params
+    have."""
     out = dict(stage_config("convert"))
     if ds_config(dataset).get("mla") is not None:
         out["mla"] = ds_config(dataset)["mla"]
     if not setup:
         for key in SETUP_ONLY_CONVERT_KEYS:
             out.pop(key, None)
+    frames = [c for c in shots if c in video_shots(dataset)]
+    if frames:
+        out["video_frames"] = frames
     return out
 
 
@@ -607,7 +656,7 @@ def mpeg_views_targets(dataset):
 #: stage -> the names of its rules (full match; <i>, the dataset's index, and <k>, the
 #: job's, as common.smk's chunk_rule and depth.smk name them)
 STAGE_RULES = {
-    "convert": r"convert_setup|convert(_views)?(_\d+){1,2}",
+    "convert": r"lenslet_frame|convert_setup|convert(_views)?(_\d+){1,2}",
     "reg_a": r"features_a|match_a|map_a",
     "reg_b": r"rig_b",
     "depth": r"depth_a(_other)?(_\d+)?|depth_b(_other)?(_\d+){1,2}",

@@ -11,14 +11,43 @@ as outputs, so the rules are defined per dataset (whose shots and N they know): 
 for the first, convert_<i>_<k> for the i-th other (common.smk chunk_rule); their files
 are named in full (common.smk dataset_path). Rules convert_views_<k> declare each shot's
 views.json, which the consumers read, and only those of its views that are not on disk
-(common.smk missing_views: the no-op's DAG)."""
+(common.smk missing_views: the no-op's DAG).
+
+A real capture's shot given as a video (plenocal.io.lenslet) is converted from the frame
+rule lenslet_frame extracts into results/<d>/lenslet/<shot>.png (common.smk
+lenslet_image), with 16 significant bits whatever convert.bit_depth says (the
+`video_frames` of the conversions' convert params, only where a job has such a shot: the
+other jobs' params are as they were)."""
+
+
+rule lenslet_frame:
+    input:
+        video=lenslet_frame_input,
+    output:
+        lenslet="results/{dataset}/lenslet/{cam}.png",
+    log:
+        log_path("lenslet_frame", "{cam}"),
+    benchmark:
+        bench_path("lenslet_frame", "{cam}")
+    wildcard_constraints:
+        dataset=VIDEO,
+        cam=VIDEO_SHOTS,
+    priority: PRIORITY["chain"]
+    conda:
+        "../envs/plenocal.yaml"
+    threads: 1
+    resources:
+        mem_mb=1500,
+        runtime=5,
+    params:
+        video=lenslet_frame_params,
+    script:
+        "../scripts/lenslet_frame.py"
 
 
 rule convert_setup:
     input:
-        lenslet=lambda wc: data(
-            wc.dataset, "lenslet", f"{full_set_cam(wc.dataset)}.png"
-        ),
+        lenslet=lambda wc: lenslet_image(wc.dataset, full_set_cam(wc.dataset)),
         calib="data/{dataset}/calib.xml",
         camera="data/{dataset}/camera.yaml",
     output:
@@ -35,7 +64,9 @@ rule convert_setup:
         mem_mb=2500,
         runtime=10,
     params:
-        convert=lambda wc: convert_settings(wc.dataset, setup=True),
+        convert=lambda wc: convert_settings(
+            wc.dataset, setup=True, shots=[full_set_cam(wc.dataset)]
+        ),
         views=lambda wc: n_views(wc.dataset),
     script:
         "../scripts/convert_setup.py"
@@ -48,7 +79,7 @@ for _i, _d in enumerate(DATASETS):
             name:
                 chunk_rule("convert", _i, _k)
             input:
-                lenslet=[data(_d, "lenslet", f"{c}.png") for c in _chunk],
+                lenslet=[lenslet_image(_d, c) for c in _chunk],
                 calib=data(_d, "calib.xml"),
                 camera=data(_d, "camera.yaml"),
                 setup=res(_d, "views", "convert_setup.json"),
@@ -78,7 +109,7 @@ for _i, _d in enumerate(DATASETS):
                 mem_mb=2500,
                 runtime=20,
             params:
-                convert=convert_settings(_d),
+                convert=convert_settings(_d, shots=_chunk),
                 views=n_views(_d),
                 centre=centre(_d),
                 cams=_chunk,
@@ -91,7 +122,7 @@ for _i, _d in enumerate(DATASETS):
             name:
                 chunk_rule("convert_views", _i, _k)
             input:
-                lenslet=[data(_d, "lenslet", f"{c}.png") for c in _chunk],
+                lenslet=[lenslet_image(_d, c) for c in _chunk],
                 analysis=[res(_d, "views", c, "analysis.npz") for c in _chunk],
                 # listed with the others in each shot's views.json
                 centre=[res(_d, "views", c, f"{centre(_d)}.png") for c in _chunk],
@@ -118,7 +149,7 @@ for _i, _d in enumerate(DATASETS):
                 mem_mb=2500,
                 runtime=20,
             params:
-                convert=convert_settings(_d),
+                convert=convert_settings(_d, shots=_chunk),
                 views=n_views(_d),
                 cams=_chunk,
                 names=[v for v in views(_d) if v != centre(_d)],

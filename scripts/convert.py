@@ -9,6 +9,7 @@ import cv2
 
 from plenocal.convert import ConvertSettings, convert_files
 from plenocal.convert.analysis import write_analysis
+from plenocal.convert.video import video_settings
 from plenocal.io.files import write_image, write_json, write_npy
 from plenocal.names import parse_view
 from plenocal.rulelog import rule_logger
@@ -20,11 +21,14 @@ cv2.setNumThreads(max(1, int(snakemake.threads)))
 params = snakemake.params
 inp, out = snakemake.input, snakemake.output
 settings = ConvertSettings.from_config(params.convert)
+# shots given as a video: rule lenslet_frame's 16-bit frames (common.smk convert_settings)
+frames = set(params.convert.get("video_frames", ()))
 n_views = int(params.views)
 r, c = parse_view(params.centre)
 for k, cam in enumerate(params.cams):
     t0 = time.perf_counter()
-    shot = convert_files(inp.lenslet[k], inp.calib, inp.camera, n_views, settings,
+    shot = convert_files(inp.lenslet[k], inp.calib, inp.camera, n_views,
+                         video_settings(settings) if cam in frames else settings,
                          setup_json=inp.setup, threads=max(1, int(snakemake.threads)))
     stats = shot.disparity()
     log.info("%s: %d lenses (%d used), patch size %.2f..%.2f px (median %.2f, %.0f%% "

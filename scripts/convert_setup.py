@@ -6,6 +6,7 @@ import cv2
 from plenocal.convert import ConvertSettings
 from plenocal.convert.setup import decide_setup, write_setup
 from plenocal.convert.shot import load_calib, load_lenslet, read_sensor_size
+from plenocal.convert.video import video_settings
 from plenocal.rulelog import rule_logger
 
 snakemake = globals()["snakemake"]
@@ -14,8 +15,10 @@ cv2.setNumThreads(max(1, int(snakemake.threads)))
 
 image = load_lenslet(snakemake.input.lenslet, read_sensor_size(snakemake.input.camera))
 calib = load_calib(snakemake.input.calib)
-setup, _ = decide_setup(image, calib, int(snakemake.params.views),
-                        ConvertSettings.from_config(snakemake.params.convert),
+settings = ConvertSettings.from_config(snakemake.params.convert)
+if snakemake.params.convert.get("video_frames"):  # the shot is given as a video: its
+    settings = video_settings(settings)  # frame by rule lenslet_frame, 16 significant bits
+setup, _ = decide_setup(image, calib, int(snakemake.params.views), settings,
                         source=str(snakemake.input.lenslet),
                         grid_foreign=snakemake.params.convert["grid_foreign"])
 log.info("MLA %s (%s), tile %d px per lens pitch (%s), grid %s (convert.grid %s)",

@@ -9,6 +9,7 @@ import cv2
 
 from plenocal.convert import ConvertSettings, convert_files
 from plenocal.convert.analysis import read_analysis
+from plenocal.convert.video import video_settings
 from plenocal.convert.viewset import view_set_path, write_view_set
 from plenocal.io.files import write_images
 from plenocal.rulelog import rule_logger
@@ -20,12 +21,15 @@ cv2.setNumThreads(threads)
 
 params = snakemake.params
 settings = ConvertSettings.from_config(params.convert)
+# shots given as a video: rule lenslet_frame's 16-bit frames (common.smk convert_settings)
+frames = set(params.convert.get("video_frames", ()))
 inp = snakemake.input
 outputs = {str(p) for p in snakemake.output}
 for k, (cam, lenslet, analysis) in enumerate(zip(params.cams, inp.lenslet, inp.analysis,
                                                   strict=True)):
     t0 = time.perf_counter()
-    shot = convert_files(lenslet, inp.calib, inp.camera, int(params.views), settings,
+    shot = convert_files(lenslet, inp.calib, inp.camera, int(params.views),
+                         video_settings(settings) if cam in frames else settings,
                          setup_json=inp.setup, analysis=read_analysis(analysis),
                          threads=threads)
     out_dir = Path(analysis).parent

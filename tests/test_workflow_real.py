@@ -154,3 +154,117 @@ def test_bad_input_stops_before_any_job(real_run: Path, tmp_path: Path):
 
     out, _ = _bad(real_run, tmp_path / "e", digits)
     assert "move or rename x\u0660\u0660_y\u0660\u0660.png" in out, out[-2000:]
+
+
+# --- shots given as videos (README, "Bringing a real capture") ------------------------
+
+#: the shots given as 10-bit YUV recordings, and the frame to calibrate on: the shot that
+#: convert_setup decides on (common.smk full_set_cam) named MPEG-style, a hand-held shot
+#: bare (its size and bit depth from the config)
+VIDEO_FRAMES = {"x01_y01": 1, "hand01": 2}
+
+
+def video_frames(png: Path, k: int) -> list:
+    """Three frames (RGB in [0, 1]) of a recording whose frame ``k`` is the PNG's content,
+    the others the PNG inverted and flipped: a wrong frame cannot pass for it."""
+    from plenocal.io.files import read_image, to_float
+
+    rgb = to_float(read_image(png))
+    frames = [1.0 - rgb, rgb[::-1]]
+    frames.insert(k, rgb)
+    return frames
+
+
+def give_as_videos(lenslet: Path) -> dict:
+    """Replace VIDEO_FRAMES' PNGs in ``lenslet/`` by 10-bit YUV recordings; the chosen
+    frame is the PNG's content. Returns {shot: (recording, its format)}."""
+    from plenocal.io.yuv import YuvFormat, rgb_to_yuv, write_frame
+
+    out = {}
+    for shot, k in VIDEO_FRAMES.items():
+        frames = video_frames(lenslet / f"{shot}.png", k)
+        H, W = frames[0].shape[:2]
+        fmt = YuvFormat(W, H, 10)
+        name = f"{shot}_{W}x{H}_30fps_10bit.yuv" if shot.startswith("x") else f"{shot}.yuv"
+        with open(lenslet / name, "wb") as fh:
+            for rgb in frames:
+                write_frame(fh, rgb_to_yuv(rgb, 10), fmt)
+        (lenslet / f"{shot}.png").unlink()
+        out[shot] = (lenslet / name, fmt)
+    return out
+
+
+@pytest.fixture(scope="module")
+def video_capture(tiny_complete_run, tmp_path_factory) -> tuple[Path, dict]:
+    """A copy of the real capture whose VIDEO_FRAMES shots are recordings, its PNG shots
+    converted with convert.bit_depth 8 (theirs: a frame read with that would fail)."""
+    work = make_capture(tiny_complete_run, tmp_path_factory.mktemp("video"))
+    videos = give_as_videos(work / "data" / NAME / "lenslet")
+    cfg = yaml.safe_load((work / "config.yaml").read_text())
+    cfg["datasets"][NAME]["video"] = {"frame": dict(VIDEO_FRAMES), "size": "1280x960",
+                                      "bit_depth": 10}
+    cfg.setdefault("convert", {})["bit_depth"] = 8
+    (work / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    return work, videos
+
+
+def test_shots_given_as_videos_convert_their_frame(video_capture, tiny_complete_run):
+    import json
+
+    import numpy as np
+
+    from plenocal.convert.video import lenslet_frame
+    from plenocal.io.files import read_image
+    from plenocal.io.yuv import read_frame
+
+    work, videos = video_capture
+    proc = snakemake(work, "--until", "convert")
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 0, out[-4000:]
+    assert set(re.findall(r"^(?:local)?rule (lenslet_frame):", out, flags=re.M)) \
+        == {"lenslet_frame"}
+    res = work / "results" / NAME
+    assert not (res / "reg_a").exists()  # --until convert stopped there
+    for shot, (path, fmt) in videos.items():
+        frame = read_image(res / "lenslet" / f"{shot}.png")
+        assert frame.dtype == np.uint16 and frame.shape == (fmt.height, fmt.width, 3)
+        # the chosen frame, as `plenocal convert` makes it of a frame
+        assert np.array_equal(frame, lenslet_frame(read_frame(path, fmt, VIDEO_FRAMES[shot]),
+                                                   10))
+        # ... which is the PNG's content (10-bit YUV 4:2:0 of it), not another frame
+        png = read_image(tiny_complete_run / "data" / "tiny" / "lenslet" / f"{shot}.png")
+        diff = np.abs(frame / 257.0 - png).mean()  # 1.1-1.5 (the wrong frames: 50-55)
+        assert diff < 5.0, (shot, diff)
+        assert not (work / "data" / NAME / "lenslet" / f"{shot}.png").exists()
+        assert (res / "logs" / "lenslet_frame" / f"{shot}.log").is_file()
+        # converted with 16 significant bits (convert.bit_depth 8 is the PNGs')
+        views = res / "views" / shot
+        assert json.loads((views / "disparity.json").read_text())["bit_depth"] == 16
+        assert (views / "views.json").is_file()
+        assert all((views / f"{r}_{c}.png").is_file() for r in range(3) for c in range(3))
+        # its central view is the PNG's (the tiny run's conversion of the same image)
+        centre = read_image(views / "1_1.png").astype(float)
+        ref = read_image(tiny_complete_run / "results" / "tiny" / "views" / shot / "1_1.png")
+        assert centre.shape == ref.shape
+        diff = np.abs(centre - ref).mean()  # 0.7-0.8 (from the wrong frames: 47)
+        assert diff < 3.0, (shot, diff)
+    png_shot = res / "views" / "x00_y00" / "disparity.json"
+    assert json.loads(png_shot.read_text())["bit_depth"] == 8
+    # the converter's set-up was decided on a frame, read with 16 bits too
+    setup = json.loads((res / "views" / "convert_setup.json").read_text())
+    assert setup["decided_on"] == f"results/{NAME}/lenslet/x01_y01.png"
+
+
+def test_video_settings_are_checked_before_any_job(video_capture, tmp_path: Path):
+    """One case through the workflow (the others: tests/test_lenslet_folder.py)."""
+    work, _ = video_capture
+    dest = workflow_copy(tmp_path / "w")
+    shutil.copytree(work / "data", dest / "data")
+    cfg = yaml.safe_load((work / "config.yaml").read_text())
+    cfg["datasets"][NAME]["video"]["frame"]["x01_y01"] = 3
+    (dest / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    proc = snakemake(dest, "-n")
+    out = proc.stdout + proc.stderr
+    assert proc.returncode != 0 and not (dest / "results").exists()
+    assert (f"datasets.{NAME}.video.frame.x01_y01 = 3: " in out
+            and "holds 3 frames (0..2): give an index below 3" in out), out[-2000:]

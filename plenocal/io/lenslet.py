@@ -1,0 +1,231 @@
+"""The lenslet folder of a real capture, ``data/<dataset>/lenslet/``: its shots, each a
+lenslet image or a raw YUV 4:2:0 recording with the frame to calibrate on.
+
+A shot is ``<shot>.png`` (``x<col>_y<row>.png``, ``hand<k>.png``: the image the converter
+reads) or ``<shot>[_<suffix>].yuv``, a recording of the camera (``x00_y00.yuv``,
+``x00_y00_3976x2956_30fps_10bit.yuv``): its frame ``datasets.<d>.video.frame`` (one index
+for every recording, or one per shot) is extracted by rule ``lenslet_frame`` into
+``results/<d>/lenslet/<shot>.png``, the 16-bit RGB image that ``plenocal convert`` makes
+of a frame (:func:`plenocal.convert.video.lenslet_frame`), and converted with 16
+significant bits. The frame's size and bit depth come from the file's name (MPEG style,
+:func:`plenocal.io.yuv.parse_name`) or from ``video.size`` / ``video.bit_depth``; its
+colour from ``video.matrix`` / ``video.range`` (the command line's defaults).
+
+:func:`scan_lenslet_folder` reads the folder and checks it before any job (file names,
+one file a shot, the recordings' sizes, the frame index, the frame's size against the
+datasheet's sensor), stat only: a :class:`CaptureError` names the file, the config key
+and the remedy.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from plenocal import names
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from plenocal.io.yuv import YuvFormat
+
+# plenocal.io.yuv (numpy, cv2) is imported where a recording is read: the workflow scans
+# a capture of PNGs when it parses its rules, and imports neither for it (issue 15: the
+# no-op's time)
+
+#: a recording's name: the shot's, then ``_`` and anything (the MPEG-style size, rate and
+#: bit depth), ``.yuv``
+_VIDEO_NAME = re.compile(rf"({names.SHOT_PATTERN})(?:_(.*))?\.yuv", re.DOTALL)
+_SIZE = re.compile(r"([1-9][0-9]*)x([1-9][0-9]*)")
+
+
+class CaptureError(ValueError):
+    """A real capture's lenslet folder or video settings that the workflow cannot read
+    (the file, the key and the remedy in the message)."""
+
+
+@dataclass(frozen=True)
+class VideoShot:
+    """A shot given as a raw YUV recording: the frame to calibrate on and how to read it."""
+
+    path: Path
+    fmt: YuvFormat
+    frame: int
+    frames: int  # in the file
+    matrix: str
+    range: str
+
+    def params(self) -> dict:
+        """What rule ``lenslet_frame`` reads (its params: a change reruns the extraction)."""
+        return {"frame": self.frame, "size": [self.fmt.width, self.fmt.height],
+                "bit_depth": self.fmt.bits, "matrix": self.matrix, "range": self.range}
+
+
+def video_shot_from_params(path: str | Path, params: dict) -> VideoShot:
+    """The :class:`VideoShot` of :meth:`VideoShot.params` (rule ``lenslet_frame``)."""
+    from plenocal.io.yuv import YuvFormat  # noqa: PLC0415 - see the imports
+    fmt = YuvFormat(int(params["size"][0]), int(params["size"][1]), int(params["bit_depth"]))
+    return VideoShot(Path(path), fmt, int(params["frame"]), -1, str(params["matrix"]),
+                     str(params["range"]))
+
+
+def extract_frame(shot: VideoShot) -> np.ndarray:
+    """The shot's frame as the 16-bit RGB lenslet image the converter reads
+    (:func:`plenocal.convert.video.lenslet_frame`; convert it with 16 significant bits)."""
+    from plenocal.convert.video import lenslet_frame  # noqa: PLC0415 - see the imports
+    from plenocal.io.yuv import read_frame  # noqa: PLC0415
+
+    planes = read_frame(shot.path, shot.fmt, shot.frame)
+    return lenslet_frame(planes, shot.fmt.bits, shot.matrix, shot.range)
+
+
+def _bad_names(entries: list[Path]) -> list[str]:
+    bad = []
+    for p in entries:
+        if p.is_dir():
+            bad.append(f"{p.name}/ (a folder)")
+        elif p.suffix == ".png":
+            if not names.is_shot(p.stem):
+                bad.append(p.name)
+        elif p.suffix == ".yuv":
+            if not _VIDEO_NAME.fullmatch(p.name):
+                bad.append(p.name)
+        elif p.suffix.lower() in (".png", ".yuv"):
+            bad.append(f"{p.name} (rename it to {p.suffix.lower()})")
+        else:
+            bad.append(p.name)
+    return bad
+
+
+def _video_format(path: Path, video: dict, key: str) -> YuvFormat:
+    """The recording's format: its name's size and bit depth, or the config's (which must
+    agree with the name where both give one)."""
+    from plenocal.io.yuv import YuvError, YuvFormat, parse_name  # noqa: PLC0415
+    named_size, named_bits = parse_name(path)
+    size = None
+    if video.get("size") is not None:
+        m = _SIZE.fullmatch(str(video["size"]))
+        if not m:
+            raise CaptureError(f"config: {key}.size = {video['size']!r}: write it as WxH in "
+                               "pixels, e.g. 3976x2956")
+        size = (int(m.group(1)), int(m.group(2)))
+    bits = video.get("bit_depth")
+    for what, named, given, sub in (("size", named_size, size, "size"),
+                                    ("bit depth", named_bits, bits, "bit_depth")):
+        if named is not None and given is not None and named != given:
+            shown = f"{named[0]}x{named[1]}" if sub == "size" else f"{named} bits"
+            raise CaptureError(
+                f"{path}: its name gives the {what} {shown}, but {key}.{sub} = "
+                f"{video[sub]!r}: correct or remove {key}.{sub} (it is for recordings whose "
+                "name does not give it), or rename the file")
+    size, bits = size or named_size, bits or named_bits
+    missing = [f"{what} ({key}.{sub}: {example})" for what, v, sub, example in
+               (("frame size", size, "size", "WxH, e.g. 3976x2956"),
+                ("bit depth", bits, "bit_depth", "8 or 10")) if v is None]
+    if missing:
+        raise CaptureError(
+            f"{path}: the {' and the '.join(missing)} of this raw YUV 4:2:0 recording "
+            f"{'are' if len(missing) > 1 else 'is'} neither in its name nor in config.yaml: "
+            "give it there, or name the file MPEG-style, e.g. x00_y00_3976x2956_30fps_10bit.yuv")
+    try:
+        return YuvFormat(size[0], size[1], int(bits))  # type: ignore[index]
+    except YuvError as exc:
+        raise CaptureError(f"{path}: {exc}") from None
+
+
+def _frame_index(shot: str, path: Path, video: dict, key: str, shots: list[str]) -> int:
+    frame = video["frame"]
+    if isinstance(frame, dict):
+        if shot not in frame:
+            raise CaptureError(
+                f"config: {key}.frame names no frame for {shot} ({path.name}): give one for "
+                f"every shot given as a video ({', '.join(shots)}), or one number for all")
+        return int(frame[shot])
+    return int(frame)
+
+
+def scan_lenslet_folder(folder: str | Path, dataset: str, video: dict | None,
+                        sensor_size: tuple[int, int] | None = None
+                        ) -> dict[str, Path | VideoShot]:
+    """{shot: its PNG, or its :class:`VideoShot`} of a real capture's ``lenslet/``, in
+    name order, checked as the module docstring says. ``video``: the dataset's
+    ``video`` block (``None``: none in config.yaml); ``sensor_size``: (width, height) of
+    camera.yaml's sensor, which every recording's frame must have."""
+    folder = Path(folder)
+    key = f"datasets.{dataset}.video"
+    if not folder.is_dir():
+        raise CaptureError(
+            f"dataset {dataset!r}: {folder}/ does not exist; put the lenslet images "
+            "there (x00_y00.png ... and hand00.png ..., or recordings x00_y00_<W>x<H>_"
+            "<b>bit.yuv ...) or give the dataset a 'simulate' block")
+    entries = sorted(p for p in folder.iterdir() if not p.name.startswith("."))
+    bad = _bad_names(entries)
+    if bad:
+        raise CaptureError(
+            f"dataset {dataset!r}: {folder}/ may hold only lenslet images named "
+            "x<col>_y<row>.png or hand<k>.png (two-digit numbers, lower-case .png) and "
+            "recordings named as a shot, optionally followed by _ and the size and bit "
+            f"depth (x00_y00_3976x2956_10bit.yuv); move or rename {', '.join(bad)}")
+    files: dict[str, list[Path]] = {}
+    for p in entries:
+        shot = p.stem if p.suffix == ".png" else _VIDEO_NAME.fullmatch(p.name).group(1)
+        files.setdefault(shot, []).append(p)
+    twice = {s: ps for s, ps in files.items() if len(ps) > 1}
+    if twice:
+        s, ps = next(iter(twice.items()))
+        raise CaptureError(
+            f"dataset {dataset!r}: {' and '.join(p.name for p in ps)} in {folder}/ are "
+            f"{'both' if len(ps) == 2 else 'all'} the shot {s}: keep one (a PNG is converted "
+            f"as it is; from a .yuv recording the frame {key}.frame is extracted into "
+            f"results/{dataset}/lenslet/{s}.png)"
+            + (f"; also {', '.join(sorted(twice)[1:])}" if len(twice) > 1 else ""))
+    if not files:
+        raise CaptureError(f"dataset {dataset!r}: {folder}/ holds no lenslet image")
+    videos = [s for s, (p,) in files.items() if p.suffix == ".yuv"]
+    if videos and video is None:
+        raise CaptureError(
+            f"dataset {dataset!r}: {files[videos[0]][0]} is a video recording: give the frame "
+            f"to calibrate on in config.yaml, {key}: {{frame: K}} (K from 0; README, "
+            "'Bringing a real capture')")
+    if video is not None and not videos:
+        raise CaptureError(
+            f"config: {key} is set, but {folder}/ holds no .yuv recording: remove {key}, or "
+            "put the recordings there (<shot>_<W>x<H>_<b>bit.yuv)")
+    if video is not None and isinstance(video.get("frame"), dict):
+        extra = sorted(set(video["frame"]) - set(videos))
+        if extra:
+            raise CaptureError(
+                f"config: {key}.frame names {', '.join(extra)}, which {folder}/ holds no "
+                f".yuv recording of (recordings: {', '.join(videos)}): remove or rename "
+                "the key")
+    out: dict[str, Path | VideoShot] = {}
+    for shot, (path,) in files.items():
+        if path.suffix == ".png":
+            out[shot] = path
+            continue
+        assert video is not None
+        fmt = _video_format(path, video, key)
+        nbytes = path.stat().st_size
+        if nbytes == 0 or nbytes % fmt.frame_bytes:
+            raise CaptureError(
+                f"{path}: {nbytes} bytes is not a whole number of {fmt.width}x{fmt.height} "
+                f"{fmt.bits}-bit YUV 4:2:0 frames ({fmt.frame_bytes} bytes each, "
+                f"{nbytes / fmt.frame_bytes:.3f} frames): a wrong size or bit depth (in the "
+                f"name, or {key}.size / bit_depth), or a recording cut short")
+        count = nbytes // fmt.frame_bytes
+        frame = _frame_index(shot, path, video, key, videos)
+        if frame >= count:
+            sub = f"frame.{shot}" if isinstance(video["frame"], dict) else "frame"
+            raise CaptureError(
+                f"config: {key}.{sub} = {frame}: {path} holds {count} frame"
+                f"{'s' if count != 1 else ''} (0..{count - 1}): give an index below {count}")
+        if sensor_size is not None and (fmt.width, fmt.height) != tuple(sensor_size):
+            raise CaptureError(
+                f"{path}: its frames are {fmt.width}x{fmt.height} pixels but camera.yaml "
+                f"says the sensor is {sensor_size[0]}x{sensor_size[1]}: the frames must be "
+                "the full, uncropped sensor readout (or correct the size in the name, "
+                f"{key}.size or camera.yaml)")
+        out[shot] = VideoShot(path, fmt, frame, count, video["matrix"], video["range"])
+    return dict(sorted(out.items()))

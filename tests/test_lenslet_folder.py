@@ -1,0 +1,181 @@
+"""A real capture's lenslet folder with shots given as raw YUV recordings
+(plenocal.io.lenslet, config ``datasets.<d>.video``): what is read, and the errors, each
+naming the file, the key and the remedy. Fast: tiny files, no workflow (the workflow's
+run: tests/test_workflow_real.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from plenocal.config import ConfigError, validate_config
+from plenocal.convert.video import lenslet_frame
+from plenocal.io.lenslet import (
+    CaptureError,
+    VideoShot,
+    extract_frame,
+    scan_lenslet_folder,
+    video_shot_from_params,
+)
+from plenocal.io.yuv import DEFAULT_MATRIX, DEFAULT_RANGE, YuvFormat, read_frame
+
+W, H = 24, 16  # two digits each: MPEG-style names
+FMT = YuvFormat(W, H, 10)
+
+
+def video_block(**video) -> dict:
+    """The dataset's video block as the workflow gets it (validated, defaults filled)."""
+    cfg = validate_config({"datasets": {"d": {"views": 3, "video": video}}})
+    return cfg["datasets"]["d"]["video"]
+
+
+def recording(path: Path, frames: int = 3, fmt: YuvFormat = FMT, extra: int = 0) -> Path:
+    rng = np.random.default_rng(0)
+    data = rng.integers(64, 940, size=frames * fmt.frame_samples).astype(fmt.dtype)
+    path.write_bytes(data.tobytes() + b"\0" * extra)
+    return path
+
+
+def folder(tmp_path: Path, *names: str) -> Path:
+    d = tmp_path / "lenslet"
+    d.mkdir()
+    for name in names:
+        if name.endswith(".yuv"):
+            recording(d / name)
+        else:
+            (d / name).write_bytes(b"")
+    return d
+
+
+def scan(d: Path, video: dict | None, sensor=None):
+    return scan_lenslet_folder(d, "d", video, sensor)
+
+
+def test_pngs_and_recordings(tmp_path: Path):
+    d = folder(tmp_path, "x00_y00.png", f"x01_y00_{W}x{H}_30fps_10bit.yuv", "hand00.yuv",
+               ".DS_Store")
+    shots = scan(d, video_block(frame=2, size=f"{W}x{H}", bit_depth=10), sensor=(W, H))
+    assert list(shots) == ["hand00", "x00_y00", "x01_y00"]
+    assert shots["x00_y00"] == d / "x00_y00.png"
+    v = shots["x01_y00"]
+    assert isinstance(v, VideoShot) and v.fmt == FMT and v.frame == 2 and v.frames == 3
+    # the command line's colour defaults
+    assert (v.matrix, v.range) == (DEFAULT_MATRIX, DEFAULT_RANGE)
+    # one frame per shot
+    shots = scan(d, video_block(frame={"x01_y00": 0, "hand00": 1}, size=f"{W}x{H}",
+                                bit_depth=10))
+    assert shots["x01_y00"].frame == 0 and shots["hand00"].frame == 1
+    assert shots["hand00"].fmt == FMT
+
+
+def test_extracted_frame_is_the_converters(tmp_path: Path):
+    path = recording(tmp_path / f"x00_y00_{W}x{H}_10bit.yuv")
+    shot = scan_lenslet_folder(tmp_path, "d", video_block(frame=1, matrix="bt601",
+                                                          range="full"))["x00_y00"]
+    again = video_shot_from_params(path, shot.params())
+    image = extract_frame(again)
+    assert image.dtype == np.uint16 and image.shape == (H, W, 3)
+    assert np.array_equal(image, lenslet_frame(read_frame(path, FMT, 1), 10, "bt601", "full"))
+    assert not np.array_equal(image, extract_frame(video_shot_from_params(
+        path, {**shot.params(), "frame": 0})))
+
+
+@pytest.mark.parametrize("names, video, needles", [
+    # a recording, and no frame to calibrate on
+    (["x00_y00.yuv"], None, ["lenslet/x00_y00.yuv is a video recording",
+                             "datasets.d.video: {frame: K}"]),
+    # a video block, and no recording
+    (["x00_y00.png"], {"frame": 0}, ["datasets.d.video is set", "no .yuv recording",
+                                     "remove datasets.d.video"]),
+    # both files of one shot
+    (["x00_y00.png", f"x00_y00_{W}x{H}_10bit.yuv"], {"frame": 0},
+     [f"x00_y00.png and x00_y00_{W}x{H}_10bit.yuv", "the shot x00_y00: keep one"]),
+    (["x00_y00.yuv", f"x00_y00_{W}x{H}_10bit.yuv"], {"frame": 0, "size": f"{W}x{H}"},
+     ["are both the shot x00_y00: keep one"]),
+    # the frame index beyond the recording
+    ([f"x00_y00_{W}x{H}_10bit.yuv"], {"frame": 3},
+     [f"datasets.d.video.frame = 3: <dir>/x00_y00_{W}x{H}_10bit.yuv holds 3 frames "
+      "(0..2): give an index below 3"]),
+    (["x00_y00.yuv", "x01_y00.yuv"], {"frame": {"x00_y00": 0, "x01_y00": 5},
+                                     "size": f"{W}x{H}", "bit_depth": 10},
+     ["datasets.d.video.frame.x01_y00 = 5", "holds 3 frames"]),
+    # a per-shot mapping missing a recording, or naming a shot that has none
+    (["x00_y00.yuv", "x01_y00.yuv"], {"frame": {"x00_y00": 0}, "size": f"{W}x{H}",
+                                     "bit_depth": 10},
+     ["datasets.d.video.frame names no frame for x01_y00 (x01_y00.yuv)"]),
+    (["x00_y00.yuv"], {"frame": {"x00_y00": 0, "hand03": 1}, "size": f"{W}x{H}",
+                       "bit_depth": 10},
+     ["datasets.d.video.frame names hand03", "remove or rename the key"]),
+    # the format: nowhere, or the name and the config disagreeing
+    (["x00_y00.yuv"], {"frame": 0}, ["x00_y00.yuv: the frame size (datasets.d.video.size",
+                                     "and the bit depth (datasets.d.video.bit_depth",
+                                     "x00_y00_3976x2956_30fps_10bit.yuv"]),
+    ([f"x00_y00_{W}x{H}_10bit.yuv"], {"frame": 0, "size": "32x8"},
+     [f"its name gives the size {W}x{H}, but datasets.d.video.size = '32x8'"]),
+    ([f"x00_y00_{W}x{H}_10bit.yuv"], {"frame": 0, "bit_depth": 8},
+     ["its name gives the bit depth 10 bits, but datasets.d.video.bit_depth = 8"]),
+    # not a whole number of frames of the format
+    ([f"x00_y00_{W}x18_8bit.yuv"], {"frame": 0},
+     ["is not a whole number of 24x18 8-bit YUV 4:2:0 frames", "datasets.d.video.size"]),
+    ([f"x00_y00_{W}x{2 * H}_10bit.yuv"], {"frame": 0},
+     ["3456 bytes is not a whole number of 24x32 10-bit", "1.500 frames"]),
+    # names
+    (["x00_y00.YUV", "x00_y00-24x16.yuv", "cam1.yuv", "x00_y00.png.yuv"], {"frame": 0},
+     ["x00_y00.YUV (rename it to .yuv)", "x00_y00-24x16.yuv", "cam1.yuv",
+      "x00_y00.png.yuv", "x00_y00_3976x2956_10bit.yuv"]),
+])
+def test_errors_name_the_file_the_key_and_the_remedy(tmp_path, names, video, needles):
+    d = folder(tmp_path, *names)
+    with pytest.raises(CaptureError) as err:
+        scan(d, None if video is None else video_block(**video))
+    for needle in needles:
+        assert needle.replace("<dir>", str(d)) in str(err.value), str(err.value)
+
+
+def test_frames_of_another_size_than_the_sensor(tmp_path: Path):
+    d = folder(tmp_path, f"x00_y00_{W}x{H}_10bit.yuv")
+    assert scan(d, video_block(frame=0), sensor=(W, H))
+    with pytest.raises(CaptureError, match=r"frames are 24x16 pixels but camera.yaml says "
+                                           r"the sensor is 2048x1536"):
+        scan(d, video_block(frame=0), sensor=(2048, 1536))
+
+
+def test_a_cut_recording(tmp_path: Path):
+    d = tmp_path / "lenslet"
+    d.mkdir()
+    recording(d / f"x00_y00_{W}x{H}_10bit.yuv", extra=10)
+    with pytest.raises(CaptureError, match="a recording cut short"):
+        scan(d, video_block(frame=0))
+    (d / f"x00_y00_{W}x{H}_10bit.yuv").write_bytes(b"")
+    with pytest.raises(CaptureError, match="0 bytes is not a whole number"):
+        scan(d, video_block(frame=0))
+
+
+@pytest.mark.parametrize("video, needle", [
+    ({"frame": -1}, "datasets.d.video.frame = -1: must be >= 0"),
+    ({"frame": 1.5}, "datasets.d.video.frame = 1.5: must be of type"),
+    ({"frame": {"cam1": 2}}, "datasets.d.video.frame"),
+    ({"frame": {"x00_y00": -2}}, "datasets.d.video.frame.x00_y00 = -2: must be >= 0"),
+    ({}, "'frame' is a required property"),
+    ({"frame": 0, "size": "1280"}, "datasets.d.video.size = '1280'"),
+    ({"frame": 0, "bit_depth": 7}, "datasets.d.video.bit_depth = 7: must be >= 8"),
+    ({"frame": 0, "matrix": "rec709"}, "must be one of bt709, bt601, bt2020"),
+    ({"frame": 0, "frames": 2}, "unknown key(s) frames (allowed: bit_depth, frame, matrix"),
+])
+def test_schema_of_the_video_block(video, needle):
+    with pytest.raises(ConfigError) as err:
+        validate_config({"datasets": {"d": {"views": 3, "video": video}}})
+    assert needle in str(err.value), str(err.value)
+
+
+def test_no_video_block_for_a_synthetic_dataset():
+    with pytest.raises(ConfigError, match=r"datasets.s.video = '\{...\}': only a real "
+                                          r"capture's shots are given as videos"):
+        validate_config({"datasets": {"s": {"simulate": {}, "video": {"frame": 0}}}})
+
+
+def test_colour_defaults_are_the_command_lines():
+    video = video_block(frame=0)
+    assert (video["matrix"], video["range"]) == (DEFAULT_MATRIX, DEFAULT_RANGE)
