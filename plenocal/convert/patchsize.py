@@ -57,7 +57,6 @@ falling off outside, so that views are rendered from the lenses that see sharp.
 from __future__ import annotations
 
 import math
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import cv2
@@ -67,6 +66,7 @@ from scipy.spatial import cKDTree
 from plenocal.config import stage_defaults
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.exact import remap
+from plenocal.convert.threads import opencv_threads, run_all
 from plenocal.grid import MicrolensGrid
 from plenocal.viewgeom import mla_sign
 
@@ -355,13 +355,8 @@ def match_scores(gray: np.ndarray, grid: MicrolensGrid, candidates: np.ndarray,
         with np.errstate(invalid="ignore", divide="ignore"):
             scores[:, ci] = np.where(count > 0, total / np.maximum(count, 1), np.nan)
 
-    if threads > 1 and len(candidates) > 1:
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            for _ in pool.map(score, range(len(candidates))):  # re-raises an error
-                pass
-    else:
-        for ci in range(len(candidates)):
-            score(ci)
+    with opencv_threads(1 if threads > 1 else None):
+        run_all(score, list(range(len(candidates))), threads)
     return scores, pairs, texture
 
 

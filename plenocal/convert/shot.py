@@ -29,7 +29,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -61,6 +61,7 @@ from plenocal.convert.render import (
     soften_unreliable,
 )
 from plenocal.convert.safediameter import SafeDiameter, measure_safe_diameter
+from plenocal.convert.threads import Inline, opencv_threads, run_all
 from plenocal.convert.vignetting import lens_type_profiles
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_image
@@ -293,7 +294,7 @@ class ShotConversion:
         given = analysis is not None
         if not given or (safe_diameter is None and st.safe_diameter == "auto"):
             self.gray  # noqa: B018  (made once, here, before the threads read it)
-        pool = ThreadPoolExecutor(max_workers=threads - 1) if threads > 1 else _Inline()
+        pool = ThreadPoolExecutor(max_workers=threads - 1) if threads > 1 else Inline()
         try:
             safe_job = pool.submit(self._safe_diameter, safe_diameter, source)
             if analysis is None:
@@ -422,7 +423,7 @@ class ShotConversion:
         ``pool`` (an executor) beside the patch sizes."""
         st = self.settings
         gray = self.gray
-        pool = pool or _Inline()
+        pool = pool or Inline()
         profiles = pool.submit(lens_type_profiles, gray, self.grid) if st.devignette else None
         mla, scores, check = st.mla, None, None
         if st.mla == "auto":
@@ -490,8 +491,9 @@ class ShotConversion:
             out[name] = np.repeat(v, 3, axis=2) if v.shape[2] == 1 else v
 
         bands = [slice(y, min(y + PLAN_ROWS, H)) for y in range(0, H, PLAN_ROWS)]
-        _run(band, bands, threads)
-        _run(finish, list(out), threads)
+        with opencv_threads(1 if threads > 1 else None):
+            run_all(band, bands, threads)
+            run_all(finish, list(out), threads)
         return out
 
     def view(self, r: int, c: int) -> np.ndarray:
@@ -557,40 +559,6 @@ def _round_to(v: np.ndarray, top: float, dtype: type) -> np.ndarray:
     np.rint(v, out=v)
     np.clip(v, 0.0, top, out=v)
     return v.astype(dtype)
-
-
-class _Inline:
-    """An executor that runs each job at once, in the caller's thread (one thread)."""
-
-    def submit(self, fn, *args, **kwargs) -> Future:
-        job: Future = Future()
-        try:
-            job.set_result(fn(*args, **kwargs))
-        except BaseException as exc:  # noqa: BLE001  (handed on by result())
-            job.set_exception(exc)
-        return job
-
-    def shutdown(self) -> None:
-        pass
-
-
-def _run(work, items: list, threads: int) -> None:
-    """``work(item)`` for every item, on ``threads`` threads (in order on one).
-
-    The first item runs alone: OpenCV fills its interpolation tables on first use without
-    a lock, and two threads filling them at once left some entries off by one for the
-    rest of the process (views that differed by 1-2 levels at scattered pixels from run to
-    run on Boys2 with two threads; the same bytes once the first item ran alone)."""
-    if not items:
-        return
-    work(items[0])
-    if threads <= 1 or len(items) <= 2:
-        for item in items[1:]:
-            work(item)
-        return
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        for _ in pool.map(work, items[1:]):  # re-raises a worker's error
-            pass
 
 
 def _label(img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.4) -> None:
