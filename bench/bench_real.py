@@ -393,9 +393,9 @@ def speed_main(args: argparse.Namespace, frames: list[str]) -> None:
     out.say("Targets (issue 35): ours / TLCT <= 1.0 (aim 0.5); ours at most 1 GB peak on a "
             "31-MP frame.")
     out.say("")
-    out.say("| frame | MP | MLA | TLCT s | ours PNG s | ours YUV s | PNG / TLCT | YUV / TLCT "
-            "| TLCT GB | ours PNG GB | ours YUV GB | view TLCT | view ours PNG / YUV |")
-    out.say("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    out.head("frame", "MP", "MLA", "TLCT s", "ours PNG s", "ours YUV s", "PNG / TLCT",
+             "YUV / TLCT", "TLCT GB", "ours PNG GB", "ours YUV GB", "view TLCT",
+             "view ours PNG / YUV")
     rows = []
     for name in frames:
         with tempfile.TemporaryDirectory(prefix=f"bench_tlct_{name}_") as tmp:
@@ -485,9 +485,9 @@ def main() -> None:
     if compare is None:
         out.say("(plenocal.convert.compare not present: no comparison with the reference)")
     out.say("")
-    out.say("| frame | size | MLA | check s | prepare s | views s | total s | s / 4 MP | view "
-            "| ref. view | confident | grid drift max / rms px | refined | SSIM | sharpness |")
-    out.say("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    out.head("frame", "size", "MLA", "check s", "prepare s", "views s", "total s", "s / 4 MP",
+             "view", "ref. view", "confident", "grid drift max / rms px", "refined", "SSIM",
+             "sharpness")
     rows = []
     for name in frames:
         r = bench_frame(name, args.views, args.grid, pictures, compare, args.mla, args.grid_ab)

@@ -18,6 +18,11 @@ class Lines(list):
         print(text, flush=True)
         self.append(text)
 
+    def head(self, *columns: str) -> None:
+        """A Markdown table's header and its left-aligned separator row."""
+        self.say("| " + " | ".join(columns) + " |")
+        self.say("|" + "---|" * len(columns))
+
 
 def update_sections(path: str | Path, sections: dict[str, list[str]]) -> None:
     """Replace (or append) the ``## heading`` sections of ``path`` with ``sections``."""
