@@ -73,6 +73,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocal.artifacts.rig import RigB
+from plenocal.calib.groups import Groups
 from plenocal.calib.reg_a import colmap as cm
 from plenocal.calib.reg_a import viewdb
 from plenocal.camera import PinholeCamera, invert_pose, k_to_colmap, pose, rotation_angle_deg
@@ -350,23 +351,13 @@ def shot_groups(rec, model: RigModel) -> list[list[str]]:
     in two): then no point fixes where one group lies relative to another. Each group
     sorted, the groups by their first shot."""
     shot_of_frame = {fid: shot for shot, fid in model.frame_of_shot.items()}
-    parent = {s: s for s in model.frame_of_shot}
-
-    def root(s: str) -> str:
-        while parent[s] != s:
-            parent[s] = parent[parent[s]]
-            s = parent[s]
-        return s
-
+    groups = Groups(model.frame_of_shot)
     for pid in rec.point3D_ids():
-        frames = {rec.image(el.image_id).frame_id for el in rec.point3D(pid).track.elements}
-        first, *rest = sorted(root(shot_of_frame[f]) for f in frames)
-        for r in rest:
-            parent[root(r)] = root(first)
-    groups: dict[str, list[str]] = {}
-    for s in sorted(parent):
-        groups.setdefault(root(s), []).append(s)
-    return sorted(groups.values())
+        first, *rest = sorted({shot_of_frame[rec.image(el.image_id).frame_id]
+                               for el in rec.point3D(pid).track.elements})
+        for other in rest:
+            groups.join(other, first)
+    return groups.groups()
 
 
 def place_groups(rec, model: RigModel, eq6_poses: Mapping[str, np.ndarray],

@@ -43,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from plenocal.calib.groups import Groups
 from plenocal.calib.reg_a import colmap as cm
 from plenocal.camera import PinholeCamera, k_to_colmap
 
@@ -83,18 +84,11 @@ def nearest_shots(centres: Mapping[str, np.ndarray], k: int) -> set[tuple[str, s
         others = sorted((dist[tuple(sorted((a, b)))], b) for b in shots if b != a)
         for _, b in others[:k]:
             out.add(tuple(sorted((a, b))))
-    group = {s: s for s in shots}
-
-    def root(s: str) -> str:
-        while group[s] != s:
-            s = group[s]
-        return s
-
+    groups = Groups(shots)
     for a, b in out:
-        group[root(a)] = root(b)
+        groups.join(a, b)
     for (a, b), _ in sorted(dist.items(), key=lambda kv: (kv[1], kv[0])):
-        if root(a) != root(b):
-            group[root(a)] = root(b)
+        if groups.join(a, b):
             out.add((a, b))
     return out
 
