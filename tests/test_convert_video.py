@@ -231,6 +231,32 @@ def test_identical_frames_give_identical_views(tmp_path):
 
 
 @needs_real
+@pytest.mark.parametrize("temporal", ["off", "hold"])
+def test_the_decided_frame_is_not_measured_again(temporal, monkeypatch):
+    """The frame the set-up is decided on takes the decision's measurements (one patch-size
+    analysis of the first frame, not two): its views are those of a converter given the
+    same set-up, which measures the frame itself."""
+    import plenocal.convert.shot as shot_mod
+    import plenocal.convert.video as video_mod
+
+    a, _, calib = _frames()
+    frame = lenslet_frame(rgb_to_yuv(a.astype(np.float32) / 255.0, 10), 10)
+    st, vs = ConvertSettings(), VideoSettings(temporal=temporal)
+    deciding = VideoConverter(calib, 5, st, vs)
+    deciding.decide(frame, "clip[0]")
+    given = VideoConverter(calib, 5, st, vs, setup=deciding.setup)
+    want = given.convert(frame, "clip[0]")
+    calls = []
+    for mod in (video_mod, shot_mod):
+        monkeypatch.setattr(mod, "estimate_patch_size", lambda *a, **k: calls.append(1))
+    got = deciding.convert(frame, "clip[0]")
+    assert not calls
+    for r, c in ((2, 2), (0, 4)):
+        assert np.array_equal(got.view(r, c), want.view(r, c))
+    np.testing.assert_array_equal(got.used_patch, want.used_patch)
+
+
+@needs_real
 def test_hold_steadies_patch_sizes_on_static_content():
     """Frames 0 and 150 of Fujita2's top left (books, shelf: static but for coding noise;
     bench/bench_video_flicker.py measures the same on larger crops): with the hold, fewer

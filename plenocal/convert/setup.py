@@ -41,7 +41,7 @@ from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_json, write_json
 from plenocal.io.raytrix import RayCalib
 
-FORMAT_VERSION = 2  # 2: safe_diameter_px, q_px and the safe-diameter measure
+FORMAT_VERSION = 3  # 2: safe_diameter_px, q_px and the safe-diameter measure; 3: pitch_px
 LATTICE_DIGITS = 8
 log = logging.getLogger("plenocal.convert")
 
@@ -68,6 +68,8 @@ class ConverterSetup:
     safe_diameter_px: float | None = None
     q_px: float | None = None
     safe_diameter_measure: dict | None = None
+    # the refined lattice's micro-image pitch (its grid's diameter; None: not refined)
+    pitch_px: float | None = None
 
     def settings(self, base: ConvertSettings) -> ConvertSettings:
         """``base`` with the decided MLA kind and tile (nothing left ``auto``)."""
@@ -75,13 +77,10 @@ class ConverterSetup:
 
     def grid(self, calib: RayCalib, width: int, height: int) -> MicrolensGrid:
         """The grid every shot is converted with: the file's, or the refined lattice."""
-        grid = build_grid(calib, width, height)
         if not self.refined:
-            return grid
+            return build_grid(calib, width, height)
         assert self.lattice is not None
-        origin, A = self.lattice
-        return MicrolensGrid(grid.calib, width, height,
-                             lattice=(np.array(origin, dtype=float), np.array(A, dtype=float)))
+        return lattice_grid(calib, width, height, self.lattice, self.pitch_px)
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
@@ -108,11 +107,27 @@ class ConverterSetup:
                    safe_diameter_px=_float_or_none(d["safe_diameter_px"]),
                    q_px=_float_or_none(d["q_px"]),
                    safe_diameter_measure=(None if d["safe_diameter_measure"] is None
-                                          else dict(d["safe_diameter_measure"])))
+                                          else dict(d["safe_diameter_measure"])),
+                   pitch_px=_float_or_none(d["pitch_px"]))
 
 
 def _float_or_none(value) -> float | None:
     return None if value is None else float(value)
+
+
+def lattice_grid(calib: RayCalib, width: int, height: int, lattice,
+                 pitch_px: float | None = None) -> MicrolensGrid:
+    """The grid of ``calib`` on a ``width`` x ``height`` image with the lattice
+    ``(origin, A)`` (:attr:`ConverterSetup.lattice`) instead of the file's, and its
+    micro-image pitch ``pitch_px`` as the grid's diameter (None: the file's), as
+    :func:`plenocal.convert.gridcheck.refine_grid` makes it: the views' layout, the lens
+    margins and the file's safe diameter follow the pitch on the sensor."""
+    base = build_grid(calib, width, height).calib
+    if pitch_px is not None:
+        base = dataclasses.replace(base, diameter=float(pitch_px))
+    origin, A = lattice
+    return MicrolensGrid(base, width, height,
+                         lattice=(np.array(origin, dtype=float), np.array(A, dtype=float)))
 
 
 def check_and_grid(image: np.ndarray, calib: RayCalib, mode: str
@@ -164,15 +179,18 @@ def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: Con
     error = foreign_grid_error(check, calib.source, source, grid_foreign)
     if error is not None:
         raise ConvertError(error)
-    shot = ShotConversion(image, calib, n_views, settings, source=source, grid=grid)
-    lattice = None
+    lattice = pitch = None
     if check.refined:
         # to LATTICE_DIGITS significant digits (1e-4 px on a 4000-px sensor): the fit's
         # last digits move with the machine's floating-point paths, and every shot is
-        # converted with the lattice as written
+        # converted with the lattice as written - this one too, so that its measurements
+        # are those of any later conversion of the same image with the set-up
         lattice = round_floats((tuple(float(x) for x in grid.origin),
                                 tuple(tuple(float(x) for x in row) for row in grid.A)),
                                LATTICE_DIGITS)
+        pitch = round_floats(float(grid.diameter), LATTICE_DIGITS)
+        grid = lattice_grid(calib, grid.width, grid.height, lattice, pitch)
+    shot = ShotConversion(image, calib, n_views, settings, source=source, grid=grid)
     warnings = [f"{source}: {w}" for w in check.warnings] + shot.warnings
     setup = ConverterSetup(
         mla=shot.mla, tile=int(shot.layout.tile), grid_mode=settings.grid,
@@ -184,7 +202,8 @@ def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: Con
         # rounded as the lattice is (the last digits move with floating-point paths)
         safe_diameter_px=round_floats(float(shot.safe.diameter_px), LATTICE_DIGITS),
         q_px=round_floats(float(shot.layout.q), LATTICE_DIGITS),
-        safe_diameter_measure=round_floats(shot.safe.to_dict(), LATTICE_DIGITS))
+        safe_diameter_measure=round_floats(shot.safe.to_dict(), LATTICE_DIGITS),
+        pitch_px=pitch)
     return setup, shot
 
 

@@ -215,11 +215,19 @@ class VideoConverter:
         self._grid: MicrolensGrid | None = None
         self._previous: PatchSizeResult | None = None
         self.held_share: float | None = None  # share of lenses held in the last frame
+        # the decision's measurements of its frame, (source, analysis): that frame's
+        # conversion takes them instead of measuring the frame again
+        self._decided: tuple[str, ConvertAnalysis] | None = None
 
     def decide(self, image: np.ndarray, source: str) -> ConverterSetup:
-        """Decide the set-up on ``image`` (a :func:`lenslet_frame`)."""
+        """Decide the set-up on ``image`` (a :func:`lenslet_frame`); its measurements
+        (patch sizes, vignetting profiles) serve :meth:`convert` of the frame named
+        ``source``, the same numbers as measured again: the decision measures on the
+        set-up's grid, its kind and its patch settings."""
         kw = {} if self.grid_foreign is None else {"grid_foreign": self.grid_foreign}
-        self.setup, _ = decide_setup(image, self.calib, self.n_views, self.base, source, **kw)
+        self.setup, shot = decide_setup(image, self.calib, self.n_views, self.base, source,
+                                        **kw)
+        self._decided = (source, shot.analysis)
         return self.setup
 
     def convert(self, image: np.ndarray, source: str) -> ShotConversion:
@@ -234,8 +242,14 @@ class VideoConverter:
         st = setup.settings(self.base)
         analysis = None
         self.held_share = None
-        if self.video.temporal == "hold":
-            analysis = self._measure(image, st, source)
+        decided, self._decided = self._decided, None
+        if decided is not None and decided[0] == source and self._previous is None:
+            # the frame the set-up was decided on, converted first: measured already
+            analysis = dataclasses.replace(decided[1], mla_scores=None)
+            if self.video.temporal == "hold":
+                analysis = self._hold(analysis, st)
+        elif self.video.temporal == "hold":
+            analysis = self._hold(self._measure(image, st, source), st)
         shot = ShotConversion(image, self.calib, self.n_views, st, source=source,
                               grid=self._grid, analysis=analysis, check_mla=False,
                               safe_diameter=setup.safe_diameter_px, threads=self.threads)
@@ -244,20 +258,26 @@ class VideoConverter:
 
     def _measure(self, image: np.ndarray, st: ConvertSettings, source: str) -> ConvertAnalysis:
         """What :class:`ShotConversion` measures on a frame with a set-up (the kind is the
-        set-up's), each lens's size held from the previous frame where it still fits."""
+        set-up's)."""
         assert self._grid is not None
         gray = to_gray(to_unit_float(image, 16))
         patch = estimate_patch_size(gray, self._grid, st.patch, mla=st.mla,
                                     threads=self.threads)
         for note in patch.warnings:
             log.warning("%s: %s", source, note)
+        profile, row = lens_type_profiles(gray, self._grid) if st.devignette else (None, None)
+        return ConvertAnalysis(st.mla, None, patch, profile, row)
+
+    def _hold(self, analysis: ConvertAnalysis, st: ConvertSettings) -> ConvertAnalysis:
+        """``analysis`` with each lens's size held from the previous frame where it still
+        fits (:func:`hold_patch_sizes`); the frame becomes the previous one."""
+        assert self._grid is not None
         first = self._previous is None
-        patch, held = hold_patch_sizes(patch, self._previous, self._grid, st,
+        patch, held = hold_patch_sizes(analysis.patch, self._previous, self._grid, st,
                                        self.video.hold_margin)
         self.held_share = None if first else float(held.mean())
         self._previous = patch
-        profile, row = lens_type_profiles(gray, self._grid) if st.devignette else (None, None)
-        return ConvertAnalysis(st.mla, None, patch, profile, row)
+        return dataclasses.replace(analysis, patch=patch)
 
 
 # ---------------------------------------------------------------------------
