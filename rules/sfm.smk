@@ -1,8 +1,7 @@
 """Registration A (Section II-B of the paper): structure-from-motion of the central
 view of every shot (array + hand-held), the matches of all views that the verification
-shares (SIFT and each shot's own pairs in view_features, which need no calibration and
-run alongside the conversion and A; the pairs across A's neighbouring shots in
-view_matches), and the
+shares (SIFT per shot in view_features, which needs no calibration and runs alongside
+the conversion and A; the matching of A's neighbouring shots in view_matches), and the
 naive baselines of Table I (A+SfM; SfM of all views from scratch)."""
 
 
@@ -80,10 +79,9 @@ rule map_a:
         "../scripts/map_a.py"
 
 
-# SIFT of every view and the matching of each shot's own pairs, SHOTS_PER_JOB shots a job
-# (view_features_0, view_features_1, ...: a job's start-up, importing COLMAP and OpenCV,
-# is 1.4 s beside 2.1 s of SIFT and 1.8 s of matching a shot), one database per shot,
-# each job as soon as its shots are converted.
+# SIFT of every view, SHOTS_PER_JOB shots a job (view_features_0, view_features_1, ...:
+# a job's start-up, importing COLMAP and OpenCV, is 1.4 s beside 2.1 s of SIFT a shot),
+# one database per shot, each job as soon as its shots are converted.
 for _i, _d in enumerate(DATASETS):
     for _k, _chunk in enumerate(shot_chunks(cams(_d))):
 
@@ -111,7 +109,7 @@ for _i, _d in enumerate(DATASETS):
                 runtime=30,
                 gpu=gpus("sfm", "device"),
             params:
-                sfm=lambda wc: sfm_params("view_matching"),
+                sfm=lambda wc: sfm_params(),
             script:
                 "../scripts/view_features.py"
 

@@ -1,6 +1,5 @@
-"""Rules view_features_<k>: SIFT of the subaperture views of a run of shots and the
-matching of each shot's own pairs, one part of the view database per shot
-(plenocal.calib.reg_a.viewdb); needs no calibration."""
+"""Rules view_features_<k>: SIFT of the subaperture views of a run of shots, one part of
+the view database per shot (plenocal.calib.reg_a.viewdb); needs no calibration."""
 import shutil
 from pathlib import Path
 
@@ -33,10 +32,6 @@ for out in sm.output:
                                      max_num_features=cfg["max_num_features"],
                                      seed=cfg["seed"], extractor=extractor,
                                      num_threads=sm.threads, use_gpu=use_gpu)
-        viewdb.match_shot_views(work / "features.db",
-                                view_radius=cfg["view_matching"]["view_radius"],
-                                seed=cfg["seed"], num_threads=sm.threads, work_dir=work,
-                                use_gpu=use_gpu)
         (work / "features.db").replace(out_db)
     finally:
         shutil.rmtree(work, ignore_errors=True)

@@ -171,34 +171,3 @@ def test_features_per_shot_merge_into_one_extraction(views, tmp_path):
     assert all(p.stat().st_mtime_ns == 10**18 for p in parts)
     with pytest.raises(ValueError, match="more than one"):
         viewdb.merge_view_features([parts[0], parts[0]], tmp_path / "twice.db")
-
-
-def test_shot_pairs_matched_per_shot_give_the_matching_of_all(views, tmp_path):
-    """Each shot's own pairs matched in its own database (rule view_features) and merged,
-    then the pairs across shots (rule view_matches): every table holds the rows of one
-    matching of all pairs (a pair's matches and geometry do not depend on the database),
-    and a part matched with other settings is refused by name."""
-    paths, centres = views
-    one = tmp_path / "one.db"
-    viewdb.build_view_database(paths, one, tmp_path / "w1", shot_centres=centres,
-                               shot_neighbours=1, max_num_features=1000)
-    parts = []
-    for shot in sorted({n.split("/")[0] for n in paths}):
-        parts.append(tmp_path / f"{shot}.db")
-        viewdb.extract_view_features({k: v for k, v in paths.items() if k.startswith(shot)},
-                                     parts[-1], tmp_path / shot, max_num_features=1000)
-        assert viewdb.match_shot_views(parts[-1], work_dir=tmp_path) > 0
-    merged = tmp_path / "merged.db"
-    minfo = viewdb.merge_view_features(parts, merged)
-    assert minfo["pairs_matched_per_shot"] == 3 * 20
-    info = viewdb.match_views(merged, shot_centres=centres, shot_neighbours=1,
-                              work_dir=tmp_path)
-    assert info["num_pairs"] == 3 * 20 + 2 * 9
-    assert _dump(merged) == _dump(one)
-    again = tmp_path / "again.db"
-    viewdb.merge_view_features(parts, again)
-    with pytest.raises(ValueError, match="view_matching's settings do not ask for"):
-        viewdb.match_views(again, shot_centres=centres, shot_neighbours=1, view_radius=0,
-                           work_dir=tmp_path)
-    with pytest.raises(ValueError, match="views of 3 shots"):
-        viewdb.match_shot_views(one, work_dir=tmp_path)

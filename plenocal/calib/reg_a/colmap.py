@@ -302,17 +302,10 @@ def match(database: str | Path, pairs: Iterable[tuple[str, str]] | None = None, 
                                    verification_options=_verification_options(seed),
                                    device=device)
         pair_file.unlink()
-    n = num_verified(database)
+    with pycolmap.Database.open(str(database)) as db:
+        n = db.num_verified_image_pairs()
     log.info("matching: %d verified image pairs", n)
     return n
-
-
-def num_verified(database: str | Path) -> int:
-    """The number of verified image pairs in ``database``."""
-    import pycolmap  # noqa: PLC0415
-
-    with pycolmap.Database.open(str(database)) as db:
-        return int(db.num_verified_image_pairs())
 
 
 def pinhole_from_colmap(image, camera) -> PinholeCamera:

@@ -15,15 +15,10 @@ copied: triangulation and mapping read keypoints and verified matches only.
 
 SIFT needs no calibration and runs per shot as soon as its views exist
 (:func:`extract_view_features`, rule ``view_features``: 28 short jobs that the
-scheduler spreads over the cores alongside the conversion and registration A), and so
-does the matching of a shot's own pairs (:func:`match_shot_views`: two thirds of the
-pairs, which need no camera centre). The matching across shots, whose pairs follow A's
-camera centres, merges the shots' features and matches into one database
-(:func:`merge_view_features`, as one extraction of all views would lay it out) and adds
-the remaining verified matches (:func:`match_views`, rule ``view_matches``). A pair's
-matches and two-view geometry do not depend on the database it is matched in (COLMAP's
-matcher and its RANSAC, seeded, see each pair on its own), so the result is the one
-matching of every pair at once would give.
+scheduler spreads over the cores alongside the conversion and registration A); the
+matching, whose pairs follow A's camera centres, merges the shots' features into one
+database (:func:`merge_view_features`, as one extraction of all views would lay it
+out) and adds the verified matches (:func:`match_views`, rule ``view_matches``).
 
 Which pairs are matched (:func:`view_pairs`): within a shot, the views at most
 ``view_radius`` apart on the N x N grid; across shots, the same view of each shot and
@@ -174,22 +169,16 @@ def merge_view_features(parts: Iterable[str | Path], database: str | Path) -> di
     if database.exists():
         database.unlink()
     entries = []  # (name, camera, keypoints, descriptors)
-    matched = []  # (name1, name2, raw matches, two-view geometry): the parts' own pairs
     for part in sorted(Path(p) for p in parts):
         copy = database.with_name(f".{database.stem}.part.db")
         shutil.copyfile(part, copy)
         try:
             with pycolmap.Database.open(str(copy)) as db:
                 cams = {c.camera_id: c for c in db.read_all_cameras()}
-                names = {}
                 for im in db.read_all_images():
-                    names[im.image_id] = im.name
                     entries.append((im.name, cams[im.camera_id], part,
                                     db.read_keypoints(im.image_id),
                                     db.read_descriptors(im.image_id)))
-                for pair_id, geometry in zip(*db.read_two_view_geometries(), strict=True):
-                    a, b = pycolmap.pair_id_to_image_pair(pair_id)
-                    matched.append((names[a], names[b], db.read_matches(a, b), geometry))
         finally:
             copy.unlink()
     entries.sort(key=lambda e: e[0])
@@ -226,16 +215,9 @@ def merge_view_features(parts: Iterable[str | Path], database: str | Path) -> di
                                          frame_id=frame_id), use_image_id=True)
             d.write_keypoints(image_id, kp)
             d.write_descriptors(image_id, desc)
-        ids = {name: i for i, name in enumerate(names, start=1)}
-        for a, b, matches, geometry in sorted(matched, key=lambda m: (ids[m[0]], ids[m[1]])):
-            if ids[a] > ids[b]:  # a part's ids follow its names' order, as the merged ones
-                raise ValueError(f"{a} and {b}: matched in the opposite order to the "
-                                 "merged database's; re-extract the shot (rule view_features)")
-            d.write_matches(ids[a], ids[b], matches)
-            d.write_two_view_geometry(ids[a], ids[b], geometry)
     kp = [e[3].shape[0] for e in entries]
     return {"num_images": len(entries), "keypoints_mean": float(np.mean(kp)),
-            "keypoints_min": int(min(kp)), "pairs_matched_per_shot": len(matched)}
+            "keypoints_min": int(min(kp))}
 
 
 def match_views(database: str | Path, *,
@@ -245,62 +227,19 @@ def match_views(database: str | Path, *,
                 seed: int = cm.DEFAULT_SEED, num_threads: int = cm.DEFAULT_THREADS,
                 work_dir: str | Path | None = None, use_gpu: bool = False) -> dict:
     """Match (on the GPU with ``use_gpu``) and verify, in the SIFT ``database`` itself, the pairs of
-    :func:`view_pairs` that it does not hold yet (the shots' own pairs, matched by
-    :func:`match_shot_views` and merged in, are kept). Returns counts and the time taken.
-
-    Raises ValueError where the database holds a pair that :func:`view_pairs` does not
-    give (matched with other settings)."""
+    :func:`view_pairs`. Returns counts and the time taken."""
     t0 = time.perf_counter()
     names = [f"{n}.png" for n in database_names(database)]
     pairs = view_pairs(names, shot_centres, shot_neighbours=shot_neighbours,
                        view_radius=view_radius)
-    done = matched_pairs(database)
-    stray = done - set(pairs)
-    if stray:
-        a, b = sorted(stray)[0]
-        raise ValueError(f"{database}: {len(stray)} matched pairs that view_matching's "
-                         f"settings do not ask for (e.g. {a} - {b}); match the shots' "
-                         "views again with the same settings (rule view_features)")
-    todo = [p for p in pairs if p not in done]
-    n_verified = cm.match(database, todo, seed=seed, num_threads=num_threads,
-                          work_dir=work_dir, use_gpu=use_gpu) if todo else cm.num_verified(database)
+    n_verified = cm.match(database, pairs, seed=seed, num_threads=num_threads,
+                          work_dir=work_dir, use_gpu=use_gpu)
     seconds = time.perf_counter() - t0
-    log.info("view matches: %d images, %d pairs (%d matched before, %d verified), %.1f s",
-             len(names), len(pairs), len(done), n_verified, seconds)
+    log.info("view matches: %d images, %d pairs (%d verified), %.1f s", len(names),
+             len(pairs), n_verified, seconds)
     return {"num_images": len(names), "num_pairs": len(pairs),
             "num_verified_pairs": int(n_verified), "shot_neighbours": shot_neighbours,
             "view_radius": view_radius, "matching_device": "cuda" if use_gpu else "cpu"}
-
-
-def match_shot_views(database: str | Path, *,
-                     view_radius: int | None = _MATCHING["view_radius"],
-                     seed: int = cm.DEFAULT_SEED, num_threads: int = cm.DEFAULT_THREADS,
-                     work_dir: str | Path | None = None, use_gpu: bool = False) -> int:
-    """Match and verify, in the SIFT ``database`` of one shot (:func:`extract_view_features`),
-    its pairs of :func:`view_pairs` (the views at most ``view_radius`` apart): they need
-    no camera centre, so rule view_features matches them beside registration A. Returns
-    the number of verified pairs."""
-    names = [f"{n}.png" for n in database_names(database)]
-    shots = sorted({split_name(n)[0] for n in names})
-    if len(shots) != 1:
-        raise ValueError(f"{database}: views of {len(shots)} shots ({', '.join(shots[:5])}); "
-                         "a shot's pairs are matched in its own database")
-    pairs = view_pairs(names, None, shot_neighbours=None, view_radius=view_radius)
-    return cm.match(database, pairs, seed=seed, num_threads=num_threads, work_dir=work_dir,
-                    use_gpu=use_gpu) if pairs else 0
-
-
-def matched_pairs(database: str | Path) -> set[tuple[str, str]]:
-    """The image-name pairs (``"<cam>/<view>.png"``, in id order) that have a two-view
-    geometry in ``database``."""
-    import pycolmap  # noqa: PLC0415
-
-    uri = f"{Path(database).resolve().as_uri()}?mode=ro&immutable=1"  # database_names
-    with contextlib.closing(sqlite3.connect(uri, uri=True)) as con:
-        names = dict(con.execute("SELECT image_id, name FROM images"))
-        pair_ids = [r[0] for r in con.execute("SELECT pair_id FROM two_view_geometries")]
-    return {(names[a], names[b])
-            for a, b in (pycolmap.pair_id_to_image_pair(p) for p in pair_ids)}
 
 
 def match_view_database(features: str | Path, database: str | Path, **kwargs) -> dict:
