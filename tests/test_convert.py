@@ -87,6 +87,47 @@ def test_patch_size_of_a_plane_matches_the_optics(depth):
     assert np.mean(np.abs(res.raw[inner] - truth) < 0.25) > 0.85
 
 
+def test_block_gains_divide_by_each_types_profile():
+    """Hand-computed: profile bins every 0.5 px; offset (3, 4) is radius 5 = bin 10."""
+    from plenocal.convert.patchsize import block_gains
+
+    prof = np.ones((2, 12), np.float32)
+    prof[1] = np.linspace(1.0, 0.45, 12)  # bin 10 of type 1: 1 - 0.05 * 10 = 0.5
+    g = block_gains(prof, np.array([[0.0, 3.0]]), np.array([[0.0, 4.0]]))
+    assert g.shape == (2, 1, 2)
+    assert np.allclose(g[0], 1.0)
+    assert np.allclose(g[1, 0], [1.0, 2.0])
+
+
+def test_vignetted_weak_texture_keeps_a_large_patch_size():
+    """A near plane (P 8.4 px) whose micro images darken towards the rim, at a tenth of
+    the texture's contrast: the fall-off's ramps in the two blocks of a pair correlate
+    negatively, more the larger the candidate, and pulled the best match down (7.80 px).
+    The blocks are matched divided by the measured profile: within 0.1 px."""
+    from synth.lenslets import _owner
+
+    from plenocal.convert.patchsize import to_gray
+    from plenocal.convert.vignetting import lens_type_profiles
+
+    opt = small_optics(600, 450)
+    depth = 0.48
+    truth = opt.micro_image_disparity_px(depth)
+    calib, grid, img = plane_lenslet(opt, depth)
+    _, _, dist = _owner(grid)
+    rho = dist / (grid.calib.safe_diameter / 2)
+    fall = 1.0 - 0.55 * np.clip((rho - 0.6) / 0.4, 0.0, 1.0) ** 1.5
+    g = (0.5 + (img.astype(np.float32) / 255.0 - 0.5) * 0.1) * fall[..., None]
+    g += np.random.default_rng(0).normal(0.0, 0.005, g.shape)
+    weak = np.clip(np.rint(g * 255.0), 0, 255).astype(np.uint8)
+    profiles = lens_type_profiles(to_gray(weak), grid)
+    inner = grid.inside()
+    plain = estimate_patch_size(weak, grid)
+    matched = estimate_patch_size(weak, grid, vignetting=profiles)
+    assert matched.confident[inner].mean() > 0.7
+    assert abs(np.median(matched.raw[inner & matched.confident]) - truth) < 0.1
+    assert np.median(plain.raw[inner & plain.confident]) < truth - 0.3  # the bias it removes
+
+
 def test_patch_size_follows_the_content_not_the_middle_of_the_range():
     """Two planes (left half P=4.5, right half P=8): the map has both, not a blend."""
     opt = small_optics(480, 300)

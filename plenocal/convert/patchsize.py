@@ -67,6 +67,7 @@ from plenocal.config import stage_defaults
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.exact import remap
 from plenocal.convert.threads import opencv_threads, run_all
+from plenocal.convert.vignetting import BIN_PX
 from plenocal.grid import MicrolensGrid
 from plenocal.viewgeom import mla_sign
 
@@ -275,6 +276,25 @@ def _block_offsets(radius: float, samples: int) -> tuple[np.ndarray, np.ndarray]
     return bx.ravel().astype(np.float32), by.ravel().astype(np.float32)
 
 
+Vignetting = tuple[np.ndarray, np.ndarray]  # (profiles (T, nbins), row (n,)) per lens type
+
+
+def block_gains(profiles: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
+    """(T, *dx.shape) float32: 1 / the radial profile of each lens type (``profiles``
+    (T, nbins), bins of :data:`plenocal.convert.vignetting.BIN_PX`) at the offsets
+    ``(dx, dy)`` from the micro-image centre.
+
+    Matching divides the blocks by it. Where the micro images darken towards their rim,
+    a block placed ``P / 2`` out from the centre carries the fall-off as a ramp, and its
+    partner in the neighbour carries the opposite ramp; the ramps correlate negatively,
+    more so the larger the candidate ``P``, and pull a weakly textured lens's best match
+    towards smaller sizes (the simulator's near objects: 8.43 px read as 7.80 px at a
+    tenth of the texture's contrast; with the profile divided out, 8.42)."""
+    rho = np.hypot(dx, dy).astype(np.float64)
+    bins = np.arange(profiles.shape[1]) * BIN_PX
+    return np.stack([1.0 / np.interp(rho, bins, p) for p in profiles]).astype(np.float32)
+
+
 RING2 = np.array([(1, 1), (-1, 2), (-2, 1), (-1, -1), (1, -2), (2, -1)], dtype=np.int64)
 
 
@@ -295,14 +315,18 @@ def _ring_neighbours(grid: MicrolensGrid, steps: np.ndarray) -> np.ndarray:
 
 def match_scores(gray: np.ndarray, grid: MicrolensGrid, candidates: np.ndarray,
                  radius: float, samples: int, sign: float = -1.0, ring2: bool = False,
-                 threads: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 threads: int = 1, vignetting: Vignetting | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """ZNCC of every lens against its neighbours for every candidate patch size.
 
     ``sign``: -1 Keplerian (a point moves towards the neighbour by ``P``), +1 Galilean
     (away from it). ``ring2``: also the six lenses at ``sqrt(3) D`` (shift ``sqrt(3) P``),
-    where a block fits. Returns (scores (n, c): mean ZNCC over the lens's pairs, NaN where
-    it has none; pairs (n,) number of nearest-neighbour pairs; texture (n,) grey std of
-    the block at the lens centre)."""
+    where a block fits. ``vignetting``: the micro images' radial profiles (profiles (T,
+    nbins), row (n,): :func:`plenocal.convert.vignetting.lens_type_profiles`); each
+    block sample is divided by its lens's profile at the sample's distance from the lens
+    centre (:func:`block_gains`), None for none. Returns (scores (n, c): mean ZNCC over
+    the lens's pairs, NaN where it has none; pairs (n,) number of nearest-neighbour
+    pairs; texture (n,) grey std of the block at the lens centre)."""
     n = len(grid)
     rings = [(grid.neighbours, grid.neighbour_vectors / grid.diameter, 1.0)]
     if ring2:
@@ -327,8 +351,12 @@ def match_scores(gray: np.ndarray, grid: MicrolensGrid, candidates: np.ndarray,
         my = np.ascontiguousarray(np.broadcast_to(base_y + sign * shift * dy, (n, k, b))
                                   .reshape(n, -1))
         s = remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                      borderValue=0.0)
-        return s.reshape(n, k, b)
+                      borderValue=0.0).reshape(n, k, b)
+        if vignetting is not None:
+            gain = block_gains(vignetting[0], bx[None, :] + sign * shift * dirs[:, :1],
+                               by[None, :] + sign * shift * dirs[:, 1:])
+            s *= gain[0] if len(gain) == 1 else gain[vignetting[1]]
+        return s
 
     centre_block = blocks(0.0, np.zeros((1, 2)))[:, 0]
     texture = centre_block.std(axis=1)
@@ -460,9 +488,12 @@ def focus_weights(grid: MicrolensGrid, patch: np.ndarray, softness: float, floor
 
 def estimate_patch_size(image: np.ndarray, grid: MicrolensGrid,
                         settings: PatchSizeSettings | None = None, mla: str = "keplerian",
-                        threads: int = 1) -> PatchSizeResult:
+                        threads: int = 1, vignetting: Vignetting | None = None
+                        ) -> PatchSizeResult:
     """Patch size of every lens of ``grid`` in ``image`` (see the module docstring);
-    the candidate sizes are matched on ``threads`` threads (the same numbers)."""
+    the candidate sizes are matched on ``threads`` threads (the same numbers), on blocks
+    divided by the micro images' ``vignetting`` profiles where given
+    (:func:`match_scores`)."""
     settings = settings or PatchSizeSettings()
     sign = mla_sign(mla)
     gray = to_gray(image)
@@ -481,7 +512,8 @@ def estimate_patch_size(image: np.ndarray, grid: MicrolensGrid,
     multi = len({(t.depth_min, t.depth_max) for t in grid.calib.lens_types}) > 1
     scores, pairs, texture = match_scores(gray, grid, candidates, radius,
                                           settings.block_samples, sign,
-                                          settings.same_type_ring and multi, threads=threads)
+                                          settings.same_type_ring and multi, threads=threads,
+                                          vignetting=vignetting)
     # lenses cut by the sensor's edge match blocks partly off the image: they lend their
     # scores to no neighbour
     tex = np.clip(texture / settings.texture_scale, 0, 1) * grid.inside() + 1e-3

@@ -420,11 +420,15 @@ class ShotConversion:
     def _measure(self, source: str, check_mla: bool, pool=None) -> ConvertAnalysis:
         """The image's MLA kind (where ``auto``; where set, checked with ``check_mla``),
         patch sizes and vignetting profiles; what does not wait for the kind runs on
-        ``pool`` (an executor) beside the patch sizes."""
+        ``pool`` (an executor) beside the patch sizes. The profiles are measured whether
+        or not the views are devignetted: the patch sizes are matched on devignetted
+        blocks (:func:`plenocal.convert.patchsize.block_gains`)."""
         st = self.settings
         gray = self.gray
         pool = pool or Inline()
-        profiles = pool.submit(lens_type_profiles, gray, self.grid) if st.devignette else None
+        # here, not on the pool: the matching waits for the profiles, and the pool's
+        # worker is measuring the safe diameter meanwhile
+        vignetting = lens_type_profiles(gray, self.grid)
         mla, scores, check = st.mla, None, None
         if st.mla == "auto":
             mla, k, g = detect_mla_kind(gray, self.grid, st.patch)
@@ -433,7 +437,8 @@ class ShotConversion:
                      "the neighbour %.3f, away %.3f)", source, mla, k, g)
         elif check_mla:
             check = pool.submit(detect_mla_kind, gray, self.grid, st.patch)
-        patch = estimate_patch_size(gray, self.grid, st.patch, mla=mla, threads=self._threads)
+        patch = estimate_patch_size(gray, self.grid, st.patch, mla=mla, threads=self._threads,
+                                    vignetting=vignetting)
         for note in patch.warnings:
             log.warning("%s: %s", source, note)
         if check is not None:
@@ -442,7 +447,7 @@ class ShotConversion:
             if note:
                 log.warning("%s: %s", source, note)
                 self.warnings.append(f"{source}: {note}")
-        profile, row = profiles.result() if profiles is not None else (None, None)
+        profile, row = vignetting if st.devignette else (None, None)
         return ConvertAnalysis(mla, scores, patch, profile, row)
 
     def _rim_reach(self, offset: float) -> int:

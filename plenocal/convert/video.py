@@ -261,11 +261,12 @@ class VideoConverter:
         set-up's)."""
         assert self._grid is not None
         gray = to_gray(to_unit_float(image, 16))
+        vignetting = lens_type_profiles(gray, self._grid)
         patch = estimate_patch_size(gray, self._grid, st.patch, mla=st.mla,
-                                    threads=self.threads)
+                                    threads=self.threads, vignetting=vignetting)
         for note in patch.warnings:
             log.warning("%s: %s", source, note)
-        profile, row = lens_type_profiles(gray, self._grid) if st.devignette else (None, None)
+        profile, row = vignetting if st.devignette else (None, None)
         return ConvertAnalysis(st.mla, None, patch, profile, row)
 
     def _hold(self, analysis: ConvertAnalysis, st: ConvertSettings) -> ConvertAnalysis:
