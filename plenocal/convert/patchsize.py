@@ -67,7 +67,7 @@ from plenocal.config import stage_defaults
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.exact import remap
 from plenocal.convert.threads import opencv_threads, run_all
-from plenocal.convert.vignetting import BIN_PX
+from plenocal.convert.vignetting import gains
 from plenocal.grid import MicrolensGrid
 from plenocal.viewgeom import mla_sign
 
@@ -281,7 +281,7 @@ Vignetting = tuple[np.ndarray, np.ndarray]  # (profiles (T, nbins), row (n,)) pe
 
 def block_gains(profiles: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
     """(T, *dx.shape) float32: 1 / the radial profile of each lens type (``profiles``
-    (T, nbins), bins of :data:`plenocal.convert.vignetting.BIN_PX`) at the offsets
+    (T, nbins): :func:`plenocal.convert.vignetting.gains`) at the offsets
     ``(dx, dy)`` from the micro-image centre.
 
     Matching divides the blocks by it. Where the micro images darken towards their rim,
@@ -289,10 +289,8 @@ def block_gains(profiles: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> np.ndar
     partner in the neighbour carries the opposite ramp; the ramps correlate negatively,
     more so the larger the candidate ``P``, and pull a weakly textured lens's best match
     towards smaller sizes (the simulator's near objects: 8.43 px read as 7.80 px at a
-    tenth of the texture's contrast; with the profile divided out, 8.42)."""
-    rho = np.hypot(dx, dy).astype(np.float64)
-    bins = np.arange(profiles.shape[1]) * BIN_PX
-    return np.stack([1.0 / np.interp(rho, bins, p) for p in profiles]).astype(np.float32)
+    tenth of the texture's contrast; with the profile divided out, 8.38)."""
+    return gains(profiles, np.hypot(dx, dy).astype(np.float64)).astype(np.float32)
 
 
 RING2 = np.array([(1, 1), (-1, 2), (-2, 1), (-1, -1), (1, -2), (2, -1)], dtype=np.int64)

@@ -37,7 +37,7 @@ import numpy as np
 
 from plenocal.config import stage_defaults
 from plenocal.convert.exact import magnitude
-from plenocal.convert.vignetting import BIN_PX
+from plenocal.convert.vignetting import gains
 from plenocal.viewgeom import ViewLayout, nearest_lenses, nearest_slots
 
 _FLOOR = 1e-3
@@ -217,8 +217,7 @@ def radial_tables(safe_diameter: float, settings: RenderSettings,
     if profile is None:
         g = np.ones((1, len(r)))
     else:
-        rows = np.atleast_2d(profile)
-        g = np.stack([1.0 / np.interp(r, np.arange(rows.shape[1]) * BIN_PX, p) for p in rows])
+        g = gains(np.atleast_2d(profile), r)
     return w.astype(np.float32), g.astype(np.float32)
 
 

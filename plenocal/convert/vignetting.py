@@ -42,6 +42,15 @@ SIGNIFICANCE = 2.0  # standard errors a lens type's profile must differ by to co
 FLOOR = 0.15  # smallest profile value divided by (the darkest rim: noise, not signal)
 
 
+def gains(profiles: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """(T, *radius.shape) float64: 1 / each profile row of ``profiles`` ((T, nbins), bins
+    every :data:`BIN_PX` px) at the distances ``radius`` from the micro-image centre
+    (linear between bins, the end bins beyond): what a sample there is multiplied by to
+    undo the vignetting (the render's gain tables, the patch-size matching's blocks)."""
+    bins = np.arange(profiles.shape[1]) * BIN_PX
+    return np.stack([1.0 / np.interp(radius, bins, p) for p in profiles])
+
+
 def _normalise(prof: np.ndarray, grid: MicrolensGrid) -> np.ndarray:
     """3-bin moving average, divided by the mean over the inner quarter of the safe disc,
     floored at :data:`FLOOR` (float32)."""
