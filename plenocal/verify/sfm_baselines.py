@@ -10,7 +10,8 @@ A+SfM: all views of the view database (SIFT and matches shared with Table I,
 get A's poses and their points are triangulated with those poses fixed; COLMAP's
 incremental mapper then continues from that model with A's frames and the camera held
 fixed, registering each remaining view by absolute pose
-against the points and bundle-adjusting the new poses and the points.
+against the points and bundle-adjusting the new poses and the points; one global
+adjustment of every new pose and point closes it (:func:`_global_adjustment`).
 
 From scratch: the same features and matches, one shared PINHOLE camera (fx and fy
 refined apart) at COLMAP's default focal length guess, a plain incremental mapping;
