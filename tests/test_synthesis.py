@@ -8,6 +8,7 @@ from synth.planes import camera_at, fronto_plane, photo_texture, render_plane
 from plenocal.artifacts.results import SynthesisResult, SynthesisSetup
 from plenocal.camera import PinholeCamera
 from plenocal.io.files import to_uint8, write_image
+from plenocal.verify import synthesis
 from plenocal.verify.experiments import (
     experiment_input_views,
     inner_corner_view,
@@ -186,6 +187,26 @@ def test_threads_render_the_same_images(dataset):
     for t in targets:
         assert e1[t]["shape"] == e2[t]["shape"]
         np.testing.assert_array_equal(e1[t]["sse"], e2[t]["sse"])
+
+
+def test_scoring_in_chunks_changes_nothing(dataset, monkeypatch):
+    """The DIBR's targets are rendered and scored a chunk at a time (memory): any chunk
+    size gives the same errors, in the same order, and keeps the same render."""
+    root, cams = dataset
+    inputs = ["x00_y00/1_1", "x02_y01/1_1"]
+    targets = [f"x01_y00/{v}" for v in view_names(N)] + ["x01_y01/1_1"]
+    keep = {"x01_y00/1_1"}
+    runs = []
+    for chunk in (1, 4, len(targets)):
+        monkeypatch.setattr(synthesis, "SCORE_CHUNK", chunk)
+        runs.append(_ctx(root, cams).score(inputs, targets, keep))
+    (e0, k0), *others = runs
+    assert list(e0) == targets and list(k0) == ["x01_y00/1_1"]
+    for e, k in others:
+        assert list(e) == targets
+        for t in targets:
+            np.testing.assert_array_equal(e[t]["sse"], e0[t]["sse"])
+        np.testing.assert_array_equal(k["x01_y00/1_1"], k0["x01_y00/1_1"])
 
 
 def test_exp3_by_camera_set_joins_to_the_same_result(dataset, tmp_path):
