@@ -749,19 +749,6 @@ REPROJECTION_CALIB = {
 }
 
 
-def reprojection_same_as(wildcards):
-    """The complete calibration's Table I job also reads Eq. 6's result: where the
-    refinement was not kept the cameras are the same, and the row is Eq. 6's, not
-    computed twice."""
-    if wildcards.calib != "complete" or not refine_enabled():
-        return {}
-    d = wildcards.dataset
-    return {
-        "same_as_calib": res(d, *REPROJECTION_CALIB["eq6"]),
-        "same_as": res(d, "eval", "reprojection", "eq6.json"),
-    }
-
-
 def reprojection_calibs(dataset):
     out = ["reg_a", "reg_b", "complete"] + (["eq6"] if refine_enabled() else [])
     out += ["baseline_sfm"]

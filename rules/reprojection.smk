@@ -5,7 +5,6 @@ filter raised."""
 
 rule reprojection_calib:
     input:
-        unpack(reprojection_same_as),
         calib=lambda wc: res(wc.dataset, *REPROJECTION_CALIB[wc.calib]),
         database="results/{dataset}/matches/database.db",
     output:

@@ -1,19 +1,16 @@
 """Rules reprojection_calib and reprojection: the reprojection error of one calibration
 (Table I of the paper), and the table of all of them."""
-import logging
 import shutil
 from pathlib import Path
 
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
-from plenocal.artifacts.cameras import same_cameras
 from plenocal.artifacts.results import ReprojectionTable, write_reprojection_table
 from plenocal.io.files import make_temp_dir, read_json, write_json
 from plenocal.rulelog import log_to_file
 from plenocal.verify import reprojection as rp
 
 log_to_file(snakemake.log[0])  # noqa: F821
-log = logging.getLogger("reprojection")
 sm = snakemake  # noqa: F821
 
 if sm.rule == "reprojection":
@@ -21,13 +18,6 @@ if sm.rule == "reprojection":
     scratch = read_json(sm.input.scratch[0]) if sm.input.scratch else None
     write_reprojection_table(sm.output[0], ReprojectionTable(
         rp.table_i(evals, read_json(sm.input.baseline), scratch)))
-elif "same_as" in sm.input.keys() and same_cameras(sm.input.calib, sm.input.same_as_calib):
-    # the refinement was not kept: these are Eq. 6's cameras, whose row is computed
-    row = {**read_json(sm.input.same_as), "calibration": sm.wildcards.calib}
-    log.info("%s holds the same cameras as %s: Table I's row of %s is %s's (%s)",
-             sm.input.calib, sm.input.same_as_calib, sm.wildcards.calib,
-             Path(sm.input.same_as).stem, sm.input.same_as)
-    write_json(sm.output[0], row)
 else:
     cfg = sm.params.sfm
     opts = dict(max_error_px=cfg["reprojection"]["max_error_px"],

@@ -281,31 +281,3 @@ def test_png_levels_store_the_same_pixels_and_are_deterministic(tmp_path):
         pos += 12 + n
     rows = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(40, 1 + 60 * 3 * 2)
     assert (rows[:, 0] == 0).all()
-
-
-def test_same_cameras_compares_the_cameras_bit_for_bit_not_the_provenance(tmp_path):
-    """The complete calibration's Table I row is Eq. 6's only where the two files hold
-    the same cameras as written (the jobs read the files): provenance may differ, a
-    camera's numbers may not, by the last written digit."""
-    import numpy as np
-
-    from plenocal.artifacts.cameras import same_cameras, write_cameras
-    from plenocal.camera import PinholeCamera
-
-    K = np.array([[1800.0, 0.0, 332.5], [0.0, 1800.0, 250.5], [0.0, 0.0, 1.0]])
-    M = np.eye(4)
-    M[:3, 3] = [0.01, -0.002, 0.0]
-    cams = {"x00_y00/2_2": PinholeCamera(K, M, 666, 502),
-            "x01_y00/2_2": PinholeCamera(K, np.eye(4), 666, 502)}
-    write_cameras(tmp_path / "a.json", cams, extra={"source": "merge (Eq. 6)"})
-    write_cameras(tmp_path / "b.json", cams, extra={"source": "refine: not kept"})
-    assert same_cameras(tmp_path / "a.json", tmp_path / "b.json")
-    K2 = K.copy()
-    K2[0, 2] += 1e-9  # 332.500000001: the writer's 12 significant digits keep it
-    write_cameras(tmp_path / "c.json",
-                  {**cams, "x01_y00/2_2": PinholeCamera(K2, np.eye(4), 666, 502)})
-    assert not same_cameras(tmp_path / "a.json", tmp_path / "c.json")
-    write_cameras(tmp_path / "d.json", {"x00_y00/2_2": cams["x00_y00/2_2"]})
-    assert not same_cameras(tmp_path / "a.json", tmp_path / "d.json")
-    write_cameras(tmp_path / "e.json", cams, units="sfm")
-    assert not same_cameras(tmp_path / "a.json", tmp_path / "e.json")

@@ -13,7 +13,7 @@ import pytest
 import yaml
 from conftest import clone, snakemake
 
-from plenocal.artifacts.cameras import read_cameras, same_cameras
+from plenocal.artifacts.cameras import read_cameras
 from plenocal.artifacts.results import read_gt_errors, read_reprojection_table
 
 pytestmark = pytest.mark.workflow
@@ -86,23 +86,10 @@ def test_refine_disabled_gives_the_paper_method_alone(tiny_complete_run: Path,
 
 
 def _same(res: Path) -> bool:
-    return same_cameras(res / "calibration" / "cameras.json",
-                        res / "calibration" / "eq6" / "cameras.json")
+    import numpy as np  # noqa: PLC0415
 
-
-def test_refinement_not_kept_takes_eq6s_table_i_row(tiny_complete_run: Path, tmp_path: Path):
-    """Where the refinement is not kept, the complete calibration is Eq. 6's cameras, and
-    its Table I row is Eq. 6's row, not computed a second time."""
-    work = clone(tiny_complete_run, tmp_path / "run")
-    cfg = yaml.safe_load((work / "config.yaml").read_text())
-    cfg["refine"] = {**cfg.get("refine", {}), "min_gain_pct": 100.0}  # never kept
-    (work / "config.yaml").write_text(yaml.safe_dump(cfg))
-    proc = snakemake(work, "results/tiny/eval/reprojection.json")
-    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
-    res = work / "results" / "tiny"
-    assert _same(res)
-    rows = read_reprojection_table(res / "eval" / "reprojection.json").rows
-    assert rows["complete"]["calibration"] == "complete"
-    assert ({**rows["complete"], "calibration": "eq6"} == rows["eq6"])
-    log = (res / "logs" / "reprojection" / "tiny_complete.log").read_text()
-    assert "holds the same cameras as" in log
+    a = read_cameras(res / "calibration" / "cameras.json")
+    b = read_cameras(res / "calibration" / "eq6" / "cameras.json")
+    return sorted(a) == sorted(b) and all(
+        np.array_equal(a[k].cam_to_world, b[k].cam_to_world) and np.array_equal(a[k].K, b[k].K)
+        for k in a)

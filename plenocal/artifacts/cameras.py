@@ -17,8 +17,6 @@ from __future__ import annotations
 from collections.abc import Mapping
 from pathlib import Path
 
-import numpy as np
-
 from plenocal.artifacts.versioned import decode
 from plenocal.camera import PinholeCamera
 from plenocal.io.files import write_json
@@ -62,19 +60,6 @@ def read_cameras(path: str | Path) -> dict[str, PinholeCamera]:
         return {k: PinholeCamera.from_dict(v) for k, v in doc["cameras"].items()}
 
     return decode(path, FORMAT, VERSION, NAME, REMEDY, build)
-
-
-def same_cameras(a: str | Path, b: str | Path) -> bool:
-    """Whether two camera files hold the same cameras as written (names, units,
-    intrinsics, poses and sizes equal as read; the provenance keys aside): the complete
-    calibration is Eq. 6's where the refinement was not kept, and its Table I row is then
-    Eq. 6's."""
-    if read_camera_units(a) != read_camera_units(b):
-        return False
-    ca, cb = read_cameras(a), read_cameras(b)
-    return ca.keys() == cb.keys() and all(
-        np.array_equal(ca[k].K, cb[k].K) and np.array_equal(ca[k].cam_to_world, cb[k].cam_to_world)
-        and (ca[k].width, ca[k].height) == (cb[k].width, cb[k].height) for k in ca)
 
 
 def _units(doc: dict, path: str | Path) -> str:
