@@ -90,10 +90,7 @@ def _global_adjustment(model, fixed_frames: set[int], num_threads: int) -> dict:
     1.436074e5, in 9.1 s instead of 50.2 s (DENSE_SCHUR: 26.4 s). Returns its summary."""
     import pycolmap  # noqa: PLC0415
 
-    o = _continue_options(0, num_threads, set()).get_global_bundle_adjustment()
-    o.refine_focal_length = False
-    o.refine_principal_point = False
-    o.refine_extra_params = False
+    o = _large_scene_options(0, num_threads).get_global_bundle_adjustment()  # (no seed in it)
     o.ceres.auto_select_solver_type = False
     solver = o.ceres.solver_options
     solver.linear_solver_type = type(solver.linear_solver_type).ITERATIVE_SCHUR

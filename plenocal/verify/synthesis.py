@@ -181,9 +181,9 @@ class SynthesisContext:
         # the DIBR's renders are scored a chunk at a time and dropped (Exp. 3 renders 189
         # targets a variant: all at once they held 0.75 GB at tile 8); RVS renders all the
         # targets of one call in one run of its own
-        step = (len(targets) if self.config["renderer"] != "dibr"
-                else SCORE_CHUNK * self.workers)
-        for first in range(0, len(targets), max(1, step)):
+        step = max(1, len(targets) if self.config["renderer"] != "dibr"
+                   else SCORE_CHUNK * self.workers)
+        for first in range(0, len(targets), step):
             chunk = targets[first:first + step]
             rendered = self.render(inputs, chunk)
             # reading the captured targets and their errors, on the job's cores (in order)
