@@ -46,13 +46,20 @@ registration B's rig is ``refine.rig`` (:data:`RIG_MODES`):
 array's size over Eq. 6's): with the rig's poses held, the scale its metric baselines give,
 an estimate independent of Eq. 5 and of the stage's step.
 
-The focal length is one for the whole array, as the paper shares it (Section II-B); it is
-held at registration A's by default. ``focal: refine`` frees each sensor's (COLMAP gives each
-sensor its own camera), takes their mean weighted by observations, builds B's rig again
-for it and adjusts once more with it held. A parallel array does not fix the focal length
-(it trades off against depth), so only the hand-held shots do, weakly
-(:mod:`plenocal.calib.reg_a.uncertainty`); BENCHMARKS.md, "Accuracy over captures", has
-what it did.
+The focal length is one for the whole array, as the paper shares it (Section II-B).
+``focal: refine`` (the default) frees it in a first pass: each sensor's focal length and
+principal point (COLMAP gives each sensor its own camera), their mean focal length weighted
+by observations then held, B's rig built again for it, and a second pass as ``refine.rig``
+says; ``focal: hold`` keeps registration A's. A parallel array does not fix the focal length
+(it trades off against depth): the hand-held shots' turns do, and registration A sees them
+in 28 central views only (:mod:`plenocal.calib.reg_a.uncertainty`: a standard deviation
+of 0.3-0.5 % on the simulator's captures). Every view of them fixes it better, on two
+conditions measured on ten simulated captures (BENCHMARKS.md, "The focal length from every
+view"): the principal points free in that pass (held, the converter's sub-pixel offsets
+per view lean on the focal length: +0.7 % from the true cameras), and a robust loss
+(``loss: cauchy``, its scale ``loss_scale_px: auto``, :data:`AUTO_LOSS_SCALE` times the
+median reprojection error before the adjustment): with the squared loss the observations
+with errors of a few tenths of a pixel pulled it 0.5-1.6 % off.
 
 Conventions: internal (OpenCV axes, camera-to-world, pixel centres at integers) in and
 out; COLMAP's (cam_from_world, pixel centres at +0.5) only inside, through
@@ -95,6 +102,9 @@ MATCH_SETS = ("all", "across")
 #: what refine.rig frees of the rig, and the points, move)
 FRAME_MODES = ("refine", "hold")
 LOSSES = ("trivial", "huber", "cauchy", "soft_l1")
+#: loss_scale_px: auto - the robust loss's scale as this share of the observations' median
+#: reprojection error before the adjustment (BENCHMARKS.md, "The focal length from every view")
+AUTO_LOSS_SCALE = 0.8
 _REFINE = stage_defaults("refine")  # the defaults: config.schema.yaml's refine block
 _SFM = stage_defaults("sfm")  # the seed and threads of COLMAP's steps
 
@@ -112,7 +122,7 @@ class RefineSettings:
     max_error_px: float = _REFINE["max_error_px"]
     min_angle_deg: float = _REFINE["min_angle_deg"]
     loss: str = _REFINE["loss"]
-    loss_scale_px: float = _REFINE["loss_scale_px"]
+    loss_scale_px: float | str = _REFINE["loss_scale_px"]
     max_iterations: int = _REFINE["max_iterations"]
     max_shift_pct: float = _REFINE["max_shift_pct"]
     min_gain_pct: float = _REFINE["min_gain_pct"]
@@ -128,6 +138,10 @@ class RefineSettings:
             if value not in allowed:
                 raise ValueError(f"config refine.{key} = {value!r}: use one of "
                                  f"{', '.join(allowed)}")
+        if self.loss_scale_px != "auto" and not (isinstance(self.loss_scale_px, int | float)
+                                                 and self.loss_scale_px > 0):
+            raise ValueError(f"config refine.loss_scale_px = {self.loss_scale_px!r}: a "
+                             "positive number of pixels, or auto")
         if self.max_points < 100:
             raise ValueError(f"config refine.max_points = {self.max_points}: at least 100")
 
@@ -275,12 +289,15 @@ def _loss(name: str):
 
 
 def bundle_adjust(rec, model: RigModel, settings: RefineSettings, *, refine_focal: bool,
-                  refine_rig: bool, hold_frame: str, refine_pp: bool = False) -> dict:
+                  refine_rig: bool, hold_frame: str, loss_scale_px: float,
+                  refine_pp: bool = False) -> dict:
     """COLMAP's bundle adjustment of ``rec``: frames and points, each sensor's focal length
     where ``refine_focal``, each sensor's principal point where ``refine_pp`` (the central
-    view's held: a common shift is a turn of every frame), the rig's sensors where
-    ``refine_rig``; the frame of ``hold_frame`` held (the gauge's rotation and
-    translation). Returns the solver's summary."""
+    view's held unless the focal lengths are freed too: a common shift is a turn of every
+    frame), the
+    rig's sensors where ``refine_rig``; the frame of ``hold_frame`` held (the gauge's
+    rotation and translation); ``settings.loss`` at the scale ``loss_scale_px``. Returns
+    the solver's summary."""
     import pycolmap  # noqa: PLC0415
 
     cfg = pycolmap.BundleAdjustmentConfig()
@@ -298,7 +315,7 @@ def bundle_adjust(rec, model: RigModel, settings: RefineSettings, *, refine_foca
     o.refine_sensor_from_rig = refine_rig
     o.refine_rig_from_world = True
     o.ceres.loss_function_type = _loss(settings.loss)
-    o.ceres.loss_function_scale = float(settings.loss_scale_px)
+    o.ceres.loss_function_scale = float(loss_scale_px)
     s = o.ceres.solver_options
     s.max_num_iterations = int(settings.max_iterations)
     s.num_threads = int(settings.num_threads)
@@ -522,13 +539,16 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
     size_eq6 = spread(frame_centres(rec, model))
     sensors_before = sensor_params(rec)
     focal_a = float(rig.focal_px)
+    loss_scale = loss_scale_of(settings, before)
     passes = {}
     free_rig = settings.rig == "free"
     focal, per_sensor, rig_views = focal_a, {}, views
     if settings.focal == "refine":
-        # each sensor's focal length freed; the shared one their weighted mean
+        # each sensor's focal length and principal point freed; the shared focal length
+        # their weighted mean, the principal points B's again (module docstring)
         passes["focal"] = bundle_adjust(rec, model, settings, refine_focal=True,
-                                        refine_rig=free_rig, hold_frame=hold_shot)
+                                        refine_rig=free_rig, hold_frame=hold_shot,
+                                        refine_pp=True, loss_scale_px=loss_scale)
         focal, per_sensor = shared_focal(rec, model)
         rig_views = (rig_at_focal(focal).view_poses() if rig_at_focal is not None
                      else {v: (_with_focal(K, focal), M) for v, (K, M) in views.items()})
@@ -538,7 +558,8 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
             sensors_before = sensor_params(rec)
     passes["final"] = bundle_adjust(rec, model, settings, refine_focal=False,
                                     refine_rig=free_rig, hold_frame=hold_shot,
-                                    refine_pp=settings.rig == "scale_pp")
+                                    refine_pp=settings.rig == "scale_pp",
+                                    loss_scale_px=loss_scale)
     groups = shot_groups(rec, model)
     placed = {}
     if len(groups) > 1 and settings.frames == "refine":
@@ -565,6 +586,8 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
         "views": len(cams),
         "points": {"triangulated": int(tracks.num_points3D()), "used": len(ids)},
         "observations": {"before": _stats(before), "after": _stats(after)},
+        "loss": {"type": settings.loss, "scale_px": loss_scale,
+                 "median_before_px": float(np.median(before)) if before.size else None},
         "focal_px": {"registration_a": focal_a, "refined": focal,
                      "change_pct": 100.0 * (focal / focal_a - 1.0),
                      "per_sensor": per_sensor},
@@ -607,6 +630,18 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
              report["observations"]["before"]["mean_px"] or math.nan,
              report["observations"]["after"]["mean_px"] or math.nan)
     return Refinement(cams, report, rig_views, sensors_before, sensor_params(rec))
+
+
+def loss_scale_of(settings: RefineSettings, before: np.ndarray) -> float:
+    """The robust loss's scale (px): ``settings.loss_scale_px``, or with ``auto``
+    :data:`AUTO_LOSS_SCALE` times the median of ``before`` (the observations' reprojection
+    errors under the Eq. 6 cameras), so that it follows the views' own feature noise."""
+    if settings.loss_scale_px != "auto":
+        return float(settings.loss_scale_px)
+    if not before.size or not float(np.median(before)) > 0:
+        raise ValueError("refinement: no observation error to take refine.loss_scale_px: "
+                         "auto from; set it in pixels")
+    return AUTO_LOSS_SCALE * float(np.median(before))
 
 
 def fit_gain(before: np.ndarray, after: np.ndarray, min_gain_pct: float) -> dict:
