@@ -130,6 +130,44 @@ def test_settings_are_checked():
         rf.RefineSettings(rig="loose")
     with pytest.raises(ValueError, match="refine.focal"):
         rf.RefineSettings(focal="free")
+    for bad in (0, -0.5, "median"):
+        with pytest.raises(ValueError, match="refine.loss_scale_px"):
+            rf.RefineSettings(loss_scale_px=bad)
+
+
+def test_the_robust_loss_scale_follows_the_median_error_or_is_given():
+    before = np.array([0.4, 0.1, 0.2, 3.0, 0.3])  # median 0.3 px
+    assert rf.loss_scale_of(rf.RefineSettings(loss_scale_px="auto"), before) == pytest.approx(
+        rf.AUTO_LOSS_SCALE * 0.3)
+    assert rf.loss_scale_of(rf.RefineSettings(loss_scale_px=0.5), before) == 0.5
+    with pytest.raises(ValueError, match="loss_scale_px"):
+        rf.loss_scale_of(rf.RefineSettings(), np.zeros(0))
+
+
+def test_a_wrong_focal_length_is_pulled_back_towards_the_truth(capture):
+    """Registration A's focal length 1 % off (every view and the rig built with it): the
+    focal pass on every view brings it back, and the shots with it."""
+    views, rig, db = capture
+    off = 1.01
+
+    def scaled(K):
+        K = np.array(K, dtype=float)
+        K[0, 0] *= off
+        K[1, 1] *= off
+        return K
+
+    doc = {**rig.doc, "focal_px": F * off,
+           "views": {v: {"K": scaled(K), "cam_to_central": M}
+                     for v, (K, M) in rig.view_poses().items()}}
+    wrong = RigB(doc)
+    eq6 = eq6_of(views, wrong)
+    out = rf.refine_calibration(eq6, wrong, db, settings(), hold_shot="x00_y00")
+    assert out.report["settings"]["focal"] == "refine"
+    refined = out.report["focal_px"]["refined"]
+    assert abs(refined / F - 1.0) < 0.25 * (off - 1.0), refined
+    assert all(abs(c.K[0, 0] - refined) < 1e-9 for c in out.cameras.values())
+    assert (complete_errors(out.cameras, views)["rotation_err_deg"]["max"]
+            < complete_errors(eq6, views)["rotation_err_deg"]["max"])
 
 
 def test_a_refinement_that_moves_a_shot_far_is_rejected(capture):
