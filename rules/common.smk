@@ -505,7 +505,11 @@ def synthesis_depth_config():
     when it is the plane sweep) and the bounds."""
     cfg = stage_config("depth")
     if cfg["synthesis_method"] == "planesweep":
-        return {k: v for k, v in cfg.items() if k not in ("views", "sgm")}
+        return {
+            k: v
+            for k, v in cfg.items()
+            if k not in ("views", "sgm", "registration_downsample")
+        }
     return {k: cfg[k] for k in ("synthesis_method", "sgm", "bounds_margin")}
 
 

@@ -348,3 +348,58 @@ def test_maps_swept_in_worker_processes_are_the_maps_swept_here(texture, tmp_pat
     assert [c for c, _, _ in workers] == list(jobs) == [c for c, _, _ in here]
     for (_, a, _), (_, b, _) in zip(here, workers, strict=True):
         assert a.tobytes() == b.tobytes() and (a > 0).mean() > 0.5
+
+
+def test_downsampled_camera_by_hand():
+    """A camera reduced twice: f / 2 and c' = (c + 1/2) / 2 - 1/2 (pixel centres at
+    integers), the size halved rounding down; a world point lands where the full-size
+    pixel's block centre does."""
+    from plenocal.camera import PinholeCamera
+    from plenocal.depth.inputs import downsample_camera
+
+    K = np.array([[100.0, 0.0, 49.5], [0.0, 100.0, 24.5], [0.0, 0.0, 1.0]])
+    cam = PinholeCamera(K, np.eye(4), 101, 50)
+    half = downsample_camera(cam, 2)
+    np.testing.assert_allclose(half.K, [[50.0, 0.0, 24.5], [0.0, 50.0, 12.0], [0, 0, 1]])
+    assert (half.width, half.height) == (50, 25)
+    X = np.array([0.13, -0.07, 1.7])
+    full_uv, _ = cam.project(X)
+    half_uv, _ = half.project(X)
+    np.testing.assert_allclose(half_uv, (full_uv + 0.5) / 2 - 0.5, atol=1e-12)
+    assert downsample_camera(cam, 1) is cam
+
+
+def test_downsampled_image_is_block_means():
+    """Each reduced pixel is the mean of its 2 x 2 block; the odd last row and column
+    are left out."""
+    from plenocal.depth.inputs import downsample_image
+
+    img = np.arange(35, dtype=np.float32).reshape(5, 7)
+    out = downsample_image(img, 2)
+    want = img[:4, :6].reshape(2, 2, 3, 2).mean(axis=(1, 3))
+    assert out.shape == (2, 3)
+    np.testing.assert_allclose(out, want)
+    with pytest.raises(ValueError, match="cannot be reduced"):
+        downsample_image(img, 8)
+
+
+def test_plane_swept_at_half_resolution(texture, tmp_path):
+    """A registration's map at depth.registration_downsample 2: half the size, the same
+    plane (the true depth at the reduced pixels' block centres)."""
+    from plenocal.depth.inputs import DepthJob, downsampled
+    from plenocal.depth.shot import _sweep_one
+    from plenocal.io.files import write_image
+
+    ref, ri, rd, srcs, sims = _scene(texture, 20.0)
+    paths = []
+    for j, img in enumerate([ri, *sims]):
+        paths.append(tmp_path / f"v{j}.png")
+        write_image(paths[-1], (np.clip(img, 0, 1) * 255).astype(np.uint8))
+    job = downsampled(DepthJob(ref, paths[0], [f"v{j}" for j in range(len(srcs))], srcs,
+                               paths[1:], 0.4, 0.9, "m"), 2)
+    depth, _ = _sweep_one(job, PlaneSweepOptions())
+    assert depth.shape == (H // 2, W // 2) and job.downsample == 2
+    truth = rd.reshape(H // 2, 2, W // 2, 2).mean(axis=(1, 3))  # the plane: linear in 1/z
+    q = depth_quality(depth, truth, 0.01)
+    assert q["valid_share"] > 0.8, q
+    assert q["median_rel_error"] < 0.006, q

@@ -9,11 +9,17 @@ registration, the scene bounds, and previews.
 - Registration B: reference = the central view; sources = the other views of its
   own N x N set (the ``k`` nearest, or all). Bounds: rig.json's X_n / X_f (mm),
   widened.
+
+Both registrations' maps are made at 1 / ``registration_downsample`` of the views'
+resolution (:func:`downsampled`): Eq. 5 needs one robust ratio per shot, not a detailed
+map. At half resolution a map took about a seventh of the time, and Eq. 5's r moved by
++0.10 % on eighteen simulated captures, nearer the truth on fourteen (BENCHMARKS.md, "The
+registrations' depth maps at half resolution").
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -106,6 +112,7 @@ class DepthJob:
     near: float
     far: float
     units: str
+    downsample: int = 1  # the views are read reduced by this factor (:func:`job_images`)
 
 
 def depth_job_a(reg_a: RegistrationA, reg_a_path: str | Path, cam: str, centre: str,
@@ -136,3 +143,54 @@ def depth_job_b(rig: RigB, cam: str, centre: str, views_dir: str | Path, k: int 
     return DepthJob(cameras[centre], views / f"{centre}.png", srcs,
                     [cameras[s] for s in srcs], [views / f"{s}.png" for s in srcs],
                     near, far, "m")
+
+
+def downsample_camera(cam: PinholeCamera, factor: int) -> PinholeCamera:
+    """The camera of its image reduced ``factor`` times by averaging ``factor x factor``
+    blocks (:func:`downsample_image`; size ``W // factor x H // factor``). Pixel centres
+    sit at integer coordinates, so a reduced pixel x' is centred on the full-size
+    ``factor x' + (factor - 1) / 2``: ``f' = f / factor``, ``c' = (c + 1/2) / factor - 1/2``."""
+    if factor == 1:
+        return cam
+    K = np.array(cam.K, dtype=np.float64)
+    K[0, 0] /= factor
+    K[1, 1] /= factor
+    K[0, 1] /= factor
+    K[0, 2] = (K[0, 2] + 0.5) / factor - 0.5
+    K[1, 2] = (K[1, 2] + 0.5) / factor - 0.5
+    return PinholeCamera(K, cam.cam_to_world, cam.width // factor, cam.height // factor)
+
+
+def downsample_image(img: np.ndarray, factor: int) -> np.ndarray:
+    """``img`` (H, W[, C]) reduced ``factor`` times: the mean of each ``factor x factor``
+    block (the last ``W mod factor`` columns and ``H mod factor`` rows left out), in the
+    image's dtype (OpenCV's area resize at an integer factor)."""
+    if factor == 1:
+        return img
+    import cv2  # noqa: PLC0415
+
+    h, w = img.shape[0] // factor, img.shape[1] // factor
+    if h < 1 or w < 1:
+        raise ValueError(f"a {img.shape[1]}x{img.shape[0]} image cannot be reduced "
+                         f"{factor} times")
+    crop = np.ascontiguousarray(img[:h * factor, :w * factor])
+    return cv2.resize(crop, (w, h), interpolation=cv2.INTER_AREA)
+
+
+def downsampled(job: DepthJob, factor: int) -> DepthJob:
+    """``job`` at 1 / ``factor`` of the views' resolution: its cameras reduced
+    (:func:`downsample_camera`), its views read reduced (:func:`job_images`)."""
+    if int(factor) < 1:
+        raise ValueError(f"depth.registration_downsample must be >= 1 (got {factor})")
+    factor = int(factor)
+    return replace(job, ref_cam=downsample_camera(job.ref_cam, factor),
+                   src_cams=[downsample_camera(c, factor) for c in job.src_cams],
+                   downsample=job.downsample * factor)
+
+
+def job_images(job: DepthJob, image) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The reference and source views of ``job`` as ``image(path)`` reads them, reduced
+    by the job's ``downsample`` factor."""
+    f = job.downsample
+    return (downsample_image(image(job.ref_path), f),
+            [downsample_image(image(p), f) for p in job.src_paths])

@@ -11,7 +11,11 @@ each map was made alone, the check swept the neighbour a second time from other 
 (82 labels beside the map's own 52 on the default data), and each shot paid a process
 start-up; one job for all shots does neither. Registration B's check partner is another
 view of the shot's own set, whose map nothing else needs: it is swept for the check, as
-before."""
+before.
+
+Both registrations' maps are made at 1 / ``depth.registration_downsample`` of the views'
+resolution (:func:`plenocal.depth.inputs.downsampled`; half by default): the views are
+read reduced and the cameras reduced with them, so a map is ``W // f x H // f``."""
 
 from __future__ import annotations
 
@@ -27,6 +31,7 @@ import numpy as np
 
 from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.artifacts.rig import read_rig
+from plenocal.config import with_defaults
 from plenocal.depth import (
     MvsProblem,
     colmap_depths_in_one_run,
@@ -34,7 +39,7 @@ from plenocal.depth import (
     planesweep_options,
     resolve_backend,
 )
-from plenocal.depth.inputs import DepthJob, depth_job_a, depth_job_b
+from plenocal.depth.inputs import DepthJob, depth_job_a, depth_job_b, downsampled, job_images
 from plenocal.depth.planesweep import (
     PlaneSweepOptions,
     left_right_check,
@@ -69,7 +74,8 @@ def _info(job: DepthJob, backend: str, cam: str, centre: str, depth: np.ndarray,
           **extra) -> dict:
     return {"backend": backend, "near": job.near, "far": job.far, "units": job.units,
             "sources": job.src_names, "valid_share": float((depth > 0).mean()),
-            "reference": f"{cam}/{centre}", **extra}
+            "reference": f"{cam}/{centre}", "downsample": job.downsample,
+            "size": [int(depth.shape[1]), int(depth.shape[0])], **extra}
 
 
 def _estimate_each(reg: str, jobs: dict[str, DepthJob], centre: str, cfg: dict, backend: str,
@@ -80,9 +86,11 @@ def _estimate_each(reg: str, jobs: dict[str, DepthJob], centre: str, cfg: dict, 
     out = {}
     if backend == "colmap":
         t0 = time.perf_counter()
-        problems = [MvsProblem(job.ref_cam, image(job.ref_path), job.src_cams,
-                               [image(p) for p in job.src_paths], job.near, job.far)
-                    for job in jobs.values()]
+        problems = []
+        for job in jobs.values():
+            ref_img, src_imgs = job_images(job, image)
+            problems.append(MvsProblem(job.ref_cam, ref_img, job.src_cams, src_imgs,
+                                       job.near, job.far))
         depths = colmap_depths_in_one_run(problems, cfg)
         for (cam, job), depth in zip(jobs.items(), depths, strict=True):
             out[cam] = ShotDepth(depth, _info(job, backend, cam, centre, depth))
@@ -92,13 +100,19 @@ def _estimate_each(reg: str, jobs: dict[str, DepthJob], centre: str, cfg: dict, 
         return out
     for k, (cam, job) in enumerate(jobs.items()):
         t0 = time.perf_counter()
-        depth = estimate_depth(job.ref_cam, image(job.ref_path), job.src_cams,
-                               [image(p) for p in job.src_paths], job.near, job.far, cfg,
-                               backend=backend)
+        ref_img, src_imgs = job_images(job, image)
+        depth = estimate_depth(job.ref_cam, ref_img, job.src_cams, src_imgs, job.near,
+                               job.far, cfg, backend=backend)
         out[cam] = ShotDepth(depth, _info(job, backend, cam, centre, depth))
         progress(f"{reg}/{cam}: {time.perf_counter() - t0:.1f} s, "
                  f"{100 * out[cam].info['valid_share']:.1f} % valid ({k + 1} of {len(jobs)})")
     return out
+
+
+def _downsample(cfg: dict) -> int:
+    """The registrations' depth maps' reduction (``depth.registration_downsample``; the
+    schema's default where a partial block leaves it out)."""
+    return int(with_defaults("depth", cfg)["registration_downsample"])
 
 
 def _describe(reg: str, jobs: dict[str, DepthJob], backend: str,
@@ -114,8 +128,9 @@ def _sweep_one(job: DepthJob, opt: PlaneSweepOptions,
     """One unchecked plane-sweep map (the views read here, by ``image``: in a worker
     process too)."""
     t0 = time.perf_counter()
-    depth = plane_sweep_unchecked(job.ref_cam, image(job.ref_path), job.src_cams,
-                                  [image(p) for p in job.src_paths], job.near, job.far, opt)
+    ref_img, src_imgs = job_images(job, image)
+    depth = plane_sweep_unchecked(job.ref_cam, ref_img, job.src_cams, src_imgs, job.near,
+                                  job.far, opt)
     return depth, time.perf_counter() - t0
 
 
@@ -155,10 +170,12 @@ def depths_a(cams: list[str], centre: str, reg_a_path: str | Path, views_dir: st
     in ``threads`` processes (each map alone: the same maps on any number)."""
     backend = resolve_backend(cfg["backend"])
     reg_a = read_reg_a(reg_a_path)
+    factor = _downsample(cfg)
 
     def job_of(cam: str) -> DepthJob:
-        return depth_job_a(reg_a, reg_a_path, cam, centre, views_dir, model_dir,
-                           int(cfg["sources_a"]), float(cfg["bounds_margin"]))
+        return downsampled(depth_job_a(reg_a, reg_a_path, cam, centre, views_dir, model_dir,
+                                       int(cfg["sources_a"]), float(cfg["bounds_margin"])),
+                           factor)
 
     jobs = {cam: job_of(cam) for cam in cams}
     _describe("a", jobs, backend, progress)
@@ -195,7 +212,9 @@ def depths_b(cams: list[str], centre: str, rig_path: str | Path, views_dir: str 
     backend's)."""
     backend = resolve_backend(cfg["backend"])
     rig = read_rig(rig_path)
-    jobs = {cam: depth_job_b(rig, cam, centre, views_dir, cfg["sources_b"],
-                             float(cfg["bounds_margin"])) for cam in cams}
+    factor = _downsample(cfg)
+    jobs = {cam: downsampled(depth_job_b(rig, cam, centre, views_dir, cfg["sources_b"],
+                                         float(cfg["bounds_margin"])), factor)
+            for cam in cams}
     _describe("b", jobs, backend, progress)
     return _estimate_each("b", jobs, centre, cfg, backend, progress)
