@@ -46,12 +46,15 @@ def shot_ratio(d1: np.ndarray, d2: np.ndarray, low: float = _LOW, high: float = 
     d2 = np.asarray(d2)
     if d1.shape != d2.shape:
         raise ValueError(f"{name}: depth maps of registrations A and B differ in size "
-                         f"({d1.shape} vs {d2.shape}); both must be of the central view")
+                         f"({d1.shape} vs {d2.shape}); both must be of the central view, made "
+                         "with one depth.registration_downsample: rerun the depth stage "
+                         "(snakemake --forcerun depth)")
     m = valid_mask(d1, low, high) & valid_mask(d2, low, high)
     n = int(m.sum())
     if n == 0:
         raise ValueError(f"{name}: no pixel is valid in both depth maps (A and B); check the "
-                         "depth stage's output for this shot")
+                         "depth stage's output for this shot (its preview PNGs); on small "
+                         "views, depth.registration_downsample: 1 makes them at full size")
     ratio = d2[m].astype(np.float64) / d1[m].astype(np.float64)
     return {"r": float(ratio.mean()), "median": float(np.median(ratio)), "n": n,
             "std": float(ratio.std())}
