@@ -19,6 +19,7 @@ registrations' depth maps at half resolution").
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -188,7 +189,8 @@ def downsampled(job: DepthJob, factor: int) -> DepthJob:
                    downsample=job.downsample * factor)
 
 
-def job_images(job: DepthJob, image) -> tuple[np.ndarray, list[np.ndarray]]:
+def job_images(job: DepthJob, image: Callable[[str | Path], np.ndarray]
+               ) -> tuple[np.ndarray, list[np.ndarray]]:
     """The reference and source views of ``job`` as ``image(path)`` reads them, reduced
     by the job's ``downsample`` factor."""
     f = job.downsample
