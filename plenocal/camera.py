@@ -68,6 +68,23 @@ def intrinsics(f: float, cx: float, cy: float, fy: float | None = None) -> np.nd
     return np.array([[f, 0.0, cx], [0.0, f if fy is None else fy, cy], [0.0, 0.0, 1.0]])
 
 
+def downsample_camera(cam: PinholeCamera, factor: int) -> PinholeCamera:
+    """The camera of its image reduced ``factor`` times by averaging ``factor x factor``
+    blocks (:func:`plenocal.depth.inputs.downsample_image`; ``W // factor x H // factor``).
+    Pixel centres sit at integer coordinates, so a reduced pixel x' is centred on the
+    full-size ``factor x' + (factor - 1) / 2``: ``f' = f / factor``,
+    ``c' = (c + 1/2) / factor - 1/2``."""
+    if factor == 1:
+        return cam
+    K = np.array(cam.K, dtype=np.float64)
+    K[0, 0] /= factor
+    K[1, 1] /= factor
+    K[0, 1] /= factor
+    K[0, 2] = (K[0, 2] + 0.5) / factor - 0.5
+    K[1, 2] = (K[1, 2] + 0.5) / factor - 0.5
+    return PinholeCamera(K, cam.cam_to_world, cam.width // factor, cam.height // factor)
+
+
 def centred_intrinsics(f: float, width: int, height: int) -> np.ndarray:
     """K with the principal point at the image centre ((W-1)/2, (H-1)/2)."""
     return intrinsics(f, (width - 1) / 2.0, (height - 1) / 2.0)

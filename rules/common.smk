@@ -490,6 +490,8 @@ def depth_groups(dataset):
 
 # depth settings of the synthesis depth maps only (rule depth_view)
 SYNTHESIS_DEPTH_KEYS = ("synthesis_method", "views", "sgm")
+# the keys only the registrations' depth maps read (depth_view leaves them out)
+REGISTRATION_DEPTH_KEYS = ("registration_downsample",)
 
 
 def registration_depth_config():
@@ -508,7 +510,7 @@ def synthesis_depth_config():
         return {
             k: v
             for k, v in cfg.items()
-            if k not in ("views", "sgm", "registration_downsample")
+            if k not in ("views", "sgm", *REGISTRATION_DEPTH_KEYS)
         }
     return {k: cfg[k] for k in ("synthesis_method", "sgm", "bounds_margin")}
 

@@ -354,8 +354,7 @@ def test_downsampled_camera_by_hand():
     """A camera reduced twice: f / 2 and c' = (c + 1/2) / 2 - 1/2 (pixel centres at
     integers), the size halved rounding down; a world point lands where the full-size
     pixel's block centre does."""
-    from plenocal.camera import PinholeCamera
-    from plenocal.depth.inputs import downsample_camera
+    from plenocal.camera import PinholeCamera, downsample_camera
 
     K = np.array([[100.0, 0.0, 49.5], [0.0, 100.0, 24.5], [0.0, 0.0, 1.0]])
     cam = PinholeCamera(K, np.eye(4), 101, 50)

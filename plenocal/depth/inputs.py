@@ -27,7 +27,7 @@ import numpy as np
 
 from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.artifacts.rig import RigB
-from plenocal.camera import PinholeCamera, transform
+from plenocal.camera import PinholeCamera, downsample_camera, transform
 
 
 def widen(near: float, far: float, margin: float) -> tuple[float, float]:
@@ -144,22 +144,6 @@ def depth_job_b(rig: RigB, cam: str, centre: str, views_dir: str | Path, k: int 
     return DepthJob(cameras[centre], views / f"{centre}.png", srcs,
                     [cameras[s] for s in srcs], [views / f"{s}.png" for s in srcs],
                     near, far, "m")
-
-
-def downsample_camera(cam: PinholeCamera, factor: int) -> PinholeCamera:
-    """The camera of its image reduced ``factor`` times by averaging ``factor x factor``
-    blocks (:func:`downsample_image`; size ``W // factor x H // factor``). Pixel centres
-    sit at integer coordinates, so a reduced pixel x' is centred on the full-size
-    ``factor x' + (factor - 1) / 2``: ``f' = f / factor``, ``c' = (c + 1/2) / factor - 1/2``."""
-    if factor == 1:
-        return cam
-    K = np.array(cam.K, dtype=np.float64)
-    K[0, 0] /= factor
-    K[1, 1] /= factor
-    K[0, 1] /= factor
-    K[0, 2] = (K[0, 2] + 0.5) / factor - 0.5
-    K[1, 2] = (K[1, 2] + 0.5) / factor - 0.5
-    return PinholeCamera(K, cam.cam_to_world, cam.width // factor, cam.height // factor)
 
 
 def downsample_image(img: np.ndarray, factor: int) -> np.ndarray:
