@@ -150,13 +150,14 @@ def write_npy(path: str | Path, array: np.ndarray) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
-#: zlib level of every PNG the workflow writes (:func:`write_image`). Measured on the
-#: default camera's 2048 x 1536 16-bit lenslet image: level 1 encodes in 0.66 s and
-#: 13.78 MB, level 3 in 1.25 s and 13.63 MB; a 500 x 376 view 14 ms against 24 ms.
+#: compression level of every PNG the workflow writes (:func:`write_image`): ISA-L's level
+#: 1 with PNG's "up" filter (:mod:`plenocal.io.png`). A 1576 x 1190 RGB view encodes in
+#: 41 ms to 2.49 MB where OpenCV's encoder at zlib's Huffman-only level 1 took 95 ms for
+#: 2.72 MB (issue 35).
 PNG_LEVEL = 1
 
 
-#: zlib level of the simulator's lenslet images (:func:`write_image` ``level``): stored, not
+#: level of the simulator's lenslet images (:func:`write_image` ``level``): stored, not
 #: compressed - the noisy 12-bit pixels compress to 70 % at best, and a 2048 x 1536 image
 #: then encodes in 0.05 s instead of 0.22 s and decodes in 0.05 s instead of 0.15 s, for
 #: 18.9 MB instead of 13.3 MB on disk (issue 15).
@@ -164,47 +165,31 @@ LENSLET_PNG_LEVEL = 0
 
 
 def write_image(path: str | Path, image: np.ndarray, level: int = PNG_LEVEL) -> None:
-    """Write a PNG (uint8 or uint16, gray or RGB) deterministically and atomically
-    (``level``: zlib's, 0 = stored).
+    """Write a PNG (uint8 or uint16, grey or RGB) deterministically and atomically
+    (``level``: 0 stored, 1-3 ISA-L's deflate levels; :mod:`plenocal.io.png`).
 
-    OpenCV's PNG encoder is used (fixed compression level, no timestamps), with RGB
-    input converted to OpenCV's BGR order. Level :data:`PNG_LEVEL` (zlib 1): on a 12-bit
-    lenslet image 1.9x faster to encode than level 3 for 1 % more bytes (issue 15).
-    zlib's Huffman-only strategy (PNG's row filters, no string matching; issue 15): the
-    noisy pixels of these images hold few repeated strings, so on a 12-bit lenslet image
-    it encodes in 0.42 s instead of 0.67 s and decodes in 0.17 s instead of 0.20 s with
-    2 % fewer bytes; on 25 subaperture views 0.44 / 0.19 s instead of 0.53 / 0.26 s, 13 %
-    fewer bytes. Every row with PNG's "up" filter (the difference to the row above)
-    rather than libpng's per-row choice among the five filters: a 12-bit lenslet image
-    encodes in 0.17 s instead of 0.32 s and decodes in 0.09 s instead of 0.16 s with 2 %
-    fewer bytes; a 500 x 376 view in 4.8 / 2.7 ms instead of 8.3 / 4.3 ms with 17 % more
-    bytes (issue 15). Stored data (level 0) is written unfiltered: a filter only helps
-    compression, and the "up" filter's pass cost a 12-bit lenslet image 0.12 instead of
-    0.04 s to encode and 0.04 instead of 0.03 s to decode (issue 15). The pixels are the
-    same either way.
+    The encoder is our own container around ISA-L's deflate (the ``isal`` package): no time
+    stamps or other ancillary chunks, so the same pixels give the same bytes. Stored data
+    (level 0) is written unfiltered; compressed data with PNG's "up" filter on every row
+    (the difference to the row above; issue 15 measured it against libpng's per-row choice:
+    2x faster to encode and decode for a few % more bytes). ISA-L's level 1 deflates
+    3.3x faster than zlib's Huffman-only level 1, which OpenCV's encoder was set to before
+    (issue 35: a 1576 x 1190 view in 26 against 86 ms, 8 % fewer bytes), and lets go of
+    the GIL (:func:`write_images` on threads).
     """
-    import cv2  # noqa: PLC0415  (imported late: see DESIGN.md on cv2/pycolmap order)
+    from plenocal.io.png import encode_png  # noqa: PLC0415
 
-    image = np.ascontiguousarray(image)
-    if image.dtype not in (np.uint8, np.uint16):
-        raise TypeError(f"write_image needs uint8 or uint16, got {image.dtype}")
-    if image.ndim == 3 and image.shape[2] == 3:
-        image = image[:, :, ::-1]
-    ok, enc = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, int(level),
-                                           cv2.IMWRITE_PNG_STRATEGY,
-                                           cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY,
-                                           cv2.IMWRITE_PNG_FILTER,
-                                           cv2.IMWRITE_PNG_FILTER_NONE if int(level) == 0
-                                           else cv2.IMWRITE_PNG_FILTER_UP])
-    if not ok:
-        raise OSError(f"PNG encoding failed for {path}")
-    atomic_write_bytes(path, enc.tobytes())
+    try:
+        data = encode_png(np.asarray(image), level)
+    except (TypeError, ValueError) as err:
+        raise type(err)(f"{path}: {err}") from None
+    atomic_write_bytes(path, data)
 
 
 def write_images(items: Iterable[tuple[str | Path, np.ndarray]], threads: int = 1,
                  level: int = PNG_LEVEL) -> None:
-    """:func:`write_image` for every (path, image), on ``threads`` threads (zlib and the
-    file writes let go of the GIL; each file is written atomically on its own)."""
+    """:func:`write_image` for every (path, image), on ``threads`` threads (ISA-L's deflate
+    and the file writes let go of the GIL; each file is written atomically on its own)."""
     items = list(items)
     if threads <= 1 or len(items) <= 1:
         for path, image in items:
