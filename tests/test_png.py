@@ -79,3 +79,18 @@ def test_png_refuses_what_it_cannot_write(tmp_path):
     with pytest.raises(ValueError, match="level 9"):
         write_image(tmp_path / "bad.png", np.zeros((2, 2), np.uint8), level=9)
     assert not list(tmp_path.iterdir())
+
+
+def test_png_splits_large_data_over_idat_chunks(tmp_path, monkeypatch):
+    """Deflated data longer than a chunk may hold goes into consecutive IDAT chunks (here
+    cut every 7 bytes), which readers join into the one zlib stream."""
+    import plenocal.io.png as png
+
+    monkeypatch.setattr(png, "IDAT_BYTES", 7)
+    img = np.random.default_rng(5).integers(0, 65535, (20, 30, 3), dtype=np.uint16)
+    data = png.encode_png(img, 1)
+    kinds = [k for k, _ in _chunks(data)]
+    assert kinds[0] == b"IHDR" and kinds[-1] == b"IEND"
+    assert set(kinds[1:-1]) == {b"IDAT"} and len(kinds) > 10
+    (tmp_path / "split.png").write_bytes(data)
+    assert np.array_equal(read_image(tmp_path / "split.png"), img)
