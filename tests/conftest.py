@@ -25,6 +25,16 @@ def snakemake(work: Path, *args: str, timeout: int = 1500,
                           timeout=timeout, env=env)
 
 
+def snakemake_each(work: Path, calls: list[tuple[str, ...]], workers: int = 2
+                   ) -> list[subprocess.CompletedProcess]:
+    """:func:`snakemake` with each argument tuple of ``calls`` in ``work``, ``workers`` at a
+    time (for dry runs, which lock nothing: one process each, one core each), in order."""
+    from concurrent.futures import ThreadPoolExecutor  # noqa: PLC0415
+
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        return list(pool.map(lambda args: snakemake(work, *args), calls))
+
+
 def workflow_copy(dest: Path) -> Path:
     """The workflow's files (no data, no results) in ``dest``."""
     dest.mkdir(parents=True, exist_ok=True)

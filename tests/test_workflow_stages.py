@@ -13,7 +13,7 @@ import re
 from pathlib import Path
 
 import pytest
-from conftest import ROOT, clone, snakemake
+from conftest import ROOT, clone, snakemake, snakemake_each
 
 pytestmark = pytest.mark.workflow
 
@@ -102,7 +102,12 @@ def test_until_and_forcerun_take_every_stage(work: Path):
     for rule, after in graph.items():
         for b in after:
             reversed_graph[b].add(rule)
+    # every dry run first, two at a time (one core each)
+    calls = [args for stage in stages for args in (("-n", "--forceall", "--until", stage),
+                                                   ("-n", "--forcerun", stage))]
+    procs = iter(snakemake_each(work, calls))
     for stage, patterns in stages.items():
+        until, forcerun = next(procs), next(procs)
         members = {r for r in graph if any(re.fullmatch(p, r) for p in patterns)}
         assert members, stage
         after = closure(graph, members) - members
@@ -110,11 +115,11 @@ def test_until_and_forcerun_take_every_stage(work: Path):
 
         # the stage's own rule, where it is not one of its rules, runs nothing
         alias = {stage} - members
-        planned = scheduled(snakemake(work, "-n", "--forceall", "--until", stage)) - alias
+        planned = scheduled(until) - alias
         assert members <= planned, (stage, sorted(members - planned))
         assert planned <= members | before, (stage, sorted(planned - members - before))
 
-        planned = scheduled(snakemake(work, "-n", "--forcerun", stage)) - alias
+        planned = scheduled(forcerun) - alias
         assert members | after <= planned, (stage, sorted((members | after) - planned))
         assert planned <= members | after, (stage, sorted(planned - members - after))
     # the complete run is left as it was
