@@ -2,10 +2,11 @@
 deflate stream by Intel's ISA-L (the ``isal`` package).
 
 A PNG (ISO/IEC 15948) is the 8-byte signature, an ``IHDR`` chunk (size, bit depth, colour
-type), the filtered rows deflated as one zlib stream in an ``IDAT`` chunk, and ``IEND``;
-each chunk carries its length and a CRC-32. Only what the workflow writes is encoded:
-grey or RGB (colour types 0 and 2), 8 or 16 bits (16-bit samples big-endian), no
-interlacing, no ancillary chunks (no time stamp: the same pixels give the same bytes).
+type), the filtered rows deflated as one zlib stream in ``IDAT`` chunks (one unless it
+exceeds :data:`IDAT_BYTES`), and ``IEND``; each chunk carries its length and a CRC-32.
+Only what the workflow writes is encoded: grey or RGB (colour types 0 and 2), 8 or 16 bits
+(16-bit samples big-endian), no interlacing, no ancillary chunks (no time stamp: the same
+pixels give the same bytes).
 
 * ``level`` 0: stored (zlib's level 0, no compression), every row unfiltered (a filter only
   helps compression). For noisy 12-bit lenslet images that compress to 70 % at best.
@@ -35,10 +36,11 @@ LEVELS = (0, 1, 2, 3)
 IDAT_BYTES = 1 << 30
 
 
-def chunk(kind: bytes, data: bytes) -> bytes:
-    """One PNG chunk: length, type, data, CRC-32 of type and data."""
-    return (struct.pack(">I", len(data)) + kind + data
-            + struct.pack(">I", zlib.crc32(data, zlib.crc32(kind))))
+def chunk(kind: bytes, data: bytes | memoryview) -> list[bytes | memoryview]:
+    """One PNG chunk as its parts, to be joined once with the others: length, type, data
+    (not copied), CRC-32 of type and data."""
+    return [struct.pack(">I", len(data)), kind, data,
+            struct.pack(">I", zlib.crc32(data, zlib.crc32(kind)))]
 
 
 def filtered_rows(image: np.ndarray, up: bool) -> np.ndarray:
@@ -61,8 +63,8 @@ def filtered_rows(image: np.ndarray, up: bool) -> np.ndarray:
 
 def encode_png(image: np.ndarray, level: int = 1) -> bytes:
     """The PNG bytes of ``image`` (grey (H, W) or (H, W, 1), or RGB (H, W, 3); uint8 or
-    uint16) at
-    ``level`` (module docstring: 0 stored, 1-3 ISA-L's levels)."""
+    uint16) at ``level`` (module docstring: 0 stored, 1-3 ISA-L's levels). The deflated
+    data is copied once, into the returned bytes."""
     from isal import isal_zlib  # noqa: PLC0415  (only where a PNG is written)
 
     if image.dtype not in (np.uint8, np.uint16):
@@ -73,15 +75,17 @@ def encode_png(image: np.ndarray, level: int = 1) -> bytes:
     if image.ndim not in (2, 3) or channels not in _COLOUR_TYPE:
         raise ValueError(f"PNG images here are grey (H, W) or (H, W, 1), or RGB (H, W, 3), "
                          f"got shape {image.shape}")
-    if int(level) not in LEVELS:
+    if level not in LEVELS:
         raise ValueError(f"PNG level {level}: use one of {LEVELS} (0 = stored)")
+    level = int(level)
     h, w = image.shape[:2]
     if h == 0 or w == 0:
         raise ValueError(f"a PNG needs at least one pixel, got shape {image.shape}")
-    rows = filtered_rows(image, up=int(level) > 0)
-    data = zlib.compress(rows, 0) if int(level) == 0 else isal_zlib.compress(rows, int(level))
+    rows = filtered_rows(image, up=level > 0)
+    data = memoryview(zlib.compress(rows, 0) if level == 0 else isal_zlib.compress(rows, level))
     header = struct.pack(">IIBBBBB", w, h, 8 * image.dtype.itemsize, _COLOUR_TYPE[channels],
                          0, 0, 0)
-    idat = b"".join(chunk(b"IDAT", data[a:a + IDAT_BYTES])
-                    for a in range(0, max(len(data), 1), IDAT_BYTES))
-    return SIGNATURE + chunk(b"IHDR", header) + idat + chunk(b"IEND", b"")
+    parts = [SIGNATURE, *chunk(b"IHDR", header)]
+    for a in range(0, max(len(data), 1), IDAT_BYTES):
+        parts += chunk(b"IDAT", data[a:a + IDAT_BYTES])
+    return b"".join(parts + chunk(b"IEND", b""))
