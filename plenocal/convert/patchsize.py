@@ -61,11 +61,11 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from scipy.spatial import cKDTree
 
 from plenocal.config import stage_defaults
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.exact import remap
+from plenocal.convert.nearest import nearest_within
 from plenocal.convert.threads import opencv_threads, run_all
 from plenocal.convert.vignetting import gains
 from plenocal.grid import MicrolensGrid
@@ -232,9 +232,7 @@ def fill_unreliable(raw: np.ndarray, confidence: np.ndarray, centres: np.ndarray
     missing = np.flatnonzero(~ok)
     if len(missing):
         k = min(FILL_NEIGHBOURS, int(ok.sum()))
-        dist, idx = cKDTree(centres[ok]).query(centres[missing], k=k,
-                                               distance_upper_bound=FILL_REACH)
-        dist, idx = dist.reshape(len(missing), k), idx.reshape(len(missing), k)
+        dist, idx = nearest_within(centres[ok], centres[missing], k, FILL_REACH)
         found = idx < len(good)
         safe = np.where(found, idx, 0)
         wts = np.where(found, confidence[ok][safe] / np.maximum(dist, 0.5) ** 2, 0.0)
