@@ -635,7 +635,7 @@ def test_each_slot_is_devignetted_with_its_lens_types_profile():
     used = layout.lens_index
     plan, = make_plans(layout, shot.used_patch, calib.safe_diameter, [shot.settings.render],
                        profile=profiles, profile_row=lens_type[used])
-    assert plan.gain_table.shape[0] == 2 and plan.gain_row is not None
+    assert plan.gain_table.shape[0] == 2 and plan.gain_base is not None
     one, = make_plans(layout, shot.used_patch, calib.safe_diameter, [shot.settings.render],
                       profile=profiles[:1])
     b = layout.tile

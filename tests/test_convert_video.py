@@ -183,7 +183,7 @@ def test_10bit_clip_to_10bit_view_videos_matching_the_frames_pngs(tmp_path):
         r = _cli("convert", str(png), str(xml), "-o", str(ref), "--bit-depth", "16",
                  "--setup", str(out / "convert_setup.json"))
         assert r.returncode == 0, r.stderr
-        worst = 0
+        worst, over, count = 0, 0, 0
         for name in ("2_2", "0_0", "4_4", "1_3"):
             path = out / files[name]
             assert path.stat().st_size == 3 * vfmt.frame_bytes
@@ -193,9 +193,16 @@ def test_10bit_clip_to_10bit_view_videos_matching_the_frames_pngs(tmp_path):
             assert view.shape == (H, W, 3)
             want = rgb_to_yuv(view.astype(np.float32) / 255.0, 10)
             for g, w in zip(got, want, strict=True):
-                worst = max(worst, int(np.abs(g.astype(int) - w.astype(int)).max()))
-        # the PNG views are 8-bit RGB: half an 8-bit step is 1.7 10-bit luma levels
-        assert worst <= 3, (k, worst)
+                d = np.abs(g.astype(int) - w.astype(int))
+                worst = max(worst, int(d.max()))
+                over += int((d > 2).sum())
+                count += d.size
+        # the PNG views are 8-bit RGB: half an 8-bit step is 1.7 10-bit luma levels, and
+        # where filled lenses are softened the 8-bit view is rounded twice (before and
+        # after the blend with its blur: up to one 8-bit step, 3.4 levels), each output
+        # rounded once more: at most 4 levels, and more than 2 on few pixels
+        assert worst <= 4, (k, worst)
+        assert over <= 0.01 * count, (k, over, count)
 
 
 @needs_real

@@ -22,6 +22,13 @@ A tiny floor keeps the nearest lens when every candidate is at the rim. Each sam
 divided by the micro images' vignetting profile at its radius
 (:mod:`plenocal.convert.vignetting`).
 
+The radial weight and gain are tables over the squared radius (:data:`RADIAL_LEVELS`
+entries: no square root per sample, and 8-bit indices that :func:`cv2.LUT` reads; the
+steps are finest at the rim, where the weight falls fastest), and the samples are read
+through OpenCV's fixed-point maps (:func:`cv2.convertMaps`: positions to 1/32 px, the
+interpolation 1.5x as fast as from float maps, whose conversion OpenCV 5 no longer does
+inside the remap).
+
 Everything that does not depend on the view is computed once per shot
 (:class:`RenderPlan`): the candidate lenses, their tile weights and the sampling
 positions of the central view; view (r, c) only adds the constant ``R q_rc``.
@@ -36,12 +43,15 @@ import cv2
 import numpy as np
 
 from plenocal.config import stage_defaults
-from plenocal.convert.exact import magnitude
 from plenocal.convert.vignetting import gains
 from plenocal.viewgeom import ViewLayout, nearest_lenses, nearest_slots
 
 _FLOOR = 1e-3
-LUT_STEP = 0.05  # pixels of radius between entries of the radial tables
+#: entries of the radial tables, evenly spaced in the squared radius from 0 to
+#: :data:`RADIAL_BEYOND_PX` past the rim's end (the last entry for everything farther):
+#: steps of 0.05-0.07 px of radius at the rim on micro images of 16-50 px
+RADIAL_LEVELS = 256
+RADIAL_BEYOND_PX = 2.0
 
 
 _BLEND = stage_defaults("convert.blend")
@@ -119,9 +129,11 @@ class RenderPlan:
     off_x: np.ndarray  # (K, h, W) offset from the micro-image centre, central view
     off_y: np.ndarray
     tile_weight: np.ndarray  # (K, h, W) float32
-    weight_table: np.ndarray  # radial weight (rim x centre + floor), every LUT_STEP px
-    gain_table: np.ndarray  # (T, n) 1 / vignetting profile per lens type, same radii
-    gain_row: np.ndarray | None = None  # (K, h, W) float32 gain_table row of each slot's lens
+    weight_table: np.ndarray  # (RADIAL_LEVELS,) radial weight (rim x centre + floor)
+    gain_table: np.ndarray  # (T, RADIAL_LEVELS) 1 / vignetting profile per lens type
+    radial_scale: float  # table entry per squared px of radius (radial_tables)
+    # (K, h, W) intp: RADIAL_LEVELS x the gain_table row of each slot's lens (T > 1)
+    gain_base: np.ndarray | None = None
     rows: slice = field(default_factory=lambda: slice(None))  # the output rows covered
 
 
@@ -177,11 +189,11 @@ def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
         map_x[k][~have[k]] = -1e4
         map_y[k][~have[k]] = -1e4
     focus_w = None if focus is None else np.asarray(focus, dtype=f).take(lens)
-    gain_row = None
+    gain_base = None
     if profile is not None and np.ndim(profile) == 2 and len(profile) > 1:
         if profile_row is None or np.shape(profile_row) != patch.shape:
             raise ValueError("a profile per lens type needs profile_row, one row per used lens")
-        gain_row = np.asarray(profile_row, dtype=f).take(lens)
+        gain_base = np.asarray(profile_row, dtype=np.intp).take(lens) * RADIAL_LEVELS
     plans = []
     for blend in blends:
         k = min(blend.slots, K)
@@ -194,21 +206,27 @@ def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
         wt[~have[:k]] = 0.0
         # the nearest lens always keeps a tiny weight (every pixel has a lens within 0.577)
         np.maximum(wt[0], np.where(have[0], f(_FLOOR), f(0.0)), out=wt[0])
-        weight_table, gain_tab = radial_tables(safe_diameter, blend, profile)
+        weight_table, gain_tab, radial_scale = radial_tables(safe_diameter, blend, profile)
         plans.append(RenderPlan(
             layout=layout, map_x=map_x[:k], map_y=map_y[:k], off_x=off_x[:k],
             off_y=off_y[:k], tile_weight=wt, weight_table=weight_table, gain_table=gain_tab,
-            gain_row=None if gain_row is None else gain_row[:k], rows=rows))
+            radial_scale=radial_scale, gain_base=None if gain_base is None else gain_base[:k],
+            rows=rows))
     return plans
 
 
 def radial_tables(safe_diameter: float, settings: RenderSettings,
-                  profile: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """Per radius from the micro-image centre (every ``LUT_STEP`` px, the last entry for
-    everything beyond): the sample's weight ``rim x (1 - (rho / (D'/2))^2)^centre_power
-    + floor`` (n,) and its vignetting gain (T, n), one row per row of ``profile``."""
+                  profile: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, float]:
+    """The sample's weight ``rim x (1 - (rho / (D'/2))^2)^centre_power + floor``
+    (:data:`RADIAL_LEVELS`,) and its vignetting gain (T, :data:`RADIAL_LEVELS`), one row per
+    row of ``profile``, at the squared radii ``rho^2 = j / scale`` (entry ``j``), and
+    ``scale``: from the micro-image centre to :data:`RADIAL_BEYOND_PX` past the rim's end
+    (the weight is the floor there, and the last entry holds for everything farther).
+    A sample's entry is ``round(scale rho^2)`` (:func:`radial_entries`)."""
     rim_radius = safe_diameter / 2.0 - settings.rim_px
-    r = np.arange(0.0, max(rim_radius, 0.0) + settings.rim_ramp_px + 3.0, LUT_STEP)
+    end = max(rim_radius, 0.0) + RADIAL_BEYOND_PX
+    scale = (RADIAL_LEVELS - 1) / (end * end)
+    r = np.sqrt(np.arange(RADIAL_LEVELS) / scale)
     w = np.clip((rim_radius - r) / settings.rim_ramp_px, 0.0, 1.0)
     if settings.centre_power > 0:
         half = safe_diameter / 2.0
@@ -218,16 +236,24 @@ def radial_tables(safe_diameter: float, settings: RenderSettings,
         g = np.ones((1, len(r)))
     else:
         g = gains(np.atleast_2d(profile), r)
-    return w.astype(np.float32), g.astype(np.float32)
+    return w.astype(np.float32), g.astype(np.float32), float(scale)
 
 
-def _lookup(table: np.ndarray, x: np.ndarray, row: np.ndarray) -> np.ndarray:
-    """``table`` ((n,) or (T, n)) at the entries nearest to ``x`` in rows ``row`` (float32
-    arrays of one shape; zeros for a 1-D table), clamped to its ends: ``cv2.remap`` on the
-    table as an image (rounds, replicates the last entry; 2-3x faster than computing
-    integer indices and gathering with numpy)."""
-    return cv2.remap(np.atleast_2d(table), x, row, cv2.INTER_NEAREST,
-                     borderMode=cv2.BORDER_REPLICATE)
+def radial_entries(off_x: np.ndarray, off_y: np.ndarray, o: np.ndarray, scale: float
+                   ) -> np.ndarray:
+    """uint8 radial-table entries (:func:`radial_tables`) of the samples whose offsets from
+    their micro-image centres are ``(off_x, off_y) + o`` (float32 arrays of one shape):
+    ``min(round(scale ((off_x + o_x)^2 + (off_y + o_y)^2)), RADIAL_LEVELS - 1)``, in numpy's
+    IEEE operations (the same bits wherever the arrays sit)."""
+    x = off_x + np.float32(o[0])
+    y = off_y + np.float32(o[1])
+    x *= x
+    y *= y
+    x += y
+    x *= np.float32(scale)
+    x += np.float32(0.5)
+    np.minimum(x, np.float32(RADIAL_LEVELS - 1), out=x)
+    return x.astype(np.uint8)
 
 
 BAND_ROWS = 32  # rows rendered at a time: every per-pixel array of a band stays in cache
@@ -241,18 +267,18 @@ def view_weights(plan: RenderPlan, r: int, c: int, with_gain: bool = False,
     o = plan.layout.offset_image(r, c)
     off_x, off_y, tile_weight = plan.off_x[:, rows], plan.off_y[:, rows], plan.tile_weight[:, rows]
     K, H, W = off_x.shape
-    zeros = np.zeros((H, W), np.float32)
     w = np.empty((K, H, W), np.float32)
     gain = np.empty((K, H, W), np.float32) if with_gain else None
     total = np.zeros((H, W), np.float32)
     for k in range(K):
-        rad = magnitude(off_x[k] + np.float32(o[0]), off_y[k] + np.float32(o[1]))
-        rad *= np.float32(1.0 / LUT_STEP)  # fractional table entry
-        np.multiply(_lookup(plan.weight_table, rad, zeros), tile_weight[k], out=w[k])
+        entry = radial_entries(off_x[k], off_y[k], o, plan.radial_scale)
+        np.multiply(cv2.LUT(entry, plan.weight_table), tile_weight[k], out=w[k])
         total += w[k]
         if gain is not None:
-            gain[k] = _lookup(plan.gain_table, rad,
-                              zeros if plan.gain_row is None else plan.gain_row[k, rows])
+            if plan.gain_base is None:  # one profile (or none): a LUT
+                gain[k] = cv2.LUT(entry, plan.gain_table[0])
+            else:  # a profile per lens type: the row of each sample's lens
+                plan.gain_table.take(plan.gain_base[k, rows] + entry, out=gain[k], mode="clip")
     np.maximum(total, np.float32(1e-12), out=total)
     np.divide(np.float32(unit), total, out=total)
     w *= total
@@ -265,12 +291,13 @@ def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int,
                 unit: float = 1.0) -> np.ndarray:
     """View (r, c) over the plan's rows as float32 (h, W, C): ``unit`` times the units of
     ``source`` (a float32, or an 8- or 16-bit image: OpenCV interpolates integers 1.3-1.6x
-    faster, reading a quarter or half the bytes, to 1/32 px as floats; ``unit`` brings
-    them to [0, 1]), corrected for the micro images' vignetting where the plan has a
-    profile. Rendered in bands of :data:`BAND_ROWS` rows (the same numbers as whole;
-    1.3-1.5x faster). A four-channel source is no faster than three here: the samples'
-    reads from the frame, not the interpolation, bound the remap (measured on Boxer:
-    3.09 against 3.10 s)."""
+    faster, reading a quarter or half the bytes; ``unit`` brings them to [0, 1]),
+    corrected for the micro images' vignetting where the plan has a profile. Each slot's
+    samples are read at positions rounded to 1/32 px (OpenCV's fixed-point maps; the
+    module docstring). Rendered in bands of :data:`BAND_ROWS` rows (the same numbers as
+    whole; 1.3-1.5x faster). A four-channel source is no faster than three here: the
+    samples' reads from the frame, not the interpolation, bound the remap (measured on
+    Boxer: 3.09 against 3.10 s)."""
     o = plan.layout.offset_image(r, c)
     ch = 1 if source.ndim == 2 else source.shape[2]
     H, W = plan.map_x.shape[1:]
@@ -282,8 +309,9 @@ def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int,
         w = view_weights(plan, r, c, with_gain=True, rows=rows, unit=unit)
         band = out[rows]
         for k in range(w.shape[0]):
-            s = cv2.remap(source, plan.map_x[k, rows] + ox, plan.map_y[k, rows] + oy,
-                          cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            xy, frac = cv2.convertMaps(plan.map_x[k, rows] + ox, plan.map_y[k, rows] + oy,
+                                       cv2.CV_16SC2)
+            s = cv2.remap(source, xy, frac, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
             if convert:
                 s = s.astype(np.float32)
             # band += s * w_k in one pass (numpy's broadcast over channels takes 3x as long)
