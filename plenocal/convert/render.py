@@ -49,7 +49,8 @@ from plenocal.viewgeom import ViewLayout, nearest_lenses, nearest_slots
 _FLOOR = 1e-3
 #: entries of the radial tables, evenly spaced in the squared radius from 0 to
 #: :data:`RADIAL_BEYOND_PX` past the rim's end (the last entry for everything farther):
-#: steps of 0.05-0.07 px of radius at the rim on micro images of 16-50 px
+#: steps of 0.02-0.06 px of radius at the rim on micro images of 16-50 px (the tables were
+#: every 0.05 px of radius before)
 RADIAL_LEVELS = 256
 RADIAL_BEYOND_PX = 2.0
 
@@ -348,20 +349,12 @@ def soften_unreliable(view: np.ndarray, rmap: np.ndarray, sigma_px: float) -> np
     soft = np.flatnonzero((rmap < 1.0 - 1e-6).any(axis=1))
     rows = slice(int(soft[0]), int(soft[-1]) + 1)  # the rows with something to soften
     r = np.ascontiguousarray(rmap[rows], dtype=np.float32)
-    if view.dtype == np.uint16:  # cv2.blendLinear takes 8-bit and float images only
-        # r v + (1 - r) blur in float32, rounded: OpenCV's per-channel products are the
-        # same IEEE operations as numpy's broadcast over channels (the same bits), in 0.6x
-        # the time (a 1574 x 1190 view: 40 against 67 ms)
-        ch = view.shape[2]
-        v = view[rows].astype(np.float32).reshape(-1, view.shape[1], ch)
-        b = blurred[rows].astype(np.float32).reshape(v.shape)
-        keep = r if ch == 1 else cv2.merge([r] * ch)
-        fade = np.float32(1.0) - keep
-        cv2.multiply(v, keep.reshape(v.shape), dst=v)
-        cv2.multiply(b, fade.reshape(v.shape), dst=b)
-        cv2.add(v, b, dst=v)
-        np.rint(v, out=v)
-        view[rows] = v.astype(np.uint16).reshape(view[rows].shape)
+    if view.dtype == np.uint16:  # cv2.blendLinear takes 8-bit and float images: in float32
+        # (a 1574 x 1190 view: 44 ms, against 60-90 ms for the products channel by channel)
+        mixed = cv2.blendLinear(view[rows].astype(np.float32),
+                                blurred[rows].astype(np.float32), r, 1.0 - r)
+        np.rint(mixed, out=mixed)
+        view[rows] = mixed.astype(np.uint16).reshape(view[rows].shape)
         return view
     mixed = cv2.blendLinear(np.ascontiguousarray(view[rows]),
                             np.ascontiguousarray(blurred[rows]), r, 1.0 - r)
