@@ -387,8 +387,9 @@ def convert_settings(dataset, setup=False, shots=()):
     only the converter of that dataset reruns when it changes. ``setup``: rule
     convert_setup's, with the keys only it reads (SETUP_ONLY_CONVERT_KEYS). ``shots``:
     the job's; those given as a video are listed in ``video_frames`` (their lenslet image
-    is lenslet_frame's 16-bit frame: converted with 16 significant bits, which
-    ``bit_depth: auto`` would not always find), a key that only such a job's params
+    is lenslet_frame's frame: a 16-bit one converted with 16 significant bits, which
+    ``bit_depth: auto`` would not always find; an 8-bit one, from an 8-bit recording, is 8
+    bits anyway), a key that only such a job's params
     have."""
     out = dict(stage_config("convert"))
     if ds_config(dataset).get("mla") is not None:

@@ -15,7 +15,8 @@ views.json, which the consumers read, and only those of its views that are not o
 
 A real capture's shot given as a video (plenocal.io.lenslet) is converted from the frame
 rule lenslet_frame extracts into results/<d>/lenslet/<shot>.png (common.smk
-lenslet_image), with 16 significant bits whatever convert.bit_depth says (the
+lenslet_image), 16-bit with 16 significant bits whatever convert.bit_depth says (8-bit
+from an 8-bit recording; the
 `video_frames` of the conversions' convert params, only where a job has such a shot: the
 other jobs' params are as they were)."""
 

@@ -21,7 +21,8 @@ cv2.setNumThreads(max(1, int(snakemake.threads)))
 params = snakemake.params
 inp, out = snakemake.input, snakemake.output
 settings = ConvertSettings.from_config(params.convert)
-# shots given as a video: rule lenslet_frame's 16-bit frames (common.smk convert_settings)
+# shots given as a video: rule lenslet_frame's frames (16-bit, or 8-bit from an 8-bit
+# recording; common.smk convert_settings)
 frames = set(params.convert.get("video_frames", ()))
 n_views = int(params.views)
 r, c = parse_view(params.centre)

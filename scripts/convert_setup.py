@@ -17,7 +17,7 @@ image = load_lenslet(snakemake.input.lenslet, read_sensor_size(snakemake.input.c
 calib = load_calib(snakemake.input.calib)
 settings = ConvertSettings.from_config(snakemake.params.convert)
 if snakemake.params.convert.get("video_frames"):  # the shot is given as a video: its
-    settings = video_settings(settings)  # frame by rule lenslet_frame, 16 significant bits
+    settings = video_settings(settings)  # frame by rule lenslet_frame: 16 (or 8) bits
 setup, _ = decide_setup(image, calib, int(snakemake.params.views), settings,
                         source=str(snakemake.input.lenslet),
                         grid_foreign=snakemake.params.convert["grid_foreign"])

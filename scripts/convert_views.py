@@ -21,7 +21,8 @@ cv2.setNumThreads(threads)
 
 params = snakemake.params
 settings = ConvertSettings.from_config(params.convert)
-# shots given as a video: rule lenslet_frame's 16-bit frames (common.smk convert_settings)
+# shots given as a video: rule lenslet_frame's frames (16-bit, or 8-bit from an 8-bit
+# recording; common.smk convert_settings)
 frames = set(params.convert.get("video_frames", ()))
 inp = snakemake.input
 outputs = {str(p) for p in snakemake.output}

@@ -1,6 +1,6 @@
 """Rule lenslet_frame: the frame to calibrate on of a shot given as a raw YUV recording
-(config datasets.<d>.video; plenocal.io.lenslet) -> the 16-bit RGB lenslet image that the
-conversion reads, as `plenocal convert` makes it of a frame
+(config datasets.<d>.video; plenocal.io.lenslet) -> the RGB lenslet image that the
+conversion reads (8-bit for an 8-bit recording, else 16-bit), as `plenocal convert` makes it of a frame
 (plenocal.convert.video.lenslet_frame)."""
 
 import time
@@ -19,6 +19,6 @@ t0 = time.perf_counter()
 shot = video_shot_from_params(snakemake.input.video, snakemake.params.video)
 image = extract_frame(shot)
 write_image(snakemake.output.lenslet, image)
-log.info("%s: frame %d (%dx%d, %d bit, %s %s range) -> %s, 16-bit RGB, %.2f s",
+log.info("%s: frame %d (%dx%d, %d bit, %s %s range) -> %s, %d-bit RGB, %.2f s",
          shot.path, shot.frame, shot.fmt.width, shot.fmt.height, shot.fmt.bits, shot.matrix,
-         shot.range, snakemake.output.lenslet, time.perf_counter() - t0)
+         shot.range, snakemake.output.lenslet, 8 * image.itemsize, time.perf_counter() - t0)

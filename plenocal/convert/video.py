@@ -9,12 +9,12 @@ then converted as a shot of that camera (:class:`plenocal.convert.shot.ShotConve
 with the set-up, as rule ``convert`` converts each shot).
 
 Colour. The converter works in RGB: each frame's (Y, Cb, Cr) planes become RGB
-(:func:`plenocal.io.yuv.yuv_to_rgb`, BT.709 limited range by default), held as 16-bit
-integers (:func:`lenslet_frame`; a 10-bit frame loses nothing, an 8-bit one is not rounded
-to 8-bit RGB), and the views go back to YUV 4:2:0 of the input's bit depth
-(:func:`plenocal.io.yuv.rgb_to_yuv`) or to 8-bit RGB PNGs. The views of a frame are those
-that converting the same RGB frame as a 16-bit PNG with the same set-up gives (to the
-rounding of the output).
+(:func:`plenocal.io.yuv.yuv_to_rgb`, BT.709 limited range by default), held as integers
+of the recording's depth (:func:`lenslet_frame`: 8-bit RGB for an 8-bit recording, as its
+PNG would be; 16-bit for more bits, where a 10-bit frame loses nothing), and the views go
+back to YUV 4:2:0 of the input's bit depth (:func:`plenocal.io.yuv.rgb_to_yuv`) or to
+8-bit RGB PNGs. The views of a frame are those that converting the same RGB frame as a PNG
+with the same set-up gives (to the rounding of the output).
 
 Temporal stability (:func:`hold_patch_sizes`, ``temporal: hold``, the default). Coding
 noise moves each lens's best match from frame to frame on a static scene, and the patch
@@ -101,15 +101,19 @@ class VideoSettings:
 
 def lenslet_frame(planes: tuple[np.ndarray, np.ndarray, np.ndarray], bits: int,
                   matrix: str = DEFAULT_MATRIX, rng: str = DEFAULT_RANGE) -> np.ndarray:
-    """One YUV frame as the 16-bit RGB lenslet image the converter reads (uint16, full
-    16-bit scale: convert it with ``bit_depth: 16``). Written as a 16-bit PNG it is the
-    frame's PNG, whose conversion the video's matches."""
+    """One YUV frame as the RGB lenslet image the converter reads: an 8-bit frame as uint8
+    RGB (each channel rounded once, as the frame's 8-bit PNG holds it: the views sample 8-bit
+    frames 2-3x as fast as 16-bit ones, OpenCV's remap having a vector path for 8-bit data
+    only), more bits as uint16 at full 16-bit scale (convert it with ``bit_depth: 16``,
+    :func:`video_settings`). Written as a PNG it is the frame's PNG, whose conversion the
+    video's matches."""
     H, W = planes[0].shape
-    out = np.empty((H, W, 3), np.uint16)
+    dtype, top = (np.uint8, 255.0) if bits <= 8 else (np.uint16, 65535.0)
+    out = np.empty((H, W, 3), dtype)
     for a in range(0, H, FRAME_ROWS):  # in bands: a float frame is 6 bytes a pixel
         rows = slice(a, min(a + FRAME_ROWS, H))
         rgb = yuv_to_rgb(planes, bits, matrix, rng, rows=rows)
-        out[rows] = np.rint(rgb * np.float32(65535.0)).astype(np.uint16)
+        out[rows] = np.rint(rgb * np.float32(top)).astype(dtype)
     return out
 
 
@@ -141,7 +145,8 @@ def view_to_yuv(view: np.ndarray, bits: int, matrix: str = DEFAULT_MATRIX,
 
 
 def video_settings(base: ConvertSettings) -> ConvertSettings:
-    """``base`` for the frames of :func:`lenslet_frame` (16 significant bits)."""
+    """``base`` for the frames of :func:`lenslet_frame` (16 significant bits where they are
+    16-bit; an 8-bit frame is 8 bits whatever ``bit_depth`` says)."""
     return dataclasses.replace(base, bit_depth=16)
 
 

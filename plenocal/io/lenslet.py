@@ -5,9 +5,9 @@ A shot is ``<shot>.png`` (``x<col>_y<row>.png``, ``hand<k>.png``: the image the 
 reads) or ``<shot>[_<suffix>].yuv``, a recording of the camera (``x00_y00.yuv``,
 ``x00_y00_3976x2956_30fps_10bit.yuv``): its frame ``datasets.<d>.video.frame`` (one index
 for every recording, or one per shot) is extracted by rule ``lenslet_frame`` into
-``results/<d>/lenslet/<shot>.png``, the 16-bit RGB image that ``plenocal convert`` makes
-of a frame (:func:`plenocal.convert.video.lenslet_frame`), and converted with 16
-significant bits. The frame's size and bit depth come from the file's name (MPEG style,
+``results/<d>/lenslet/<shot>.png``, the RGB image that ``plenocal convert`` makes
+of a frame (:func:`plenocal.convert.video.lenslet_frame`: 8-bit from an 8-bit recording,
+else 16-bit, converted with 16 significant bits). The frame's size and bit depth come from the file's name (MPEG style,
 :func:`plenocal.io.yuv.parse_name`) or from ``video.size`` / ``video.bit_depth``; its
 colour from ``video.matrix`` / ``video.range`` (the command line's defaults).
 
@@ -72,8 +72,9 @@ def video_shot_from_params(path: str | Path, params: dict) -> VideoShot:
 
 
 def extract_frame(shot: VideoShot) -> np.ndarray:
-    """The shot's frame as the 16-bit RGB lenslet image the converter reads
-    (:func:`plenocal.convert.video.lenslet_frame`; convert it with 16 significant bits)."""
+    """The shot's frame as the RGB lenslet image the converter reads
+    (:func:`plenocal.convert.video.lenslet_frame`: 8-bit from an 8-bit recording, else
+    16-bit, to convert with 16 significant bits)."""
     from plenocal.convert.video import lenslet_frame  # noqa: PLC0415 - see the imports
     from plenocal.io.yuv import read_frame  # noqa: PLC0415
 
