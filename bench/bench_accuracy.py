@@ -23,7 +23,7 @@ change name the stages to run again, e.g. ``--forcerun refine``.
 Usage::
 
     python bench/bench_accuracy.py [--seeds 1 2 3 4 5] [--geometries default wide]
-        [--forcerun RULE ...] [--collect-only] [--out BENCHMARKS.md]
+        [--forcerun RULE ...] [--collect-only] [--no-exp1] [--out BENCHMARKS.md]
 """
 
 from __future__ import annotations
@@ -104,8 +104,9 @@ def clone_capture(src: Path, dest: Path) -> None:
 
 
 def run_capture(work: Path, cfg: dict, forcerun: list[str], jobs: int,
-                triggers: list[str] | None = None) -> float:
-    """Snakemake on the capture's targets in ``work``; the wall seconds."""
+                triggers: list[str] | None = None, targets: tuple[str, ...] = TARGETS
+                ) -> float:
+    """Snakemake on the capture's ``targets`` in ``work``; the wall seconds."""
     work.mkdir(parents=True, exist_ok=True)
     (work / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
     cmd = [sys.executable, "-m", "snakemake", f"-j{jobs}", "--snakefile", str(ROOT / "Snakefile"),
@@ -113,7 +114,7 @@ def run_capture(work: Path, cfg: dict, forcerun: list[str], jobs: int,
            "--workflow-profile", "none", "--scheduler", "greedy",
            *(["--forcerun", *forcerun] if forcerun else []),
            *(["--rerun-triggers", *triggers] if triggers else []),
-           "--", *(f"results/{DATASET}/{t}" for t in TARGETS)]
+           "--", *(f"results/{DATASET}/{t}" for t in targets)]
     t0 = time.perf_counter()
     with open(work / "bench.log", "w") as log:
         proc = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT)
@@ -138,10 +139,11 @@ def _abs(v):
     return None if v is None else abs(float(v))
 
 
-def collect(work: Path) -> dict:
-    """One capture's figures (the columns of the table)."""
+def collect(work: Path, exp1: bool = True) -> dict:
+    """One capture's figures (the columns of the table); ``exp1``: with Exp. 1's (not
+    with ``--no-exp1``, where a kept file may predate the calibration)."""
     gt, tab = _json(work, "eval/gt_errors.json"), _json(work, "eval/reprojection.json")
-    exp1 = _json(work, "eval/synthesis_exp1.json")
+    exp1 = _json(work, "eval/synthesis_exp1.json") if exp1 else None
     a, c = gt["registration_a"], gt["complete"]
     rows = tab["rows"]
     step_mm = 1000.0 * a["array_step_m"]
@@ -162,8 +164,8 @@ def collect(work: Path) -> dict:
         "table_complete": table("complete"),
         "table_naive": table("baseline_sfm"),
         "table_truth": table("ground_truth"),
-        "exp1_db": _psnr(exp1, "complete"),
-        "exp1_truth_cams_db": _psnr(exp1, "ground_truth"),
+        "exp1_db": None if exp1 is None else _psnr(exp1, "complete"),
+        "exp1_truth_cams_db": None if exp1 is None else _psnr(exp1, "ground_truth"),
         "a_focal_pct": abs(a["focal_err_pct"]),
     }
     eq6 = gt.get("eq6")
@@ -320,6 +322,10 @@ def main() -> None:
                          "<capture>-refine (only the refinement and what reads the "
                          "calibration run again); the table then holds the refined "
                          "calibration and the Eq. 6 result beside it")
+    ap.add_argument("--no-exp1", action="store_true",
+                    help="the calibration and Table I only, without Exp. 1's depth maps and "
+                         "view synthesis (a third of a capture's time): to re-measure after "
+                         "a change before the calibration; the Exp. 1 columns read '-'")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default=None, help="BENCHMARKS.md to update (its section)")
     args = ap.parse_args()
@@ -339,8 +345,9 @@ def main() -> None:
             if not args.collect_only:
                 print(f"[{time.strftime('%H:%M:%S')}] {name}: running ...", flush=True)
                 walls[name] = run_capture(work, capture_config(geom, seed, args.refine),
-                                          args.forcerun, args.jobs, args.triggers)
-            results[name] = collect(work)
+                                          args.forcerun, args.jobs, args.triggers,
+                                          TARGETS[:2] if args.no_exp1 else TARGETS)
+            results[name] = collect(work, exp1=not args.no_exp1)
             print(f"  {name}: " + ", ".join(f"{k} {_fmt(f, results[name].get(k))}"
                                             for k, _, f in COLUMNS[:5]), flush=True)
     out = Lines()
