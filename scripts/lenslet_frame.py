@@ -1,7 +1,7 @@
 """Rule lenslet_frame: the frame to calibrate on of a shot given as a raw YUV recording
 (config datasets.<d>.video; plenocal.io.lenslet) -> the RGB lenslet image that the
-conversion reads (8-bit for an 8-bit recording, else 16-bit), as `plenocal convert` makes it of a frame
-(plenocal.convert.video.lenslet_frame)."""
+conversion reads (8-bit for an 8-bit recording, else 16-bit), as `plenocal convert` makes
+it of a frame (plenocal.convert.video.lenslet_frame)."""
 
 import time
 

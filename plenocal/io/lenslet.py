@@ -7,9 +7,10 @@ reads) or ``<shot>[_<suffix>].yuv``, a recording of the camera (``x00_y00.yuv``,
 for every recording, or one per shot) is extracted by rule ``lenslet_frame`` into
 ``results/<d>/lenslet/<shot>.png``, the RGB image that ``plenocal convert`` makes
 of a frame (:func:`plenocal.convert.video.lenslet_frame`: 8-bit from an 8-bit recording,
-else 16-bit, converted with 16 significant bits). The frame's size and bit depth come from the file's name (MPEG style,
-:func:`plenocal.io.yuv.parse_name`) or from ``video.size`` / ``video.bit_depth``; its
-colour from ``video.matrix`` / ``video.range`` (the command line's defaults).
+else 16-bit, converted with 16 significant bits). The frame's size and bit depth come
+from the file's name (MPEG style, :func:`plenocal.io.yuv.parse_name`) or from
+``video.size`` / ``video.bit_depth``; its colour from ``video.matrix`` / ``video.range``
+(the command line's defaults).
 
 :func:`scan_lenslet_folder` reads the folder and checks it before any job (file names,
 one file a shot, the recordings' sizes, the frame index, the frame's size against the
