@@ -84,3 +84,20 @@ def test_points_on_a_line_and_empty_inputs():
     assert d.shape == (0, 3)
     with pytest.raises(ValueError, match="k must be"):
         nearest_within(P, Q, 0, 24.0)
+
+
+def test_small_chunks_give_the_same_neighbours(monkeypatch):
+    """Queries split over many chunks of candidates (CHUNK_PAIRS lowered to 50, a chunk of
+    one query where it has more): the same result as in one chunk."""
+    import plenocal.convert.nearest as nearest  # noqa: PLC0415
+
+    rng = np.random.default_rng(7)
+    P = hex_lattice(40, 30) + rng.normal(0.0, 0.01, (1200, 2))
+    ok = rng.random(len(P)) < 0.4
+    whole = nearest_within(P[ok], P[~ok], 12, 24.0)
+    monkeypatch.setattr(nearest, "CHUNK_PAIRS", 50)
+    parts = nearest_within(P[ok], P[~ok], 12, 24.0)
+    np.testing.assert_array_equal(parts[0], whole[0])
+    np.testing.assert_array_equal(parts[1], whole[1])
+    want = brute(P[ok], P[~ok], 12, 24.0)
+    np.testing.assert_array_equal(parts[1], want[1])

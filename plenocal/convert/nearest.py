@@ -19,8 +19,8 @@ import math
 
 import numpy as np
 
-#: candidate pairs examined at a time (the arrays of one chunk stay near 100 MB)
-CHUNK_PAIRS = 4_000_000
+#: candidate pairs examined at a time (a chunk's arrays: about 100 MB)
+CHUNK_PAIRS = 2_000_000
 
 
 def nearest_within(points: np.ndarray, queries: np.ndarray, k: int, reach: float
