@@ -668,3 +668,44 @@ def test_soften_unreliable_is_one_blend_for_every_depth_and_channel_count():
     np.testing.assert_array_equal(mono[..., 0], out16[..., 0])
     np.testing.assert_array_equal(out8[:40], view8[:40])
     np.testing.assert_array_equal(out16[80:], view8[80:].astype(np.uint16) * 257)
+
+
+@pytest.mark.parametrize("safe_diameter", [16.0, 50.0])
+def test_radial_tables_follow_the_weight_formula_in_the_squared_radius(safe_diameter):
+    """The blend weight read from the 256-entry tables over the squared radius
+    (radial_entries, cv2.LUT) is the formula rim x (1 - (rho / (D'/2))^2)^power + floor at
+    the entry's radius, sqrt(round(scale rho^2) / scale); within 0.06 px of radius of the
+    sample's own at the rim ramp, and the floor beyond the table."""
+    from plenocal.convert.render import (  # noqa: PLC0415
+        _FLOOR,
+        RADIAL_LEVELS,
+        RenderSettings,
+        radial_entries,
+        radial_tables,
+    )
+
+    st = RenderSettings()
+    half = safe_diameter / 2.0
+    rim = half - st.rim_px
+
+    def formula(rho):
+        w = np.clip((rim - rho) / st.rim_ramp_px, 0.0, 1.0)
+        return w * np.clip(1.0 - (rho / half) ** 2, 0.0, 1.0) ** st.centre_power + _FLOOR
+
+    wt, gt, scale = radial_tables(safe_diameter, st, None)
+    assert wt.shape == (RADIAL_LEVELS,) and gt.shape == (1, RADIAL_LEVELS)
+    rng = np.random.default_rng(1)
+    x = rng.uniform(-half - 4, half + 4, (64, 64)).astype(np.float32)
+    y = rng.uniform(-half - 4, half + 4, (64, 64)).astype(np.float32)
+    o = np.array([0.7, -1.3])
+    entry = radial_entries(x, y, o, scale)
+    rho = np.hypot(x.astype(np.float64) + 0.7, y.astype(np.float64) - 1.3)
+    j = np.minimum(np.rint(scale * rho ** 2), RADIAL_LEVELS - 1)
+    assert np.abs(entry.astype(int) - j).max() <= 1  # float32 rounding at .5 only
+    got = cv2.LUT(entry, wt)
+    np.testing.assert_allclose(got, formula(np.sqrt(entry / scale)), atol=1e-6)
+    beyond = rho > rim + 2.5
+    assert beyond.any() and np.allclose(got[beyond], _FLOOR)
+    ramp = (rho > rim - st.rim_ramp_px) & (rho < rim)
+    step = np.abs(np.sqrt(entry / scale) - rho)[ramp]
+    assert step.max() < 0.06, step.max()
