@@ -206,6 +206,39 @@ def test_10bit_clip_to_10bit_view_videos_matching_the_frames_pngs(tmp_path):
 
 
 @needs_real
+def test_8bit_clip_to_8bit_view_videos_are_the_frames_png_views(tmp_path):
+    """An 8-bit clip (frames 0, 150 of a Fujita2 crop) is held as 8-bit RGB frames, as their
+    PNGs: each frame's view videos are exactly rgb_to_yuv of the 8-bit views converted from
+    the frame's PNG (lenslet_frame written out) with the video's set-up."""
+    a, b, calib = _frames()
+    clip = _clip(tmp_path, [a, b], 8)
+    xml = tmp_path / "calib.xml"
+    write_calib(calib, xml)
+    out = tmp_path / "video"
+    r = _cli("convert", str(clip), str(xml), "-o", str(out), "--format", "yuv",
+             "--temporal", "off")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((out / "video.json").read_text())
+    W, H = doc["views"]["width"], doc["views"]["height"]
+    vfmt = YuvFormat(W, H, 8)
+    fmt = resolve_format(clip)
+    for k in range(2):
+        frame = lenslet_frame(read_frame(clip, fmt, k), 8)
+        assert frame.dtype == np.uint8
+        png = tmp_path / f"f{k}.png"
+        write_image(png, frame)
+        ref = tmp_path / f"png{k}"
+        r = _cli("convert", str(png), str(xml), "-o", str(ref),
+                 "--setup", str(out / "convert_setup.json"))
+        assert r.returncode == 0, r.stderr
+        for name in ("2_2", "0_0", "4_4"):
+            got = read_frame(out / doc["views"]["files"][name], vfmt, k)
+            want = rgb_to_yuv(read_image(ref / f"{name}.png").astype(np.float32) / 255.0, 8)
+            for g, w in zip(got, want, strict=True):
+                assert np.array_equal(g, w), (k, name)
+
+
+@needs_real
 def test_identical_frames_give_identical_views(tmp_path):
     """Frames A A B B: frame 1 equals frame 0 and frame 3 frame 2 byte for byte, with the
     temporal hold (the default) and per-frame PNG output; every run the same bytes."""

@@ -11,10 +11,11 @@ with the set-up, as rule ``convert`` converts each shot).
 Colour. The converter works in RGB: each frame's (Y, Cb, Cr) planes become RGB
 (:func:`plenocal.io.yuv.yuv_to_rgb`, BT.709 limited range by default), held as integers
 of the recording's depth (:func:`lenslet_frame`: 8-bit RGB for an 8-bit recording, as its
-PNG would be; 16-bit for more bits, where a 10-bit frame loses nothing), and the views go
-back to YUV 4:2:0 of the input's bit depth (:func:`plenocal.io.yuv.rgb_to_yuv`) or to
-8-bit RGB PNGs. The views of a frame are those that converting the same RGB frame as a PNG
-with the same set-up gives (to the rounding of the output).
+PNG would be; 16-bit for more bits, where a 10-bit frame loses nothing), and the views
+(8-bit RGB, 16-bit for a deeper recording's videos) go back to YUV 4:2:0 of the input's
+bit depth (:func:`plenocal.io.yuv.rgb_to_yuv`) or to 8-bit RGB PNGs. The views of a
+frame are those that converting the same RGB frame as a PNG with the same set-up gives (to
+the rounding of the output; the same 8-bit views for an 8-bit recording).
 
 Temporal stability (:func:`hold_patch_sizes`, ``temporal: hold``, the default). Coding
 noise moves each lens's best match from frame to frame on a static scene, and the patch
@@ -124,15 +125,16 @@ FRAME_ROWS = 256
 
 def view_to_yuv(view: np.ndarray, bits: int, matrix: str = DEFAULT_MATRIX,
                 rng: str = DEFAULT_RANGE) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The (Y, Cb, Cr) planes of a 16-bit RGB view (:func:`plenocal.io.yuv.rgb_to_yuv` of
-    view / 65535), made in bands of :data:`FRAME_ROWS` rows: the same planes as the whole
-    view's, without a float copy of it (98 MB and as much again in temporaries for a
-    view of a 31-MP frame)."""
+    """The (Y, Cb, Cr) planes of an 8- or 16-bit RGB view (:func:`plenocal.io.yuv.rgb_to_yuv`
+    of view / 255 or / 65535), made in bands of :data:`FRAME_ROWS` rows: the same planes as
+    the whole view's, without a float copy of it (98 MB and as much again in temporaries
+    for a view of a 31-MP frame)."""
     H = view.shape[0]
     planes = None
+    unit = np.float32(1.0 / np.iinfo(view.dtype).max)
     for a in range(0, H, FRAME_ROWS):
         b = min(a + FRAME_ROWS, H)
-        rgb = np.multiply(view[a:b], np.float32(1.0 / 65535.0), dtype=np.float32)
+        rgb = np.multiply(view[a:b], unit, dtype=np.float32)
         part = rgb_to_yuv(rgb, bits, matrix, rng)
         if planes is None:
             planes = (np.empty((H,) + part[0].shape[1:], part[0].dtype),
@@ -405,10 +407,14 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
             folder = out / f"frame_{k:05d}"
             if out_format == "png":
                 folder.mkdir(exist_ok=True)
-            # 16-bit views for the YUV videos (rounded again to the input's depth there), in
-            # groups within the converter's memory budget
-            for views in shot.view_groups(threads=threads, dtype=np.uint16
-                                          if writer is not None else np.uint8):
+            # views in groups within the converter's memory budget: 16-bit for YUV videos
+            # of more than 8 bits (rounded again to the input's depth there), 8-bit for
+            # PNGs and for 8-bit videos, whose frames are 8-bit RGB (lenslet_frame): twice
+            # as many views in the budget (one group on a 12-MP frame, where 16-bit views
+            # took two, each planning the frame again) and a third of the softening time
+            deep = writer is not None and fmt.bits > 8
+            for views in shot.view_groups(threads=threads,
+                                          dtype=np.uint16 if deep else np.uint8):
                 for name, view in views.items():
                     if writer is not None:
                         writer.write(name, view_to_yuv(view, fmt.bits, video.matrix,
