@@ -60,6 +60,19 @@ def _clip(folder: Path, images: list[np.ndarray], bits: int, name: str | None = 
     return path
 
 
+def _video_of(folder: Path, images: list[np.ndarray], bits: int, calib):
+    """``images`` as a ``bits``-bit clip with ``calib`` written as calib.xml, converted to
+    per-view YUV videos (``--temporal off``): (clip, xml, out folder, stderr, video.json)."""
+    clip = _clip(folder, images, bits)
+    xml = folder / "calib.xml"
+    write_calib(calib, xml)
+    out = folder / "video"
+    r = _cli("convert", str(clip), str(xml), "-o", str(out), "--format", "yuv",
+             "--temporal", "off")
+    assert r.returncode == 0, r.stderr
+    return clip, xml, out, r.stderr, json.loads((out / "video.json").read_text())
+
+
 def _rvs_read(path: Path, w: int, h: int, bits: int, frame: int) -> np.ndarray:
     """RVS 4.0's read_color_YUV (image_loading.cpp): seek ``area x elemSize x 3 / 2 x
     frame``, read Y (h x w), then U and V (h/2 x w/2, cv::Size / 2), native-endian samples
@@ -160,16 +173,9 @@ def test_10bit_clip_to_10bit_view_videos_matching_the_frames_pngs(tmp_path):
     views match, to the rounding of the outputs, those converted from the frame's PNG (the
     same YUV frame as a 16-bit RGB PNG) with the video's set-up."""
     a, b, calib = _frames()
-    clip = _clip(tmp_path, [a, b, a], 10)
-    xml = tmp_path / "calib.xml"
-    write_calib(calib, xml)
-    out = tmp_path / "video"
-    r = _cli("convert", str(clip), str(xml), "-o", str(out), "--format", "yuv",
-             "--temporal", "off")
-    assert r.returncode == 0, r.stderr
+    clip, xml, out, stderr, doc = _video_of(tmp_path, [a, b, a], 10, calib)
     for k in range(3):
-        assert f"frame {k} ({k + 1}/3)" in r.stderr  # progress per frame
-    doc = json.loads((out / "video.json").read_text())
+        assert f"frame {k} ({k + 1}/3)" in stderr  # progress per frame
     W, H = doc["views"]["width"], doc["views"]["height"]
     assert W % 2 == 0 and H % 2 == 0
     files = doc["views"]["files"]
@@ -211,14 +217,7 @@ def test_8bit_clip_to_8bit_view_videos_are_the_frames_png_views(tmp_path):
     PNGs: each frame's view videos are exactly rgb_to_yuv of the 8-bit views converted from
     the frame's PNG (lenslet_frame written out) with the video's set-up."""
     a, b, calib = _frames()
-    clip = _clip(tmp_path, [a, b], 8)
-    xml = tmp_path / "calib.xml"
-    write_calib(calib, xml)
-    out = tmp_path / "video"
-    r = _cli("convert", str(clip), str(xml), "-o", str(out), "--format", "yuv",
-             "--temporal", "off")
-    assert r.returncode == 0, r.stderr
-    doc = json.loads((out / "video.json").read_text())
+    clip, xml, out, _, doc = _video_of(tmp_path, [a, b], 8, calib)
     W, H = doc["views"]["width"], doc["views"]["height"]
     vfmt = YuvFormat(W, H, 8)
     fmt = resolve_format(clip)
