@@ -101,3 +101,11 @@ def test_small_chunks_give_the_same_neighbours(monkeypatch):
     np.testing.assert_array_equal(parts[1], whole[1])
     want = brute(P[ok], P[~ok], 12, 24.0)
     np.testing.assert_array_equal(parts[1], want[1])
+
+
+def test_an_infinite_reach_with_more_neighbours_asked_than_points_ends():
+    """k larger than the number of points and no reach: every point, then inf and n."""
+    P = np.array([[0.0, 0.0], [5.0, 1.0], [2.0, 7.0]])
+    d, i = nearest_within(P, np.array([[1.0, 1.0]]), 5, np.inf)
+    assert list(i[0]) == [0, 1, 2, 3, 3] and np.isinf(d[0, 3:]).all()
+    np.testing.assert_allclose(d[0, :3], [np.sqrt(2.0), 4.0, np.sqrt(37.0)])

@@ -46,9 +46,10 @@ def nearest_within(points: np.ndarray, queries: np.ndarray, k: int, reach: float
     # stay few)
     r = min(reach, max(math.sqrt(1.5 * k * area / (math.pi * n)),
                        float((hi - lo).max()) / 512.0, 1e-9))
+    span = float(np.hypot(*(hi - lo)))  # beyond it every point is nearer than r
     todo = np.arange(m)
     while len(todo):
-        last = r >= reach
+        last = r >= reach or r > span  # (an infinite reach with k > n ends here too)
         settled = _pass(points, queries, todo, k, r, lo, hi, last, dist, idx)
         todo = todo[~settled]
         r = min(reach, 2.0 * r)
