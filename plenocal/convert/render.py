@@ -18,9 +18,10 @@ smooth: real microlenses blur and distort towards their rim; power 1 lowers the
 corner views' blend disagreement of the TSPC frames by 1-11 %, and on the simulator
 raises corner views by 0.1-1.6 dB for 0.03-0.05 dB less in the central views). Multi-focus MLAs also
 multiply by each lens's focus weight (:func:`plenocal.convert.patchsize.focus_weights`).
-A tiny floor keeps the nearest lens when every candidate is at the rim. Each sample is
-divided by the micro images' vignetting profile at its radius
-(:mod:`plenocal.convert.vignetting`).
+A tiny floor keeps the nearest lens when every candidate is at the rim; a pixel whose
+in-rim weight (:func:`pixel_support`) is that small is then taken from its supported
+neighbours (:mod:`plenocal.convert.holes`). Each sample is divided by the micro images'
+vignetting profile at its radius (:mod:`plenocal.convert.vignetting`).
 
 The radial weight and gain are tables over the squared radius (:data:`RADIAL_LEVELS`
 entries: no square root per sample, and 8-bit indices that :func:`cv2.LUT` reads; the
@@ -136,6 +137,8 @@ class RenderPlan:
     # (K, h, W) intp: RADIAL_LEVELS x the gain_table row of each slot's lens (T > 1)
     gain_base: np.ndarray | None = None
     rows: slice = field(default_factory=lambda: slice(None))  # the output rows covered
+    # (h, W) float32 the floor's share of a pixel's weight: floor x the slots' tile weights
+    floor_weight: np.ndarray | None = None
 
 
 def make_plan(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
@@ -212,7 +215,7 @@ def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
             layout=layout, map_x=map_x[:k], map_y=map_y[:k], off_x=off_x[:k],
             off_y=off_y[:k], tile_weight=wt, weight_table=weight_table, gain_table=gain_tab,
             radial_scale=radial_scale, gain_base=None if gain_base is None else gain_base[:k],
-            rows=rows))
+            rows=rows, floor_weight=wt.sum(axis=0) * f(_FLOOR)))
     return plans
 
 
@@ -261,10 +264,12 @@ BAND_ROWS = 32  # rows rendered at a time: every per-pixel array of a band stays
 
 
 def view_weights(plan: RenderPlan, r: int, c: int, with_gain: bool = False,
-                 rows: slice = slice(None), unit: float = 1.0) -> np.ndarray:
+                 rows: slice = slice(None), unit: float = 1.0,
+                 support: np.ndarray | None = None) -> np.ndarray:
     """(K, h, W) normalised blend weights of view (r, c) over ``rows`` of the plan's
     arrays (all by default), times ``unit``; with ``with_gain`` each multiplied by its
-    sample's vignetting gain (1 / micro-image profile)."""
+    sample's vignetting gain (1 / micro-image profile). ``support``: an (h, W) float32
+    array that receives each pixel's support (:func:`pixel_support`)."""
     o = plan.layout.offset_image(r, c)
     off_x, off_y, tile_weight = plan.off_x[:, rows], plan.off_y[:, rows], plan.tile_weight[:, rows]
     K, H, W = off_x.shape
@@ -280,6 +285,8 @@ def view_weights(plan: RenderPlan, r: int, c: int, with_gain: bool = False,
                 gain[k] = cv2.LUT(entry, plan.gain_table[0])
             else:  # a profile per lens type: the row of each sample's lens
                 plan.gain_table.take(plan.gain_base[k, rows] + entry, out=gain[k], mode="clip")
+    if support is not None:
+        pixel_support(plan, total, rows, out=support)
     np.maximum(total, np.float32(1e-12), out=total)
     np.divide(np.float32(unit), total, out=total)
     w *= total
@@ -289,7 +296,7 @@ def view_weights(plan: RenderPlan, r: int, c: int, with_gain: bool = False,
 
 
 def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int,
-                unit: float = 1.0) -> np.ndarray:
+                unit: float = 1.0, support: np.ndarray | None = None) -> np.ndarray:
     """View (r, c) over the plan's rows as float32 (h, W, C): ``unit`` times the units of
     ``source`` (a float32, or an 8- or 16-bit image: OpenCV interpolates integers 1.3-1.6x
     faster, reading a quarter or half the bytes; ``unit`` brings them to [0, 1]),
@@ -298,7 +305,9 @@ def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int,
     module docstring). Rendered in bands of :data:`BAND_ROWS` rows (the same numbers as
     whole; 1.3-1.5x faster). A four-channel source is no faster than three here: the
     samples' reads from the frame, not the interpolation, bound the remap (measured on
-    Boxer: 3.09 against 3.10 s)."""
+    Boxer: 3.09 against 3.10 s). ``support``: an (h, W) float32 array that receives each
+    pixel's support (:func:`pixel_support`; :func:`fill_unsupported` mends the pixels
+    that have too little)."""
     o = plan.layout.offset_image(r, c)
     ch = 1 if source.ndim == 2 else source.shape[2]
     H, W = plan.map_x.shape[1:]
@@ -307,7 +316,8 @@ def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int,
     convert = source.dtype != np.float32
     for y0 in range(0, H, BAND_ROWS):
         rows = slice(y0, min(y0 + BAND_ROWS, H))
-        w = view_weights(plan, r, c, with_gain=True, rows=rows, unit=unit)
+        w = view_weights(plan, r, c, with_gain=True, rows=rows, unit=unit,
+                         support=None if support is None else support[rows])
         band = out[rows]
         for k in range(w.shape[0]):
             xy, frac = cv2.convertMaps(plan.map_x[k, rows] + ox, plan.map_y[k, rows] + oy,
@@ -319,6 +329,19 @@ def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int,
             cv2.accumulateProduct(s.reshape(band.shape),
                                   w[k] if ch == 1 else cv2.merge([w[k]] * ch), band)
     return out if ch > 1 else out[..., None]
+
+
+def pixel_support(plan: RenderPlan, total: np.ndarray, rows: slice = slice(None),
+                  out: np.ndarray | None = None) -> np.ndarray:
+    """Each output pixel's support: the blend's weight from samples inside the micro
+    images' rims, ``sum_k tile_k x radial_k`` (the floor taken out of ``total``, the
+    pixel's whole weight ``sum_k tile_k x (radial_k + floor)``, :func:`view_weights`).
+
+    It is 0 where every lens that covers the pixel samples past its rim, its neighbours'
+    light: along a view's edge, where the lens that would see the point nearer its centre
+    lies off the sensor, the floor then keeps rim samples that show as notches
+    (:func:`plenocal.convert.holes.fill_unsupported` mends them)."""
+    return np.subtract(total, plan.floor_weight[rows], out=out)
 
 
 def reliability_map(layout: ViewLayout, guessed: np.ndarray) -> np.ndarray:

@@ -41,6 +41,7 @@ from plenocal.artifacts.disparity import disparity_record
 from plenocal.config import settings_from, stage_defaults, with_defaults
 from plenocal.convert.analysis import ConvertAnalysis
 from plenocal.convert.errors import ConvertError
+from plenocal.convert.holes import fill_unsupported, weak_box
 from plenocal.convert.levels import render_source, significant_bits, to_unit_float
 from plenocal.convert.patchsize import (
     PatchSizeResult,
@@ -468,7 +469,9 @@ class ShotConversion:
         """The views ``names`` (``"r_c"``) as RGB (layout.height x layout.width x 3) of
         ``dtype``: uint8 (0-255) or uint16 (0-65535, for the video formats above 8 bits),
         each softened where the patch sizes were filled
-        (:func:`plenocal.convert.render.soften_unreliable`).
+        (:func:`plenocal.convert.render.soften_unreliable`), after its pixels that no
+        micro image sees from inside its rim are filled from their neighbours
+        (:func:`plenocal.convert.holes.fill_unsupported`).
 
         Rendered band by band (:data:`PLAN_ROWS` output rows): each band's geometry is
         planned once for every view (so that the plans stay a few MB on any sensor) and
@@ -482,15 +485,23 @@ class ShotConversion:
         top = float(np.iinfo(dtype).max)
         todo = [(name, *parse_view(name)) for name in names]
         out = {name: np.empty((H, W, ch), dtype) for name, _, _ in todo}
+        # where pixels lack support: name -> [(row, column, confidence box)] (holes.weak_box)
+        weak: dict[str, list[tuple[int, int, np.ndarray]]] = {name: [] for name, _, _ in todo}
 
         def band(rows: slice) -> None:
             plans = self.plans_for_rows(rows)
+            support = np.empty((rows.stop - rows.start, W), np.float32)
             for name, r, c in todo:
                 v = render_view(plans[self._blend_of(r, c)], self._render_source, r, c,
-                                self._render_scale)
+                                self._render_scale, support=support)
                 out[name][rows] = _round_to(v, top, dtype)
+                box = weak_box(support)
+                if box is not None:
+                    weak[name].append((rows.start + box[0], box[1], box[2]))
 
         def finish(name: str) -> None:
+            if weak[name]:
+                fill_unsupported(out[name], weak[name])
             sigma = self.settings.render.unreliable_blur * self.layout.tile
             v = soften_unreliable(out[name], self._reliable, sigma)
             out[name] = np.repeat(v, 3, axis=2) if v.shape[2] == 1 else v
