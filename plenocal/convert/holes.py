@@ -6,8 +6,9 @@ an output pixel samples past its rim, the floor's samples decide the pixel: they
 the neighbouring micro images' light, and along a view's edge (the lens that would see
 the point nearer its centre is off the sensor) they show as a row of notches, triangles
 up to a quarter of a tile deep (HandTools' top views, Origami's; a few pixels of the
-simulator's corner views); inside the wide blend's views (:func:`plenocal.convert.render.
-rim_reach`), where the in-rim weight is small, they draw the tiles' hexagonal outlines.
+simulator's corner views); inside the views of the wide blend (the corner views,
+:func:`plenocal.convert.render.rim_reach`), where the in-rim weight is small, they draw
+faint outlines of the tiles.
 A pixel's support (:func:`plenocal.convert.render.pixel_support`) is the weight of its
 in-rim samples; one with less than :data:`SUPPORT_FULL` is taken, in proportion, from its
 supported neighbours::
@@ -28,8 +29,9 @@ import cv2
 import numpy as np
 
 #: support (in-rim blend weight; a sample at its micro-image centre with a whole tile
-#: weight has 1) from which a pixel is its blend's alone. At 0.01 the floor's past-rim
-#: samples (weight 0.001 per lens) make at most about a sixth of the pixel.
+#: weight has 1) from which a pixel is its blend's alone. From 0.01 on, the floor's past-rim
+#: samples (0.001 times each lens's tile weight) make at most a quarter of a pixel of a
+#: 3-lens blend.
 SUPPORT_FULL = 0.01
 #: rows (columns) of context each side of the rows (columns) that need a fill
 SLAB_MARGIN_PX = 16

@@ -306,8 +306,8 @@ def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int,
     whole; 1.3-1.5x faster). A four-channel source is no faster than three here: the
     samples' reads from the frame, not the interpolation, bound the remap (measured on
     Boxer: 3.09 against 3.10 s). ``support``: an (h, W) float32 array that receives each
-    pixel's support (:func:`pixel_support`; :func:`fill_unsupported` mends the pixels
-    that have too little)."""
+    pixel's support (:func:`pixel_support`; :func:`plenocal.convert.holes.fill_unsupported`
+    mends the pixels that have too little)."""
     o = plan.layout.offset_image(r, c)
     ch = 1 if source.ndim == 2 else source.shape[2]
     H, W = plan.map_x.shape[1:]
