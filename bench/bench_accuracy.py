@@ -18,7 +18,10 @@ then the median and the worst case of every column. The captures are kept in
 ``bench/out/accuracy/<geometry>-s<seed>/`` (one Snakemake working folder each, running the
 repository's own Snakefile): a second run reruns only what changed. Snakemake does not see
 a change inside the ``plenocal`` package (only in the rules and scripts), so after such a
-change name the stages to run again, e.g. ``--forcerun refine``.
+change name the stages to run again, e.g. ``--forcerun refine``. The rules' scripts import
+the ``plenocal`` package of the checkout that holds this script and its Snakefile, not the
+one installed: a copy of the repository used for a run of its own must be brought to the
+code to measure first (a stale copy's views came out bit for bit those of its own commit).
 
 Usage::
 
