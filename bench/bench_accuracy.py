@@ -157,6 +157,7 @@ def collect(work: Path, exp1: bool = True) -> dict:
 
     out = {
         "focal_pct": abs(c["focal_err_pct"]["max"]),
+        "focal_signed_pct": c.get("focal_err_signed_pct"),
         "centre_mm": c["centre_rmse_mm"],
         "centre_pct_step": 100.0 * c["centre_rmse_mm"] / step_mm,
         "rot_deg": c["rotation_err_deg"]["max"],
@@ -190,6 +191,7 @@ def collect(work: Path, exp1: bool = True) -> dict:
 
 COLUMNS = [  # (key, header, format)
     ("focal_pct", "focal %", "{:.3f}"),
+    ("focal_signed_pct", "signed", "{:+.3f}"),
     ("centre_mm", "centres mm", "{:.3f}"),
     ("centre_pct_step", "% step", "{:.2f}"),
     ("rot_deg", "rot. deg", "{:.4f}"),
@@ -211,6 +213,8 @@ EQ6_COLUMNS = [
 ]
 #: columns where larger is better (the worst case is the smallest)
 HIGHER_BETTER = {"exp1_db", "exp1_truth_cams_db"}
+#: signed columns: the median keeps the sign (a lean shows), the worst is the largest in size
+SIGNED = {"focal_signed_pct"}
 
 
 def _fmt(fmt: str, v) -> str:
@@ -233,6 +237,8 @@ def summary_rows(results: dict[str, dict], columns) -> list[str]:
                 cells.append("-")
             elif label == "median":
                 cells.append(f.format(statistics.median(vals)))
+            elif k in SIGNED:
+                cells.append(f.format(max(vals, key=abs)))
             else:
                 cells.append(f.format(min(vals) if k in HIGHER_BETTER else max(vals)))
         lines.append(f"| **{label}** | " + " | ".join(cells) + " |")
@@ -352,7 +358,7 @@ def main() -> None:
                                           TARGETS[:2] if args.no_exp1 else TARGETS)
             results[name] = collect(work, exp1=not args.no_exp1)
             print(f"  {name}: " + ", ".join(f"{k} {_fmt(f, results[name].get(k))}"
-                                            for k, _, f in COLUMNS[:5]), flush=True)
+                                            for k, _, f in COLUMNS[:6]), flush=True)
     out = Lines()
     out.say(f"Captures: seeds {', '.join(map(str, args.seeds))} of geometries "
             f"{', '.join(args.geometries)} (bench/bench_accuracy.py; {len(results)} captures). "

@@ -179,3 +179,13 @@ def test_pose_similarity_recovers_a_known_similarity_and_ignores_centre_depth_no
     _, R_centre, _ = umeyama(src_c, noisy)
     assert rotation_angle_deg(R_pose, R_true) < 1e-9
     assert rotation_angle_deg(R_centre, R_true) > 0.01
+
+
+def test_the_complete_calibrations_focal_error_keeps_its_sign():
+    """``focal_err_pct`` holds the absolute errors' statistics; ``focal_err_signed_pct``
+    their signed mean (a focal length 0.3 % short: 0.3 and -0.3)."""
+    short = {k: PinholeCamera(np.diag([0.997, 0.997, 1.0]) @ c.K, c.cam_to_world, W, H)
+             for k, c in calib().items()}
+    al = gt_errors(truth(), reg_a=reg_a(), rig=rig_doc(), r=R_TRUE, calib=short)["complete"]
+    assert al["focal_err_pct"]["mean"] == pytest.approx(0.3, rel=1e-6)
+    assert al["focal_err_signed_pct"] == pytest.approx(-0.3, rel=1e-6)

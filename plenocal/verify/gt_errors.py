@@ -246,6 +246,8 @@ def complete_errors(calib: Mapping[str, PinholeCamera],
             "rotation_err_deg": _stats([rotation_angle_deg(R_c @ a, b)
                                         for a, b in zip(src_R, dst_R, strict=True)])},
         "focal_err_pct": _stats([abs(v) for v in f_err]),
+        # the same errors with their signs (``focal_err_pct`` holds their absolute values)
+        "focal_err_signed_pct": float(np.mean(f_err)) if f_err else None,
         "pp_err_px": _stats(pp_err),
         "residual_scale_err_pct": 100.0 * (s_sim - 1.0),
     }
