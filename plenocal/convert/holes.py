@@ -18,7 +18,11 @@ supported neighbours::
 ``fill`` is a normalised push-pull over a Gaussian pyramid of ``c view`` and ``c``: at
 each level the support-weighted mean where that level's neighbourhood has support, the
 coarser level's estimate where it has not, so a hole is filled from the nearest supported
-pixels whatever its size. Only pixels with ``c < 1`` change; they are processed in
+pixels whatever its size. (:func:`plenocal.verify.dibr.push_pull` fills the DIBR's holes
+the same way but with binary weights; here a partly supported pixel adds to the fill in
+proportion to its support. The two could share one pyramid; merging them changes the
+filled values, so it waits for a re-measure over captures.) Only pixels with ``c < 1``
+change; they are processed in
 windows around them (:data:`SLAB_MARGIN_PX` of context each side), fixed by the
 confidence alone.
 """
