@@ -50,6 +50,7 @@ move right with c (``tests/test_groundtruth.py``).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -147,8 +148,28 @@ def make_layout(grid: MicrolensGrid, n_views: int, tile: int, q: float | None = 
     )
 
 
+#: lattice steps from a pixel's nearest tile centre, ring by ring: the centre, its six
+#: neighbours (1 pitch), the next six (sqrt 3) and the six after (2)
 _STEPS = np.array([(0, 0), (1, 0), (0, 1), (-1, 1), (-1, 0), (0, -1), (1, -1),
-                   (1, 1), (-1, -1), (2, -1), (-2, 1), (1, -2), (-1, 2)])
+                   (1, 1), (-1, -1), (2, -1), (-2, 1), (1, -2), (-1, 2),
+                   (2, 0), (0, 2), (-2, 2), (-2, 0), (0, -2), (2, -2)])
+#: candidates (the first steps of _STEPS) that hold every lens within a radius (tile
+#: units) of any pixel. A pixel's cell is its lattice coordinates rounded, a parallelogram
+#: whose corners lie sqrt(3)/2 from its centre (not the hexagon of the nearest centre), so
+#: the rings up to r hold every lens nearer than the next ring's distance less sqrt(3)/2
+CANDIDATE_RINGS = ((7, math.sqrt(3.0) / 2), (13, 2.0 - math.sqrt(3.0) / 2),
+                   (19, math.sqrt(7.0) - math.sqrt(3.0) / 2))
+
+
+def candidates_within(radius: float) -> int:
+    """How many candidates (:data:`_STEPS`) hold every lens within ``radius`` tiles of any
+    output pixel (7 up to 0.87 tiles, 13 up to 1.13, 19 up to 1.78); ValueError beyond."""
+    for count, reach in CANDIDATE_RINGS:
+        if radius <= reach:
+            return count
+    raise ValueError(f"a blend radius of {radius} tiles needs lenses beyond the "
+                     f"{CANDIDATE_RINGS[-1][0]} candidates (at most "
+                     f"{CANDIDATE_RINGS[-1][1]:.2f} tiles)")
 
 
 _MARGIN = 5  # empty lattice cells around the used lenses in the lookup table
@@ -230,6 +251,7 @@ def nearest_lenses(layout: ViewLayout, k: int = 7) -> tuple[np.ndarray, np.ndarr
 
 _KEY_SCALE = float(1 << 22)  # squared tile distances quantised to 2^-22 for the order
 _KEY_MAX = (1 << 27) - 1  # keys above: d2 >= 32 tiles^2 or no lens
+_KEY_BITS = 5  # the candidate's number in the key's low bits (up to 31; 31: no lens)
 
 
 def nearest_slots(layout: ViewLayout, keep: int = 3, k: int = 7, rows: slice = slice(None)
@@ -238,17 +260,19 @@ def nearest_slots(layout: ViewLayout, keep: int = 3, k: int = 7, rows: slice = s
     slot-major, for the output ``rows`` (all by default; a band gives the same numbers as
     those rows of the whole): (lens index (keep, h, W) int32, -1 where none; squared
     distance in tile units (keep, h, W) float32, inf where none). Ties (to 2^-22 tile^2) keep the
-    candidate order. A sorting network on int32 keys ``quantised d2 << 3 | candidate``
-    (one pass, 5 min/max per candidate) instead of sorting (H, W, k) arrays."""
-    if k > 8:
-        raise ValueError(f"nearest_slots takes at most 8 candidates, got {k}")
+    candidate order. A sorting network on int64 keys ``quantised d2 << 5 | candidate``
+    (one pass, ``keep`` min/max per candidate) instead of sorting (H, W, k) arrays. ``k``:
+    up to ``len(_STEPS)`` (19) candidates (:func:`candidates_within`)."""
+    if k > len(_STEPS):
+        raise ValueError(f"nearest_slots takes at most {len(_STEPS)} candidates, got {k}")
     keep = min(keep, k)
-    big = np.int32((_KEY_MAX << 3) | 7)
+    empty = (1 << _KEY_BITS) - 1
+    big = np.int64((_KEY_MAX << _KEY_BITS) | empty)
     slots = None
     for n, (_, d2) in enumerate(_candidates(layout, k, rows)):
-        key = np.minimum(d2 * _KEY_SCALE, _KEY_MAX).astype(np.int32)
-        key <<= 3
-        key |= np.int32(n)
+        key = np.minimum(d2 * _KEY_SCALE, _KEY_MAX).astype(np.int64)
+        key <<= _KEY_BITS
+        key |= np.int64(n)
         if slots is None:
             slots = [key] + [np.full_like(key, big) for _ in range(keep - 1)]
             continue
@@ -257,12 +281,13 @@ def nearest_slots(layout: ViewLayout, keep: int = 3, k: int = 7, rows: slice = s
             lo_, hi_ = np.minimum(slots[s], x), np.maximum(slots[s], x)
             slots[s], x = lo_, hi_
     table, cell, off = _lattice_lookup(layout, k, rows)
-    off = np.append(off, 0).astype(np.int32)  # entry 7 (empty slot): any cell, set to -1
+    # entries k.. (the empty slot's number): any cell, set to -1
+    off = np.append(off, np.zeros(empty + 1 - len(off), np.int32)).astype(np.int32)
     idx = np.empty((keep,) + cell.shape, np.int32)
     dist2 = np.empty(idx.shape, np.float32)
     for s in range(keep):
-        li = table.take(cell + off.take(slots[s] & 7))
-        li[(slots[s] >> 3) >= _KEY_MAX] = -1
+        li = table.take(cell + off.take(slots[s] & empty))
+        li[(slots[s] >> _KEY_BITS) >= _KEY_MAX] = -1
         idx[s] = li
         dist2[s] = _tile_dist2(layout, li, rows)
     return idx, dist2

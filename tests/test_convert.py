@@ -3,6 +3,7 @@ geometry, every Raytrix fixture converts, and the error cases."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -709,3 +710,42 @@ def test_radial_tables_follow_the_weight_formula_in_the_squared_radius(safe_diam
     ramp = (rho > rim - st.rim_ramp_px) & (rho < rim)
     step = np.abs(np.sqrt(entry / scale) - rho)[ramp]
     assert step.max() < 0.06, step.max()
+
+
+@pytest.mark.parametrize("turn", [0.0, 0.37])
+def test_slots_are_the_true_nearest_lenses_and_every_lens_within_the_blend(turn):
+    """nearest_slots against brute force over every used lens's tile centre: with the
+    candidates that :func:`candidates_within` gives a blend's radius, the k nearest come out
+    nearest first (a tile's radius with 13 candidates, the wider blend's 1.6 tiles with 19:
+    the nearest centre and its six neighbours do not hold every lens within either, and a
+    blend that misses one changes at the candidates' borders, the corner views' sawtooth of
+    seams). And the counts: 7 candidates to 0.87 tiles, 13 to 1.13, 19 to 1.78, beyond
+    refused."""
+    from plenocal.viewgeom import candidates_within, nearest_slots
+
+    assert [candidates_within(r) for r in (0.8, 1.0, 1.6)] == [7, 13, 19]
+    with pytest.raises(ValueError, match="candidates"):
+        candidates_within(1.8)
+    opt = small_optics(480, 300)
+    calib = RayCalib(**{**calib_for_optics(opt).__dict__, "rotation": math.pi / 2 + turn})
+    grid = MicrolensGrid(calib, 480, 300)
+    shot = ShotConversion(lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 4)),
+                          calib, 5, FIXED_TILE)
+    layout = shot.layout
+    rows = slice(layout.height // 3, layout.height // 3 + 24)
+    ys = np.arange(layout.height, dtype=np.float64)[rows][:, None, None]
+    xs = np.arange(layout.width, dtype=np.float64)[None, :, None]
+    tc = layout.tile_centres
+    d2 = ((xs - tc[:, 0]) ** 2 + (ys - tc[:, 1]) ** 2) / layout.tile ** 2
+    d2.sort(axis=2)
+    inner = (slice(None), slice(2 * layout.tile, -2 * layout.tile))  # whole lattice around
+    for radius, keep in ((1.0, 4), (1.6, 7)):
+        _, got = nearest_slots(layout, keep=keep, k=candidates_within(radius), rows=rows)
+        np.testing.assert_allclose(np.sqrt(got[(slice(None),) + inner]),
+                                   np.sqrt(np.moveaxis(d2[..., :keep], 2, 0)[(slice(None),)
+                                                                             + inner]),
+                                   atol=1e-3)
+    _, seven = nearest_slots(layout, keep=7, k=7, rows=rows)
+    for slot, share in ((3, 0.01), (6, 0.1)):  # the old candidates missed these often
+        missed = np.abs(np.sqrt(seven[slot]) - np.sqrt(d2[..., slot])) > 1e-3
+        assert missed[inner].mean() > share, slot

@@ -45,7 +45,7 @@ import numpy as np
 
 from plenocal.config import stage_defaults
 from plenocal.convert.vignetting import gains
-from plenocal.viewgeom import ViewLayout, nearest_lenses, nearest_slots
+from plenocal.viewgeom import ViewLayout, candidates_within, nearest_lenses, nearest_slots
 
 _FLOOR = 1e-3
 #: entries of the radial tables, evenly spaced in the squared radius from 0 to
@@ -170,7 +170,11 @@ def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
     if patch.shape != (len(layout.lens_index),):
         raise ValueError(f"need one patch size per used lens ({len(layout.lens_index)}), "
                          f"got {patch.shape}")
-    idx, dist2 = nearest_slots(layout, keep=max(b.slots for b in blends), rows=rows)
+    # every lens within the widest blend's radius is a candidate (a blend that missed one
+    # with weight would change at the candidates' borders: a seam)
+    idx, dist2 = nearest_slots(layout, keep=max(b.slots for b in blends),
+                               k=candidates_within(max(b.fade_radius for b in blends)),
+                               rows=rows)
     K, H, W = idx.shape
     have = idx >= 0
     lens = np.where(have, idx, 0)
