@@ -148,8 +148,9 @@ def make_layout(grid: MicrolensGrid, n_views: int, tile: int, q: float | None = 
     )
 
 
-#: lattice steps from a pixel's nearest tile centre, ring by ring: the centre, its six
-#: neighbours (1 pitch), the next six (sqrt 3) and the six after (2)
+#: lattice steps from a pixel's cell (its lattice coordinates rounded), ring by ring: the
+#: cell's tile centre, its six neighbours (1 pitch), the next six (sqrt 3) and the six
+#: after (2)
 _STEPS = np.array([(0, 0), (1, 0), (0, 1), (-1, 1), (-1, 0), (0, -1), (1, -1),
                    (1, 1), (-1, -1), (2, -1), (-2, 1), (1, -2), (-1, 2),
                    (2, 0), (0, 2), (-2, 2), (-2, 0), (0, -2), (2, -2)])
@@ -183,8 +184,9 @@ def _rows(layout: ViewLayout, rows: slice, dtype) -> np.ndarray:
 def _lattice_lookup(layout: ViewLayout, k: int, rows: slice = slice(None)
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The lens table of the tile lattice, flattened with a margin of empty cells (-1),
-    each output pixel's cell (its nearest lattice point; (h, W) int32 into the flat
-    table for the output ``rows``, kept ``_MARGIN - 3`` cells inside it) and the flat
+    each output pixel's cell (its lattice coordinates rounded, a parallelogram, not the
+    nearest lens's hexagon; (h, W) int32 into the flat table for the output ``rows``,
+    kept ``_MARGIN - 3`` cells inside it) and the flat
     offsets of the first ``k`` lattice steps: the candidate lens of step n at pixel u is
     ``table[cell[u] + off[n]]``."""
     ys = _rows(layout, rows, np.float64)
@@ -229,7 +231,7 @@ def _tile_dist2(layout: ViewLayout, li: np.ndarray, rows: slice = slice(None)
 
 def _candidates(layout: ViewLayout, k: int, rows: slice = slice(None)):
     """Yield, for the first ``k`` lattice steps around each output pixel's (of ``rows``)
-    nearest tile centre, (lens index (h, W) int32, -1 where none; squared distance to its
+    cell's tile centre, (lens index (h, W) int32, -1 where none; squared distance to its
     tile centre in tile units (h, W) float32, inf where none)."""
     table, cell, off = _lattice_lookup(layout, k, rows)
     for o in off:
@@ -241,9 +243,11 @@ def nearest_lenses(layout: ViewLayout, k: int = 7) -> tuple[np.ndarray, np.ndarr
     """For every output pixel, up to ``k`` used lenses whose tiles may cover it.
 
     Returns (lens index into the layout (H, W, k), -1 where none; squared distance to
-    the tile centre in tile units (H, W, k)). Candidates are the lens whose tile centre
-    is nearest and its six lattice neighbours, so any weight of radius <= 1 tile is
-    complete.
+    the tile centre in tile units (H, W, k)). Candidates are the first ``k`` steps of
+    :data:`_STEPS` from the pixel's cell: the default 7 (the cell's lens and its six
+    neighbours) hold every lens within 0.87 tiles, not every lens within one
+    (:func:`candidates_within`; the renderer's :func:`nearest_slots` takes as many as its
+    blends need).
     """
     idx, dist2 = zip(*_candidates(layout, k), strict=True)
     return np.stack(idx, axis=-1).astype(np.int64), np.stack(dist2, axis=-1)

@@ -584,12 +584,12 @@ def _label(img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.4)
 
 def patch_size_picture(layout: ViewLayout, patch: np.ndarray, confident: np.ndarray
                        ) -> np.ndarray:
-    """The patch-size map at tile resolution (viridis, each lens its tile; lenses filled
-    from neighbours drawn darker) with a colour bar; uint8 RGB."""
-    from plenocal.viewgeom import nearest_lenses  # noqa: PLC0415
+    """The patch-size map at tile resolution (viridis, each lens its tile: the output
+    pixels nearest its tile centre, a hexagon; lenses filled from neighbours drawn darker)
+    with a colour bar; uint8 RGB."""
+    from plenocal.viewgeom import nearest_slots  # noqa: PLC0415
 
-    idx, _ = nearest_lenses(layout, k=1)
-    idx = idx[..., 0]
+    idx = nearest_slots(layout, keep=1)[0][0]
     lo, hi = float(np.min(patch)), float(np.max(patch))
     span = max(hi - lo, 1e-6)
     level = np.clip(np.rint((patch - lo) / span * 255), 0, 255).astype(np.uint8)
