@@ -717,7 +717,7 @@ def test_slots_are_the_true_nearest_lenses_and_every_lens_within_the_blend(turn)
     """nearest_slots against brute force over every used lens's tile centre: with the
     candidates that :func:`candidates_within` gives a blend's radius, the k nearest come out
     nearest first (a tile's radius with 13 candidates, the wider blend's 1.6 tiles with 19:
-    the nearest centre and its six neighbours do not hold every lens within either, and a
+    the cell's lens and its six neighbours do not hold every lens within either, and a
     blend that misses one changes at the candidates' borders, the corner views' sawtooth of
     seams). And the counts: 7 candidates to 0.87 tiles, 13 to 1.13, 19 to 1.78, beyond
     refused."""
