@@ -589,7 +589,10 @@ def patch_size_picture(layout: ViewLayout, patch: np.ndarray, confident: np.ndar
     with a colour bar; uint8 RGB."""
     from plenocal.viewgeom import nearest_slots  # noqa: PLC0415
 
-    idx = nearest_slots(layout, keep=1)[0][0]
+    idx = np.empty((layout.height, layout.width), np.int32)
+    for y in range(0, layout.height, PLAN_ROWS):  # in bands: a few MB on any sensor
+        rows = slice(y, min(y + PLAN_ROWS, layout.height))
+        idx[rows] = nearest_slots(layout, keep=1, rows=rows)[0][0]
     lo, hi = float(np.min(patch)), float(np.max(patch))
     span = max(hi - lo, 1e-6)
     level = np.clip(np.rint((patch - lo) / span * 255), 0, 255).astype(np.uint8)
