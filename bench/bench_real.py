@@ -530,7 +530,11 @@ def main() -> None:
     out.say("Local measures against TLCT's views of the same frame (issue 33; "
             "plenocal.convert.localcheck): the worst textured tile's SSIM (6 x 6 grid; "
             "target >= 0.85 for the centre) and the lattice trace, ours / TLCT's, dB "
-            "(target: ours at most TLCT's). D' the safe diameter the views were cut with "
+            "(target: ours at most TLCT's); z: each trace's distance from the measure's floor "
+            "on the same view (the trace at its lattice's frequencies turned by 10-50 deg, "
+            "where no lattice is), in standard deviations of the floor over the turns: a "
+            "view within about 2 of its floor shows no lattice the measure can see. D' the "
+            "safe diameter the views were cut with "
             "(measured, or calib.xml's D - 2), q the view spacing; filled: the share of "
             "lenses whose patch size was filled, not measured.")
     out.say("")
@@ -548,7 +552,8 @@ def main() -> None:
             else:
                 flag = "" if lc["lattice_db"] <= lc["ref_lattice_db"] else " (over)"
                 cells += [f"{lc['worst_tile_ssim']:.3f}",
-                          f"{lc['lattice_db']:.1f} / {lc['ref_lattice_db']:.1f}{flag}"]
+                          f"{lc['lattice_db']:.1f} / {lc['ref_lattice_db']:.1f}{flag}; "
+                          f"z {lc['lattice_z']:+.1f} / {lc['ref_lattice_z']:+.1f}"]
         safe = r["safe"]
         out.say(f"| {r['name']} | {safe.diameter_px:.1f} ({safe.file_px:.1f}) | {r['q']:.2f} "
                 f"| {100 * r['filled']:.0f}% | " + " | ".join(cells) + " |")

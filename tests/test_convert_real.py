@@ -279,6 +279,10 @@ def test_lattice_trace_fails_the_paper_spacing_corner_view_and_passes_the_measur
     now = local_compare(v["corner"][0], v["ref"]["v000"], v["corner"][1])
     assert before["lattice_db"] > before["ref_lattice_db"] + 0.5, before
     assert now["lattice_db"] <= now["ref_lattice_db"], now
+    # against the measure's floor on the same view: the lattice stands above it at the
+    # paper's q, and sinks into it at the measured D' (TLCT's view lies on its floor too)
+    assert before["lattice_z"] > 2.0, before
+    assert abs(now["lattice_z"]) < 1.0 and abs(now["ref_lattice_z"]) < 1.0, now
 
 
 def test_central_view_worst_textured_tile_against_tlct(boys2_views):

@@ -23,7 +23,11 @@ of a doll on black read 0.949 while the face was a honeycomb. Two measures look 
   sawtooth stands out by ten or more. The mean in dB over the frequencies. Our view is
   measured on the reference's pixel grid (aligned as above, on the same crop), so that
   both views are read at the same frequencies: our lattice is mapped there by the
-  alignment's linear part.
+  alignment's linear part. Its **floor** is the same measure at the lattice's frequencies
+  turned by :data:`NULL_TURNS_DEG`, where no lattice is: on the real frames 4-5 dB,
+  scattering by about 1 dB from turn to turn (0.5-1.9 dB), so that a trace within a couple
+  of the floor's standard deviations of it (``z``) shows no lattice the measure can see,
+  and two such traces differ by noise.
 
 :func:`local_compare` gives both for one view and its reference view.
 """
@@ -42,6 +46,9 @@ MIN_COVER = 0.8  # share of a tile that the aligned view must cover
 PEAK_BINS = 1.5  # radius (FFT bins) searched around each lattice frequency
 RING_WIDTH = 0.08  # relative half width of the ring that gives the background power
 SHELLS = 12  # lattice frequencies measured (the first two shells of a hexagonal lattice)
+#: turns of the lattice's frequencies (degrees) at which :func:`lattice_trace` reads its
+#: floor: at least 10 degrees from the hexagonal lattice's own directions (every 60)
+NULL_TURNS_DEG = (10, 14, 18, 22, 38, 42, 46, 50)
 SHIFT_PX = 2  # each tile's SSIM at its best whole-pixel shift within this many pixels
 _C1, _C2 = 0.01 ** 2, 0.03 ** 2  # SSIM's constants for data range 1
 
@@ -113,37 +120,84 @@ def lattice_frequencies(basis: np.ndarray, count: int = SHELLS) -> np.ndarray:
     return f[order[:count]]
 
 
+def turned(basis: np.ndarray, deg: float) -> np.ndarray:
+    """The lattice steps ``basis`` (rows, pixels) turned by ``deg`` degrees."""
+    a = np.radians(deg)
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    return np.asarray(basis, dtype=float) @ rot.T
+
+
+class _Spectrum:
+    """A grey image's Hann-windowed power spectrum (fftshifted) and its frequency grid,
+    computed once for every set of frequencies read from it."""
+
+    def __init__(self, img: np.ndarray):
+        h, w = img.shape
+        win = np.outer(np.hanning(h), np.hanning(w))
+        x = (img - img.mean()) * win
+        self.power = np.abs(np.fft.fftshift(np.fft.fft2(x))) ** 2
+        self.fy = (np.arange(h) - h // 2) / h
+        self.fx = (np.arange(w) - w // 2) / w
+        self.rad = np.hypot(*np.meshgrid(self.fx, self.fy))
+        self.bin_r = np.hypot(1.0 / w, 1.0 / h) / np.sqrt(2.0)  # one bin
+
+    def discs(self, freqs: np.ndarray, radius_bins: float) -> np.ndarray:
+        """(h, w) bool: the bins within ``radius_bins`` bins of any of ``freqs``."""
+        h, w = self.power.shape
+        out = np.zeros((h, w), bool)
+        r = radius_bins * self.bin_r
+        for f in freqs:
+            ys = np.flatnonzero(np.abs(self.fy - f[1]) <= r)
+            xs = np.flatnonzero(np.abs(self.fx - f[0]) <= r)
+            if len(ys) and len(xs):
+                box = np.hypot(*np.meshgrid(self.fx[xs] - f[0], self.fy[ys] - f[1])) <= r
+                out[np.ix_(ys, xs)] |= box
+        return out
+
+    def trace(self, basis: np.ndarray, count: int, avoid: np.ndarray) -> list[float]:
+        """Per frequency of the lattice ``basis``: the peak within :data:`PEAK_BINS` bins
+        over the median of the ring of its magnitude, in dB; the ring leaves out the bins
+        within 3 bins of this lattice's frequencies and of ``avoid`` (more frequencies)."""
+        freqs = lattice_frequencies(basis, count)
+        near = self.discs(np.concatenate([lattice_frequencies(basis, 60), avoid]), 3.0)
+        values = []
+        for f in freqs:
+            if abs(f[0]) >= 0.5 or abs(f[1]) >= 0.5:
+                continue  # beyond Nyquist on this grid
+            peak = self.discs(f[None], PEAK_BINS)
+            mag = float(np.hypot(*f))
+            ring = (np.abs(self.rad - mag) <= RING_WIDTH * mag) & ~near
+            if not peak.any() or ring.sum() < 16:
+                continue
+            values.append(10.0 * np.log10(self.power[peak].max()
+                                          / max(np.median(self.power[ring]), 1e-30)))
+        return values
+
+
 def lattice_trace(img: np.ndarray, basis: np.ndarray, count: int = SHELLS) -> dict:
     """The lattice's trace in a grey float image ``img`` whose lattice steps are the rows
     of ``basis`` (pixels): mean over the lattice frequencies of the peak power over the
-    ring background, in dB, and each frequency's value (module docstring)."""
-    h, w = img.shape
-    win = np.outer(np.hanning(h), np.hanning(w)).astype(np.float64)
-    x = (img - img.mean()) * win
-    power = np.abs(np.fft.fftshift(np.fft.fft2(x))) ** 2
-    fy = (np.arange(h) - h // 2) / h
-    fx = (np.arange(w) - w // 2) / w
-    FX, FY = np.meshgrid(fx, fy)
-    rad = np.hypot(FX, FY)
-    freqs = lattice_frequencies(basis, count)
-    all_f = lattice_frequencies(basis, 60)  # every lattice frequency near the rings
-    bin_r = np.hypot(1.0 / w, 1.0 / h) / np.sqrt(2.0)  # one bin
-    near_lattice = np.zeros((h, w), bool)
-    for f in all_f:
-        near_lattice |= np.hypot(FX - f[0], FY - f[1]) <= 3.0 * bin_r
-    values = []
-    for f in freqs:
-        if abs(f[0]) >= 0.5 or abs(f[1]) >= 0.5:
-            continue  # beyond Nyquist on this grid
-        peak = np.hypot(FX - f[0], FY - f[1]) <= PEAK_BINS * bin_r
-        mag = float(np.hypot(*f))
-        ring = (np.abs(rad - mag) <= RING_WIDTH * mag) & ~near_lattice
-        if not peak.any() or ring.sum() < 16:
-            continue
-        values.append(10.0 * np.log10(power[peak].max() / max(np.median(power[ring]), 1e-30)))
+    ring background, in dB, and each frequency's value (module docstring); and its null
+    floor (:data:`NULL_TURNS_DEG`): the mean and standard deviation of the same measure
+    at the lattice's frequencies turned by each of those angles, where no lattice is.
+
+    The measure on a view without a lattice is not zero: the peak is the largest of a few
+    bins of a noisy spectrum, and the scene's own structure lies at some directions more
+    than others. On the real frames the floor reads 4.0-4.8 dB, scattering by 0.7-1.7 dB
+    between the turns (BENCHMARKS.md, "The lattice measure's floor"), so two views whose
+    traces differ by less than that cannot be told apart by it; ``z`` is the trace's
+    distance from its floor in floor standard deviations."""
+    spec = _Spectrum(np.asarray(img, dtype=np.float64))
+    lattice = lattice_frequencies(basis, 60)
+    values = spec.trace(basis, count, np.zeros((0, 2)))
     if not values:
         raise ConvertError("no lattice frequency of the view lies below Nyquist")
-    return {"db": float(np.mean(values)), "per_frequency_db": [float(v) for v in values]}
+    null = [float(np.mean(v)) for v in (spec.trace(turned(basis, d), count, lattice)
+                                        for d in NULL_TURNS_DEG) if v]
+    db = float(np.mean(values))
+    m, sd = float(np.mean(null)), float(np.std(null))
+    return {"db": db, "per_frequency_db": [float(v) for v in values], "null_db": m,
+            "null_sd_db": sd, "z": (db - m) / max(sd, 1e-6)}
 
 
 def local_compare(ours_img: np.ndarray, ref_img: np.ndarray, basis: np.ndarray) -> dict:
@@ -168,5 +222,8 @@ def local_compare(ours_img: np.ndarray, ref_img: np.ndarray, basis: np.ndarray) 
     return {"worst_tile_ssim": tiles["worst"], "worst_tile": tiles["worst_tile"],
             "textured_tiles": tiles["textured_tiles"], "tile_ssim": tiles["tiles"],
             "lattice_db": ours_trace["db"], "ref_lattice_db": ref_trace["db"],
+            "lattice_z": ours_trace["z"], "ref_lattice_z": ref_trace["z"],
+            "lattice_null_db": (ours_trace["null_db"], ours_trace["null_sd_db"]),
+            "ref_lattice_null_db": (ref_trace["null_db"], ref_trace["null_sd_db"]),
             "inliers": inliers, "alignment": M}
 
