@@ -437,6 +437,32 @@ def test_texture_files_read_as_scikit_image_reads_them():
         np.testing.assert_array_equal(got, want[:, :, :3], err_msg=name)
 
 
+def test_textures_are_the_same_bits_whichever_code_opencv_would_pick():
+    """The scenes' textures are blurred in numpy's float32 operations, not by OpenCV, whose
+    blur takes its code by the CPU (its optimised and baseline paths differ by 1-2 float32
+    steps on a third of the texels): the same textures with OpenCV's optimised code on or
+    off, and the Gaussian OpenCV's blur is, to a few float32 steps."""
+    import cv2
+
+    from plenocal.simulate.scene import TEXTURE_FILES, gaussian_blur, load_texture
+
+    names = sorted(TEXTURE_FILES)[:3]
+    was = cv2.useOptimized()
+    try:
+        cv2.setUseOptimized(True)
+        fast = [load_texture(n) for n in names]
+        cv2.setUseOptimized(False)
+        plain = [load_texture(n) for n in names]
+    finally:
+        cv2.setUseOptimized(was)
+    for name, a, b in zip(names, fast, plain, strict=True):
+        np.testing.assert_array_equal(a, b, err_msg=name)
+    img = np.random.default_rng(3).random((60, 70, 3)).astype(np.float32)
+    for sigma in (0.7, 1.0, 1.5):
+        np.testing.assert_allclose(gaussian_blur(img, sigma),
+                                   cv2.GaussianBlur(img, (0, 0), sigma), atol=1e-6)
+
+
 def test_bounding_boxes_skip_nothing_that_a_ray_hits(tmp_path: Path):
     """The tracers skip what no ray of theirs can hit - a lenslet pixel's rays test only
     the quads its microlens's bundle reaches (_bundle_candidates), an ideal render's
