@@ -24,8 +24,8 @@ of a doll on black read 0.949 while the face was a honeycomb. Two measures look 
   measured on the reference's pixel grid (aligned as above, on the same crop), so that
   both views are read at the same frequencies: our lattice is mapped there by the
   alignment's linear part. Its **floor** is the same measure at the lattice's frequencies
-  turned by :data:`NULL_TURNS_DEG`, where no lattice is: on the real frames 4-5 dB,
-  scattering by about 1 dB from turn to turn (0.5-1.9 dB), so that a trace within a couple
+  turned by :data:`NULL_TURNS_DEG`, where no lattice is: on the real frames about 4-5 dB,
+  scattering by 0.7-1.8 dB from turn to turn, so that a trace within a couple
   of the floor's standard deviations of it (``z``) shows no lattice the measure can see,
   and two such traces differ by noise.
 
@@ -183,7 +183,7 @@ def lattice_trace(img: np.ndarray, basis: np.ndarray, count: int = SHELLS) -> di
 
     The measure on a view without a lattice is not zero: the peak is the largest of a few
     bins of a noisy spectrum, and the scene's own structure lies at some directions more
-    than others. On the real frames the floor reads 4.0-4.8 dB, scattering by 0.7-1.7 dB
+    than others. On the real frames the floor reads about 4-5 dB, scattering by 0.7-1.8 dB
     between the turns (BENCHMARKS.md, "The lattice measure's floor"), so two views whose
     traces differ by less than that cannot be told apart by it; ``z`` is the trace's
     distance from its floor in floor standard deviations."""
