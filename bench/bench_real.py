@@ -32,8 +32,9 @@ Local measures (issue 33), for the central view and the two corner views 0_0 and
 ``v000.png``, ``v024.png``; :mod:`plenocal.convert.localcheck`): the worst textured tile
 (SSIM on a 6 x 6 grid over the tiles where the reference has texture; target >= 0.85 for
 the central view) and the microlens lattice's trace (dB at the lattice's frequencies;
-target: at most TLCT's, on every view). The later frames (``<seq>_f150.png``) use their
-sequence's xml.
+target: at most TLCT's, on every view), each trace with its distance z from the measure's
+floor on the same view (:func:`plenocal.convert.localcheck.lattice_trace`). The later
+frames (``<seq>_f150.png``) use their sequence's xml.
 
 Pictures (``--pictures``, git-ignored bench/out/): ``<frame>.png`` side by side at the
 central view's height: the raw frame (area-downscaled) | our central view | the

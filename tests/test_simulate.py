@@ -441,7 +441,7 @@ def test_textures_are_the_same_bits_whichever_code_opencv_would_pick():
     """The scenes' textures are blurred in numpy's float32 operations, not by OpenCV, whose
     blur takes its code by the CPU (its optimised and baseline paths differ by 1-2 float32
     steps on a third of the texels): the same textures with OpenCV's optimised code on or
-    off, and the Gaussian OpenCV's blur is, to a few float32 steps."""
+    off, and the same Gaussian as OpenCV's blur, to a few float32 steps."""
     import cv2
 
     from plenocal.simulate.scene import TEXTURE_FILES, gaussian_blur, load_texture
