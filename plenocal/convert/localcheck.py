@@ -141,36 +141,48 @@ class _Spectrum:
         self.rad = np.hypot(*np.meshgrid(self.fx, self.fy))
         self.bin_r = np.hypot(1.0 / w, 1.0 / h) / np.sqrt(2.0)  # one bin
 
+    def _box(self, f: np.ndarray, r: float):
+        """The rows, the columns and the disc (bool, on their grid) of the bins within
+        ``r`` (cycles per pixel) of frequency ``f``; None where no bin is."""
+        ys = np.flatnonzero(np.abs(self.fy - f[1]) <= r)
+        xs = np.flatnonzero(np.abs(self.fx - f[0]) <= r)
+        if not len(ys) or not len(xs):
+            return None
+        return ys, xs, np.hypot(*np.meshgrid(self.fx[xs] - f[0], self.fy[ys] - f[1])) <= r
+
     def discs(self, freqs: np.ndarray, radius_bins: float) -> np.ndarray:
         """(h, w) bool: the bins within ``radius_bins`` bins of any of ``freqs``."""
-        h, w = self.power.shape
-        out = np.zeros((h, w), bool)
-        r = radius_bins * self.bin_r
+        out = np.zeros(self.power.shape, bool)
         for f in freqs:
-            ys = np.flatnonzero(np.abs(self.fy - f[1]) <= r)
-            xs = np.flatnonzero(np.abs(self.fx - f[0]) <= r)
-            if len(ys) and len(xs):
-                box = np.hypot(*np.meshgrid(self.fx[xs] - f[0], self.fy[ys] - f[1])) <= r
-                out[np.ix_(ys, xs)] |= box
+            box = self._box(f, radius_bins * self.bin_r)
+            if box is not None:
+                out[np.ix_(box[0], box[1])] |= box[2]
         return out
 
     def trace(self, basis: np.ndarray, count: int, avoid: np.ndarray) -> list[float]:
         """Per frequency of the lattice ``basis``: the peak within :data:`PEAK_BINS` bins
         over the median of the ring of its magnitude, in dB; the ring leaves out the bins
-        within 3 bins of this lattice's frequencies and of ``avoid`` (more frequencies)."""
+        within 3 bins of this lattice's frequencies and of ``avoid`` (more frequencies).
+        A shell's frequencies share a magnitude, and its ring's median is taken once."""
         freqs = lattice_frequencies(basis, count)
         near = self.discs(np.concatenate([lattice_frequencies(basis, 60), avoid]), 3.0)
+        background: dict[float, float | None] = {}
         values = []
         for f in freqs:
             if abs(f[0]) >= 0.5 or abs(f[1]) >= 0.5:
                 continue  # beyond Nyquist on this grid
-            peak = self.discs(f[None], PEAK_BINS)
-            mag = float(np.hypot(*f))
-            ring = (np.abs(self.rad - mag) <= RING_WIDTH * mag) & ~near
-            if not peak.any() or ring.sum() < 16:
+            box = self._box(f, PEAK_BINS * self.bin_r)
+            if box is None or not box[2].any():
                 continue
-            values.append(10.0 * np.log10(self.power[peak].max()
-                                          / max(np.median(self.power[ring]), 1e-30)))
+            mag = float(np.hypot(*f))
+            if mag not in background:
+                ring = (np.abs(self.rad - mag) <= RING_WIDTH * mag) & ~near
+                background[mag] = (max(float(np.median(self.power[ring])), 1e-30)
+                                   if ring.sum() >= 16 else None)
+            if background[mag] is None:
+                continue
+            peak = self.power[np.ix_(box[0], box[1])][box[2]].max()
+            values.append(10.0 * np.log10(peak / background[mag]))
         return values
 
 
