@@ -130,7 +130,7 @@ rule view_matches:
     priority: PRIORITY["chain"]
     conda:
         "../envs/plenocal.yaml"
-    threads: lambda wc: stage_config("sfm")["num_threads"]
+    threads: lambda wc: stage_config("sfm")["view_matching"]["num_threads"]
     resources:
         mem_mb=4000,
         runtime=60,

@@ -171,3 +171,34 @@ def test_features_per_shot_merge_into_one_extraction(views, tmp_path):
     assert all(p.stat().st_mtime_ns == 10**18 for p in parts)
     with pytest.raises(ValueError, match="more than one"):
         viewdb.merge_view_features([parts[0], parts[0]], tmp_path / "twice.db")
+
+
+def test_the_matched_database_is_the_same_bytes_on_any_number_of_threads(views, tmp_path):
+    """COLMAP's matcher on two threads writes its rows in the order its threads finish:
+    rewritten in key order, the file is the same bytes as on one (Snakemake's checksums),
+    still in COLMAP's WAL mode, with nothing left beside it."""
+    paths, centres = views
+    feats = tmp_path / "features.db"
+    viewdb.extract_view_features(paths, feats, tmp_path / "w", max_num_features=1000)
+    out = {}
+    for threads in (1, 2, 2):
+        db = tmp_path / f"m{threads}_{len(out)}" / "database.db"
+        db.parent.mkdir()
+        viewdb.match_view_database(feats, db, shot_centres=centres, shot_neighbours=1,
+                                   num_threads=threads, work_dir=db.parent)
+        out[db] = db.read_bytes()
+        assert sorted(p.name for p in db.parent.iterdir()) == ["database.db"]
+    first, *rest = out.values()
+    assert all(b == first for b in rest)
+    assert first[18:20] == b"\x02\x02"  # WAL
+
+
+def test_a_rewrite_in_key_order_keeps_every_row(views, tmp_path):
+    paths, _ = views
+    db = tmp_path / "features.db"
+    viewdb.extract_view_features(dict(sorted(paths.items())[:3]), db, tmp_path / "w",
+                                 max_num_features=300)
+    before = _dump(db)
+    viewdb.rewrite_in_key_order(db)
+    assert _dump(db) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["features.db", "w"]

@@ -234,12 +234,36 @@ def match_views(database: str | Path, *,
                        view_radius=view_radius)
     n_verified = cm.match(database, pairs, seed=seed, num_threads=num_threads,
                           work_dir=work_dir, use_gpu=use_gpu)
+    rewrite_in_key_order(database)
     seconds = time.perf_counter() - t0
     log.info("view matches: %d images, %d pairs (%d verified), %.1f s", len(names),
              len(pairs), n_verified, seconds)
     return {"num_images": len(names), "num_pairs": len(pairs),
             "num_verified_pairs": int(n_verified), "shot_neighbours": shot_neighbours,
             "view_radius": view_radius, "matching_device": "cuda" if use_gpu else "cpu"}
+
+
+def rewrite_in_key_order(database: str | Path) -> None:
+    """Rewrite the SQLite ``database`` in place with every table's rows in key order
+    (SQLite's ``VACUUM INTO`` a fresh file, which COLMAP's WAL mode is then set on again).
+
+    COLMAP's matcher on several threads writes the same rows (each pair's RANSAC is seeded
+    on its own) in the order its threads finish them, and the file's pages follow that
+    order: the same matches, other bytes, and Snakemake's checksums would see a change
+    where there is none. Rewritten, the file is the same bytes with any number of threads
+    (BENCHMARKS.md, "The view matching on two threads"). The rewrite goes to a temporary
+    file beside it that replaces it only once complete."""
+    database = Path(database)
+    tmp = database.with_name(f".{database.name}.in_key_order")
+    tmp.unlink(missing_ok=True)
+    try:
+        with contextlib.closing(sqlite3.connect(database)) as con:
+            con.execute("VACUUM INTO ?", (str(tmp),))
+        with contextlib.closing(sqlite3.connect(tmp)) as con:
+            con.execute("PRAGMA journal_mode=WAL")
+        tmp.replace(database)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def match_view_database(features: str | Path, database: str | Path, **kwargs) -> dict:
