@@ -43,6 +43,7 @@ from pathlib import Path
 
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md)
 import numpy as np
+import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from benchmd import Lines, update_sections  # noqa: E402
@@ -165,7 +166,7 @@ def residual_structure(tracks, res: dict, keep: set) -> dict[str, np.ndarray]:
     a projective term of the view coordinates (in units of 300 px from the principal
     point): [shift x, x/x, x/y, shift y, y/x, y/y, proj a, proj b], and the median."""
     by_shot: dict[str, list] = {}
-    for key in keep:
+    for key in sorted(keep):
         iid, _ = key
         shot = split_key(tracks.image(iid).name[:-4])[0]
         by_shot.setdefault(shot, []).append(key)
@@ -188,8 +189,7 @@ def residual_structure(tracks, res: dict, keep: set) -> dict[str, np.ndarray]:
 
 def run(capture: str, within: float, runs: list[str]) -> dict:
     res_dir = OUT / capture / "results" / "synthetic"
-    cfg = validate_config(__import__("yaml").safe_load((OUT / capture / "config.yaml")
-                                                       .read_text()))
+    cfg = validate_config(yaml.safe_load((OUT / capture / "config.yaml").read_text()))
     settings = rf.RefineSettings.from_config(cfg["refine"], seed=int(cfg["sfm"]["seed"]),
                                              num_threads=int(cfg["sfm"]["num_threads"]))
     eq6 = read_cameras(res_dir / "calibration" / "eq6" / "cameras.json")
