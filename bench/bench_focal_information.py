@@ -53,7 +53,7 @@ from plenocal.artifacts.rig import RigB, read_rig  # noqa: E402
 from plenocal.calib import refine as rf  # noqa: E402
 from plenocal.calib.reg_b.rig import rig_at_focal  # noqa: E402
 from plenocal.config import validate_config  # noqa: E402
-from plenocal.names import split_key  # noqa: E402
+from plenocal.names import array_shots, split_key  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "bench" / "out" / "accuracy"
@@ -195,9 +195,9 @@ def run(capture: str, within: float, runs: list[str]) -> dict:
     eq6 = read_cameras(res_dir / "calibration" / "eq6" / "cameras.json")
     truth = read_cameras(res_dir / "ground_truth" / "cameras.json")
     rig = read_rig(res_dir / "reg_b" / "rig.json")
-    shots = sorted({split_key(k)[0] for k in eq6})
-    array = [s for s in shots if not s.startswith("hand")]
-    hold = array[len(array) // 2]  # the workflow's full_set_cam: the array's middle
+    sim = cfg["datasets"]["synthetic"]["simulate"]["array"]
+    array = array_shots(int(sim["cols"]), int(sim["rows"]))  # row-major, as the workflow's
+    hold = array[len(array) // 2]  # full_set_cam: the array's middle shot
     central = [v for v, (_, M) in rig.view_poses().items() if np.allclose(M, np.eye(4))][0]
     f_true = float(truth[f"{hold}/{central}"].K[0, 0])
     original = rf.rig_reconstruction
