@@ -103,26 +103,43 @@ def focal_pattern(f: float, width: int, height: int, turn_deg: float, rel: float
 # ---------------------------------------------------------------- part 2: the observations
 
 
-def truth_residuals(tracks, ids: list[int], truth) -> dict[tuple[int, int], np.ndarray]:
+def truth_residuals(tracks, ids: list[int], truth) -> dict[tuple[int, int], tuple]:
     """(image_id, point2D_idx) -> (true projection, residual), COLMAP's pixel convention, of
     every observation of the points ``ids``: each point triangulated with the true cameras
-    (a linear DLT over its track)."""
-    out = {}
-    for pid in ids:
-        els = list(tracks.point3D(pid).track.elements)
-        rows, obs = [], []
-        for el in els:
-            cam = truth[tracks.image(el.image_id).name[:-4]]
-            uv = np.asarray(tracks.image(el.image_id).points2D[el.point2D_idx].xy) - 0.5
-            P = cam.K @ cam.world_to_cam[:3]
-            rows += [uv[0] * P[2] - P[0], uv[1] * P[2] - P[1]]
-            obs.append((el, cam, uv))
-        X = np.linalg.svd(np.array(rows))[2][-1]
-        X = X[:3] / X[3]
-        for el, cam, uv in obs:
-            proj = cam.project(X)[0]
-            out[(el.image_id, el.point2D_idx)] = (proj + 0.5, uv - proj)
-    return out
+    (a linear DLT over its track, all points at once: each point's equations padded with
+    zero rows to the longest track's, which leaves its null space as it is). The model is
+    read back through COLMAP's binary files (:func:`plenocal.verify.reprojection.read_model`)."""
+    from plenocal.verify import reprojection as rp  # noqa: PLC0415
+
+    obs, _, _ = rp.read_model(tracks)
+    want = np.asarray(sorted(ids), dtype=np.uint64)
+    keys, point, uv, P = [], [], [], []
+    for image_id in sorted(tracks.images):
+        name = tracks.image(image_id).name
+        kp, pid = obs[name]
+        idx = np.flatnonzero(np.isin(pid, want))
+        if not idx.size:
+            continue
+        cam = truth[name[:-4]]
+        keys += [(image_id, int(i)) for i in idx]
+        point.append(np.searchsorted(want, pid[idx]))
+        uv.append(kp[idx] - 0.5)
+        P.append(np.broadcast_to(cam.K @ cam.world_to_cam[:3], (idx.size, 3, 4)))
+    point, uv, P = np.concatenate(point), np.concatenate(uv), np.concatenate(P)
+    # each observation's two DLT rows, in the slot of its point's system
+    eqs = uv[:, :, None] * P[:, 2:3, :] - P[:, :2, :]  # (n, 2, 4)
+    order = np.argsort(point, kind="stable")
+    counts = np.bincount(point, minlength=len(want))
+    slot = np.empty(len(point), np.intp)
+    slot[order] = np.arange(len(point)) - np.repeat(np.cumsum(counts) - counts, counts)
+    A = np.zeros((len(want), 2 * int(counts.max()), 4))
+    A[point, 2 * slot] = eqs[:, 0]
+    A[point, 2 * slot + 1] = eqs[:, 1]
+    X = np.linalg.svd(A, full_matrices=False)[2][:, -1]
+    Xh = X[point] / X[point, 3:]
+    proj = np.einsum("nij,nj->ni", P, Xh)
+    proj = proj[:, :2] / proj[:, 2:]
+    return {k: (proj[n] + 0.5, uv[n] - proj[n]) for n, k in enumerate(keys)}
 
 
 def _rebuilt(rec, xy: dict, keep: set, point_ids: list[int], tracks):
