@@ -178,19 +178,26 @@ def _rebuilt(rec, xy: dict, keep: set, point_ids: list[int], tracks):
     return out
 
 
+def shots_of_images(tracks) -> dict[int, str]:
+    """image_id -> its shot (``<shot>/<view>.png``)."""
+    return {iid: split_key(tracks.image(iid).name[:-4])[0] for iid in tracks.images}
+
+
 def residual_structure(tracks, res: dict, keep: set) -> dict[str, np.ndarray]:
     """shot -> the least-squares fit of its kept residuals (px) by a shift, an affine map and
     a projective term of the view coordinates (in units of 300 px from the principal
     point): [shift x, x/x, x/y, shift y, y/x, y/y, proj a, proj b], and the median."""
+    shot_of = shots_of_images(tracks)
+    pp_of = {}
+    for iid in tracks.images:
+        cam = tracks.camera(tracks.image(iid).camera_id)
+        pp_of[iid] = (cam.principal_point_x, cam.principal_point_y)
     by_shot: dict[str, list] = {}
     for key in sorted(keep):
-        iid, _ = key
-        shot = split_key(tracks.image(iid).name[:-4])[0]
-        by_shot.setdefault(shot, []).append(key)
+        by_shot.setdefault(shot_of[key[0]], []).append(key)
     out = {}
     for shot, keys in sorted(by_shot.items()):
-        cams = [tracks.camera(tracks.image(k[0]).camera_id) for k in keys]
-        cam_pp = np.array([[c.principal_point_x, c.principal_point_y] for c in cams])
+        cam_pp = np.array([pp_of[k[0]] for k in keys])
         proj = np.array([res[k][0] for k in keys])
         r = np.array([res[k][1] for k in keys])
         x, y = ((proj - cam_pp) / 300.0).T
@@ -227,8 +234,7 @@ def run(capture: str, within: float, runs: list[str]) -> dict:
             state["keep"] = {k for k, (_, r) in state["res"].items()
                              if np.linalg.norm(r) <= within}
             state["structure"] = residual_structure(tracks, state["res"], state["keep"])
-            state["shot_of"] = {k: split_key(tracks.image(k[0]).name[:-4])[0]
-                                for k in state["res"]}
+            state["shot_of"] = shots_of_images(tracks)
         res, keep, how = state["res"], state["keep"], state["run"]
         keys = sorted(keep)
         if how == "measured":
@@ -238,7 +244,7 @@ def run(capture: str, within: float, runs: list[str]) -> dict:
             xy = {k: res[k][0] + res[keys[j]][1] for k, j in zip(keys, deal, strict=True)}
         else:
             def take(k: tuple) -> bool:
-                hand = state["shot_of"][k].startswith("hand")
+                hand = state["shot_of"][k[0]].startswith("hand")
                 return (how == "hand only" and hand) or (how == "array only" and not hand)
             xy = {k: res[k][0] + (res[k][1] if take(k) else 0.0) for k in keys}
         return _rebuilt(rec, xy, keep, point_ids, tracks), model
