@@ -217,15 +217,15 @@ def _tile_dist2(layout: ViewLayout, li: np.ndarray, rows: slice = slice(None)
     f = np.float32
     ys = _rows(layout, rows, f)
     xs = np.arange(layout.width, dtype=f)[None, :]
-    cx = np.append(layout.tile_centres[:, 0], np.nan).astype(f)  # index -1: no lens
-    cy = np.append(layout.tile_centres[:, 1], np.nan).astype(f)
+    # index -1 (no lens): a centre at infinity, so that its distance is inf
+    cx = np.append(layout.tile_centres[:, 0], np.inf).astype(f)
+    cy = np.append(layout.tile_centres[:, 1], np.inf).astype(f)
     dx = xs - cx.take(li)
     dy = ys - cy.take(li)
     dx *= dx
     dy *= dy
     dx += dy
     dx *= f(1.0 / layout.tile ** 2)
-    dx[li < 0] = np.inf
     return dx
 
 
@@ -263,35 +263,45 @@ def nearest_slots(layout: ViewLayout, keep: int = 3, k: int = 7, rows: slice = s
     """The ``keep`` nearest of :func:`nearest_lenses`'s ``k`` candidates, nearest first,
     slot-major, for the output ``rows`` (all by default; a band gives the same numbers as
     those rows of the whole): (lens index (keep, h, W) int32, -1 where none; squared
-    distance in tile units (keep, h, W) float32, inf where none). Ties (to 2^-22 tile^2) keep the
-    candidate order. A sorting network on int64 keys ``quantised d2 << 5 | candidate``
-    (one pass, ``keep`` min/max per candidate) instead of sorting (H, W, k) arrays. ``k``:
-    up to ``len(_STEPS)`` (19) candidates (:func:`candidates_within`)."""
+    distance in tile units (keep, h, W) float32, inf where none). Ties (to 2^-22 tile^2)
+    keep the candidate order. A sorting network on uint32 keys ``quantised d2 << 5 |
+    candidate`` (one pass, at most ``keep`` min/max per candidate) instead of sorting
+    (H, W, k) arrays; each slot's lens and distance are then read from the candidates'
+    by the candidate number in its key. ``k``: up to ``len(_STEPS)`` (19) candidates
+    (:func:`candidates_within`)."""
     if k > len(_STEPS):
         raise ValueError(f"nearest_slots takes at most {len(_STEPS)} candidates, got {k}")
     keep = min(keep, k)
-    empty = (1 << _KEY_BITS) - 1
-    big = np.int64((_KEY_MAX << _KEY_BITS) | empty)
-    slots = None
-    for n, (_, d2) in enumerate(_candidates(layout, k, rows)):
-        key = np.minimum(d2 * _KEY_SCALE, _KEY_MAX).astype(np.int64)
-        key <<= _KEY_BITS
-        key |= np.int64(n)
-        if slots is None:
-            slots = [key] + [np.full_like(key, big) for _ in range(keep - 1)]
-            continue
-        x = key
-        for s in range(keep):  # insert x: slots stay sorted
-            lo_, hi_ = np.minimum(slots[s], x), np.maximum(slots[s], x)
-            slots[s], x = lo_, hi_
     table, cell, off = _lattice_lookup(layout, k, rows)
-    # entries k.. (the empty slot's number): any cell, set to -1
-    off = np.append(off, np.zeros(empty + 1 - len(off), np.int32)).astype(np.int32)
+    # every candidate's lens and distance; row k: none (-1, inf)
+    lens = np.empty((k + 1,) + cell.shape, np.int32)
+    dist = np.empty(lens.shape, np.float32)
+    lens[k], dist[k] = -1, np.inf
+    bits = np.uint32(_KEY_BITS)
+    slots: list[np.ndarray] = []
+    for n, o in enumerate(off):
+        table.take(cell + o, out=lens[n])
+        dist[n] = _tile_dist2(layout, lens[n], rows)
+        # the quantised distance, at most _KEY_MAX (float32 rounds _KEY_MAX up to 2^27)
+        key = np.minimum(dist[n] * _KEY_SCALE, _KEY_MAX).astype(np.uint32)
+        np.minimum(key, np.uint32(_KEY_MAX), out=key)
+        key <<= bits
+        key |= np.uint32(n)
+        for s in range(min(n, keep)):  # insert key: the slots filled so far stay sorted
+            lo_ = np.minimum(slots[s], key)
+            np.maximum(slots[s], key, out=key)
+            slots[s] = lo_
+        if n < keep:
+            slots.append(key)
+    flat_lens, flat_dist = lens.ravel(), dist.ravel()
+    column = np.arange(cell.size, dtype=np.intp).reshape(cell.shape)
     idx = np.empty((keep,) + cell.shape, np.int32)
     dist2 = np.empty(idx.shape, np.float32)
     for s in range(keep):
-        li = table.take(cell + off.take(slots[s] & empty))
-        li[(slots[s] >> _KEY_BITS) >= _KEY_MAX] = -1
-        idx[s] = li
-        dist2[s] = _tile_dist2(layout, li, rows)
+        n = (slots[s] & np.uint32((1 << _KEY_BITS) - 1)).astype(np.intp)
+        n[(slots[s] >> bits) >= _KEY_MAX] = k  # 32 tiles^2 or more away, or no lens: none
+        n *= cell.size
+        n += column  # the flat position of the candidate's row and this pixel
+        flat_lens.take(n, out=idx[s])
+        flat_dist.take(n, out=dist2[s])
     return idx, dist2
