@@ -254,6 +254,18 @@ def read_model(rec, work_dir: str | Path | None = None):
         shutil.rmtree(tmp, ignore_errors=True)
 
 
+def read_keypoints(rec, work_dir: str | Path | None = None) -> dict[str, np.ndarray]:
+    """Every image's keypoints of ``rec`` (image name -> (n, 2) float64, COLMAP's
+    convention, in the image's point order), through its binary files
+    (:func:`read_observations`)."""
+    tmp = Path(tempfile.mkdtemp(prefix="plenocal_model_", dir=work_dir))
+    try:
+        rec.write_binary(str(tmp))
+        return {name: kp for name, (kp, _) in read_observations(tmp).items()}
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 def triangulated_stats(cameras: Mapping[str, PinholeCamera], database: str | Path, *,
                        max_error_px: float = _REPROJ["max_error_px"],
                        min_angle_deg: float = _REPROJ["min_angle_deg"],
