@@ -14,6 +14,7 @@ import pytest
 
 from plenocal.convert import ConvertSettings, ShotConversion
 from plenocal.convert.compare import compare_to_reference, fine_detail
+from plenocal.convert.patchsize import detect_mla_kind
 from plenocal.convert.render import blend_disagreement
 from plenocal.grid import MicrolensGrid
 from plenocal.io.raytrix import RayCalib, read_calib
@@ -88,6 +89,9 @@ def test_mla_kind_is_read_from_the_frame(name, box, kind):
     scores = shot.mla_scores
     other = "keplerian" if kind == "galilean" else "galilean"
     assert scores[kind] > 0.7 and scores[kind] - scores[other] > 0.4, scores
+    # the two ways matched side by side on two threads: the same numbers
+    two = detect_mla_kind(shot.gray, shot.grid, shot.settings.patch, threads=2)
+    assert two == (kind, scores["keplerian"], scores["galilean"])
 
 
 def test_views_upright_and_parallax_direction(fujita):

@@ -385,13 +385,16 @@ def match_scores(gray: np.ndarray, grid: MicrolensGrid, candidates: np.ndarray,
 
 
 def detect_mla(gray: np.ndarray, grid: MicrolensGrid, radius: float, samples: int,
-               candidates: np.ndarray, max_lenses: int = 600) -> tuple[str, float, float]:
+               candidates: np.ndarray, max_lenses: int = 600, threads: int = 1
+               ) -> tuple[str, float, float]:
     """Which way points move between neighbouring micro images, read from the image.
 
     Matches an even spread of textured lenses (at most ``max_lenses``) against their
     six neighbours both ways: towards the neighbour (Keplerian: micro images inverted)
-    and away from it (Galilean: upright). Returns (kind, mean best ZNCC towards, mean
-    best ZNCC away); the kind whose best match is higher. Deterministic (no sampling)."""
+    and away from it (Galilean: upright), the two ways side by side on ``threads``
+    threads (each computed alone: the same numbers with any number). Returns (kind, mean
+    best ZNCC towards, mean best ZNCC away); the kind whose best match is higher.
+    Deterministic (no sampling)."""
     inside = np.flatnonzero(grid.inside() & (grid.neighbours >= 0).all(axis=1))
     if len(inside) == 0:
         return "keplerian", float("nan"), float("nan")
@@ -414,7 +417,9 @@ def detect_mla(gray: np.ndarray, grid: MicrolensGrid, radius: float, samples: in
     m_i = grid.centres[chosen]
     half_safe = grid.calib.safe_diameter / 2
     best = {}
-    for kind, sign in (("keplerian", -1.0), ("galilean", 1.0)):
+
+    def match(way: tuple[str, float]) -> None:  # one way: its own entry of best, alone
+        kind, sign = way
         curve = []
         for P in candidates:
             sh = 0.5 * float(P)
@@ -430,19 +435,23 @@ def detect_mla(gray: np.ndarray, grid: MicrolensGrid, radius: float, samples: in
                 total += (a * b).sum(axis=1) / den
             curve.append(total / 6)
         best[kind] = float(np.mean(np.max(np.stack(curve, axis=1), axis=1))) if curve else 0.0
+
+    with opencv_threads(1 if threads > 1 else None):
+        run_all(match, [("keplerian", -1.0), ("galilean", 1.0)], threads)
     kind = "keplerian" if best["keplerian"] >= best["galilean"] else "galilean"
     return kind, best["keplerian"], best["galilean"]
 
 
-def detect_mla_kind(gray: np.ndarray, grid: MicrolensGrid, settings: PatchSizeSettings
-                    ) -> tuple[str, float, float]:
+def detect_mla_kind(gray: np.ndarray, grid: MicrolensGrid, settings: PatchSizeSettings,
+                    threads: int = 1) -> tuple[str, float, float]:
     """:func:`detect_mla` with the settings' block and a coarse candidate range (up to
-    the largest searchable patch size, ``D' / 40`` steps)."""
+    the largest searchable patch size, ``D' / 40`` steps), on ``threads`` threads."""
     D_safe = grid.calib.safe_diameter
     radius = settings.block_radius_px or D_safe / 7.0
     cap = settings.max_fraction * D_safe
     cand = np.arange(settings.min_px, cap + 1e-9, max(settings.step_px, D_safe / 40))
-    return detect_mla(gray, grid, radius, settings.block_samples, cand, max_lenses=200)
+    return detect_mla(gray, grid, radius, settings.block_samples, cand, max_lenses=200,
+                      threads=threads)
 
 
 def aggregate_scores(scores: np.ndarray, weight: np.ndarray, neighbours: np.ndarray,

@@ -432,7 +432,9 @@ class ShotConversion:
         vignetting = lens_type_profiles(gray, self.grid)
         mla, scores, check = st.mla, None, None
         if st.mla == "auto":
-            mla, k, g = detect_mla_kind(gray, self.grid, st.patch)
+            # the pool's worker is done with the safe diameter by now (it takes as long
+            # as the profiles): the two ways are matched side by side
+            mla, k, g = detect_mla_kind(gray, self.grid, st.patch, threads=self._threads)
             scores = {"keplerian": k, "galilean": g}
             log.info("%s: MLA kind from the image: %s (mean best ZNCC: points moving towards "
                      "the neighbour %.3f, away %.3f)", source, mla, k, g)
