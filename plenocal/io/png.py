@@ -1,5 +1,5 @@
 """PNG encoding for :func:`plenocal.io.files.write_image`: the file format written here, the
-deflate stream by Intel's ISA-L (the ``isal`` package).
+deflate stream by libdeflate (the ``deflate`` package).
 
 A PNG (ISO/IEC 15948) is the 8-byte signature, an ``IHDR`` chunk (size, bit depth, colour
 type), the filtered rows deflated as one zlib stream in ``IDAT`` chunks (one unless it
@@ -10,10 +10,15 @@ pixels give the same bytes).
 
 * ``level`` 0: stored (zlib's level 0, no compression), every row unfiltered (a filter only
   helps compression). For noisy 12-bit lenslet images that compress to 70 % at best.
-* ``level`` 1-3: ISA-L's levels, every row with PNG's "up" filter (the difference to the
-  row above). On a 1576 x 1190 RGB view (HandTools) level 1 deflates in 26 ms to 2.49 MB,
-  where zlib's Huffman-only level 1 (what OpenCV's encoder was set to) took 86 ms for
-  2.72 MB; the whole OpenCV encode took 95 ms, this one 41 ms. ISA-L lets go of the GIL,
+* ``level`` 1-3: libdeflate's levels, every row with PNG's "up" filter (the difference to
+  the row above). libdeflate compresses the whole buffer in one call, so its stream is a
+  function of the rows, the level and its version alone. ISA-L's streaming deflate (the
+  ``isal`` package, used before) once gave another, equally valid stream for the same
+  rows of a ground-truth render in a workflow job (the CI's reproducibility test; not
+  reproduced in 200 runs outside the workflow): that broke the promise of the same bytes
+  for the same pixels. On a 1576 x 1190 RGB view (HandTools) libdeflate's level 1 takes
+  25.5 ms for 2.37 MB, ISA-L's level 1 took 17.1 ms for 2.46 MB, zlib's Huffman-only level
+  1 (what OpenCV's encoder was set to) 59 ms for 2.70 MB. libdeflate lets go of the GIL,
   so views are encoded on several threads at once.
 
 Any PNG reader decodes these files (OpenCV's and Pillow's are tested, ``tests/test_png.py``).
@@ -63,9 +68,9 @@ def filtered_rows(image: np.ndarray, up: bool) -> np.ndarray:
 
 def encode_png(image: np.ndarray, level: int = 1) -> bytes:
     """The PNG bytes of ``image`` (grey (H, W) or (H, W, 1), or RGB (H, W, 3); uint8 or
-    uint16) at ``level`` (module docstring: 0 stored, 1-3 ISA-L's levels). The deflated
+    uint16) at ``level`` (module docstring: 0 stored, 1-3 libdeflate's levels). The deflated
     data is copied once, into the returned bytes."""
-    from isal import isal_zlib  # noqa: PLC0415  (only where a PNG is written)
+    import deflate  # noqa: PLC0415  (only where a PNG is written)
 
     if image.dtype not in (np.uint8, np.uint16):
         raise TypeError(f"PNG samples are uint8 or uint16, got {image.dtype}")
@@ -82,7 +87,8 @@ def encode_png(image: np.ndarray, level: int = 1) -> bytes:
     if h == 0 or w == 0:
         raise ValueError(f"a PNG needs at least one pixel, got shape {image.shape}")
     rows = filtered_rows(image, up=level > 0)
-    data = memoryview(zlib.compress(rows, 0) if level == 0 else isal_zlib.compress(rows, level))
+    data = memoryview(zlib.compress(rows, 0) if level == 0
+                      else deflate.zlib_compress(rows, level))
     header = struct.pack(">IIBBBBB", w, h, 8 * image.dtype.itemsize, _COLOUR_TYPE[channels],
                          0, 0, 0)
     parts = [SIGNATURE, *chunk(b"IHDR", header)]
