@@ -254,8 +254,8 @@ def nearest_lenses(layout: ViewLayout, k: int = 7) -> tuple[np.ndarray, np.ndarr
 
 
 _KEY_SCALE = float(1 << 22)  # squared tile distances quantised to 2^-22 for the order
-_KEY_MAX = (1 << 27) - 1  # keys above: d2 >= 32 tiles^2 or no lens
-_KEY_BITS = 5  # the candidate's number in the key's low bits (up to 31; 31: no lens)
+_KEY_MAX = (1 << 27) - 1  # quantised d2 clamped here: 32 tiles^2 or more away, or no lens
+_KEY_BITS = 5  # the candidate's number in the key's low bits (up to 31 candidates)
 
 
 def nearest_slots(layout: ViewLayout, keep: int = 3, k: int = 7, rows: slice = slice(None)
