@@ -148,6 +148,12 @@ def _rebuilt(rec, xy: dict, keep: set, point_ids: list[int], tracks):
     dropped)."""
     import pycolmap  # noqa: PLC0415
 
+    from plenocal.verify.reprojection import read_keypoints  # noqa: PLC0415
+
+    moved: dict[int, list] = {}
+    for (iid, k), uv in xy.items():
+        moved.setdefault(iid, []).append((k, uv))
+    keypoints = read_keypoints(rec)
     out = pycolmap.Reconstruction()
     for cid in rec.cameras:
         out.add_camera(rec.camera(cid))
@@ -162,10 +168,11 @@ def _rebuilt(rec, xy: dict, keep: set, point_ids: list[int], tracks):
         out.add_frame(frame)
     for iid in sorted(rec.images):
         im = rec.image(iid)
-        pts = [pycolmap.Point2D(xy.get((iid, k), np.asarray(p.xy)))
-               for k, p in enumerate(im.points2D)]
-        new = pycolmap.Image(name=im.name, points2D=pycolmap.Point2DList(pts),
-                             camera_id=im.camera_id, image_id=iid)
+        kp = keypoints[im.name].copy()
+        for k, uv in moved.get(iid, ()):
+            kp[k] = uv
+        new = pycolmap.Image(name=im.name, keypoints=kp, camera_id=im.camera_id,
+                             image_id=iid)
         new.frame_id = im.frame_id
         out.add_image(new)
     for fid in rec.frames:
@@ -227,8 +234,8 @@ def run(capture: str, within: float, runs: list[str]) -> dict:
     original = rf.rig_reconstruction
     state: dict = {}
 
-    def patched(tracks, views, shot_poses, width, height, point_ids):
-        rec, model = original(tracks, views, shot_poses, width, height, point_ids)
+    def patched(tracks, views, shot_poses, width, height, point_ids, work_dir=None):
+        rec, model = original(tracks, views, shot_poses, width, height, point_ids, work_dir)
         if "res" not in state:
             state["res"] = truth_residuals(tracks, point_ids, truth)
             state["keep"] = {k for k, (_, r) in state["res"].items()

@@ -50,6 +50,7 @@ differently), and the numbers of images, observations and 3-D points.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import shutil
 import struct
@@ -243,27 +244,31 @@ def adjust_points(rec, cameras: Mapping[str, PinholeCamera],
     return len(ids)
 
 
-def read_model(rec, work_dir: str | Path | None = None):
-    """The observations (:func:`read_observations`) and the points (:func:`read_points`) of
-    ``rec``, through its binary files (far faster than the Python bindings)."""
+@contextlib.contextmanager
+def written_model(rec, work_dir: str | Path | None = None) -> Iterator[Path]:
+    """A temporary folder (under ``work_dir``) holding ``rec``'s binary files, removed
+    after the block: COLMAP's files are read far faster than the Python bindings."""
     tmp = Path(tempfile.mkdtemp(prefix="plenocal_model_", dir=work_dir))
     try:
         rec.write_binary(str(tmp))
-        return (read_observations(tmp), *read_points(tmp))
+        yield tmp
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def read_model(rec, work_dir: str | Path | None = None):
+    """The observations (:func:`read_observations`) and the points (:func:`read_points`) of
+    ``rec``, through its binary files (:func:`written_model`)."""
+    with written_model(rec, work_dir) as folder:
+        return (read_observations(folder), *read_points(folder))
 
 
 def read_keypoints(rec, work_dir: str | Path | None = None) -> dict[str, np.ndarray]:
     """Every image's keypoints of ``rec`` (image name -> (n, 2) float64, COLMAP's
     convention, in the image's point order), through its binary files
-    (:func:`read_observations`)."""
-    tmp = Path(tempfile.mkdtemp(prefix="plenocal_model_", dir=work_dir))
-    try:
-        rec.write_binary(str(tmp))
-        return {name: kp for name, (kp, _) in read_observations(tmp).items()}
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+    (:func:`written_model`, :func:`read_observations`)."""
+    with written_model(rec, work_dir) as folder:
+        return {name: kp for name, (kp, _) in read_observations(folder).items()}
 
 
 def triangulated_stats(cameras: Mapping[str, PinholeCamera], database: str | Path, *,
