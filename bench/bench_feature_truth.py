@@ -76,9 +76,9 @@ EXTRA = {"true + low order": None, "true + low order + radial": "radial",
 SCALE_TOL = 0.2  # |log(scale ratio)| of a pair
 
 
-def render_truth(capture: Path, dest: Path) -> None:
+def render_truth(capture: Path, dest: Path, supersample: int) -> None:
     """Every view of every shot of ``capture`` as the truth's pinhole camera (image and
-    z-depth), those not yet in ``dest``."""
+    z-depth, ``supersample`` rays per pixel and axis), those not yet in ``dest``."""
     from plenocal.simulate.groundtruth import render_views  # noqa: PLC0415
 
     res = capture / "results" / "synthetic"
@@ -89,7 +89,7 @@ def render_truth(capture: Path, dest: Path) -> None:
     dest.mkdir(parents=True, exist_ok=True)
     print(f"{capture.name}: rendering {len(keys)} true views into {dest}", flush=True)
     render_views(capture / "data" / "synthetic" / "truth" / "scene.json",
-                 res / "ground_truth" / "cameras.json", keys, 3,
+                 res / "ground_truth" / "cameras.json", keys, supersample,
                  [dest / f"{_flat(k)}.png" for k in keys],
                  [dest / f"{_flat(k)}.npy" for k in keys], log=lambda _m: None)
 
@@ -186,14 +186,15 @@ def run(capture: str, within: float, renders_root: Path) -> dict:
     folder = OUT / capture
     res = folder / "results" / "synthetic"
     renders = renders_root / capture
-    render_truth(folder, renders)
     cfg = validate_config(yaml.safe_load((folder / "config.yaml").read_text()))
+    simulate = cfg["datasets"]["synthetic"]["simulate"]
+    render_truth(folder, renders, int(simulate["render"]["ideal_supersample"]))
     settings = rf.RefineSettings.from_config(cfg["refine"], seed=int(cfg["sfm"]["seed"]),
                                              num_threads=int(cfg["sfm"]["num_threads"]))
     eq6 = read_cameras(res / "calibration" / "eq6" / "cameras.json")
     truth = read_cameras(res / "ground_truth" / "cameras.json")
     rig = read_rig(res / "reg_b" / "rig.json")
-    sim = cfg["datasets"]["synthetic"]["simulate"]["array"]
+    sim = simulate["array"]
     array = array_shots(int(sim["cols"]), int(sim["rows"]))  # row-major, as the workflow's
     hold = array[len(array) // 2]
     central = [v for v, (_, M) in rig.view_poses().items() if np.allclose(M, np.eye(4))][0]
