@@ -151,10 +151,7 @@ def write_npy(path: str | Path, array: np.ndarray) -> None:
 
 
 #: compression level of every PNG the workflow writes (:func:`write_image`): libdeflate's
-#: level 1 with PNG's "up" filter (:mod:`plenocal.io.png`). A 1576 x 1190 RGB view encodes
-#: in 29 ms to 2.37 MB (ISA-L's level 1, used before: 19 ms for 2.46 MB, the same run), where
-#: OpenCV's encoder at zlib's Huffman-only level 1 took 95 ms
-#: for 2.72 MB (issue 35).
+#: level 1 with PNG's "up" filter (:mod:`plenocal.io.png` gives its measurements; issue 35).
 PNG_LEVEL = 1
 
 
@@ -172,12 +169,10 @@ def write_image(path: str | Path, image: np.ndarray, level: int = PNG_LEVEL) -> 
     The encoder is our own container around libdeflate (the ``deflate`` package): no time
     stamps or other ancillary chunks, and a deflate stream made in one call from the
     whole image, so the same pixels give the same bytes. Stored data (level 0) is written
-    unfiltered; compressed data with PNG's "up" filter on every row (the difference to the
-    row above; issue 15 measured it against libpng's per-row choice: 2x faster to encode
-    and decode for a few % more bytes). libdeflate's level 1 deflates 2.3x faster than
-    zlib's Huffman-only level 1, which OpenCV's encoder was set to before (a 1576 x 1190
-    view in 25.5 against 59 ms, 12 % fewer bytes), and lets go of the GIL
-    (:func:`write_images` on threads).
+    unfiltered; compressed data with PNG's "up" filter on every row (issue 15 measured it
+    against libpng's per-row choice: 2x faster to encode and decode for a few % more
+    bytes). The speed against OpenCV's encoder and ISA-L: :mod:`plenocal.io.png`.
+    libdeflate lets go of the GIL (:func:`write_images` on threads).
     """
     from plenocal.io.png import encode_png  # noqa: PLC0415
 
