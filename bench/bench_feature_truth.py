@@ -43,29 +43,20 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
-import time
 from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_focal_information import _rebuilt  # noqa: E402
+from bench_focal_information import OUT, _rebuilt, kept_capture, refine_runs  # noqa: E402
 from benchmd import Lines, update_sections  # noqa: E402
 
 from plenocal.artifacts.cameras import read_cameras  # noqa: E402
-from plenocal.artifacts.rig import RigB, read_rig  # noqa: E402
-from plenocal.calib import refine as rf  # noqa: E402
 from plenocal.calib.reg_a.colmap import opencv_sift  # noqa: E402
-from plenocal.calib.reg_b.rig import rig_at_focal  # noqa: E402
-from plenocal.config import validate_config  # noqa: E402
-from plenocal.names import array_shots  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-OUT = ROOT / "bench" / "out" / "accuracy"
 RENDERS = ROOT / "bench" / "out" / "feature_truth"
 SECTION = "Whose errors lean the focal length: our views' keypoints or SIFT's (issue 32)"
 RUNS = ("ours", "true renders", "true + low order", "true + low order + radial",
@@ -183,60 +174,29 @@ def pair_observations(tracks, point_ids: list[int], database_kp: dict, renders: 
 def run(capture: str, within: float, renders_root: Path) -> dict:
     import pycolmap  # noqa: PLC0415
 
-    folder = OUT / capture
-    res = folder / "results" / "synthetic"
+    cap = kept_capture(capture)
     renders = renders_root / capture
-    cfg = validate_config(yaml.safe_load((folder / "config.yaml").read_text()))
-    simulate = cfg["datasets"]["synthetic"]["simulate"]
-    render_truth(folder, renders, int(simulate["render"]["ideal_supersample"]))
-    settings = rf.RefineSettings.from_config(cfg["refine"], seed=int(cfg["sfm"]["seed"]),
-                                             num_threads=int(cfg["sfm"]["num_threads"]))
-    eq6 = read_cameras(res / "calibration" / "eq6" / "cameras.json")
-    truth = read_cameras(res / "ground_truth" / "cameras.json")
-    rig = read_rig(res / "reg_b" / "rig.json")
-    sim = simulate["array"]
-    array = array_shots(int(sim["cols"]), int(sim["rows"]))  # row-major, as the workflow's
-    hold = array[len(array) // 2]
-    central = [v for v, (_, M) in rig.view_poses().items() if np.allclose(M, np.eye(4))][0]
-    f_true = float(truth[f"{hold}/{central}"].K[0, 0])
-    with pycolmap.Database.open(str(res / "matches" / "database.db")) as db:
+    render_truth(OUT / capture, renders,
+                 int(cap.cfg["datasets"]["synthetic"]["simulate"]["render"]["ideal_supersample"]))
+    with pycolmap.Database.open(str(cap.res / "matches" / "database.db")) as db:
         database_kp = {im.name: db.read_keypoints(im.image_id) for im in db.read_all_images()}
-    original = rf.rig_reconstruction
     state: dict = {}
 
-    def patched(tracks, views, shot_poses, width, height, point_ids, work_dir=None):
-        rec, model = original(tracks, views, shot_poses, width, height, point_ids, work_dir)
+    def rebuild(how: str, rec, tracks, point_ids):
         if "pairs" not in state:
-            state["pairs"] = pair_observations(tracks, point_ids, database_kp, renders, truth,
-                                               within)
+            state["pairs"] = pair_observations(tracks, point_ids, database_kp, renders,
+                                               cap.truth, within)
         pairs = state["pairs"]
-        xy = pairs["places"].get(state["run"], {})  # "ours": the keypoints as they are
-        return _rebuilt(rec, xy, pairs["keep"], point_ids, tracks), model
+        xy = pairs["places"].get(how, {})  # "ours": the keypoints as they are
+        return _rebuilt(rec, xy, pairs["keep"], point_ids, tracks)
 
-    out: dict = {"runs": {}, "median": {}}
-    rf.rig_reconstruction = patched
-    try:
-        for how in RUNS:
-            state["run"] = how
-            if "loss_scale" in out:  # every run at the first run's robust scale
-                settings = dataclasses.replace(settings, loss_scale_px=out["loss_scale"])
-            t0 = time.perf_counter()
-            r = rf.refine_calibration(eq6, rig, res / "matches" / "database.db", settings,
-                                      hold_shot=hold,
-                                      rig_at_focal=lambda f: RigB(rig_at_focal(rig.doc, f)))
-            out.setdefault("loss_scale", float(r.report["loss"]["scale_px"]))
-            out["runs"][how] = 100.0 * (r.report["focal_px"]["refined"] / f_true - 1.0)
-            out["median"][how] = float(r.report["observations"]["after"]["median_px"])
-            print(f"{capture} {how:30s} focal {out['runs'][how]:+.3f} % "
-                  f"({time.perf_counter() - t0:.0f} s)", flush=True)
-    finally:
-        rf.rig_reconstruction = original
+    out = refine_runs(cap, list(RUNS), rebuild)
     pairs = state["pairs"]
     out["paired"] = (len(pairs["keep"]), pairs["n"])
     depth = np.array([np.mean(pairs["depth"][v], axis=0) for v in sorted(pairs["depth"])])
     out["depth_range"] = (float(np.ptp(depth[:, 0])), float(np.ptp(depth[:, 1])))
     out["terms"] = {k: float(np.median(v)) for k, v in pairs["terms"].items()}
-    out["workflow"] = _workflow_focal(res)
+    out["workflow"] = _workflow_focal(cap.res)
     return out
 
 

@@ -218,31 +218,85 @@ def residual_structure(tracks, res: dict, keep: set) -> dict[str, np.ndarray]:
     return out
 
 
-def run(capture: str, within: float, runs: list[str]) -> dict:
-    res_dir = OUT / capture / "results" / "synthetic"
+@dataclasses.dataclass
+class KeptCapture:
+    """A kept capture of ``bench_accuracy.py`` as its refinement and its truth see it."""
+
+    name: str
+    res: Path  # its results/synthetic
+    cfg: dict  # its config, validated
+    settings: rf.RefineSettings
+    eq6: dict
+    truth: dict
+    rig: RigB
+    hold: str  # the shot the workflow holds: the array's middle one (full_set_cam)
+    f_true: float  # px
+
+
+def kept_capture(capture: str) -> KeptCapture:
+    """``bench/out/accuracy/<capture>`` read as the workflow's rule ``refine`` reads it."""
+    res = OUT / capture / "results" / "synthetic"
     cfg = validate_config(yaml.safe_load((OUT / capture / "config.yaml").read_text()))
     settings = rf.RefineSettings.from_config(cfg["refine"], seed=int(cfg["sfm"]["seed"]),
                                              num_threads=int(cfg["sfm"]["num_threads"]))
-    eq6 = read_cameras(res_dir / "calibration" / "eq6" / "cameras.json")
-    truth = read_cameras(res_dir / "ground_truth" / "cameras.json")
-    rig = read_rig(res_dir / "reg_b" / "rig.json")
+    truth = read_cameras(res / "ground_truth" / "cameras.json")
+    rig = read_rig(res / "reg_b" / "rig.json")
     sim = cfg["datasets"]["synthetic"]["simulate"]["array"]
     array = array_shots(int(sim["cols"]), int(sim["rows"]))  # row-major, as the workflow's
-    hold = array[len(array) // 2]  # full_set_cam: the array's middle shot
+    hold = array[len(array) // 2]
     central = [v for v, (_, M) in rig.view_poses().items() if np.allclose(M, np.eye(4))][0]
-    f_true = float(truth[f"{hold}/{central}"].K[0, 0])
+    return KeptCapture(capture, res, cfg, settings,
+                       read_cameras(res / "calibration" / "eq6" / "cameras.json"), truth, rig,
+                       hold, float(truth[f"{hold}/{central}"].K[0, 0]))
+
+
+def refine_runs(cap: KeptCapture, runs: list[str], rebuild) -> dict:
+    """The workflow's refinement of ``cap`` once per run of ``runs``, each on the rig
+    reconstruction ``rebuild(run, rec, tracks, point_ids)`` returns, every run at the first
+    run's robust scale (``auto`` would follow each run's own median error, and weigh the
+    runs' residuals differently). Returns ``runs`` (run -> signed focal error %),
+    ``median`` (run -> median reprojection error after, px) and ``loss_scale``."""
     original = rf.rig_reconstruction
-    state: dict = {}
+    state = {"run": runs[0]}
 
     def patched(tracks, views, shot_poses, width, height, point_ids, work_dir=None):
         rec, model = original(tracks, views, shot_poses, width, height, point_ids, work_dir)
+        return rebuild(state["run"], rec, tracks, point_ids), model
+
+    out: dict = {"runs": {}, "median": {}}
+    settings = cap.settings
+    rf.rig_reconstruction = patched
+    try:
+        for how in runs:
+            state["run"] = how
+            if "loss_scale" in out:
+                settings = dataclasses.replace(settings, loss_scale_px=out["loss_scale"])
+            t0 = time.perf_counter()
+            r = rf.refine_calibration(cap.eq6, cap.rig, cap.res / "matches" / "database.db",
+                                      settings, hold_shot=cap.hold,
+                                      rig_at_focal=lambda f: RigB(rig_at_focal(cap.rig.doc, f)))
+            out.setdefault("loss_scale", float(r.report["loss"]["scale_px"]))
+            out["runs"][how] = 100.0 * (r.report["focal_px"]["refined"] / cap.f_true - 1.0)
+            out["median"][how] = float(r.report["observations"]["after"]["median_px"])
+            print(f"{cap.name} {how:30s} focal {out['runs'][how]:+.3f} % "
+                  f"({time.perf_counter() - t0:.0f} s)", flush=True)
+    finally:
+        rf.rig_reconstruction = original
+    return out
+
+
+def run(capture: str, within: float, runs: list[str]) -> dict:
+    cap = kept_capture(capture)
+    state: dict = {}
+
+    def rebuild(how: str, rec, tracks, point_ids):
         if "res" not in state:
-            state["res"] = truth_residuals(tracks, point_ids, truth)
+            state["res"] = truth_residuals(tracks, point_ids, cap.truth)
             state["keep"] = {k for k, (_, r) in state["res"].items()
                              if np.linalg.norm(r) <= within}
             state["structure"] = residual_structure(tracks, state["res"], state["keep"])
             state["shot_of"] = shots_of_images(tracks)
-        res, keep, how = state["res"], state["keep"], state["run"]
+        res, keep = state["res"], state["keep"]
         keys = sorted(keep)
         if how == "measured":
             xy = {}
@@ -254,28 +308,9 @@ def run(capture: str, within: float, runs: list[str]) -> dict:
                 hand = state["shot_of"][k[0]].startswith("hand")
                 return (how == "hand only" and hand) or (how == "array only" and not hand)
             xy = {k: res[k][0] + (res[k][1] if take(k) else 0.0) for k in keys}
-        return _rebuilt(rec, xy, keep, point_ids, tracks), model
+        return _rebuilt(rec, xy, keep, point_ids, tracks)
 
-    out = {"runs": {}}
-    rf.rig_reconstruction = patched
-    try:
-        for how in runs:
-            state["run"] = how
-            if "loss_scale" in out:
-                # every run at the measured run's robust scale (``auto`` would follow each
-                # run's own median error, and weigh the runs' residuals differently)
-                settings = dataclasses.replace(settings, loss_scale_px=out["loss_scale"])
-            t0 = time.perf_counter()
-            r = rf.refine_calibration(eq6, rig, res_dir / "matches" / "database.db", settings,
-                                      hold_shot=hold,
-                                      rig_at_focal=lambda f: RigB(rig_at_focal(rig.doc, f)))
-            err = 100.0 * (r.report["focal_px"]["refined"] / f_true - 1.0)
-            out.setdefault("loss_scale", float(r.report["loss"]["scale_px"]))
-            out["runs"][how] = err
-            print(f"{capture} {how:11s} focal {err:+.3f} %  ({time.perf_counter() - t0:.0f} s)",
-                  flush=True)
-    finally:
-        rf.rig_reconstruction = original
+    out = {"runs": refine_runs(cap, runs, rebuild)["runs"]}
     kept = [np.linalg.norm(state["res"][k][1]) for k in state["keep"]]
     out["kept"] = (len(state["keep"]), len(state["res"]), float(np.median(kept)))
     out["structure"] = state["structure"]
