@@ -328,7 +328,7 @@ def _match_per_image(database: Path, pairs: Iterable[tuple[str, str]], *, seed: 
     6-point solver and a Sampson refinement of pose and focal length), about 3.5x the
     time of the fundamental-matrix path that a pair of two cameras takes (29.8 s against
     8.5 s for the default data's 2991 pairs, the same configurations and inlier counts
-    within 0.7 %; BENCHMARKS.md, "Where the calibration's time goes"). The matching
+    within 0.7 %; BENCHMARKS.md, "The view matches verified per image"). The matching
     itself reads descriptors only; the image ids, and so the pair ids, are the
     database's."""
     import contextlib  # noqa: PLC0415
