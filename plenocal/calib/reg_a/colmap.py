@@ -300,7 +300,22 @@ def match(database: str | Path, pairs: Iterable[tuple[str, str]] | None = None, 
                                   verification_options=_verification_options(seed),
                                   device=device)
     else:
-        pair_file = Path(work_dir or database.parent) / f".{database.stem}.pairs.txt"
+        _match_pair_list(database, pairs, seed=seed, num_threads=num_threads,
+                         work_dir=work_dir, use_gpu=use_gpu)
+    with pycolmap.Database.open(str(database)) as db:
+        n = db.num_verified_image_pairs()
+    log.info("matching: %d verified image pairs", n)
+    return n
+
+
+def _match_pair_list(database: Path, pairs: Iterable[tuple[str, str]], *, seed: int,
+                     num_threads: int, work_dir: str | Path | None, use_gpu: bool) -> None:
+    """COLMAP's matching and verification of the image-name ``pairs`` in ``database``,
+    through a pair list written beside it (under ``work_dir``) and removed after."""
+    import pycolmap  # noqa: PLC0415
+
+    pair_file = Path(work_dir or database.parent) / f".{database.stem}.pairs.txt"
+    try:
         pair_file.write_text("".join(f"{a} {b}\n" for a, b in pairs))
         popts = pycolmap.ImportedPairingOptions()
         popts.match_list_path = str(pair_file)
@@ -308,12 +323,9 @@ def match(database: str | Path, pairs: Iterable[tuple[str, str]] | None = None, 
                                    matching_options=_matching_options(num_threads, use_gpu),
                                    pairing_options=popts,
                                    verification_options=_verification_options(seed),
-                                   device=device)
-        pair_file.unlink()
-    with pycolmap.Database.open(str(database)) as db:
-        n = db.num_verified_image_pairs()
-    log.info("matching: %d verified image pairs", n)
-    return n
+                                   device=_device(use_gpu))
+    finally:
+        pair_file.unlink(missing_ok=True)
 
 
 def _match_per_image(database: Path, pairs: Iterable[tuple[str, str]], *, seed: int,
@@ -334,11 +346,7 @@ def _match_per_image(database: Path, pairs: Iterable[tuple[str, str]], *, seed: 
     import contextlib  # noqa: PLC0415
     import sqlite3  # noqa: PLC0415
 
-    import pycolmap  # noqa: PLC0415
-
-    folder = Path(work_dir or database.parent)
-    scratch = folder / f".{database.stem}.per_image.db"
-    pair_file = folder / f".{database.stem}.pairs.txt"
+    scratch = Path(work_dir or database.parent) / f".{database.stem}.per_image.db"
     scratch.unlink(missing_ok=True)
     try:
         with contextlib.closing(sqlite3.connect(database)) as con:
@@ -346,14 +354,8 @@ def _match_per_image(database: Path, pairs: Iterable[tuple[str, str]], *, seed: 
         with contextlib.closing(sqlite3.connect(scratch)) as con:
             _one_camera_per_image(con)
             con.commit()
-        pair_file.write_text("".join(f"{a} {b}\n" for a, b in pairs))
-        popts = pycolmap.ImportedPairingOptions()
-        popts.match_list_path = str(pair_file)
-        pycolmap.match_image_pairs(str(scratch),
-                                   matching_options=_matching_options(num_threads, use_gpu),
-                                   pairing_options=popts,
-                                   verification_options=_verification_options(seed),
-                                   device=_device(use_gpu))
+        _match_pair_list(scratch, pairs, seed=seed, num_threads=num_threads,
+                         work_dir=work_dir, use_gpu=use_gpu)
         with contextlib.closing(sqlite3.connect(database)) as con:
             con.execute("ATTACH DATABASE ? AS scratch", (str(scratch),))
             for table in ("matches", "two_view_geometries"):
@@ -363,7 +365,7 @@ def _match_per_image(database: Path, pairs: Iterable[tuple[str, str]], *, seed: 
             con.commit()
             con.execute("DETACH DATABASE scratch")
     finally:
-        for path in (scratch, pair_file, Path(f"{scratch}-wal"), Path(f"{scratch}-shm")):
+        for path in (scratch, Path(f"{scratch}-wal"), Path(f"{scratch}-shm")):
             path.unlink(missing_ok=True)
 
 
