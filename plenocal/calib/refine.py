@@ -105,6 +105,15 @@ LOSSES = ("trivial", "huber", "cauchy", "soft_l1")
 #: loss_scale_px: auto - the robust loss's scale as this share of the observations' median
 #: reprojection error before the adjustment (BENCHMARKS.md, "The focal length from every view")
 AUTO_LOSS_SCALE = 0.8
+#: the adjustments' first trust region (Ceres' initial_trust_region_radius; its default and
+#: COLMAP's is 1e4): so large that the first steps are Gauss-Newton's. The passes start
+#: from Eq. 6, near their minimum, where Levenberg-Marquardt's damped first steps crept along
+#: the focal length's shallow valley: at 1e4 the focal pass left it 0.41 / 0.29 / 0.22 /
+#: 0.20 % off the truth after 4 / 6 / 8 / 10 iterations on one capture, and 15 were needed;
+#: at 1e9, 0.20 % after 6 (BENCHMARKS.md, "The refinement's first steps", which measures the
+#: default of ``max_iterations`` chosen with it). A step that raises the cost is rejected and
+#: the region shrinks, as at any radius.
+INITIAL_TRUST_REGION = 1e9
 _REFINE = stage_defaults("refine")  # the defaults: config.schema.yaml's refine block
 _SFM = stage_defaults("sfm")  # the seed and threads of COLMAP's steps
 
@@ -322,6 +331,7 @@ def bundle_adjust(rec, model: RigModel, settings: RefineSettings, *, refine_foca
     o.ceres.loss_function_scale = float(loss_scale_px)
     s = o.ceres.solver_options
     s.max_num_iterations = int(settings.max_iterations)
+    s.initial_trust_region_radius = INITIAL_TRUST_REGION
     s.num_threads = int(settings.num_threads)
     t0 = time.perf_counter()
     summary = pycolmap.create_default_bundle_adjuster(o, cfg, rec).solve().todict()
