@@ -9,10 +9,13 @@ from plenocal.calib.reg_a import viewdb
 from plenocal.calib.reg_a.colmap import resolve_sfm_device
 from plenocal.convert.viewset import view_set_files
 from plenocal.io.files import make_temp_dir
+from plenocal.malloc import keep_freed_memory
 from plenocal.names import split_key
 from plenocal.rulelog import log_to_file
 
 log_to_file(snakemake.log[0])  # noqa: F821
+# SIFT's scale space per view, freed and allocated again: keep the heap (plenocal.malloc)
+keep_freed_memory()
 sm = snakemake  # noqa: F821
 cfg = sm.params.sfm
 use_gpu, extractor = resolve_sfm_device(cfg)  # sfm.device and sfm.sift
