@@ -4,7 +4,7 @@ glibc's ``malloc`` serves a large request (over its mmap threshold, which it rai
 its own up to 32 MB as such blocks are freed) by mapping fresh pages, and gives the top of
 its heap back to the system whenever more than its trim threshold (twice the mmap
 threshold) lies free there. A job that runs OpenCV's SIFT on hundreds of views, each with
-its own scale space (a 666 x 502 view upsampled twice: tens of MB), then faults in fresh,
+its own scale space (a 666 x 502 view upsampled 2x: tens of MB), then faults in fresh,
 zeroed pages for every view: on the default data rule ``view_features`` spent 1.0-1.1 of its
 3.3 s a shot (25 views) in the kernel. With the heap kept (:func:`keep_freed_memory`) it
 is 0.1 s, and the jobs take 0.7 of their time (BENCHMARKS.md, "The allocator in the SIFT
