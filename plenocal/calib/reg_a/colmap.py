@@ -381,16 +381,16 @@ def _one_camera_per_image(con) -> None:
     con.execute("DELETE FROM rig_sensors")
     con.execute("DELETE FROM rigs")
     con.execute("DELETE FROM cameras")
-    for image_id, camera_id in rows:
-        con.execute("INSERT INTO cameras (camera_id, model, width, height, params, "
+    con.executemany("INSERT INTO cameras (camera_id, model, width, height, params, "
                     "prior_focal_length) VALUES (?, ?, ?, ?, ?, ?)",
-                    (image_id, *cams[camera_id]))
-        con.execute("UPDATE images SET camera_id = ? WHERE image_id = ?", (image_id, image_id))
-        con.execute("INSERT INTO rigs (rig_id, ref_sensor_id, ref_sensor_type) "
-                    "VALUES (?, ?, 0)", (image_id, image_id))
-        con.execute("INSERT INTO frames (frame_id, rig_id) VALUES (?, ?)", (image_id, image_id))
-        con.execute("INSERT INTO frame_data (frame_id, data_id, sensor_id, sensor_type) "
-                    "VALUES (?, ?, ?, 0)", (image_id, image_id, image_id))
+                    [(image_id, *cams[camera_id]) for image_id, camera_id in rows])
+    ids = [(image_id,) * 2 for image_id, _ in rows]
+    con.executemany("UPDATE images SET camera_id = ? WHERE image_id = ?", ids)
+    con.executemany("INSERT INTO rigs (rig_id, ref_sensor_id, ref_sensor_type) "
+                    "VALUES (?, ?, 0)", ids)
+    con.executemany("INSERT INTO frames (frame_id, rig_id) VALUES (?, ?)", ids)
+    con.executemany("INSERT INTO frame_data (frame_id, data_id, sensor_id, sensor_type) "
+                    "VALUES (?, ?, ?, 0)", [(i, i, i) for i, _ in ids])
 
 
 def pinhole_from_colmap(image, camera) -> PinholeCamera:
