@@ -14,7 +14,6 @@ jobs"). The numbers computed do not change: only where the buffers lie.
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import logging
 
 log = logging.getLogger(__name__)
@@ -35,11 +34,9 @@ def keep_freed_memory(mmap_threshold: int = MMAP_THRESHOLD_BYTES,
     module docstring), for the rest of the process's life. Costs at most
     ``trim_threshold`` of resident memory beyond what the process holds. Returns whether
     the settings were taken: False where the C library is not glibc (nothing changes)."""
-    name = ctypes.util.find_library("c")
-    try:
-        libc = ctypes.CDLL(name)
-        mallopt = libc.mallopt
-    except (OSError, AttributeError, TypeError):
+    try:  # the process's own symbols: the C library it runs on
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
         return False
     mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
     mallopt.restype = ctypes.c_int
