@@ -628,6 +628,9 @@ def refine_inputs(wildcards):
     }
     if refine_enabled():
         out["database"] = res(d, "matches", "database.db")
+        if stage_config("refine")["align"]["enabled"]:
+            # the views themselves: the observations are aligned by their patches
+            out["view_sets"] = view_sets(d, cams(d))
     return out
 
 

@@ -23,7 +23,8 @@ rule refine:
     priority: PRIORITY["calibration"]
     conda:
         "../envs/plenocal.yaml"
-    threads: lambda wc: stage_config("sfm")["num_threads"]
+    # COLMAP's steps on sfm.num_threads; the observations' alignment (refine.align) on two
+    threads: lambda wc: max(2, stage_config("sfm")["num_threads"])
     resources:
         mem_mb=3000,
         runtime=30,

@@ -10,6 +10,7 @@ from plenocal.artifacts.cameras import read_cameras, write_cameras
 from plenocal.artifacts.rig import RigB, read_rig
 from plenocal.calib.refine import RefineSettings, refine_calibration
 from plenocal.calib.reg_b.rig import rig_at_focal
+from plenocal.convert.viewset import view_set_files
 from plenocal.export.colmap_model import write_colmap
 from plenocal.export.mpeg import write_mpeg
 from plenocal.io.files import make_temp_dir, write_json
@@ -21,8 +22,10 @@ sm = snakemake
 
 eq6 = read_cameras(sm.input.eq6)
 rig = read_rig(sm.input.rig)
+# COLMAP's steps on sfm.num_threads (Ceres on two threads gives other bytes: BENCHMARKS.md);
+# the observations' alignment on all of the job's threads (the same bytes on any number)
 settings = RefineSettings.from_config(sm.params.refine, seed=int(sm.params.sfm["seed"]),
-                                      num_threads=int(sm.threads))
+                                      num_threads=int(sm.params.sfm["num_threads"]))
 if settings.enabled:
     # COLMAP's working files beside the output, removed at the end (and a killed job's by
     # the next run: make_temp_dir)
@@ -30,7 +33,9 @@ if settings.enabled:
     try:
         result = refine_calibration(
             eq6, rig, sm.input.database, settings, hold_shot=sm.params.hold_shot,
-            rig_at_focal=lambda f: RigB(rig_at_focal(rig.doc, f)), work_dir=work)
+            rig_at_focal=lambda f: RigB(rig_at_focal(rig.doc, f)), work_dir=work,
+            images=view_set_files(sm.input.view_sets) if "view_sets" in sm.input.keys()
+            else None, align_threads=int(sm.threads))
     finally:
         shutil.rmtree(work, ignore_errors=True)
     cams, info = result.cameras, {"enabled": True, **result.report}

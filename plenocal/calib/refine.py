@@ -83,6 +83,7 @@ from plenocal.artifacts.rig import RigB
 from plenocal.calib.groups import Groups
 from plenocal.calib.reg_a import colmap as cm
 from plenocal.calib.reg_a import viewdb
+from plenocal.calib.track_alignment import AlignSettings
 from plenocal.camera import PinholeCamera, invert_pose, k_to_colmap, pose, rotation_angle_deg
 from plenocal.config import stage_defaults
 from plenocal.names import split_key
@@ -135,6 +136,7 @@ class RefineSettings:
     max_iterations: int = _REFINE["max_iterations"]
     max_shift_pct: float = _REFINE["max_shift_pct"]
     min_gain_pct: float = _REFINE["min_gain_pct"]
+    align: AlignSettings = AlignSettings()
     seed: int = _SFM["seed"]
     num_threads: int = _SFM["num_threads"]
 
@@ -164,8 +166,10 @@ class RefineSettings:
     def from_config(cls, cfg: Mapping, seed: int = _SFM["seed"],
                     num_threads: int = _SFM["num_threads"]) -> RefineSettings:
         keys = {f for f in cls.__dataclass_fields__ if f not in ("seed", "num_threads")}
-        return cls(**{k: cfg[k] for k in keys if k in cfg}, seed=seed,
-                   num_threads=num_threads)
+        kw = {k: cfg[k] for k in keys if k in cfg}
+        if isinstance(kw.get("align"), Mapping):
+            kw["align"] = AlignSettings(**kw["align"])
+        return cls(**kw, seed=seed, num_threads=num_threads)
 
 
 # --- the COLMAP boundary -------------------------------------------------------------
@@ -204,7 +208,8 @@ class RigModel:
 
 def rig_reconstruction(tracks, views: Mapping[str, tuple[np.ndarray, np.ndarray]],
                        shot_poses: Mapping[str, np.ndarray], width: int, height: int,
-                       point_ids: list[int], work_dir: str | Path | None = None):
+                       point_ids: list[int], work_dir: str | Path | None = None,
+                       keypoints: Mapping[str, np.ndarray] | None = None):
     """A ``pycolmap.Reconstruction`` of one rig (``views``: view -> (K, cam_to_central), the
     central view the one whose pose is the identity) with one frame per shot
     (``shot_poses``: shot -> its central view's cam_to_world), every image of ``tracks``
@@ -212,8 +217,9 @@ def rig_reconstruction(tracks, views: Mapping[str, tuple[np.ndarray, np.ndarray]
     in its frame, and the points ``point_ids`` of ``tracks`` with their tracks. Each
     image's keypoints are read through ``tracks``'s binary files (written under
     ``work_dir``): the same numbers as through the bindings, whose per-point objects took
-    1.9 s for 700 views of 1,300 keypoints. Returns the reconstruction and its
-    :class:`RigModel`."""
+    1.9 s for 700 views of 1,300 keypoints; or given (``keypoints``: image name -> (n, 2),
+    COLMAP's convention, the aligned ones of :func:`aligned_keypoints`). Returns the
+    reconstruction and its :class:`RigModel`."""
     import pycolmap  # noqa: PLC0415
 
     from plenocal.verify.reprojection import read_keypoints  # noqa: PLC0415
@@ -253,7 +259,8 @@ def rig_reconstruction(tracks, views: Mapping[str, tuple[np.ndarray, np.ndarray]
                 frame.add_data_id(pycolmap.data_t(sensor_id=_camera_sensor(cam_of[view]),
                                                   id=image_id))
         rec.add_frame(frame)
-    keypoints = read_keypoints(tracks, work_dir)
+    if keypoints is None:
+        keypoints = read_keypoints(tracks, work_dir)
     for image_id, (shot, view, im) in images.items():
         new = pycolmap.Image(name=im.name, keypoints=keypoints[im.name],
                              camera_id=cam_of[view], image_id=image_id)
@@ -273,6 +280,56 @@ def select_points(tracks, max_points: int) -> list[int]:
     ids = sorted(pid for pid in tracks.point3D_ids() if tracks.point3D(pid).track.length() >= 3)
     stride = max(1, math.ceil(len(ids) / max_points))
     return ids[::stride]
+
+
+def aligned_keypoints(tracks, point_ids: list[int], images: Mapping[str, str | Path],
+                      settings: AlignSettings, num_threads: int = 1,
+                      work_dir: str | Path | None = None
+                      ) -> tuple[dict[str, np.ndarray], dict]:
+    """Every image's keypoints of ``tracks`` (image name -> (n, 2), COLMAP's convention),
+    those observing the points ``point_ids`` aligned to their track's reference observation
+    by their patches (:mod:`plenocal.calib.track_alignment`), with its statistics.
+    ``images``: view key (``<shot>/<view>``) -> the view's image file."""
+    import cv2  # noqa: PLC0415
+
+    from plenocal.calib import track_alignment as ta  # noqa: PLC0415
+    from plenocal.verify.reprojection import read_keypoints  # noqa: PLC0415
+
+    keypoints = read_keypoints(tracks, work_dir)
+    name_of = {i: tracks.image(i).name for i in tracks.images}
+    by_id = {i: keypoints[n] for i, n in name_of.items()}
+    cameras = {}
+    for i in name_of:
+        im = tracks.image(i)
+        T = im.cam_from_world().matrix()
+        cameras[i] = (tracks.camera(im.camera_id).calibration_matrix(), T[:, :3], T[:, 3])
+    points = {}
+    for pid in point_ids:
+        p = tracks.point3D(pid)
+        points[pid] = (np.asarray(p.xyz, float),
+                       [(e.image_id, e.point2D_idx) for e in p.track.elements])
+    missing = sorted({name_of[i][:-4] for i in name_of} - set(images))
+    if missing:
+        raise ValueError(f"refine.align: no image file for {len(missing)} views "
+                         f"({', '.join(missing[:5])}): rerun the conversion")
+
+    def load(i: int) -> np.ndarray:
+        path = images[name_of[i][:-4]]
+        grey = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE | cv2.IMREAD_ANYDEPTH)
+        if grey is None:
+            raise ValueError(f"{path}: not a readable image (refine.align reads the views)")
+        return grey
+
+    obs, rows = ta.track_observations(points, cameras, by_id)
+    uv, aligned, stats = ta.align_observations(obs, load, settings, num_threads)
+    out = {n: kp.copy() for n, kp in keypoints.items()}
+    for (i, j), xy in zip(rows, uv, strict=True):
+        out[name_of[i]][j] = xy
+    log.info("observations aligned by their patches: %d of %d (median shift %s px, %.1f s)",
+             stats["aligned"], stats["observations"],
+             "-" if stats["shift_median_px"] is None else f"{stats['shift_median_px']:.3f}",
+             stats["seconds"])
+    return out, stats
 
 
 def cameras_of(rec) -> dict[str, PinholeCamera]:
@@ -504,13 +561,18 @@ def _stats(e: np.ndarray) -> dict:
 def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: str | Path,
                        settings: RefineSettings, *, hold_shot: str,
                        rig_at_focal: Callable[[float], RigB] | None = None,
-                       work_dir: str | Path | None = None) -> Refinement:
+                       work_dir: str | Path | None = None,
+                       images: Mapping[str, str | Path] | None = None,
+                       align_threads: int | None = None) -> Refinement:
     """Refine the Eq. 6 calibration ``eq6`` (every view of every shot, metres) under the rig
     ``rig`` on the verified matches of the view ``database`` (module docstring).
     ``hold_shot``: the shot whose pose is held (the gauge). ``rig_at_focal``: registration
     B's rig rebuilt for another focal length (its baselines follow the focal length:
     :func:`plenocal.calib.reg_b.exact_model.exact_model`); without it the rig keeps B's
-    geometry when the focal length changes."""
+    geometry when the focal length changes. ``images``: view key -> its image file, for
+    ``settings.align`` (without them the observations stay where SIFT placed them), aligned
+    on ``align_threads`` threads (``settings.num_threads`` if None; the same result on any
+    number)."""
     from plenocal.verify import reprojection as rp  # noqa: PLC0415
 
     t0 = time.perf_counter()
@@ -546,8 +608,16 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
         raise ValueError(f"refinement: only {len(ids)} points seen in three or more views; "
                          "the views have too few matches (see matches/matches.json), or set "
                          "refine.enabled: false")
+    keypoints, align = None, {"enabled": False}
+    if settings.align.enabled and images is not None:
+        keypoints, stats = aligned_keypoints(
+            tracks, ids, images, settings.align,
+            settings.num_threads if align_threads is None else align_threads, work_dir)
+        align = {"enabled": True, **stats}
+    elif settings.align.enabled:
+        align["why"] = "no view images given: the observations are SIFT's keypoints"
     rec, model = rig_reconstruction(tracks, views, shot_poses, rig.width, rig.height, ids,
-                                    work_dir)
+                                    work_dir, keypoints)
     log.info("rig reconstruction: %d shots x %d views, %d of %d points (%.1f s triangulation)",
              len(shots), len(views), len(ids), tracks.num_points3D(), t_tri)
     before = observation_errors(rec, work_dir)
@@ -602,6 +672,7 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
         "points": {"triangulated": int(tracks.num_points3D()), "used": len(ids)},
         "observations": {"before": _stats(before), "after": _stats(after)},
         "loss": {"type": settings.loss, "scale_px": loss_scale},
+        "alignment": align,
         "focal_px": {"registration_a": focal_a, "refined": focal,
                      "change_pct": 100.0 * (focal / focal_a - 1.0),
                      "per_sensor": per_sensor},

@@ -1,0 +1,315 @@
+"""Every observation of a track aligned to one reference observation by its patch (beyond
+the paper; the joint refinement's observations, :mod:`plenocal.calib.refine`).
+
+Why: SIFT places a keypoint at an extremum of its scale space, and on views as soft as
+the converter's (about a Gaussian of 1 px over an ideal render) where that extremum falls
+moves with the local appearance, which differs between the hand-held shots' turned views
+and the array's. On the simulator this leaned the refined focal length by +0.1 to +0.2 %
+(BENCHMARKS.md, "SIFT on soft views"). Aligned by their pixels to one observation of the
+same point, every observation sits where the same image content is, and the adjustment
+sees the geometry rather than SIFT's placement (BENCHMARKS.md, "The observations aligned
+by their patches").
+
+For each track (3-D point ``X`` of the Eq. 6 triangulation):
+
+* the **reference** observation is the one whose camera centre is nearest the mean of the
+  track's camera centres (:func:`reference_index`); its keypoint stays SIFT's (an error
+  there moves the whole track, i.e. the point, not the cameras);
+* each other observation's **affine map** from the reference image to its own is the
+  Jacobian of the homography that the plane through ``X`` facing the reference camera
+  induces (:func:`local_affine`): within a set nearly the identity, across the shots the
+  turn and the change of scale;
+* its **translation** is found by Lucas-Kanade, inverse compositional (the template's
+  gradients fixed), a patch of ``(2 radius + 1)^2`` pixels under a Gaussian weight, each
+  patch's mean and contrast normalised (:func:`align_translations`); kept where it moved
+  at most ``max_shift_px`` from SIFT's keypoint and the aligned patches' normalised
+  correlation is at least ``min_zncc``, SIFT's keypoint otherwise.
+
+Conventions: keypoints in COLMAP's convention (pixel centres at +0.5) in and out; image
+arrays indexed by pixel centres (``keypoint - 0.5``) inside. The result is a function of
+the inputs alone: each observation is computed on its own, whatever the threads.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from plenocal.config import stage_defaults
+
+_ALIGN = stage_defaults("refine")["align"]
+#: cv2.remap's destination must stay under 32767 rows
+_REMAP_ROWS = 16384
+
+
+@dataclass(frozen=True)
+class AlignSettings:
+    """The ``refine.align`` block of the config (config.schema.yaml documents each key)."""
+
+    enabled: bool = _ALIGN["enabled"]
+    radius_px: int = _ALIGN["radius_px"]
+    iterations: int = _ALIGN["iterations"]
+    max_shift_px: float = _ALIGN["max_shift_px"]
+    min_zncc: float = _ALIGN["min_zncc"]
+
+    def __post_init__(self) -> None:
+        if not 1 <= int(self.radius_px) <= 32:
+            raise ValueError(f"config refine.align.radius_px = {self.radius_px}: 1 to 32")
+        if int(self.iterations) < 1:
+            raise ValueError(f"config refine.align.iterations = {self.iterations}: at least 1")
+        if not self.max_shift_px > 0:
+            raise ValueError(f"config refine.align.max_shift_px = {self.max_shift_px}: "
+                             "a positive number of pixels")
+        if not -1.0 <= self.min_zncc <= 1.0:
+            raise ValueError(f"config refine.align.min_zncc = {self.min_zncc}: -1 to 1")
+
+
+@dataclass(frozen=True)
+class Observations:
+    """The observations to align, one row each (n rows): ``image`` (n,) the index of its
+    image, ``keypoint`` (n, 2) COLMAP's convention; ``ref_image`` (n,) and ``ref_keypoint``
+    (n, 2) its track's reference observation; ``affine`` (n, 2, 2) the map of
+    :func:`local_affine`."""
+
+    image: np.ndarray
+    keypoint: np.ndarray
+    ref_image: np.ndarray
+    ref_keypoint: np.ndarray
+    affine: np.ndarray
+
+
+def reference_index(centres: np.ndarray) -> int:
+    """The observation of a track (``centres``: (m, 3) its cameras' centres) whose camera is
+    nearest the mean of them all (the first such, for ties)."""
+    centres = np.asarray(centres, float)
+    return int(np.argmin(np.linalg.norm(centres - centres.mean(axis=0), axis=1)))
+
+
+def _back_project(K_inv: np.ndarray, R: np.ndarray, t: np.ndarray, uv: np.ndarray,
+                  depth: np.ndarray) -> np.ndarray:
+    """World points (n, 3) at camera depth ``depth`` (n,) along the pixels ``uv`` (n, 2) of
+    cameras ``x_cam = R x + t`` (R (n, 3, 3), t (n, 3), ``K_inv`` (n, 3, 3))."""
+    ray = np.einsum("nij,nj->ni", K_inv, np.concatenate([uv, np.ones((len(uv), 1))], 1))
+    p_cam = ray / ray[:, 2:3] * depth[:, None]
+    return np.einsum("nji,nj->ni", R, p_cam - t)
+
+
+def _project(K: np.ndarray, R: np.ndarray, t: np.ndarray, X: np.ndarray) -> np.ndarray:
+    c = np.einsum("nij,nj->ni", K, np.einsum("nij,nj->ni", R, X) + t)
+    return c[:, :2] / c[:, 2:3]
+
+
+def local_affine(K_ref: np.ndarray, R_ref: np.ndarray, t_ref: np.ndarray,
+                 K: np.ndarray, R: np.ndarray, t: np.ndarray, X: np.ndarray,
+                 uv_ref: np.ndarray) -> np.ndarray:
+    """(n, 2, 2): the derivative of the target pixel by the reference pixel at ``uv_ref``
+    (n, 2) for the plane through the point ``X`` (n, 3) that faces the reference camera
+    (fronto-parallel to it), i.e. the Jacobian of the homography ``K (R - t n^T / d)
+    K_ref^-1`` that plane induces. Cameras as ``x_cam = R x + t`` (each (n, 3, 3) / (n, 3)),
+    intrinsics ``K`` (n, 3, 3); any pixel convention, the same for both."""
+    depth = np.einsum("nij,nj->ni", R_ref, X)[:, 2] + t_ref[:, 2]
+    K_inv = np.linalg.inv(K_ref)
+    p0 = _project(K, R, t, _back_project(K_inv, R_ref, t_ref, uv_ref, depth))
+    cols = [_project(K, R, t, _back_project(K_inv, R_ref, t_ref, uv_ref + d, depth)) - p0
+            for d in ((1.0, 0.0), (0.0, 1.0))]
+    return np.stack(cols, axis=2)
+
+
+def _remap(image: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """``image`` sampled bilinearly at ``xy`` (n, k, 2) array coordinates -> (n, k)."""
+    import cv2  # noqa: PLC0415
+
+    out = np.empty(xy.shape[:2], np.float32)
+    for a in range(0, len(xy), _REMAP_ROWS):
+        block = xy[a:a + _REMAP_ROWS].astype(np.float32)
+        out[a:a + _REMAP_ROWS] = cv2.remap(image, np.ascontiguousarray(block[..., 0]),
+                                           np.ascontiguousarray(block[..., 1]),
+                                           cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return out
+
+
+def patch_grid(radius: int) -> tuple[np.ndarray, np.ndarray]:
+    """The patch's offsets (k, 2) and their Gaussian weights (k,) (sigma radius / 1.5)."""
+    r = np.arange(-radius, radius + 1, dtype=np.float64)
+    gx, gy = np.meshgrid(r, r)
+    grid = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    return grid, np.exp(-(grid ** 2).sum(1) / (2.0 * (radius / 1.5) ** 2))
+
+
+def _centred(v: np.ndarray, w: np.ndarray) -> np.ndarray:
+    return v - (v * w).sum(1, keepdims=True) / w.sum()
+
+
+def templates(image: np.ndarray, uv: np.ndarray, grid: np.ndarray, w: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The reference patches at the array coordinates ``uv`` (n, 2) of ``image`` (float32):
+    values, x and y gradients (each (n, k), mean-free under the weights ``w``)."""
+    pts = uv[:, None, :] + grid[None]
+    values = _remap(image, pts)
+    gx = 0.5 * (_remap(image, pts + (1.0, 0.0)) - _remap(image, pts - (1.0, 0.0)))
+    gy = 0.5 * (_remap(image, pts + (0.0, 1.0)) - _remap(image, pts - (0.0, 1.0)))
+    return _centred(values, w), _centred(gx, w), _centred(gy, w)
+
+
+def align_translations(image: np.ndarray, uv: np.ndarray, affine: np.ndarray,
+                       template: tuple[np.ndarray, np.ndarray, np.ndarray],
+                       grid: np.ndarray, w: np.ndarray, iterations: int
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Lucas-Kanade, inverse compositional, for the translation only: the positions (n, 2,
+    array coordinates of ``image``, float32) where the template (:func:`templates`) seen
+    through ``affine`` (n, 2, 2) matches, started at ``uv``; and the aligned patches'
+    weighted normalised correlation (n,). A step is at most 1 px; a patch without contrast
+    stays where it started."""
+    t, tx, ty = template
+    a = (tx * tx * w).sum(1)
+    b = (tx * ty * w).sum(1)
+    c = (ty * ty * w).sum(1)
+    det = a * c - b * b
+    solvable = det > 1e-9 * np.maximum(a + c, 1e-12) ** 2
+    det = np.where(solvable, det, 1.0)
+    t_norm = np.sqrt((t * t * w).sum(1))
+    offsets = np.einsum("nij,kj->nki", affine, grid)
+    u = np.array(uv, dtype=np.float64)
+    h, wd = image.shape
+    zncc = np.zeros(len(u))
+    for _ in range(iterations):
+        v = _centred(_remap(image, u[:, None, :] + offsets), w)
+        v_norm = np.sqrt((v * v * w).sum(1))
+        gain = np.where(v_norm > 1e-9, t_norm / np.maximum(v_norm, 1e-9), 0.0)
+        e = v * gain[:, None] - t
+        ex = (tx * e * w).sum(1)
+        ey = (ty * e * w).sum(1)
+        d = np.stack([(c * ex - b * ey) / det, (a * ey - b * ex) / det], axis=1)
+        d = np.where(solvable[:, None], np.clip(d, -1.0, 1.0), 0.0)
+        # the warp composed with the step's inverse: u - A d
+        u = u - np.einsum("nij,nj->ni", affine, d)
+        u[:, 0] = np.clip(u[:, 0], 0.0, wd - 1.0)
+        u[:, 1] = np.clip(u[:, 1], 0.0, h - 1.0)
+    v = _centred(_remap(image, u[:, None, :] + offsets), w)
+    denom = np.sqrt((v * v * w).sum(1)) * t_norm
+    zncc = np.where(denom > 1e-9, (v * t * w).sum(1) / np.maximum(denom, 1e-9), 0.0)
+    return u, zncc
+
+
+def inside(uv: np.ndarray, affine: np.ndarray, radius: int, width: int, height: int
+           ) -> np.ndarray:
+    """(n,) whether the patch at ``uv`` (array coordinates) seen through ``affine`` lies in
+    the image, one pixel to spare for the gradients."""
+    reach = radius * np.abs(affine).sum(axis=2) + 1.5
+    return ((uv - reach >= 0) & (uv + reach <= (width - 1, height - 1))).all(axis=1)
+
+
+def _rows_of(image: np.ndarray) -> dict[int, np.ndarray]:
+    """Image index -> the rows (ascending) of ``image`` (n,) that hold it."""
+    order = np.argsort(image, kind="stable")
+    values, starts = np.unique(image[order], return_index=True)
+    return {int(v): rows for v, rows in zip(values, np.split(order, starts[1:]), strict=True)}
+
+
+def align_observations(obs: Observations, load: Callable[[int], np.ndarray],
+                       settings: AlignSettings, num_threads: int = 1
+                       ) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The aligned keypoints (n, 2, COLMAP's convention) of ``obs``, whether each was
+    aligned (n,) (SIFT's keypoint kept where not), and statistics. ``load``: image index ->
+    the view's grey levels (2-D; kept as loaded, in float32 only while in use; each image
+    loaded once per call, on ``num_threads`` threads; the result does not depend on
+    them)."""
+    t0 = time.perf_counter()
+    n = len(obs.image)
+    radius = int(settings.radius_px)
+    grid, w = patch_grid(radius)
+    ref_uv = obs.ref_keypoint - 0.5
+    uv = obs.keypoint - 0.5
+    by_ref, by_image = _rows_of(obs.ref_image), _rows_of(obs.image)
+    images = sorted(set(by_ref) | set(by_image))
+    k = len(grid)
+    tmpl = [np.zeros((n, k), np.float32) for _ in range(3)]
+    ok = np.zeros(n, bool)
+    with ThreadPoolExecutor(max(1, num_threads)) as pool:
+        loaded = dict(zip(images, pool.map(load, images), strict=True))
+
+        def template(i: int) -> None:
+            sel = by_ref[i]
+            h, wd = loaded[i].shape
+            ok[sel] = inside(ref_uv[sel], np.broadcast_to(np.eye(2), (len(sel), 2, 2)),
+                             radius, wd, h)
+            parts = templates(loaded[i].astype(np.float32), ref_uv[sel], grid, w)
+            for arr, part in zip(tmpl, parts, strict=True):
+                arr[sel] = part
+
+        list(pool.map(template, sorted(by_ref)))
+    for i, sel in by_image.items():
+        h, wd = loaded[i].shape
+        ok[sel] &= inside(uv[sel], obs.affine[sel], radius, wd, h)
+
+    def one(i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        sel = by_image[i][ok[by_image[i]]]
+        if not sel.size:
+            return sel, np.zeros((0, 2)), np.zeros(0)
+        u, z = align_translations(loaded[i].astype(np.float32), uv[sel], obs.affine[sel],
+                                  tuple(t[sel] for t in tmpl), grid, w,
+                                  int(settings.iterations))
+        return sel, u, z
+
+    out = uv.copy()
+    zncc = np.full(n, np.nan)
+    with ThreadPoolExecutor(max(1, num_threads)) as pool:
+        for sel, u, z in pool.map(one, sorted(by_image)):
+            out[sel] = u
+            zncc[sel] = z
+    shift = np.linalg.norm(out - uv, axis=1)
+    aligned = ok & (shift <= settings.max_shift_px) & (zncc >= settings.min_zncc)
+    out = np.where(aligned[:, None], out, uv) + 0.5
+    stats = {"observations": int(n), "aligned": int(aligned.sum()),
+             "aligned_share": float(aligned.mean()) if n else 0.0,
+             "shift_median_px": float(np.median(shift[aligned])) if aligned.any() else None,
+             "zncc_median": float(np.nanmedian(zncc)) if np.isfinite(zncc).any() else None,
+             "images": int(len(loaded)), "seconds": time.perf_counter() - t0}
+    return out, aligned, stats
+
+
+def track_observations(points: Mapping[int, tuple[np.ndarray, list[tuple[int, int]]]],
+                       cameras: Mapping[int, tuple[np.ndarray, np.ndarray, np.ndarray]],
+                       keypoints: Mapping[int, np.ndarray]
+                       ) -> tuple[Observations, list[tuple[int, int]]]:
+    """The observations to align of ``points`` (point id -> (X (3,), its track's (image
+    id, keypoint index) pairs)), each track's reference observation left out
+    (:func:`reference_index`). ``cameras``: image id -> (K, R, t) in COLMAP's pixel
+    convention, ``x_cam = R x + t``; ``keypoints``: image id -> (m, 2). Returns them and
+    each row's (image id, keypoint index)."""
+    ids = sorted(cameras)
+    index = {i: m for m, i in enumerate(ids)}
+    KK, RR, TT = (np.stack([cameras[i][m] for i in ids]) for m in range(3))
+    centre = {i: -cameras[i][1].T @ cameras[i][2] for i in ids}
+    rows, refs, xyz = [], [], []
+    for pid in sorted(points):
+        X, track = points[pid]
+        r = reference_index(np.array([centre[i] for i, _ in track]))
+        for j, el in enumerate(track):
+            if j != r:
+                rows.append(el)
+                refs.append(track[r])
+                xyz.append(X)
+    if not rows:
+        empty = np.zeros((0, 2))
+        return Observations(np.zeros(0, int), empty, np.zeros(0, int), empty,
+                            np.zeros((0, 2, 2))), []
+    img, kp_idx = np.array(rows).T
+    ref_img, ref_idx = np.array(refs).T
+    start = {}
+    flat = []
+    for i in ids:
+        start[i] = sum(len(f) for f in flat)
+        flat.append(np.asarray(keypoints[i], float).reshape(-1, 2))
+    flat = np.concatenate(flat)
+    first = np.array([start[i] for i in ids])
+    cam, ref_cam = np.array([index[i] for i in img]), np.array([index[i] for i in ref_img])
+    kp = flat[first[cam] + kp_idx]
+    ref_kp = flat[first[ref_cam] + ref_idx]
+    A = local_affine(KK[ref_cam], RR[ref_cam], TT[ref_cam], KK[cam], RR[cam], TT[cam],
+                     np.array(xyz), ref_kp)
+    return Observations(img, kp, ref_img, ref_kp, A), rows
