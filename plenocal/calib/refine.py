@@ -283,7 +283,7 @@ def select_points(tracks, max_points: int) -> list[int]:
 
 
 def aligned_keypoints(tracks, point_ids: list[int], images: Mapping[str, str | Path],
-                      settings: AlignSettings, num_threads: int = 1,
+                      settings: AlignSettings, num_threads: int,
                       work_dir: str | Path | None = None
                       ) -> tuple[dict[str, np.ndarray], dict]:
     """Every image's keypoints of ``tracks`` (image name -> (n, 2), COLMAP's convention),

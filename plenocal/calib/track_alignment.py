@@ -211,7 +211,7 @@ def _rows_of(image: np.ndarray) -> dict[int, np.ndarray]:
 
 
 def align_observations(obs: Observations, load: Callable[[int], np.ndarray],
-                       settings: AlignSettings, num_threads: int = 1
+                       settings: AlignSettings, num_threads: int
                        ) -> tuple[np.ndarray, np.ndarray, dict]:
     """The aligned keypoints (n, 2, COLMAP's convention) of ``obs``, whether each was
     aligned (n,) (SIFT's keypoint kept where not), and statistics. ``load``: image index ->
