@@ -15,7 +15,10 @@ This step adjusts them together, as COLMAP 4 models a camera rig
   B's view model gives it);
 * the 3-D points are the verified matches of every view (rule ``view_matches``, the
   matches Table I triangulates) triangulated with the Eq. 6 cameras held fixed
-  (:func:`plenocal.verify.reprojection.triangulate`), at most ``max_points`` of them.
+  (:func:`plenocal.verify.reprojection.triangulate`), at most ``max_points`` of them;
+* their observations aligned by their patches to their track's reference observation
+  (``refine.align``, :mod:`plenocal.calib.track_alignment`, given the views' images:
+  :func:`aligned_keypoints`), since SIFT's placement on soft views leans the focal length.
 
 COLMAP's bundle adjustment then moves the frames and the points, one frame held (the
 gauge). Where the matches leave the shots in groups that share no point (rule view_matches
