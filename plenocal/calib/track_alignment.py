@@ -32,7 +32,6 @@ the inputs alone: each observation is computed on its own, whatever the threads.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -160,7 +159,7 @@ def align_translations(image: np.ndarray, uv: np.ndarray, affine: np.ndarray,
                        grid: np.ndarray, w: np.ndarray, iterations: int
                        ) -> tuple[np.ndarray, np.ndarray]:
     """Lucas-Kanade, inverse compositional, for the translation only: the positions (n, 2,
-    array coordinates of ``image``, float32) where the template (:func:`templates`) seen
+    array coordinates of ``image``; ``image`` float32) where the template (:func:`templates`) seen
     through ``affine`` (n, 2, 2) matches, started at ``uv``; and the aligned patches'
     weighted normalised correlation (n,). A step is at most 1 px; a patch without contrast
     stays where it started."""
@@ -175,7 +174,6 @@ def align_translations(image: np.ndarray, uv: np.ndarray, affine: np.ndarray,
     offsets = np.einsum("nij,kj->nki", affine, grid)
     u = np.array(uv, dtype=np.float64)
     h, wd = image.shape
-    zncc = np.zeros(len(u))
     for _ in range(iterations):
         v = _centred(_remap(image, u[:, None, :] + offsets), w)
         v_norm = np.sqrt((v * v * w).sum(1))
@@ -217,8 +215,8 @@ def align_observations(obs: Observations, load: Callable[[int], np.ndarray],
     aligned (n,) (SIFT's keypoint kept where not), and statistics. ``load``: image index ->
     the view's grey levels (2-D; kept as loaded, in float32 only while in use; each image
     loaded once per call, on ``num_threads`` threads; the result does not depend on
-    them)."""
-    t0 = time.perf_counter()
+    them). The statistics hold no timing: refine.json, which holds them, must be the same
+    bytes in every run."""
     n = len(obs.image)
     radius = int(settings.radius_px)
     grid, w = patch_grid(radius)
@@ -268,7 +266,7 @@ def align_observations(obs: Observations, load: Callable[[int], np.ndarray],
              "aligned_share": float(aligned.mean()) if n else 0.0,
              "shift_median_px": float(np.median(shift[aligned])) if aligned.any() else None,
              "zncc_median": float(np.nanmedian(zncc)) if np.isfinite(zncc).any() else None,
-             "images": int(len(loaded)), "seconds": time.perf_counter() - t0}
+             "images": int(len(loaded))}
     return out, aligned, stats
 
 
