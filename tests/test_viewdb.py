@@ -173,26 +173,33 @@ def test_features_per_shot_merge_into_one_extraction(views, tmp_path):
         viewdb.merge_view_features([parts[0], parts[0]], tmp_path / "twice.db")
 
 
-def test_the_matched_database_is_the_same_bytes_on_any_number_of_threads(views, tmp_path):
-    """COLMAP's matcher on two threads writes its rows in the order its threads finish:
-    rewritten in key order, the file is the same bytes as on one (Snakemake's checksums),
-    still in COLMAP's WAL mode, with nothing left beside it (the per-image verification's
-    scratch copy and pair list removed). (On the default data the matcher on two threads
-    found other matches in 2 of 8 runs: the workflow's default is one thread.)"""
+def test_the_matched_database_is_the_same_bytes_on_one_thread_and_in_key_order_on_two(
+        views, tmp_path):
+    """On one thread (the workflow's default, sfm.view_matching.num_threads) two runs give
+    the same bytes (Snakemake's checksums). On two, COLMAP's matcher writes its rows in the
+    order its threads finish, and pycolmap 4.2's CPU matcher then sometimes finds other
+    matches (2 of 8 runs on the default data; this test, which asked for the same bytes on
+    two threads, failed so in a fresh-clone CI): the file is rewritten in key order, so
+    where its rows are one thread's it is the same bytes; it matches the same pairs, stays
+    in COLMAP's WAL mode, and nothing is left beside it (the per-image verification's
+    scratch copy and pair list removed)."""
     paths, centres = views
     feats = tmp_path / "features.db"
     viewdb.extract_view_features(paths, feats, tmp_path / "w", max_num_features=1000)
     out = {}
-    for threads in (1, 2, 2):
-        db = tmp_path / f"m{threads}_{len(out)}" / "database.db"
+    for run, threads in enumerate((1, 1, 2)):
+        db = tmp_path / f"m{run}" / "database.db"
         db.parent.mkdir()
         viewdb.match_view_database(feats, db, shot_centres=centres, shot_neighbours=1,
                                    num_threads=threads, work_dir=db.parent)
-        out[db] = db.read_bytes()
+        out[run] = db
         assert sorted(p.name for p in db.parent.iterdir()) == ["database.db"]
-    first, *rest = out.values()
-    assert all(b == first for b in rest)
-    assert first[18:20] == b"\x02\x02"  # WAL
+        assert db.read_bytes()[18:20] == b"\x02\x02"  # WAL
+    assert out[0].read_bytes() == out[1].read_bytes()
+    if _dump(out[2]) == _dump(out[0]):
+        assert out[2].read_bytes() == out[0].read_bytes()
+    pairs = [[r[0] for r in _dump(out[k])["matches"]] for k in (0, 2)]
+    assert pairs[0] == pairs[1] and pairs[0]
 
 
 def test_a_rewrite_in_key_order_keeps_every_row(views, tmp_path):
