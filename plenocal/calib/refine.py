@@ -88,7 +88,7 @@ from plenocal.calib.reg_a import colmap as cm
 from plenocal.calib.reg_a import viewdb
 from plenocal.calib.track_alignment import AlignSettings
 from plenocal.camera import PinholeCamera, invert_pose, k_to_colmap, pose, rotation_angle_deg
-from plenocal.config import stage_defaults
+from plenocal.config import settings_from, stage_defaults
 from plenocal.names import split_key
 
 log = logging.getLogger(__name__)
@@ -171,7 +171,7 @@ class RefineSettings:
         keys = {f for f in cls.__dataclass_fields__ if f not in ("seed", "num_threads")}
         kw = {k: cfg[k] for k in keys if k in cfg}
         if isinstance(kw.get("align"), Mapping):
-            kw["align"] = AlignSettings(**kw["align"])
+            kw["align"] = settings_from(AlignSettings, kw["align"])
         return cls(**kw, seed=seed, num_threads=num_threads)
 
 
@@ -327,8 +327,9 @@ def aligned_keypoints(tracks, point_ids: list[int], images: Mapping[str, str | P
     obs, rows = ta.track_observations(points, cameras, by_id)
     uv, aligned, stats = ta.align_observations(obs, load, settings, num_threads)
     out = {n: kp.copy() for n, kp in keypoints.items()}
-    for (i, j), xy in zip(rows, uv, strict=True):
-        out[name_of[i]][j] = xy
+    rows = np.asarray(rows).reshape(-1, 2)
+    for i, sel in ta.rows_of(rows[:, 0]).items():
+        out[name_of[i]][rows[sel, 1]] = uv[sel]
     log.info("observations aligned by their patches: %d of %d (median shift %s px, %.1f s)",
              stats["aligned"], stats["observations"],
              "-" if stats["shift_median_px"] is None else f"{stats['shift_median_px']:.3f}",

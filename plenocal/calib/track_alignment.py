@@ -39,10 +39,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from plenocal.config import stage_defaults
+from plenocal.convert.exact import remap
 
 _ALIGN = stage_defaults("refine")["align"]
-#: cv2.remap's destination must stay under 32767 rows
-_REMAP_ROWS = 16384
 
 
 @dataclass(frozen=True)
@@ -119,16 +118,13 @@ def local_affine(K_ref: np.ndarray, R_ref: np.ndarray, t_ref: np.ndarray,
 
 
 def _remap(image: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    """``image`` sampled bilinearly at ``xy`` (n, k, 2) array coordinates -> (n, k)."""
+    """``image`` sampled bilinearly at ``xy`` (n, k, 2) array coordinates -> (n, k), for any
+    n (:func:`plenocal.convert.exact.remap` slices the rows OpenCV cannot take at once)."""
     import cv2  # noqa: PLC0415
 
-    out = np.empty(xy.shape[:2], np.float32)
-    for a in range(0, len(xy), _REMAP_ROWS):
-        block = xy[a:a + _REMAP_ROWS].astype(np.float32)
-        out[a:a + _REMAP_ROWS] = cv2.remap(image, np.ascontiguousarray(block[..., 0]),
-                                           np.ascontiguousarray(block[..., 1]),
-                                           cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    return out
+    pts = xy.astype(np.float32)
+    return remap(image, np.ascontiguousarray(pts[..., 0]), np.ascontiguousarray(pts[..., 1]),
+                 cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
 def patch_grid(radius: int) -> tuple[np.ndarray, np.ndarray]:
@@ -201,7 +197,7 @@ def inside(uv: np.ndarray, affine: np.ndarray, radius: int, width: int, height: 
     return ((uv - reach >= 0) & (uv + reach <= (width - 1, height - 1))).all(axis=1)
 
 
-def _rows_of(image: np.ndarray) -> dict[int, np.ndarray]:
+def rows_of(image: np.ndarray) -> dict[int, np.ndarray]:
     """Image index -> the rows (ascending) of ``image`` (n,) that hold it."""
     order = np.argsort(image, kind="stable")
     values, starts = np.unique(image[order], return_index=True)
@@ -222,7 +218,7 @@ def align_observations(obs: Observations, load: Callable[[int], np.ndarray],
     grid, w = patch_grid(radius)
     ref_uv = obs.ref_keypoint - 0.5
     uv = obs.keypoint - 0.5
-    by_ref, by_image = _rows_of(obs.ref_image), _rows_of(obs.image)
+    by_ref, by_image = rows_of(obs.ref_image), rows_of(obs.image)
     images = sorted(set(by_ref) | set(by_image))
     k = len(grid)
     tmpl = [np.zeros((n, k), np.float32) for _ in range(3)]
@@ -298,13 +294,9 @@ def track_observations(points: Mapping[int, tuple[np.ndarray, list[tuple[int, in
                             np.zeros((0, 2, 2))), []
     img, kp_idx = np.array(rows).T
     ref_img, ref_idx = np.array(refs).T
-    start = {}
-    flat = []
-    for i in ids:
-        start[i] = sum(len(f) for f in flat)
-        flat.append(np.asarray(keypoints[i], float).reshape(-1, 2))
+    flat = [np.asarray(keypoints[i], float).reshape(-1, 2) for i in ids]
+    first = np.concatenate([[0], np.cumsum([len(f) for f in flat])[:-1]])
     flat = np.concatenate(flat)
-    first = np.array([start[i] for i in ids])
     cam, ref_cam = np.array([index[i] for i in img]), np.array([index[i] for i in ref_img])
     kp = flat[first[cam] + kp_idx]
     ref_kp = flat[first[ref_cam] + ref_idx]
