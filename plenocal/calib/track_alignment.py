@@ -117,14 +117,13 @@ def local_affine(K_ref: np.ndarray, R_ref: np.ndarray, t_ref: np.ndarray,
     return np.stack(cols, axis=2)
 
 
-def _remap(image: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    """``image`` sampled bilinearly at ``xy`` (n, k, 2) array coordinates -> (n, k), for any
-    n (:func:`plenocal.convert.exact.remap` slices the rows OpenCV cannot take at once)."""
+def _remap(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """``image`` sampled bilinearly at the array coordinates ``x``, ``y`` (each (n, k)
+    float32) -> (n, k), for any n (:func:`plenocal.convert.exact.remap` slices the rows
+    OpenCV cannot take at once)."""
     import cv2  # noqa: PLC0415
 
-    pts = xy.astype(np.float32)
-    return remap(image, np.ascontiguousarray(pts[..., 0]), np.ascontiguousarray(pts[..., 1]),
-                 cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return remap(image, x, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
 def patch_grid(radius: int) -> tuple[np.ndarray, np.ndarray]:
@@ -135,19 +134,34 @@ def patch_grid(radius: int) -> tuple[np.ndarray, np.ndarray]:
     return grid, np.exp(-(grid ** 2).sum(1) / (2.0 * (radius / 1.5) ** 2))
 
 
-def _centred(v: np.ndarray, w: np.ndarray) -> np.ndarray:
-    return v - (v * w).sum(1, keepdims=True) / w.sum()
+def _grid_radius(grid: np.ndarray) -> int:
+    radius = int(round(float(np.abs(grid).max())))
+    if len(grid) != (2 * radius + 1) ** 2:
+        raise ValueError("the patch's offsets are not patch_grid's")
+    return radius
 
 
 def templates(image: np.ndarray, uv: np.ndarray, grid: np.ndarray, w: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The reference patches at the array coordinates ``uv`` (n, 2) of ``image`` (float32):
-    values, x and y gradients (each (n, k), mean-free under the weights ``w``)."""
-    pts = uv[:, None, :] + grid[None]
-    values = _remap(image, pts)
-    gx = 0.5 * (_remap(image, pts + (1.0, 0.0)) - _remap(image, pts - (1.0, 0.0)))
-    gy = 0.5 * (_remap(image, pts + (0.0, 1.0)) - _remap(image, pts - (0.0, 1.0)))
-    return _centred(values, w), _centred(gx, w), _centred(gy, w)
+    """The reference patches at the array coordinates ``uv`` (n, 2) of ``image``: values,
+    x and y gradients (central differences), each (n, k) float32 and mean-free under the
+    weights ``w``; ``grid`` :func:`patch_grid`'s. One bilinear sampling of the patch grown
+    by a pixel on each side gives all three."""
+    radius = _grid_radius(grid)
+    side = 2 * radius + 3
+    r = np.arange(-radius - 1, radius + 2, dtype=np.float64)
+    gx, gy = np.meshgrid(r, r)
+    big = _remap(image, (uv[:, 0:1] + gx.ravel()).astype(np.float32),
+                 (uv[:, 1:2] + gy.ravel()).astype(np.float32)).reshape(len(uv), side, side)
+    values = big[:, 1:-1, 1:-1]
+    dx = 0.5 * (big[:, 1:-1, 2:] - big[:, 1:-1, :-2])
+    dy = 0.5 * (big[:, 2:, 1:-1] - big[:, :-2, 1:-1])
+    mean_weights = (w / w.sum()).astype(np.float32)
+    out = []
+    for a in (values, dx, dy):
+        a = a.reshape(len(uv), -1)
+        out.append(np.ascontiguousarray(a - (a @ mean_weights)[:, None]))
+    return out[0], out[1], out[2]
 
 
 def align_translations(image: np.ndarray, uv: np.ndarray, affine: np.ndarray,
@@ -155,37 +169,57 @@ def align_translations(image: np.ndarray, uv: np.ndarray, affine: np.ndarray,
                        grid: np.ndarray, w: np.ndarray, iterations: int
                        ) -> tuple[np.ndarray, np.ndarray]:
     """Lucas-Kanade, inverse compositional, for the translation only: the positions (n, 2,
-    array coordinates of ``image``; ``image`` float32) where the template (:func:`templates`) seen
-    through ``affine`` (n, 2, 2) matches, started at ``uv``; and the aligned patches'
-    weighted normalised correlation (n,). A step is at most 1 px; a patch without contrast
-    stays where it started."""
-    t, tx, ty = template
-    a = (tx * tx * w).sum(1)
-    b = (tx * ty * w).sum(1)
-    c = (ty * ty * w).sum(1)
+    array coordinates of ``image``) where the template (:func:`templates`) seen through
+    ``affine`` (n, 2, 2) matches, started at ``uv``; and the aligned patches' weighted
+    normalised correlation (n,). A step is at most 1 px; a patch without contrast stays
+    where it started.
+
+    Each step needs of the sampled patch ``v`` only its weighted sums: ``sum w v`` and
+    ``sum w v^2`` (its mean and contrast) and ``sum w g v`` for the template's gradients
+    ``g``, since those are mean-free (``sum w g (v - mean) = sum w g v``): the error
+    ``gain (v - mean) - t`` is never formed."""
+    t, tx, ty = (np.asarray(a, np.float32) for a in template)
+    wk = np.asarray(w, np.float32)
+    total = float(np.asarray(w, np.float64).sum())
+    txw, tyw = tx * wk, ty * wk
+    a = np.einsum("nk,nk->n", txw, tx).astype(np.float64)
+    b = np.einsum("nk,nk->n", txw, ty).astype(np.float64)
+    c = np.einsum("nk,nk->n", tyw, ty).astype(np.float64)
     det = a * c - b * b
     solvable = det > 1e-9 * np.maximum(a + c, 1e-12) ** 2
     det = np.where(solvable, det, 1.0)
-    t_norm = np.sqrt((t * t * w).sum(1))
+    t_norm = np.sqrt(np.einsum("nk,nk->n", t * wk, t).astype(np.float64))
+    gx_t = np.einsum("nk,nk->n", txw, t).astype(np.float64)
+    gy_t = np.einsum("nk,nk->n", tyw, t).astype(np.float64)
     offsets = np.einsum("nij,kj->nki", affine, grid)
+    off_x = np.ascontiguousarray(offsets[..., 0], np.float32)
+    off_y = np.ascontiguousarray(offsets[..., 1], np.float32)
     u = np.array(uv, dtype=np.float64)
     h, wd = image.shape
+
+    def sample(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The patch at ``u`` and its contrast (weighted, mean removed)."""
+        v = _remap(image, off_x + u[:, 0:1].astype(np.float32),
+                   off_y + u[:, 1:2].astype(np.float32))
+        mean = (v @ wk).astype(np.float64) / total
+        square = ((v * v) @ wk).astype(np.float64)
+        return v, np.sqrt(np.maximum(square - total * mean * mean, 0.0))
+
     for _ in range(iterations):
-        v = _centred(_remap(image, u[:, None, :] + offsets), w)
-        v_norm = np.sqrt((v * v * w).sum(1))
+        v, v_norm = sample(u)
         gain = np.where(v_norm > 1e-9, t_norm / np.maximum(v_norm, 1e-9), 0.0)
-        e = v * gain[:, None] - t
-        ex = (tx * e * w).sum(1)
-        ey = (ty * e * w).sum(1)
+        ex = gain * np.einsum("nk,nk->n", txw, v) - gx_t
+        ey = gain * np.einsum("nk,nk->n", tyw, v) - gy_t
         d = np.stack([(c * ex - b * ey) / det, (a * ey - b * ex) / det], axis=1)
         d = np.where(solvable[:, None], np.clip(d, -1.0, 1.0), 0.0)
         # the warp composed with the step's inverse: u - A d
         u = u - np.einsum("nij,nj->ni", affine, d)
         u[:, 0] = np.clip(u[:, 0], 0.0, wd - 1.0)
         u[:, 1] = np.clip(u[:, 1], 0.0, h - 1.0)
-    v = _centred(_remap(image, u[:, None, :] + offsets), w)
-    denom = np.sqrt((v * v * w).sum(1)) * t_norm
-    zncc = np.where(denom > 1e-9, (v * t * w).sum(1) / np.maximum(denom, 1e-9), 0.0)
+    v, v_norm = sample(u)
+    denom = v_norm * t_norm
+    vt = np.einsum("nk,nk->n", v, t * wk).astype(np.float64)  # t mean-free
+    zncc = np.where(denom > 1e-9, vt / np.maximum(denom, 1e-9), 0.0)
     return u, zncc
 
 
