@@ -23,8 +23,11 @@ rule refine:
     priority: PRIORITY["calibration"]
     conda:
         "../envs/plenocal.yaml"
-    # COLMAP's steps on sfm.num_threads; the observations' alignment (refine.align) on two
-    threads: lambda wc: max(2, stage_config("sfm")["num_threads"])
+    # sfm.num_threads (COLMAP's steps; the observations' alignment, refine.align, on all of
+    # them). Not two of its own: with -j2, a two-thread job waits until both cores are free
+    # at once, and the verification's one-thread jobs kept one busy - the full run's refine
+    # started 118 s after its inputs were ready (BENCHMARKS.md, "The refine job's threads")
+    threads: lambda wc: stage_config("sfm")["num_threads"]
     resources:
         mem_mb=3000,
         runtime=30,
