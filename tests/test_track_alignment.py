@@ -91,7 +91,8 @@ def test_lucas_kanade_finds_the_translation_through_the_affine_map(deg, scale, s
     assert np.all(zncc > 0.95)
 
 
-def test_alignment_keeps_the_reference_and_sift_where_it_cannot_align_and_ignores_threads():
+def test_alignment_keeps_the_reference_and_sift_where_it_cannot_align_and_ignores_threads(
+        monkeypatch):
     ref = texture(5)
     shift = np.array([0.3, -0.4])
     tgt = warped(ref, np.array([[1.0, 0, shift[0]], [0, 1.0, shift[1]]]))
@@ -110,6 +111,12 @@ def test_alignment_keeps_the_reference_and_sift_where_it_cannot_align_and_ignore
     out2, aligned2, stats2 = ta.align_observations(obs, images.__getitem__, settings, 2)
     assert np.array_equal(out1, out2) and np.array_equal(aligned1, aligned2)
     assert stats == stats2  # refine.json holds them: no timing, the same bytes every run
+    # the templates held a batch of target images at a time: each image its own batch
+    monkeypatch.setattr(ta, "BATCH_OBSERVATIONS", 1)
+    assert ta._batches(ta.rows_of(obs.image), 1) == [[1], [2]]
+    out3, aligned3, stats3 = ta.align_observations(obs, images.__getitem__, settings, 2)
+    assert np.array_equal(out1, out3) and np.array_equal(aligned1, aligned3)
+    assert stats == stats3
     assert aligned1[:n].all()
     assert np.abs(out1[:n] - (p + 0.5 + shift)).max() < 0.08  # the phases (test above)
     # the flat image, and the patch past the border, keep SIFT's keypoints
