@@ -299,3 +299,21 @@ def test_central_view_worst_textured_tile_against_tlct(boys2_views):
     assert found["textured_tiles"] >= 20
     assert found["worst_tile_ssim"] >= 0.85, found
     assert found["lattice_db"] <= found["ref_lattice_db"], found
+
+
+def test_origami_central_view_worst_textured_tile_against_tlct():
+    """Issue 33's floor on the frame whose worst tile is an out-of-focus background (the
+    top right, beyond the lens types' ranges, where the lenses' sizes are guessed): the
+    guessed tiles softened by a quarter tile keep the background's edges as TLCT's view
+    has them (0.861; half a tile smeared them into a blurred block, 0.800)."""
+    from plenocal.cli import validate_convert_block  # noqa: PLC0415
+    from plenocal.convert import convert_files  # noqa: PLC0415
+    from plenocal.convert.localcheck import local_compare  # noqa: PLC0415
+
+    assert REAL is not None
+    shot = convert_files(REAL / "frames" / "Origami.png", REAL / "frames" / "Origami.xml",
+                         None, 5, ConvertSettings.from_config(validate_convert_block({})))
+    ref = cv2.imread(str(REAL / "reference" / "Origami" / "centre.png"))[..., ::-1]
+    found = local_compare(shot.view(2, 2), ref, shot.layout.basis)
+    assert found["textured_tiles"] >= 20
+    assert found["worst_tile_ssim"] >= 0.85, found
