@@ -362,8 +362,8 @@ def reliability_map(layout: ViewLayout, guessed: np.ndarray) -> np.ndarray:
 def _lowpass(img: np.ndarray, sigma_px: float) -> np.ndarray:
     """``img`` (h, w[, C]) blurred by a Gaussian of ``sigma_px``: on the image shrunk by
     ``f = floor(sigma / 2)`` (area averages), where the Gaussian's sigma is 2-4 px, and
-    brought back (bilinear); a low-pass either way, to the eye the same. A Boys2 view
-    (sigma 6.5 px, a quarter tile) 27 ms at full scale, 9 ms shrunk by 3; views whose
+    brought back (bilinear); a low-pass either way, to the eye the same. A Boys2-sized view
+    (sigma 6.5 px, a quarter tile): 19 ms at full scale, 7 ms shrunk by 3. Views whose
     sigma is under 4 px (the simulator's tiles of 7-8 px) are blurred at full scale. The
     shape of ``img``."""
     h, w = img.shape[:2]
@@ -381,9 +381,9 @@ def soften_unreliable(view: np.ndarray, rmap: np.ndarray, sigma_px: float) -> np
     (``sigma_px``) where ``rmap`` (:func:`reliability_map`) is below 1:
     ``r view + (1 - r) blur``, rounded for integers; in place (pixels where ``rmap`` is 1
     are not touched), and returned. Only the box around the pixels to soften is blurred,
-    with a margin of the kernel's reach (four sigmas): where a few lenses' sizes are
-    guessed (1 % of a simulated shot's, 0.7 % of a TSPC frame's) the whole view's blur cost
-    more than the rest of the softening."""
+    with a margin of the kernel's reach (four sigmas): a view whose guessed lenses lie in
+    one part of it blurs that part (on the real frames they are scattered, and the box is
+    most of the view)."""
     if sigma_px <= 0:
         return view
     soft = rmap < 1.0 - 1e-6
