@@ -106,17 +106,24 @@ def _runs(idx: np.ndarray, size: int) -> list[tuple[int, int, int, int]]:
     return [(max(a - SLAB_MARGIN_PX, 0), min(b + SLAB_MARGIN_PX, size), a, b) for a, b in out]
 
 
+def box_of(mask: np.ndarray) -> tuple[slice, slice] | None:
+    """The rows and columns spanning the true pixels of ``mask`` (h, w); None where none
+    is true."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    if not len(rows):
+        return None
+    cols = np.flatnonzero(mask[rows[0]:rows[-1] + 1].any(axis=0))
+    return slice(int(rows[0]), int(rows[-1]) + 1), slice(int(cols[0]), int(cols[-1]) + 1)
+
+
 def weak_box(support: np.ndarray) -> tuple[int, int, np.ndarray] | None:
     """The confidence (:func:`support_confidence`) of ``support`` (h, W) over the box of
     its pixels below 1, as ``(first row, first column, (h', w') confidence)``; None where
     every pixel has full support. The renderer keeps only these boxes, band by band."""
     if float(support.min()) >= SUPPORT_FULL:
         return None
-    low = support < np.float32(SUPPORT_FULL)
-    rows = np.flatnonzero(low.any(axis=1))
-    cols = np.flatnonzero(low[rows[0]:rows[-1] + 1].any(axis=0))
-    box = support[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
-    return int(rows[0]), int(cols[0]), support_confidence(box)
+    ys, xs = box_of(support < np.float32(SUPPORT_FULL))
+    return ys.start, xs.start, support_confidence(support[ys, xs])
 
 
 def fill_unsupported(view: np.ndarray,
