@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from plenocal.convert.errors import ConvertError
+from plenocal.convert.prefilter import prefilter
 
 AUTO_DEPTHS = (10, 12, 14, 16)
 
@@ -41,14 +42,21 @@ def to_unit_float(image: np.ndarray, bits: int) -> np.ndarray:
     return np.ascontiguousarray(f)
 
 
-def render_source(image: np.ndarray, bits: int) -> tuple[np.ndarray, float]:
+def render_source(image: np.ndarray, bits: int, prefilter_a: float = 0.0
+                  ) -> tuple[np.ndarray, float]:
     """The image the views sample, and the factor that brings its values to [0, 1]: 8-bit
     data as it is; 16-bit data holding ``bits`` bits shifted to the top of the word, so
     that the interpolation's rounding (OpenCV interpolates integers to an integer) falls
     ``16 - bits`` bits below the data's last one. Sampling the integers rather than a
-    float copy reads a quarter (8 bit) or half the bytes, and the frame is not copied."""
+    float copy reads a quarter (8 bit) or half the bytes; the frame is copied only where
+    it is shifted or prefiltered (``prefilter_a``: :mod:`plenocal.convert.prefilter`, on
+    the shifted integers, so that its rounding too falls below the data's last bit)."""
     if image.dtype == np.uint8:
-        return np.ascontiguousarray(image), 1.0 / ((1 << bits) - 1)
+        src = prefilter(np.ascontiguousarray(image), prefilter_a)
+        return src, 1.0 / ((1 << bits) - 1)
     shift = 16 - bits  # the image holds no value above 2^bits - 1 (significant_bits)
-    src = np.left_shift(image, np.uint16(shift)) if shift else np.ascontiguousarray(image)
+    if shift:
+        src = prefilter(np.left_shift(image, np.uint16(shift)), prefilter_a, in_place=True)
+    else:
+        src = prefilter(np.ascontiguousarray(image), prefilter_a)
     return src, 1.0 / (((1 << bits) - 1) << shift)

@@ -287,8 +287,10 @@ class ShotConversion:
             log.info("%s: 16-bit image with %d significant bits (max %d)", source, self.bits,
                      int(image.max()))
         self._image = image
-        # what the views sample: the image's own integers (no float copy of the frame)
-        self._render_source, self._render_scale = render_source(image, self.bits)
+        # what the views sample: the image's own integers (no float copy of the frame),
+        # prefiltered against bilinear sampling's blur (plenocal.convert.prefilter)
+        self._render_source, self._render_scale = render_source(image, self.bits,
+                                                                st.render.prefilter)
         self._source_float: np.ndarray | None = None
         self._gray: np.ndarray | None = None
         self._threads = threads
