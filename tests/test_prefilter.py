@@ -11,6 +11,7 @@ from synth.lenslets import calib_for_optics, lenslet_from_patch_size, random_tex
 from plenocal.config import stage_defaults
 from plenocal.convert.levels import render_source
 from plenocal.convert.prefilter import (
+    OPTIMAL_A,
     expected_error,
     prefilter,
     prefilter_kernel,
@@ -62,13 +63,13 @@ def test_expected_error_by_hand():
 
 @pytest.mark.parametrize("power", [0, 1, 2])  # flat, 1/f and 1/f^2 spectra
 def test_the_default_is_the_least_expected_error(power):
-    """convert.blend.prefilter is where Eq. P1 is least, within 0.015, for each spectrum;
-    and it halves neither way: the optimum is a broad one."""
+    """OPTIMAL_A is where Eq. P1 is least, within 0.015, for each spectrum, and it cuts
+    the error by more than a fifth against no filter."""
     spectrum = (W / np.pi) ** -power
     grid = np.linspace(0.0, 0.25, 51)
     errs = [expected_error(a, W, spectrum) for a in grid]
     best = float(grid[int(np.argmin(errs))])
-    a = stage_defaults("convert.blend")["prefilter"]
+    a = OPTIMAL_A
     assert best == pytest.approx(a, abs=0.015)
     assert expected_error(a, W, spectrum) < 0.8 * expected_error(0.0, W, spectrum)
 
@@ -102,15 +103,15 @@ def test_render_source_filters_after_the_shift():
 
 def test_views_come_nearer_the_ideal_view_with_the_prefilter():
     """A plane of known patch size (as test_views_match_the_ideal_view_of_the_plane), its
-    ideal views read from the texture by Keys' cubic: every view with the default
-    prefilter nearer them than without."""
+    ideal views read from the texture by Keys' cubic: every view with OPTIMAL_A nearer
+    them than without."""
     calib = calib_for_optics(small_optics())
     grid = MicrolensGrid(calib, 400, 300)
     tex = random_texture(512, 1.5, 3)
     P = 6.5
     img = lenslet_from_patch_size(grid, P, tex)
     psnr = {}
-    for a in (0.0, stage_defaults("convert.blend")["prefilter"]):
+    for a in (0.0, OPTIMAL_A):
         st = ConvertSettings(tile_size=6, even_size=False, render=RenderSettings(prefilter=a))
         shot = ShotConversion(img, calib, 5, st)
         L = shot.layout
@@ -124,15 +125,15 @@ def test_views_come_nearer_the_ideal_view_with_the_prefilter():
             ideal = cv2.remap(tex, t[..., 0], t[..., 1], cv2.INTER_CUBIC)
             ideal8 = np.clip(np.rint(ideal * 255), 0, 255).astype(np.uint8)
             psnr[a, r, c] = view_quality(shot.view(r, c), ideal8, border=L.tile)["psnr_db"]
-    a = stage_defaults("convert.blend")["prefilter"]
+    a = OPTIMAL_A
     for r, c in ((2, 2), (0, 0), (4, 1)):
         assert psnr[a, r, c] > psnr[0.0, r, c] + 0.1, psnr
 
 
 def test_the_default_is_the_least_expected_error_in_two_dimensions():
     """The separable filter on both axes, bilinear interpolation at a uniform phase in x
-    and y, a flat 2-D spectrum: Eq. P1's 2-D form is lower at the default than a half
-    step either side."""
+    and y, a flat 2-D spectrum: Eq. P1's 2-D form is lower at OPTIMAL_A than 0.05 either
+    side."""
     n = 24
     t = (np.arange(n) + 0.5) / n
     w = np.linspace(0.05, np.pi, 24)
@@ -145,6 +146,19 @@ def test_the_default_is_the_least_expected_error_in_two_dimensions():
              - truth[:, None, :, None] * truth[None, :, None, :])
         return float(np.mean(np.abs(e) ** 2))
 
-    a = stage_defaults("convert.blend")["prefilter"]
+    a = OPTIMAL_A
     assert error(a) < error(a - 0.05) and error(a) < error(a + 0.05)
     assert error(a) < 0.8 * error(0.0)
+
+
+def test_off_by_default_and_then_the_frame_as_it_is():
+    """convert.blend.prefilter is 0 by default (the calibration leaned with it), and then
+    the views sample the frame's own integers: the same views, to the bit, as before the
+    filter existed."""
+    assert stage_defaults("convert.blend")["prefilter"] == 0
+    assert RenderSettings().prefilter == 0
+    rng = np.random.default_rng(2)
+    img8 = rng.integers(0, 256, (30, 40, 3), dtype=np.uint8)
+    assert render_source(img8, 8)[0] is img8
+    img16 = rng.integers(0, 4096, (30, 40), dtype=np.uint16)
+    assert np.array_equal(render_source(img16, 12)[0], img16 << 4)

@@ -21,16 +21,26 @@ against the signal, for a component ``w`` (Eq. P1)::
 averaged over the frame's spectrum ``S(w)`` (:func:`expected_error`), is least at
 ``a`` = 0.10-0.11 for a flat spectrum and for ``1/f`` and ``1/f^2`` ones (natural
 images), in one dimension and with the 2-D separable filter alike
-(``tests/test_prefilter.py``): ``convert.blend.prefilter`` 0.1. Keys' cubic interpolation
+(``tests/test_prefilter.py``): :data:`OPTIMAL_A`. Keys' cubic interpolation
 does the same job at the sampling (OpenCV's ``INTER_CUBIC``), but reads 16 samples
 instead of 4 and took Boys2's 25 views from 2.0 to 3.1 s; the prefilter is one pass
 over the frame.
+
+``convert.blend.prefilter`` is 0 (off) by default: with :data:`OPTIMAL_A` the views come
+0.3-0.9 dB nearer the simulator's true pinhole renders and hold 1.03-1.17 of TLCT's fine
+detail on the real frames, but the calibration made from them leaned: the focal length by
++0.027 % on average over the twenty simulated captures, one of them past issue 32's 0.1 %
+(BENCHMARKS.md, "The frame prefiltered against bilinear sampling's blur"). It is for
+conversions outside the calibration (``plenocal convert --set blend.prefilter=0.1``).
 """
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
+
+#: the least expected squared error of Eq. P1 (flat, 1/f and 1/f^2 spectra; 1-D and 2-D)
+OPTIMAL_A = 0.1
 
 
 def prefilter_kernel(a: float) -> np.ndarray:
