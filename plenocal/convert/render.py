@@ -30,6 +30,10 @@ through OpenCV's fixed-point maps (:func:`cv2.convertMaps`: positions to 1/32 px
 interpolation 1.5x as fast as from float maps, whose conversion OpenCV 5 no longer does
 inside the remap).
 
+The frame the samples are read from may be prefiltered once against bilinear
+interpolation's blur (``convert.blend.prefilter``, :mod:`plenocal.convert.prefilter`; off
+by default).
+
 Everything that does not depend on the view is computed once per shot
 (:class:`RenderPlan`): the candidate lenses, their tile weights and the sampling
 positions of the central view; view (r, c) only adds the constant ``R q_rc``.
