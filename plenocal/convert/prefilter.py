@@ -23,8 +23,8 @@ averaged over the frame's spectrum ``S(w)`` (:func:`expected_error`), is least a
 images), in one dimension and with the 2-D separable filter alike
 (``tests/test_prefilter.py``): :data:`OPTIMAL_A`. Keys' cubic interpolation
 does the same job at the sampling (OpenCV's ``INTER_CUBIC``), but reads 16 samples
-instead of 4 and took Boys2's 25 views from 2.0 to 3.1 s; the prefilter is one pass
-over the frame.
+instead of 4 and took Boys2's whole conversion from 3.8-4.1 to 4.8-5.4 s; the prefilter
+is one pass over the frame (6-32 ms on the real frames).
 
 ``convert.blend.prefilter`` is 0 (off) by default: with :data:`OPTIMAL_A` the views come
 0.3-0.9 dB nearer the simulator's true pinhole renders and hold 1.03-1.17 of TLCT's fine

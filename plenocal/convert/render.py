@@ -81,7 +81,7 @@ class RenderSettings:
     wider_fade_radius: float = _BLEND["wider_fade_radius"]
     wider_centre_power: float = _BLEND["wider_centre_power"]
     unreliable_blur: float = _BLEND["unreliable_blur"]  # tile units; 0: off
-    prefilter: float = _BLEND["prefilter"]  # a of the frame's prefilter (convert.prefilter)
+    prefilter: float = _BLEND["prefilter"]  # a of the frame's prefilter; 0: off
 
     def wide(self) -> RenderSettings:
         """The blend of the views whose patches reach past the micro image."""

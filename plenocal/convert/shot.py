@@ -288,7 +288,8 @@ class ShotConversion:
                      int(image.max()))
         self._image = image
         # what the views sample: the image's own integers (no float copy of the frame),
-        # prefiltered against bilinear sampling's blur (plenocal.convert.prefilter)
+        # prefiltered against bilinear sampling's blur where convert.blend.prefilter is set
+        # (plenocal.convert.prefilter; off by default)
         self._render_source, self._render_scale = render_source(image, self.bits,
                                                                 st.render.prefilter)
         self._source_float: np.ndarray | None = None
