@@ -51,10 +51,8 @@ def render_source(image: np.ndarray, bits: int, prefilter_a: float = 0.0
     float copy reads a quarter (8 bit) or half the bytes; the frame is copied only where
     it is shifted or prefiltered (``prefilter_a``: :mod:`plenocal.convert.prefilter`, on
     the shifted integers, so that its rounding too falls below the data's last bit)."""
-    if image.dtype == np.uint8:
-        src = prefilter(np.ascontiguousarray(image), prefilter_a)
-        return src, 1.0 / ((1 << bits) - 1)
-    shift = 16 - bits  # the image holds no value above 2^bits - 1 (significant_bits)
+    # 16-bit: the image holds no value above 2^bits - 1 (significant_bits)
+    shift = 0 if image.dtype == np.uint8 else 16 - bits
     if shift:
         src = prefilter(np.left_shift(image, np.uint16(shift)), prefilter_a, in_place=True)
     else:

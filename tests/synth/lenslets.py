@@ -115,3 +115,19 @@ def calib_for_optics(optics: PlenopticOptics, depth_range: tuple[float, float] =
         lens_border=lens_border, lens_base_x=(1.0, 0.0), lens_base_y=(0.5, 0.8660254037844386),
         lens_types=(LensType(0, (0.0, 0.0), depth_range[0], depth_range[1]),),
     )
+
+
+def plane_view(calib, layout, patch: float, texture: np.ndarray, r: int, c: int,
+               interpolation: int = cv2.INTER_LINEAR) -> np.ndarray:
+    """The ideal view (r, c) of :func:`lenslet_from_patch_size`'s plane (patch size
+    ``patch`` everywhere, ``texture_scale`` 1) on ``layout`` (a
+    :class:`plenocal.viewgeom.ViewLayout`): the virtual image read from ``texture`` where
+    each output pixel looks, by ``interpolation``; uint8 RGB."""
+    ys, xs = np.mgrid[0:layout.height, 0:layout.width].astype(np.float64)
+    v = calib.diameter / patch
+    d = np.stack([xs - layout.tile_centres[0, 0], ys - layout.tile_centres[0, 1]], -1) * (
+        calib.diameter / layout.tile)
+    y = layout.lens_centres[0] + d - v * layout.offset_image(r, c)
+    t = (y / v + np.array(texture.shape[1::-1]) / 2).astype(np.float32)
+    ideal = cv2.remap(texture, t[..., 0], t[..., 1], interpolation)
+    return np.clip(np.rint(ideal * 255), 0, 255).astype(np.uint8)
