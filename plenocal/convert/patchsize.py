@@ -86,6 +86,7 @@ class PatchSizeSettings:
     min_confidence: float = _PATCH["min_confidence"]
     smooth_iterations: int = _PATCH["smooth_iterations"]
     texture_scale: float = _PATCH["texture_scale"]  # grey std (0..1) saturating the texture
+    pair_weights: bool = _PATCH["pair_weights"]  # pairs weighted by their texture (Eq. M1)
     search_range: str = _PATCH["search_range"]  # "type": its type's range; "union": all types'
     # measured on Fujita2 / Origami (README): neither changes the views (SSIM, sharpness,
     # blend disagreement within 0.01), aggregation costs the simulator 0.1 dB, the ring
@@ -294,6 +295,26 @@ def block_gains(profiles: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> np.ndar
 RING2 = np.array([(1, 1), (-1, 2), (-2, 1), (-1, -1), (1, -2), (2, -1)], dtype=np.int64)
 
 
+#: a pair's weight where both its blocks are flat (Eq. M1): a lens with no textured pair
+#: keeps the plain mean of its pairs, as without the weights (its confidence is nil anyway)
+FLAT_PAIR_WEIGHT = 1e-3
+
+
+def pair_texture(std: np.ndarray, texture_scale: float | None) -> np.ndarray:
+    """Eq. M1: a block's weight in the pairs it belongs to, ``min(1, s / s0) + eps`` for
+    its grey-level standard deviation ``s`` (0..1 grey, after the vignetting is divided
+    out) and ``s0 = texture_scale`` (``eps``: :data:`FLAT_PAIR_WEIGHT`); a pair weighs the
+    smaller of its two blocks' weights. ZNCC normalises the contrast away, so a pair of
+    flat blocks (a black background, an overexposed wall) correlates their noise and
+    their faint remnants of structure as strongly as a textured pair its texture: on a
+    lens whose lower neighbours see only black, those pairs' chance peaks outvoted the
+    pairs that see the edge above (Boxer's board, README "Pairs that see nothing"). None:
+    1 for every block."""
+    if texture_scale is None:
+        return np.ones_like(std)
+    return np.minimum(std / texture_scale, 1.0) + FLAT_PAIR_WEIGHT
+
+
 def _ring_neighbours(grid: MicrolensGrid, steps: np.ndarray) -> np.ndarray:
     """(n, 6) index of the lens at each lattice step (``steps`` (6, 2)) or -1."""
     lo = grid.ij.min(axis=0)
@@ -311,7 +332,8 @@ def _ring_neighbours(grid: MicrolensGrid, steps: np.ndarray) -> np.ndarray:
 
 def match_scores(gray: np.ndarray, grid: MicrolensGrid, candidates: np.ndarray,
                  radius: float, samples: int, sign: float = -1.0, ring2: bool = False,
-                 threads: int = 1, vignetting: Vignetting | None = None
+                 threads: int = 1, vignetting: Vignetting | None = None,
+                 texture_scale: float | None = None
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """ZNCC of every lens against its neighbours for every candidate patch size.
 
@@ -320,8 +342,10 @@ def match_scores(gray: np.ndarray, grid: MicrolensGrid, candidates: np.ndarray,
     where a block fits. ``vignetting``: the micro images' radial profiles (profiles (T,
     nbins), row (n,): :func:`plenocal.convert.vignetting.lens_type_profiles`); each
     block sample is divided by its lens's profile at the sample's distance from the lens
-    centre (:func:`block_gains`), None for none. Returns (scores (n, c): mean ZNCC over
-    the lens's pairs, NaN where it has none; pairs (n,) number of nearest-neighbour
+    centre (:func:`block_gains`), None for none. ``texture_scale``: each pair's ZNCC is
+    weighted by the texture of its flatter block where that is flattest over the
+    candidates (:func:`pair_texture`, Eq. M1); None: every pair weighs the same. Returns (scores (n, c): the pairs' weighted mean ZNCC,
+    NaN where the lens has none; pairs (n,) number of nearest-neighbour
     pairs; texture (n,) grey std of the block at the lens centre)."""
     n = len(grid)
     rings = [(grid.neighbours, grid.neighbour_vectors / grid.diameter, 1.0)]
@@ -357,30 +381,50 @@ def match_scores(gray: np.ndarray, grid: MicrolensGrid, candidates: np.ndarray,
     centre_block = blocks(0.0, np.zeros((1, 2)))[:, 0]
     texture = centre_block.std(axis=1)
     pairs = (grid.neighbours >= 0).sum(axis=1)
-    scores = np.full((n, len(candidates)), np.nan, dtype=np.float32)
+    c = len(candidates)
+    # every pair's ZNCC and texture (its flatter block's, Eq. M1) per candidate; NaN where
+    # the pair has no partner or its blocks leave the safe micro image
+    corr = np.full((n, 6 * len(rings), c), np.nan, dtype=np.float32)
+    tex = np.full((n, 6 * len(rings), c), np.nan, dtype=np.float32)
 
     def score(ci: int) -> None:  # one candidate size: its own column, alone
         P = candidates[ci]
-        total = np.zeros(n, dtype=np.float32)
-        count = np.zeros(n, dtype=np.float32)
-        for nb, dirs, scale in rings:
+        for r, (nb, dirs, scale) in enumerate(rings):
             shift = 0.5 * scale * float(P)
             if shift + radius > half_safe:
                 continue
             B = blocks(shift, dirs)
             B -= B.mean(axis=2, keepdims=True)
-            B /= np.sqrt((B * B).sum(axis=2, keepdims=True)) + 1e-6
+            norm = np.sqrt((B * B).sum(axis=2))
+            B /= norm[:, :, None] + 1e-6
+            t = pair_texture(norm / math.sqrt(b), texture_scale)
             valid = nb >= 0
             safe_nb = np.where(valid, nb, 0)
             for k in range(6):
                 partner = B[safe_nb[:, k], opposite[k]]
-                total += np.where(valid[:, k], np.einsum("ij,ij->i", B[:, k], partner), 0.0)
-                count += valid[:, k]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            scores[:, ci] = np.where(count > 0, total / np.maximum(count, 1), np.nan)
+                corr[:, 6 * r + k, ci] = np.where(valid[:, k],
+                                                  np.einsum("ij,ij->i", B[:, k], partner),
+                                                  np.nan)
+                tex[:, 6 * r + k, ci] = np.where(
+                    valid[:, k], np.minimum(t[:, k], t[safe_nb[:, k], opposite[k]]), np.nan)
 
     with opencv_threads(1 if threads > 1 else None):
-        run_all(score, list(range(len(candidates))), threads)
+        run_all(score, list(range(c)), threads)
+    # a pair's weight: its texture at the candidate where it is flattest, the same at every
+    # candidate (weights that changed with the candidate would let a size win by leaving
+    # out a pair that disagrees with it)
+    weight = np.where(np.isfinite(tex), tex, np.inf).min(axis=2)
+    weight = np.where(np.isfinite(weight), weight, 0.0).astype(np.float32)
+    # relative to the lens's most textured pair: where all are alike (a weakly textured
+    # surface, or nothing at all) they weigh alike, as without the weights
+    top = weight.max(axis=1, keepdims=True)
+    weight = np.where(top > 0, weight / np.where(top > 0, top, 1.0), 0.0)
+    ok = np.isfinite(corr)
+    w = np.where(ok, weight[:, :, None], 0.0)
+    num = (w * np.where(ok, corr, 0.0)).sum(axis=1)
+    den = w.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scores = np.where(den > 0, num / den, np.nan).astype(np.float32)
     return scores, pairs, texture
 
 
@@ -518,7 +562,9 @@ def estimate_patch_size(image: np.ndarray, grid: MicrolensGrid,
     scores, pairs, texture = match_scores(gray, grid, candidates, radius,
                                           settings.block_samples, sign,
                                           settings.same_type_ring and multi, threads=threads,
-                                          vignetting=vignetting)
+                                          vignetting=vignetting,
+                                          texture_scale=settings.texture_scale
+                                          if settings.pair_weights else None)
     # lenses cut by the sensor's edge match blocks partly off the image: they lend their
     # scores to no neighbour
     tex = np.clip(texture / settings.texture_scale, 0, 1) * grid.inside() + 1e-3
