@@ -344,9 +344,10 @@ def match_scores(gray: np.ndarray, grid: MicrolensGrid, candidates: np.ndarray,
     block sample is divided by its lens's profile at the sample's distance from the lens
     centre (:func:`block_gains`), None for none. ``texture_scale``: each pair's ZNCC is
     weighted by the texture of its flatter block where that is flattest over the
-    candidates (:func:`pair_texture`, Eq. M1); None: every pair weighs the same. Returns (scores (n, c): the pairs' weighted mean ZNCC,
-    NaN where the lens has none; pairs (n,) number of nearest-neighbour
-    pairs; texture (n,) grey std of the block at the lens centre)."""
+    candidates, relative to the lens's most textured pair (:func:`pair_texture`, Eq.
+    M1); None: every pair weighs the same. Returns (scores (n, c): the pairs' weighted
+    mean ZNCC, NaN where the lens has none; pairs (n,) number of nearest-neighbour pairs;
+    texture (n,) grey std of the block at the lens centre)."""
     n = len(grid)
     rings = [(grid.neighbours, grid.neighbour_vectors / grid.diameter, 1.0)]
     if ring2:
