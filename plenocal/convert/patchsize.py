@@ -303,13 +303,15 @@ FLAT_PAIR_WEIGHT = 1e-3
 def pair_texture(std: np.ndarray, texture_scale: float | None) -> np.ndarray:
     """Eq. M1: a block's weight in the pairs it belongs to, ``min(1, s / s0) + eps`` for
     its grey-level standard deviation ``s`` (0..1 grey, after the vignetting is divided
-    out) and ``s0 = texture_scale`` (``eps``: :data:`FLAT_PAIR_WEIGHT`); a pair weighs the
-    smaller of its two blocks' weights. ZNCC normalises the contrast away, so a pair of
-    flat blocks (a black background, an overexposed wall) correlates their noise and
-    their faint remnants of structure as strongly as a textured pair its texture: on a
-    lens whose lower neighbours see only black, those pairs' chance peaks outvoted the
-    pairs that see the edge above (Boxer's board, README "Pairs that see nothing"). None:
-    1 for every block."""
+    out) and ``s0 = texture_scale`` (``eps``: :data:`FLAT_PAIR_WEIGHT`). A pair weighs
+    the smaller of its two blocks' weights, at the candidate where that is smallest, over
+    the largest such weight among the lens's pairs (:func:`match_scores`).
+
+    ZNCC normalises the contrast away, so a pair of flat blocks (a black background, an
+    overexposed wall) correlates their noise and faint remnants of structure as strongly
+    as a textured pair its texture: on a lens whose lower neighbours see only black, those
+    pairs' chance peak outvoted the pairs that see the edge above (Boxer's board:
+    BENCHMARKS.md, "Pairs that see nothing"). None: 1 for every block."""
     if texture_scale is None:
         return np.ones_like(std)
     return np.minimum(std / texture_scale, 1.0) + FLAT_PAIR_WEIGHT
