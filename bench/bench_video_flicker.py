@@ -29,6 +29,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+# this checkout's package and test helpers, not an installed copy (a worktree measures its
+# own code)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from test_convert_real import REAL, crop  # noqa: E402
