@@ -15,7 +15,9 @@ Matching. For a candidate ``P`` the block of lens ``i`` centred at ``m_i + s (P/
 centred at ``m_j - s (P/2) n``: symmetric about the pair's midpoint, so both blocks
 stay inside their micro images for ``P`` up to ``D' - 2 r``. The cost is zero-mean
 normalised cross-correlation (robust to the vignetting and to the different focus of
-the lens types), averaged over the lens's available pairs: its six neighbours and,
+the lens types), averaged over the lens's available pairs, each weighted by the texture
+its blocks carry (:func:`pair_texture`, Eq. M1: a pair that sees only a flat region
+correlates its noise as strongly as a textured one its texture): its six neighbours and,
 with ``same_type_ring`` on a multi-focus MLA, the six lenses at ``sqrt(3) D`` (the
 same lens type, shift ``sqrt(3) P``) where the block fits. With ``aggregate > 0`` the
 scores are then aggregated over the lens lattice (:func:`aggregate_scores`: each lens
