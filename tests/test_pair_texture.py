@@ -18,6 +18,21 @@ def test_pair_texture_by_hand():
     assert np.array_equal(ps.pair_texture(np.array([0.0, 0.3]), None), [1.0, 1.0])
 
 
+def test_pair_weights_by_hand():
+    """A pair weighs its texture where it is flattest over the candidates, relative to its
+    lens's most textured pair; a pair never scored weighs 0; a lens whose pairs are all
+    flat weighs them alike."""
+    nan = np.nan
+    tex = np.array([
+        [[1.0, 1.0, 1.0], [1.0, 0.2, 1.0], [nan, nan, nan]],  # one pair flat at one size
+        [[0.4, 0.5, 0.6], [0.2, 0.2, nan], [0.1, 0.3, 0.2]],  # every pair weak
+        [[1e-3, 1e-3, 1e-3], [1e-3, 1e-3, 1e-3], [1e-3, 1e-3, 1e-3]],  # nothing at all
+    ], np.float32)
+    w = ps.pair_weights(tex)
+    assert w.dtype == np.float32
+    assert np.allclose(w, [[1.0, 0.2, 0.0], [1.0, 0.5, 0.25], [1.0, 1.0, 1.0]])
+
+
 def edge_over_faint_black(p_true: float, p_wrong: float, amplitude: float):
     """A plane at patch size ``p_true`` whose texture ends at a horizontal edge below
     which the scene is black but for a faint pattern that matches at ``p_wrong`` (a

@@ -319,6 +319,20 @@ def pair_texture(std: np.ndarray, texture_scale: float | None) -> np.ndarray:
     return np.minimum(std / texture_scale, 1.0) + FLAT_PAIR_WEIGHT
 
 
+def pair_weights(texture: np.ndarray) -> np.ndarray:
+    """(n, pairs) float32: each pair's weight in its lens's score, from ``texture`` (n,
+    pairs, candidates): the pair's :func:`pair_texture` per candidate, NaN where it was
+    not scored. A pair weighs its texture at the candidate where it is flattest, the same
+    at every candidate (weights that changed with the candidate would let a size win by
+    leaving out a pair that disagrees with it), relative to the lens's most textured pair
+    (where all are alike, a weakly textured surface or nothing at all, they weigh alike,
+    as without the weights); 0 for a pair never scored."""
+    weight = np.where(np.isfinite(texture), texture, np.inf).min(axis=2)
+    weight = np.where(np.isfinite(weight), weight, 0.0).astype(np.float32)
+    top = weight.max(axis=1, keepdims=True)
+    return np.where(top > 0, weight / np.where(top > 0, top, 1.0), 0.0).astype(np.float32)
+
+
 def _ring_neighbours(grid: MicrolensGrid, steps: np.ndarray) -> np.ndarray:
     """(n, 6) index of the lens at each lattice step (``steps`` (6, 2)) or -1."""
     lo = grid.ij.min(axis=0)
@@ -415,15 +429,7 @@ def match_scores(gray: np.ndarray, grid: MicrolensGrid, candidates: np.ndarray,
 
     with opencv_threads(1 if threads > 1 else None):
         run_all(score, list(range(c)), threads)
-    # a pair's weight: its texture at the candidate where it is flattest, the same at every
-    # candidate (weights that changed with the candidate would let a size win by leaving
-    # out a pair that disagrees with it)
-    weight = np.where(np.isfinite(tex), tex, np.inf).min(axis=2)
-    weight = np.where(np.isfinite(weight), weight, 0.0).astype(np.float32)
-    # relative to the lens's most textured pair: where all are alike (a weakly textured
-    # surface, or nothing at all) they weigh alike, as without the weights
-    top = weight.max(axis=1, keepdims=True)
-    weight = np.where(top > 0, weight / np.where(top > 0, top, 1.0), 0.0)
+    weight = pair_weights(tex)
     ok = np.isfinite(corr)
     w = np.where(ok, weight[:, :, None], 0.0)
     num = (w * np.where(ok, corr, 0.0)).sum(axis=1)
