@@ -374,6 +374,21 @@ def test_every_fixture_converts(path):
     assert pic.shape[0] == shot.layout.height and pic.dtype == np.uint8
 
 
+def test_patch_picture_colours_are_not_squeezed_by_an_outlier():
+    """One wrong lens at 40 px among sizes 10-12 px: the colour range is the map's
+    1st-99th percentile, so the others keep the whole scale (the range by hand: numpy's
+    linear percentile of 0..98 evenly over 10..12 plus 40)."""
+    from plenocal.convert.shot import colour_range
+
+    patch = np.append(np.linspace(10.0, 12.0, 99), 40.0)
+    lo, hi = colour_range(patch)
+    # 1st percentile: position 0.99 of 99 gaps -> 10 + 0.99 * 2 / 98; 99th: position 98.01
+    # -> between 12 (index 98) and 40 (index 99) at 0.01
+    assert math.isclose(lo, 10.0 + 0.99 * 2.0 / 98.0, rel_tol=1e-12)
+    assert math.isclose(hi, 12.0 + 0.01 * 28.0, rel_tol=1e-12)
+    assert hi < 12.5  # not 40
+
+
 def test_conversion_is_deterministic():
     calib = calib_for_optics(small_optics())
     grid = MicrolensGrid(calib, 400, 300)

@@ -587,18 +587,30 @@ def _label(img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.4)
                 cv2.LINE_AA)
 
 
+#: the patch-size picture's colour range: these percentiles of the map, so that a few
+#: outlying lenses (one wrong match) do not squeeze every other lens into a few colours
+PICTURE_PERCENTILES = (1.0, 99.0)
+
+
+def colour_range(patch: np.ndarray) -> tuple[float, float]:
+    """The patch-size picture's colour range: :data:`PICTURE_PERCENTILES` of ``patch``
+    (lenses beyond it take the end colours; the bar marks the ends ``<`` and ``>``)."""
+    lo, hi = np.percentile(patch, PICTURE_PERCENTILES)
+    return float(lo), float(hi)
+
+
 def patch_size_picture(layout: ViewLayout, patch: np.ndarray, confident: np.ndarray
                        ) -> np.ndarray:
     """The patch-size map at tile resolution (viridis, each lens its tile: the output
     pixels nearest its tile centre, a hexagon; lenses filled from neighbours drawn darker)
-    with a colour bar; uint8 RGB."""
+    with a colour bar over :func:`colour_range`; uint8 RGB."""
     from plenocal.viewgeom import nearest_slots  # noqa: PLC0415
 
     idx = np.empty((layout.height, layout.width), np.int32)
     for y in range(0, layout.height, PLAN_ROWS):  # in bands: a few MB on any sensor
         rows = slice(y, min(y + PLAN_ROWS, layout.height))
         idx[rows] = nearest_slots(layout, keep=1, rows=rows)[0][0]
-    lo, hi = float(np.min(patch)), float(np.max(patch))
+    lo, hi = colour_range(patch)
     span = max(hi - lo, 1e-6)
     level = np.clip(np.rint((patch - lo) / span * 255), 0, 255).astype(np.uint8)
     lut = cv2.applyColorMap(np.arange(256, dtype=np.uint8)[:, None], cv2.COLORMAP_VIRIDIS)[:, 0]
@@ -614,9 +626,10 @@ def patch_size_picture(layout: ViewLayout, patch: np.ndarray, confident: np.ndar
     top, bottom = 20, max(h - 20, 21)
     ramp = np.linspace(255, 0, bottom - top).astype(np.uint8)
     panel[top:bottom, pad:pad + bar_w] = lut[ramp][:, None, ::-1]
-    for frac in (0.0, 0.5, 1.0):
+    below, above = bool(np.any(patch < lo)), bool(np.any(patch > hi))
+    for frac, mark in ((0.0, "<" if below else ""), (0.5, ""), (1.0, ">" if above else "")):
         y = int(round(bottom - 1 - frac * (bottom - top - 1)))
-        _label(panel, f"{lo + frac * span:.2f}", (pad + bar_w + 4, y + 4))
+        _label(panel, f"{mark}{lo + frac * span:.2f}", (pad + bar_w + 4, y + 4))
     _label(panel, "P [px]", (pad, 14))
     return np.ascontiguousarray(np.concatenate([img, panel], axis=1))
 
