@@ -52,12 +52,20 @@ def edge_over_faint_black(p_true: float, p_wrong: float, amplitude: float):
     img = np.where(black[..., None], lenslet_from_patch_size(grid, p_wrong, faint),
                    lenslet_from_patch_size(grid, p_true, top))
     _, centre, dist = _owner(grid)
-    block = dist < calib.safe_diameter / 7  # the centre block's reach
-    share = np.full(len(grid), np.nan)
-    for i in np.flatnonzero(grid.inside()):
-        own = block & (np.abs(centre - grid.centres[i]).max(axis=-1) < 0.5)
-        share[i] = black[own].mean()
-    return grid, img, (share > 0.25) & (share < 0.75)
+    # each pixel's lens: its owner's lattice index looked up among the grid's lenses
+    ij = np.rint((centre - grid.origin) @ np.linalg.inv(grid.A).T).astype(np.int64)
+    lo = grid.ij.min(axis=0)
+    table = np.full(tuple(grid.ij.max(axis=0) - lo + 1), -1, np.int64)
+    table[tuple((grid.ij - lo).T)] = np.arange(len(grid))
+    local = ij - lo
+    known = np.all((local >= 0) & (local < table.shape), axis=-1)
+    lens = np.full(known.shape, -1, np.int64)
+    lens[known] = table[tuple(local[known].T)]
+    block = (dist < calib.safe_diameter / 7) & (lens >= 0)  # the centre block's reach
+    count = np.bincount(lens[block], minlength=len(grid))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = np.bincount(lens[block], weights=black[block], minlength=len(grid)) / count
+    return grid, img, grid.inside() & (share > 0.25) & (share < 0.75)
 
 
 def test_flat_pairs_do_not_outvote_the_edge():

@@ -302,6 +302,12 @@ RING2 = np.array([(1, 1), (-1, 2), (-2, 1), (-1, -1), (1, -2), (2, -1)], dtype=n
 FLAT_PAIR_WEIGHT = 1e-3
 
 
+def texture_share(std: np.ndarray, texture_scale: float) -> np.ndarray:
+    """How textured a block is, in [0, 1]: its grey-level standard deviation ``std`` over
+    ``texture_scale``, saturating at 1 (the confidence's texture factor, and Eq. M1's)."""
+    return np.clip(std / texture_scale, 0, 1)
+
+
 def pair_texture(std: np.ndarray, texture_scale: float | None) -> np.ndarray:
     """Eq. M1: a block's weight in the pairs it belongs to, ``min(1, s / s0) + eps`` for
     its grey-level standard deviation ``s`` (0..1 grey, after the vignetting is divided
@@ -316,7 +322,7 @@ def pair_texture(std: np.ndarray, texture_scale: float | None) -> np.ndarray:
     BENCHMARKS.md, "Pairs that see nothing"). None: 1 for every block."""
     if texture_scale is None:
         return np.ones_like(std)
-    return np.minimum(std / texture_scale, 1.0) + FLAT_PAIR_WEIGHT
+    return texture_share(std, texture_scale) + FLAT_PAIR_WEIGHT
 
 
 def pair_weights(texture: np.ndarray) -> np.ndarray:
@@ -578,7 +584,7 @@ def estimate_patch_size(image: np.ndarray, grid: MicrolensGrid,
                                           if settings.pair_weights else None)
     # lenses cut by the sensor's edge match blocks partly off the image: they lend their
     # scores to no neighbour
-    tex = np.clip(texture / settings.texture_scale, 0, 1) * grid.inside() + 1e-3
+    tex = texture_share(texture, settings.texture_scale) * grid.inside() + 1e-3
     scores = aggregate_scores(scores, tex, grid.neighbours, settings.aggregate)
 
     if settings.search_range not in ("type", "union"):
@@ -615,7 +621,7 @@ def estimate_patch_size(image: np.ndarray, grid: MicrolensGrid,
     distinct = np.where(np.isfinite(second), s_best - second, 0.5)
     conf = (np.clip(np.nan_to_num(s_best, neginf=0.0), 0, 1)
             * np.clip(distinct / 0.1, 0, 1)
-            * np.clip(texture / settings.texture_scale, 0, 1))
+            * texture_share(texture, settings.texture_scale))
     # a best match on the edge of the lens type's range or of the whole search is the
     # range cutting off a better match, or (smallest size) the micro images' own structure
     # matching where the scene has nothing to match: not trusted, the lens is filled
