@@ -43,6 +43,24 @@ def test_the_affine_map_of_a_camera_turned_about_its_axis_is_the_turn():
     assert np.allclose(A[0], _rz(30.0)[:2, :2], atol=1e-9)
 
 
+def test_the_patch_offsets_are_the_affine_map_applied_to_the_grid():
+    # by hand: a turn by 90 deg and a halving, on the offsets (1, 0) and (0, 2)
+    A = np.array([[[0.0, -1.0], [1.0, 0.0]], [[0.5, 0.0], [0.0, 0.5]]])
+    grid = np.array([[1.0, 0.0], [0.0, 2.0]])
+    x, y = ta.patch_offsets(A, grid)
+    assert x.dtype == y.dtype == np.float32
+    assert np.array_equal(x, [[0.0, -2.0], [0.5, 0.0]])
+    assert np.array_equal(y, [[1.0, 0.0], [0.0, 1.0]])
+    # the same bits as the einsum it replaced (the aligned keypoints must not move)
+    rng = np.random.default_rng(3)
+    A = rng.standard_normal((500, 2, 2)) * rng.choice([1e-3, 1.0, 1e3], size=(500, 2, 2))
+    grid, _ = ta.patch_grid(5)
+    x, y = ta.patch_offsets(A, grid)
+    ref = np.einsum("nij,kj->nki", A, grid)
+    assert np.array_equal(x, ref[..., 0].astype(np.float32))
+    assert np.array_equal(y, ref[..., 1].astype(np.float32))
+
+
 def test_the_reference_is_the_observation_nearest_the_tracks_middle():
     centres = np.array([[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0], [3.0, 0, 0], [4.1, 0, 0]])
     assert ta.reference_index(centres) == 2

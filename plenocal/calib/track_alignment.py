@@ -164,6 +164,24 @@ def templates(image: np.ndarray, uv: np.ndarray, grid: np.ndarray, w: np.ndarray
     return out[0], out[1], out[2]
 
 
+def patch_offsets(affine: np.ndarray, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The patch's offsets seen through each observation's affine map, ``A_n g_k``: x and
+    y, each (n, k) float32, for ``affine`` (n, 2, 2) and ``grid`` (k, 2) (:func:`patch_grid`).
+
+    Each entry is ``A_i0 g_0 + A_i1 g_1`` in float64, rounded once to float32: the bits
+    ``np.einsum("nij,kj->nki", affine, grid)`` gives, whose generic loop took 0.8 s per
+    65,536 observations of 121 pixels (9 s of a default capture's 20 s alignment) against
+    0.1 s for the two products here."""
+    a = np.asarray(affine, dtype=np.float64)
+    g = np.asarray(grid, dtype=np.float64)
+    out = []
+    for i in (0, 1):
+        v = np.multiply.outer(np.ascontiguousarray(a[:, i, 0]), g[:, 0])
+        v += np.multiply.outer(np.ascontiguousarray(a[:, i, 1]), g[:, 1])
+        out.append(v.astype(np.float32))
+    return out[0], out[1]
+
+
 def align_translations(image: np.ndarray, uv: np.ndarray, affine: np.ndarray,
                        template: tuple[np.ndarray, np.ndarray, np.ndarray],
                        grid: np.ndarray, w: np.ndarray, iterations: int
@@ -191,9 +209,7 @@ def align_translations(image: np.ndarray, uv: np.ndarray, affine: np.ndarray,
     t_norm = np.sqrt(np.einsum("nk,nk->n", t * wk, t).astype(np.float64))
     gx_t = np.einsum("nk,nk->n", txw, t).astype(np.float64)
     gy_t = np.einsum("nk,nk->n", tyw, t).astype(np.float64)
-    offsets = np.einsum("nij,kj->nki", affine, grid)
-    off_x = np.ascontiguousarray(offsets[..., 0], np.float32)
-    off_y = np.ascontiguousarray(offsets[..., 1], np.float32)
+    off_x, off_y = patch_offsets(affine, grid)
     u = np.array(uv, dtype=np.float64)
     h, wd = image.shape
 
