@@ -335,8 +335,8 @@ def pair_weights(texture: np.ndarray) -> np.ndarray:
     as without the weights); 0 for a pair never scored."""
     weight = np.where(np.isfinite(texture), texture, np.inf).min(axis=2)
     weight = np.where(np.isfinite(weight), weight, 0.0).astype(np.float32)
-    top = weight.max(axis=1, keepdims=True)
-    return np.where(top > 0, weight / np.where(top > 0, top, 1.0), 0.0).astype(np.float32)
+    top = weight.max(axis=1, keepdims=True)  # 0 only where every weight of the lens is 0
+    return weight / np.where(top > 0, top, np.float32(1.0))
 
 
 def _ring_neighbours(grid: MicrolensGrid, steps: np.ndarray) -> np.ndarray:
