@@ -23,12 +23,11 @@ rule refine:
     priority: PRIORITY["calibration"]
     conda:
         "../envs/plenocal.yaml"
-    # sfm.num_threads (COLMAP's steps; the observations' alignment, refine.align, on all of
-    # them). Not two of its own: with -j2, a two-thread job waits until both cores are free
-    # at once, and the verification's one-thread jobs kept one busy - the full run's refine
-    # started 118 s after its inputs were ready (BENCHMARKS.md, "Every point in the
-    # refinement; the refine job's threads; the alignment's speed")
-    threads: lambda wc: stage_config("sfm")["num_threads"]
+    # refine.num_threads (1): the same bytes run after run for any number (BENCHMARKS.md, "The
+    # refinement's adjustments by sparse Cholesky"). With -j2, a two-thread job waits until
+    # both cores are free at once, and the verification's one-thread jobs keep one busy
+    # (BENCHMARKS.md, "Every point in the refinement; the refine job's threads")
+    threads: lambda wc: stage_config("refine")["num_threads"]
     resources:
         mem_mb=3000,
         runtime=30,

@@ -22,10 +22,9 @@ sm = snakemake
 
 eq6 = read_cameras(sm.input.eq6)
 rig = read_rig(sm.input.rig)
-# COLMAP's steps on sfm.num_threads (Ceres on two threads gives other bytes: BENCHMARKS.md);
-# the observations' alignment on all of the job's threads (the same bytes on any number)
+# every step on the job's threads (refine.num_threads: the same bytes run after run)
 settings = RefineSettings.from_config(sm.params.refine, seed=int(sm.params.sfm["seed"]),
-                                      num_threads=int(sm.params.sfm["num_threads"]))
+                                      num_threads=int(sm.threads))
 if settings.enabled:
     # COLMAP's working files beside the output, removed at the end (and a killed job's by
     # the next run: make_temp_dir)

@@ -243,3 +243,24 @@ def test_observations_aligned_by_their_patches_keep_the_refinement_on_the_truth(
     with pytest.raises(ValueError, match="no image file"):
         rf.refine_calibration(eq6, rig, db, settings(), hold_shot="x00_y00",
                               images=dict(list(images.items())[1:]))
+
+
+def test_the_refined_cameras_are_the_same_bytes_on_one_and_two_threads(capture):
+    """The adjustments' normal equations by sparse Cholesky (refine.LINEAR_SOLVER): Ceres'
+    threads do not change the cameras' bytes, and two threads give the same bytes twice.
+    Ceres' Schur complement, COLMAP's choice, sums on several threads in the order they
+    finish and gave other bytes run to run. (The OpenMP threads pycolmap's CHOLMOD starts
+    with are the process's, the same for the three runs.)"""
+    views, rig, db = capture
+    eq6 = eq6_of(views, rig)
+    runs = [rf.refine_calibration(eq6, rig, db, settings(num_threads=n), hold_shot="x00_y00")
+            for n in (1, 2, 2)]
+    for out, n in zip(runs, (1, 2, 2), strict=True):
+        assert {p["linear_solver"] for p in out.report["passes"].values()} == {
+            rf.LINEAR_SOLVER}
+        assert {p["threads"] for p in out.report["passes"].values()} == {n}
+    for out in runs[1:]:
+        assert sorted(out.cameras) == sorted(runs[0].cameras)
+        for key, cam in runs[0].cameras.items():
+            assert cam.K.tobytes() == out.cameras[key].K.tobytes(), key
+            assert cam.cam_to_world.tobytes() == out.cameras[key].cam_to_world.tobytes(), key

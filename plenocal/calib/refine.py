@@ -118,6 +118,20 @@ AUTO_LOSS_SCALE = 0.8
 #: default of ``max_iterations`` chosen with it). A step that raises the cost is rejected and
 #: the region shrinks, as at any radius.
 INITIAL_TRUST_REGION = 1e9
+#: Ceres' linear solver in the adjustments. COLMAP picks the Schur complement for problems
+#: of this size (SPARSE_SCHUR), whose elimination sums each point's share of the reduced
+#: system on several threads in whatever order they finish (ceres-solver issues 577 and
+#: 664): on two threads the refined cameras came out other bytes run to run, so the step
+#: ran on one. The normal equations solved by sparse Cholesky (CHOLMOD) reach the same
+#: minimum (over the twenty kept captures the focal lengths equal to 1e-9, the poses to
+#: 1e-10) in less time (default-s1's two passes 36.4 s against 44.2 s on one thread, 24.3 s
+#: on two), and Ceres' threads do not change their bytes (each residual block's Jacobian is
+#: evaluated into a place of its own). The OpenMP threads that pycolmap's CHOLMOD starts
+#: with (``OMP_NUM_THREADS`` when the process starts; Snakemake sets it to the job's
+#: threads) change the last digits (wide-s1's focal length 2110.668611612627 px with one,
+#: 2110.6686116311516 px with two), the same run after run (BENCHMARKS.md, "The
+#: refinement's adjustments by sparse Cholesky").
+LINEAR_SOLVER = "SPARSE_NORMAL_CHOLESKY"
 _REFINE = stage_defaults("refine")  # the defaults: config.schema.yaml's refine block
 _SFM = stage_defaults("sfm")  # the seed and threads of COLMAP's steps
 
@@ -394,14 +408,21 @@ def bundle_adjust(rec, model: RigModel, settings: RefineSettings, *, refine_foca
     s = o.ceres.solver_options
     s.max_num_iterations = int(settings.max_iterations)
     s.initial_trust_region_radius = INITIAL_TRUST_REGION
+    # the normal equations by sparse Cholesky, not COLMAP's choice (the Schur complement):
+    # the same bytes run after run on any number of Ceres threads, and faster (LINEAR_SOLVER)
+    o.ceres.auto_select_solver_type = False
+    s.linear_solver_type = getattr(type(s.linear_solver_type), LINEAR_SOLVER)
     s.num_threads = int(settings.num_threads)
+    o.ceres.min_num_residuals_for_cpu_multi_threading = 0  # the threads given, always
     t0 = time.perf_counter()
     summary = pycolmap.create_default_bundle_adjuster(o, cfg, rec).solve().todict()
     ceres = summary["ceres_summary"]
     out = {"termination": str(summary["termination_type"]).rsplit(".", 1)[-1],
            "iterations": int(ceres["num_successful_steps"] + ceres["num_unsuccessful_steps"]),
            "initial_cost": float(ceres["initial_cost"]), "final_cost": float(ceres["final_cost"]),
-           "residuals": int(summary["num_residuals"])}
+           "residuals": int(summary["num_residuals"]),
+           "linear_solver": str(ceres["linear_solver_type_used"]).rsplit(".", 1)[-1],
+           "threads": int(ceres["num_threads_used"])}
     seconds = time.perf_counter() - t0
     log.info("bundle adjustment (focal %s, principal points %s, rig %s): %s after %d "
              "iterations, cost %.6g -> %.6g, %.1f s", "refined" if refine_focal else "held",
