@@ -26,7 +26,8 @@ rule refine:
     # refine.num_threads (1): the same bytes run after run for any number (BENCHMARKS.md, "The
     # refinement's adjustments by sparse Cholesky"). With -j2, a two-thread job waits until
     # both cores are free at once, and the verification's one-thread jobs keep one busy
-    # (BENCHMARKS.md, "Every point in the refinement; the refine job's threads")
+    # (BENCHMARKS.md, "Every point in the refinement; the refine job's threads; the
+    # alignment's speed")
     threads: lambda wc: stage_config("refine")["num_threads"]
     resources:
         mem_mb=3000,

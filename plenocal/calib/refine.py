@@ -123,10 +123,11 @@ INITIAL_TRUST_REGION = 1e9
 #: system on several threads in whatever order they finish (ceres-solver issues 577 and
 #: 664): on two threads the refined cameras came out other bytes run to run, so the step
 #: ran on one. The normal equations solved by sparse Cholesky (CHOLMOD) reach the same
-#: minimum (over the twenty kept captures the focal lengths equal to 1e-9, the poses to
-#: 1e-10) in less time (default-s1's two passes 36.4 s against 44.2 s on one thread, 24.3 s
-#: on two), and Ceres' threads do not change their bytes (each residual block's Jacobian is
-#: evaluated into a place of its own). The OpenMP threads that pycolmap's CHOLMOD starts
+#: minimum (over the twenty kept captures the focal lengths equal to 1e-9 of themselves,
+#: the poses to 1e-10) in a little less time (default-s2's two passes 42.8 and 38.4 s
+#: against 45.3 and 45.8 s on one thread, alternating; default-s1's 24.3 s on two), and
+#: Ceres' threads do not change their bytes (each residual block's Jacobian is evaluated
+#: into a place of its own). The OpenMP threads that pycolmap's CHOLMOD starts
 #: with (``OMP_NUM_THREADS`` when the process starts; Snakemake sets it to the job's
 #: threads) change the last digits (wide-s1's focal length 2110.668611612627 px with one,
 #: 2110.6686116311516 px with two), the same run after run (BENCHMARKS.md, "The
