@@ -134,7 +134,7 @@ INITIAL_TRUST_REGION = 1e9
 #: refinement's adjustments by sparse Cholesky").
 LINEAR_SOLVER = "SPARSE_NORMAL_CHOLESKY"
 _REFINE = stage_defaults("refine")  # the defaults: config.schema.yaml's refine block
-_SFM = stage_defaults("sfm")  # the seed and threads of COLMAP's steps
+_SFM = stage_defaults("sfm")  # the seed of COLMAP's steps
 
 
 @dataclass(frozen=True)
@@ -156,7 +156,7 @@ class RefineSettings:
     min_gain_pct: float = _REFINE["min_gain_pct"]
     align: AlignSettings = AlignSettings()
     seed: int = _SFM["seed"]
-    num_threads: int = _SFM["num_threads"]
+    num_threads: int = _REFINE["num_threads"]
 
     def __post_init__(self) -> None:
         for key, value, allowed in (("focal", self.focal, FOCAL_MODES),
@@ -182,12 +182,16 @@ class RefineSettings:
 
     @classmethod
     def from_config(cls, cfg: Mapping, seed: int = _SFM["seed"],
-                    num_threads: int = _SFM["num_threads"]) -> RefineSettings:
-        keys = {f for f in cls.__dataclass_fields__ if f not in ("seed", "num_threads")}
+                    num_threads: int | None = None) -> RefineSettings:
+        """The ``refine:`` block ``cfg``; ``seed`` is sfm.seed; ``num_threads`` (a job's
+        threads) overrides the block's ``num_threads``."""
+        keys = {f for f in cls.__dataclass_fields__ if f != "seed"}
         kw = {k: cfg[k] for k in keys if k in cfg}
         if isinstance(kw.get("align"), Mapping):
             kw["align"] = settings_from(AlignSettings, kw["align"])
-        return cls(**kw, seed=seed, num_threads=num_threads)
+        if num_threads is not None:
+            kw["num_threads"] = num_threads
+        return cls(**kw, seed=seed)
 
 
 # --- the COLMAP boundary -------------------------------------------------------------
