@@ -252,8 +252,8 @@ def test_safe_diameter_is_measured_on_the_frame(name, low, high):
 def boys2_views():
     """Boys2's central and first corner view as ``plenocal convert`` makes them (defaults),
     and the corner view at the paper's spacing with the earlier wide blend (4 and 5 lenses,
-    a 1.5 and 2 tile fade; 1.75 here, the widest the candidates hold): what the issue found
-    the lattice in; TLCT's views beside."""
+    a 1.5 and 2 tile fade; 1.75 here, the widest the candidates hold; each lens weighed by
+    its own trust): what the issue found the lattice in; TLCT's views beside."""
     from plenocal.cli import validate_convert_block  # noqa: PLC0415
     from plenocal.convert import convert_files  # noqa: PLC0415
 
@@ -264,7 +264,7 @@ def boys2_views():
     before = convert_files(frame, xml, None, 5, ConvertSettings.from_config(
         validate_convert_block({"safe_diameter": "file", "blend": {
             "wide_slots": 4, "wide_fade_radius": 1.5, "wider_slots": 5,
-            "wider_fade_radius": 1.75}})))
+            "wider_fade_radius": 1.75, "wide_trust_passes": 0}})))
     ref = {k: cv2.imread(str(REAL / "reference" / "Boys2" / f"{k}.png"))[..., ::-1]
            for k in ("centre", "v000")}
     return {"centre": (now.view(2, 2), now.layout.basis), "corner": (now.view(0, 0),

@@ -49,7 +49,11 @@ over itself and its six neighbours (edge-preserving; removes isolated mismatches
 Reliability: :func:`reliability` weighs each lens in the blend, 1 where its match was
 confident and the map kept it, :data:`UNRELIABLE_WEIGHT` where the size was filled or
 the smoothing overrode the match: an estimate nobody measured must not win a blend
-against a measured neighbour with a tile many times too large.
+against a measured neighbour with a tile many times too large. In the views whose patches
+reach past the micro image, the blend takes each lens's weight averaged over the lattice
+(:func:`lattice_mean`, ``convert.blend.wide_trust_passes``): there a measured lens among
+filled ones (ten times their weight) took the blend over its radial weight's whole disc,
+and that disc's rim drew arcs (HandTools_f150's corner views, issue 33).
 
 Focus (multi-focus MLAs): :func:`focus_weights` gives each lens a weight for the
 blend, 1 where its type's depth range covers the virtual depth ``D / P`` it found,
@@ -258,6 +262,20 @@ def reliability(raw: np.ndarray, patch: np.ndarray, confident: np.ndarray,
     :data:`UNRELIABLE_WEIGHT` (float32)."""
     kept = confident & np.isfinite(raw) & (np.abs(patch - np.nan_to_num(raw)) <= 2 * step_px)
     return np.where(kept, 1.0, UNRELIABLE_WEIGHT).astype(np.float32)
+
+
+def lattice_mean(values: np.ndarray, neighbours: np.ndarray, passes: int) -> np.ndarray:
+    """``passes`` rounds of the mean of each lens's value (``values`` (n,)) and its
+    neighbours' (``neighbours`` (n, 6), -1 where a lens has none: the mean of those it
+    has), float32. One pass bounds the ratio of two adjacent lenses' weights of
+    :func:`reliability` from 10 to about 5, two passes to about 2.6."""
+    v = np.asarray(values, dtype=np.float32)
+    nb = np.asarray(neighbours)
+    have = nb >= 0
+    count = np.float32(1.0) + have.sum(axis=1, dtype=np.float32)
+    for _ in range(passes):
+        v = (v + np.where(have, v[np.maximum(nb, 0)], np.float32(0.0)).sum(axis=1)) / count
+    return v.astype(np.float32)
 
 
 def out_of_range(result: PatchSizeResult) -> np.ndarray:
