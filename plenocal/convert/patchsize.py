@@ -267,8 +267,8 @@ def reliability(raw: np.ndarray, patch: np.ndarray, confident: np.ndarray,
 def lattice_mean(values: np.ndarray, neighbours: np.ndarray, passes: int) -> np.ndarray:
     """``passes`` rounds of the mean of each lens's value (``values`` (n,)) and its
     neighbours' (``neighbours`` (n, 6), -1 where a lens has none: the mean of those it
-    has), float32. One pass bounds the ratio of two adjacent lenses' weights of
-    :func:`reliability` from 10 to about 5, two passes to about 2.6."""
+    has), float32. On the real frames one pass brought the largest ratio of two adjacent
+    lenses' weights of :func:`reliability` from 10 to 5.5, two passes to 2.6."""
     v = np.asarray(values, dtype=np.float32)
     nb = np.asarray(neighbours)
     have = nb >= 0

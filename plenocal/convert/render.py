@@ -216,13 +216,18 @@ def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
     if len(focus_per_blend) != len(blends):
         raise ValueError(f"need one focus array per blend ({len(blends)}), "
                          f"got {len(focus_per_blend)}")
-    taken: dict[int, np.ndarray] = {}  # each distinct array's weights per slot, once
+    # each distinct array's weights per slot, once, for as many slots as its blends use
+    slots_of: dict[int, int] = {}
+    for blend, a in zip(blends, focus_per_blend, strict=True):
+        if a is not None:
+            slots_of[id(a)] = max(slots_of.get(id(a), 0), min(blend.slots, K))
+    taken: dict[int, np.ndarray] = {}
 
     def focus_slots(a: np.ndarray | None) -> np.ndarray | None:
         if a is None:
             return None
         if id(a) not in taken:
-            taken[id(a)] = np.asarray(a, dtype=f).take(lens)
+            taken[id(a)] = np.asarray(a, dtype=f).take(lens[:slots_of[id(a)]])
         return taken[id(a)]
     gain_base = None
     if profile is not None and np.ndim(profile) == 2 and len(profile) > 1:
