@@ -317,3 +317,49 @@ def test_origami_central_view_worst_textured_tile_against_tlct():
     found = local_compare(shot.view(2, 2), ref, shot.layout.basis)
     assert found["textured_tiles"] >= 20
     assert found["worst_tile_ssim"] >= 0.85, found
+
+
+def _composition_change(shot, weights: list, r: int, c: int) -> tuple[float, float]:
+    """How sharply view (r, c)'s blend switches between lenses: for each pair of
+    horizontally adjacent pixels, the sum over lenses of the change in each lens's
+    normalised weight (a lens that leaves the blend counts its whole weight); the 99th
+    percentile over the pixels whose support is under 0.1 (every lens samples near its
+    rim), and the largest anywhere. An arc at a lens's rim is such a switch."""
+    from plenocal.convert.render import make_plans, view_weights  # noqa: PLC0415
+    from plenocal.viewgeom import candidates_within, nearest_slots  # noqa: PLC0415
+
+    blends = shot._blends
+    plan = make_plans(shot.layout, shot.used_patch, shot.safe.diameter_px, blends, weights,
+                      shot.profile, shot._profile_row)[shot._blend_of(r, c)]
+    ids, _ = nearest_slots(shot.layout, keep=max(b.slots for b in blends),
+                           k=candidates_within(max(b.fade_radius for b in blends)))
+    support = np.empty(plan.map_x.shape[1:], np.float32)
+    w = view_weights(plan, r, c, support=support)
+    ids = ids[:w.shape[0]]
+    a, b = ids[:, :, :-1], ids[:, :, 1:]
+    wa, wb = w[:, :, :-1], w[:, :, 1:]
+    same = (a[:, None] == b[None, :]) & (a[:, None] >= 0)  # slot i at u is slot j at u + 1
+    change = np.abs(wa - (same * wb[None]).sum(axis=1)).sum(axis=0)
+    change += (wb * ~same.any(axis=0)).sum(axis=0)  # lenses that join the blend at u + 1
+    low = support[:, :-1] < 0.1
+    return float(np.percentile(change[low], 99)), float(change.max())
+
+
+def test_corner_views_blend_does_not_switch_to_one_measured_lens():
+    """Issue 33's arcs (HandTools_f150's corner view along the sleeve): a lens whose size
+    was measured weighs ten times a filled one, and where every lens samples near its rim
+    it took the blend over its whole disc, whose rim showed. The wide blends take the
+    trust averaged over the lattice: the blend's composition changes from pixel to pixel
+    by at most two thirds of what it did with each lens's own trust."""
+    from plenocal.convert import convert_files  # noqa: PLC0415
+
+    assert REAL is not None
+    shot = convert_files(REAL / "frames" / "HandTools_f150.png",
+                         REAL / "frames" / "HandTools.xml", None, 5)
+    r, c = 4, 4
+    assert shot._blend_of(r, c) == 2  # the wider blend
+    own = [shot._lens_weights[0]] * len(shot._blends)
+    before = _composition_change(shot, own, r, c)
+    now = _composition_change(shot, shot._lens_weights, r, c)
+    assert now[0] < 0.67 * before[0], (before, now)
+    assert now[1] < 0.67 * before[1], (before, now)
