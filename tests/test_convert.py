@@ -614,41 +614,30 @@ def test_views_reaching_the_rim_take_the_wide_blend():
     assert shot.plan_for(2, 2) is shot.plan and {0, 1} <= reaches
 
 
-def test_the_wide_blends_weigh_the_lenses_by_their_trust_averaged_over_the_lattice():
-    """The tight blend weighs each lens by its own trust (focus x reliability); the wide
-    blends by the trust averaged over the lattice (convert.blend.wide_trust_passes): the
-    shot's per-blend lens weights, and make_plans with one focus array per blend giving
-    each blend's plan exactly as a plan made with that array alone."""
+def test_the_blend_weighs_the_lenses_by_their_trust_averaged_over_the_lattice():
+    """Every blend weighs each lens by its focus times its trust (reliability) averaged
+    over the lattice (convert.blend.trust_passes, 2), the wide ones too; 0 passes give
+    each lens its own trust."""
     from plenocal.convert.patchsize import lattice_mean, reliability
-    from plenocal.convert.render import RenderSettings, make_plans
+    from plenocal.convert.render import RenderSettings
 
-    assert RenderSettings().trust_passes == 0
-    assert RenderSettings().wide().trust_passes == RenderSettings().wide_trust_passes == 2
-    assert RenderSettings().wider().trust_passes == 2
+    s = RenderSettings()
+    assert s.trust_passes == s.wide().trust_passes == s.wider().trust_passes == 2
     opt = small_optics(480, 300)
     calib = calib_for_optics(opt)
     grid = MicrolensGrid(calib, 480, 300)
-    shot = ShotConversion(lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 4)),
-                          calib, 5, FIXED_TILE)
+    img = lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 4))
+    shot = ShotConversion(img, calib, 5, FIXED_TILE)
     p = shot.patch
     trust = reliability(p.raw, p.patch, p.confident, shot.settings.patch.step_px)
     assert 0 < (trust < 1).sum() < len(trust)  # a mix: the averaging changes something
     used = shot.layout.lens_index
-    assert len(shot._blends) == 3
-    for blend, weights in zip(shot._blends, shot._lens_weights, strict=True):
-        expect = (p.focus * lattice_mean(trust, grid.neighbours, blend.trust_passes))[used]
-        assert np.array_equal(weights, expect)
-    assert not np.array_equal(shot._lens_weights[0], shot._lens_weights[2])
-    blends = shot._blends
-    together = make_plans(shot.layout, shot.used_patch, calib.safe_diameter, blends,
-                          shot._lens_weights)
-    for k, blend in enumerate(blends):
-        alone, = make_plans(shot.layout, shot.used_patch, calib.safe_diameter, [blend],
-                            shot._lens_weights[k])
-        assert np.array_equal(together[k].tile_weight, alone.tile_weight)
-    with pytest.raises(ValueError, match="one focus array per blend"):
-        make_plans(shot.layout, shot.used_patch, calib.safe_diameter, blends,
-                   shot._lens_weights[:2])
+    expect = (p.focus * lattice_mean(trust, grid.neighbours, 2))[used]
+    assert np.array_equal(shot._lens_weight, expect)
+    own = ShotConversion(img, calib, 5, replace(FIXED_TILE, render=replace(
+        FIXED_TILE.render, trust_passes=0)))
+    assert np.array_equal(own._lens_weight, (p.focus * trust)[used])
+    assert not np.array_equal(own._lens_weight, shot._lens_weight)
 
 
 def test_each_slot_is_devignetted_with_its_lens_types_profile():

@@ -264,7 +264,7 @@ def boys2_views():
     before = convert_files(frame, xml, None, 5, ConvertSettings.from_config(
         validate_convert_block({"safe_diameter": "file", "blend": {
             "wide_slots": 4, "wide_fade_radius": 1.5, "wider_slots": 5,
-            "wider_fade_radius": 1.75, "wide_trust_passes": 0}})))
+            "wider_fade_radius": 1.75, "trust_passes": 0}})))
     ref = {k: cv2.imread(str(REAL / "reference" / "Boys2" / f"{k}.png"))[..., ::-1]
            for k in ("centre", "v000")}
     return {"centre": (now.view(2, 2), now.layout.basis), "corner": (now.view(0, 0),
@@ -319,7 +319,7 @@ def test_origami_central_view_worst_textured_tile_against_tlct():
     assert found["worst_tile_ssim"] >= 0.85, found
 
 
-def _composition_change(shot, weights: list, r: int, c: int) -> tuple[float, float]:
+def _composition_change(shot, weights: np.ndarray, r: int, c: int) -> tuple[float, float]:
     """How sharply view (r, c)'s blend switches between lenses: for each pair of
     horizontally adjacent pixels, the sum over lenses of the change in each lens's
     normalised weight (a lens that leaves the blend counts its whole weight); the 99th
@@ -348,18 +348,21 @@ def _composition_change(shot, weights: list, r: int, c: int) -> tuple[float, flo
 def test_corner_views_blend_does_not_switch_to_one_measured_lens():
     """Issue 33's arcs (HandTools_f150's corner view along the sleeve): a lens whose size
     was measured weighs ten times a filled one, and where every lens samples near its rim
-    it took the blend over its whole disc, whose rim showed. The wide blends take the
-    trust averaged over the lattice: the blend's composition changes from pixel to pixel
-    by at most two thirds of what it did with each lens's own trust."""
+    it took the blend over its whole disc, whose rim showed. The blend takes the trust
+    averaged over the lattice: its composition changes from pixel to pixel by at most two
+    thirds of what it did with each lens's own trust."""
     from plenocal.convert import convert_files  # noqa: PLC0415
+    from plenocal.convert.patchsize import reliability  # noqa: PLC0415
 
     assert REAL is not None
     shot = convert_files(REAL / "frames" / "HandTools_f150.png",
                          REAL / "frames" / "HandTools.xml", None, 5)
     r, c = 4, 4
     assert shot._blend_of(r, c) == 2  # the wider blend
-    own = [shot._lens_weights[0]] * len(shot._blends)
+    p = shot.patch
+    own = (p.focus * reliability(p.raw, p.patch, p.confident, shot.settings.patch.step_px)
+           )[shot.layout.lens_index]
     before = _composition_change(shot, own, r, c)
-    now = _composition_change(shot, shot._lens_weights, r, c)
+    now = _composition_change(shot, shot._lens_weight, r, c)
     assert now[0] < 0.67 * before[0], (before, now)
     assert now[1] < 0.67 * before[1], (before, now)

@@ -49,11 +49,11 @@ over itself and its six neighbours (edge-preserving; removes isolated mismatches
 Reliability: :func:`reliability` weighs each lens in the blend, 1 where its match was
 confident and the map kept it, :data:`UNRELIABLE_WEIGHT` where the size was filled or
 the smoothing overrode the match: an estimate nobody measured must not win a blend
-against a measured neighbour with a tile many times too large. In the views whose patches
-reach past the micro image, the blend takes each lens's weight averaged over the lattice
-(:func:`lattice_mean`, ``convert.blend.wide_trust_passes``): there a measured lens among
-filled ones (ten times their weight) took the blend over its radial weight's whole disc,
-and that disc's rim drew arcs (HandTools_f150's corner views, issue 33).
+against a measured neighbour with a tile many times too large. The blend takes that
+weight averaged over the lattice (:func:`lattice_mean`, ``convert.blend.trust_passes``):
+with each lens's own, a measured lens among filled ones (ten times their weight) took the
+blend over its whole tile, and in the corner views, where every lens samples near its rim,
+over its radial weight's whole disc, whose rim drew arcs (issue 33).
 
 Focus (multi-focus MLAs): :func:`focus_weights` gives each lens a weight for the
 blend, 1 where its type's depth range covers the virtual depth ``D / P`` it found,

@@ -18,8 +18,8 @@ smooth: real microlenses blur and distort towards their rim; power 1 lowers the
 corner views' blend disagreement of the TSPC frames by 1-11 %, and on the simulator
 raises corner views by 0.1-1.6 dB for 0.03-0.05 dB less in the central views). Multi-focus MLAs also
 multiply by each lens's focus weight (:func:`plenocal.convert.patchsize.focus_weights`),
-and every lens by its trust (:func:`plenocal.convert.patchsize.reliability`; in the wide
-blends averaged over the lattice, ``wide_trust_passes``).
+and every lens by its trust (:func:`plenocal.convert.patchsize.reliability`, averaged over
+the lattice: ``trust_passes``).
 A tiny floor keeps the nearest lens when every candidate is at the rim; a pixel whose
 in-rim weight (:func:`pixel_support`) is that small is then taken from its supported
 neighbours (:mod:`plenocal.convert.holes`). Each sample is divided by the micro images'
@@ -82,10 +82,9 @@ class RenderSettings:
     wider_slots: int = _BLEND["wider_slots"]
     wider_fade_radius: float = _BLEND["wider_fade_radius"]
     wider_centre_power: float = _BLEND["wider_centre_power"]
-    # the lenses' blend trust averaged over the lattice this many passes (0: each its own;
-    # the tight blend's); the wide blends take wide_trust_passes
-    trust_passes: int = 0
-    wide_trust_passes: int = _BLEND["wide_trust_passes"]
+    # passes of the lattice mean over the lenses' trust (patchsize.lattice_mean); 0: each
+    # lens its own (a measured lens among filled ones then weighs ten times each)
+    trust_passes: int = _BLEND["trust_passes"]
     unreliable_blur: float = _BLEND["unreliable_blur"]  # tile units; 0: off
     prefilter: float = _BLEND["prefilter"]  # a of the frame's prefilter; 0: off
 
@@ -93,15 +92,14 @@ class RenderSettings:
         """The blend of the views whose patches reach past the micro image."""
         return replace(self, slots=max(self.slots, self.wide_slots),
                        fade_radius=max(self.fade_radius, self.wide_fade_radius),
-                       centre_power=max(self.centre_power, self.wide_centre_power),
-                       trust_passes=max(self.trust_passes, self.wide_trust_passes))
+                       centre_power=max(self.centre_power, self.wide_centre_power))
 
     def wider(self) -> RenderSettings:
         """The blend of the views whose patches' sides pass the micro image."""
         wide = self.wide()
         return replace(self, slots=max(wide.slots, self.wider_slots),
                        fade_radius=max(wide.fade_radius, self.wider_fade_radius),
-                       centre_power=self.wider_centre_power, trust_passes=wide.trust_passes)
+                       centre_power=self.wider_centre_power)
 
     def for_reach(self, reach: int) -> RenderSettings:
         """The blend of a view of :func:`rim_reach` ``reach``."""
@@ -169,8 +167,7 @@ def make_plan(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
 
 
 def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
-               blends: list[RenderSettings],
-               focus: np.ndarray | list[np.ndarray | None] | None = None,
+               blends: list[RenderSettings], focus: np.ndarray | None = None,
                profile: np.ndarray | None = None,
                profile_row: np.ndarray | None = None,
                rows: slice = slice(None)) -> list[RenderPlan]:
@@ -178,10 +175,8 @@ def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
     tiles and their sampling positions are computed once for the most slots, and a
     blend of fewer slots takes the first (nearest) of them (views of the arrays, no
     copy). ``rows``: the output rows to plan (a slice with step 1; all by default); a
-    band's plan holds the same numbers as those rows of the whole view's. ``focus``: as
-    in :func:`make_plan`, or a list of one such per blend (each blend's lens weights:
-    :class:`plenocal.convert.shot.ShotConversion` averages the trust over the lattice for
-    the wide blends). See :func:`make_plan` for the other arguments."""
+    band's plan holds the same numbers as those rows of the whole view's. See
+    :func:`make_plan` for the other arguments."""
     patch = np.asarray(patch, dtype=np.float64)
     if patch.shape != (len(layout.lens_index),):
         raise ValueError(f"need one patch size per used lens ({len(layout.lens_index)}), "
@@ -212,31 +207,14 @@ def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
         np.add(off_y[k], lcy.take(li), out=map_y[k])
         map_x[k][~have[k]] = -1e4
         map_y[k][~have[k]] = -1e4
-    focus_per_blend = focus if isinstance(focus, list) else [focus] * len(blends)
-    if len(focus_per_blend) != len(blends):
-        raise ValueError(f"need one focus array per blend ({len(blends)}), "
-                         f"got {len(focus_per_blend)}")
-    # each distinct array's weights per slot, once, for as many slots as its blends use
-    slots_of: dict[int, int] = {}
-    for blend, a in zip(blends, focus_per_blend, strict=True):
-        if a is not None:
-            slots_of[id(a)] = max(slots_of.get(id(a), 0), min(blend.slots, K))
-    taken: dict[int, np.ndarray] = {}
-
-    def focus_slots(a: np.ndarray | None) -> np.ndarray | None:
-        if a is None:
-            return None
-        if id(a) not in taken:
-            taken[id(a)] = np.asarray(a, dtype=f).take(lens[:slots_of[id(a)]])
-        return taken[id(a)]
+    focus_w = None if focus is None else np.asarray(focus, dtype=f).take(lens)
     gain_base = None
     if profile is not None and np.ndim(profile) == 2 and len(profile) > 1:
         if profile_row is None or np.shape(profile_row) != patch.shape:
             raise ValueError("a profile per lens type needs profile_row, one row per used lens")
         gain_base = np.asarray(profile_row, dtype=np.intp).take(lens) * RADIAL_LEVELS
     plans = []
-    for blend, blend_focus in zip(blends, focus_per_blend, strict=True):
-        focus_w = focus_slots(blend_focus)
+    for blend in blends:
         k = min(blend.slots, K)
         R = blend.fade_radius
         wt = 1.0 - dist2[:k] * f(1.0 / (R * R))

@@ -353,13 +353,10 @@ class ShotConversion:
         trust = reliability(self.patch.raw, self.patch.patch, self.patch.confident,
                             st.patch.step_px)
         self._blends = [st.render.for_reach(k) for k in reaches]
-        # each blend's lens weights: the wide blends average the trust over the lattice
-        # (patchsize.lattice_mean), so that no measured lens among filled ones takes a
-        # corner view's blend over its whole disc (arcs at its rim)
-        by_passes = {n: (self.patch.focus * lattice_mean(trust, self.grid.neighbours, n)
-                         )[self.layout.lens_index]
-                     for n in sorted({b.trust_passes for b in self._blends})}
-        self._lens_weights = [by_passes[b.trust_passes] for b in self._blends]
+        # the trust averaged over the lattice (patchsize.lattice_mean): a measured lens
+        # among filled ones no longer takes the blend over its whole tile or disc
+        self._lens_weight = (self.patch.focus * lattice_mean(
+            trust, self.grid.neighbours, st.render.trust_passes))[self.layout.lens_index]
         self._profile_row = (None if profile_row is None
                              else profile_row[self.layout.lens_index])
         self._plans: list[RenderPlan] | None = None  # the whole view's, made on first use
@@ -371,7 +368,7 @@ class ShotConversion:
         """The render plans (one per blend, :func:`plenocal.convert.render.make_plans`)
         of output ``rows``."""
         return make_plans(self.layout, self.used_patch, self.safe.diameter_px, self._blends,
-                          self._lens_weights, self.profile, self._profile_row, rows=rows)
+                          self._lens_weight, self.profile, self._profile_row, rows=rows)
 
     @property
     def plan(self) -> RenderPlan:
