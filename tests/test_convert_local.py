@@ -112,6 +112,37 @@ def test_worst_tile_sees_a_local_honeycomb_that_the_whole_view_hides():
     assert found2["worst"] > 0.95
 
 
+def test_worst_tile_takes_each_tiles_own_subpixel_shift():
+    """A view whose content sits 2.6-3.4 px off the reference's, varying over the view
+    (one affine map cannot align a TLCT view everywhere): each tile at its own sub-pixel
+    shift reads near 1, where whole-pixel shifts within SHIFT_PX leave the tiles
+    0.5-1.4 px off; a honeycomb in such a view still reads low."""
+    from plenocal.convert.localcheck import SHIFT_PX, SUBPIXEL_REACH_PX
+
+    ref = smooth_scene(seed=2)
+    h, w = ref.shape
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    off = (2.6 + 0.8 * xs / w).astype(np.float32)  # 2.6 px at the left, 3.4 px at the right
+    ours = cv2.remap(ref, xs - off, ys + 0.5 * off, cv2.INTER_CUBIC,
+                     borderMode=cv2.BORDER_REFLECT)
+    assert SHIFT_PX < 2.6 and SUBPIXEL_REACH_PX > 3.4
+    mask = np.zeros(ref.shape, bool)
+    mask[4:-4, 4:-4] = True  # what the moved view covers
+    found = tile_ssim(ref, ours, mask)
+    assert found["worst"] > 0.95, found["tiles"]
+    whole_pixel = min(float(ssim_map(ref, np.roll(ours, (dy, dx), axis=(0, 1)))[
+        h // 3:2 * h // 3, w // 3:2 * w // 3].mean()) for dy in range(-2, 3)
+        for dx in range(-2, 3))
+    assert whole_pixel < found["worst"] - 0.05, (whole_pixel, found["worst"])
+    cell = np.floor(lattice_coords(h, w, HEX * 1.5)).astype(np.int64)
+    box = (slice(0, h // 6), slice(w // 6, 2 * w // 6))
+    keys = cell[box][..., 0] * 100003 + cell[box][..., 1]
+    _, inv = np.unique(keys.ravel(), return_inverse=True)
+    part = ours[box]
+    ours[box] = (np.bincount(inv, part.ravel()) / np.bincount(inv))[inv].reshape(part.shape)
+    assert tile_ssim(ref, ours, mask)["worst"] < 0.75
+
+
 def _overlapping_frame(grid: MicrolensGrid, light_radius: float, seed: int = 0
                        ) -> np.ndarray:
     """A frame whose micro images are discs of ``light_radius`` around the lens centres,
