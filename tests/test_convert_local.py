@@ -209,7 +209,6 @@ def test_fill_takes_the_nearest_confident_lenses_and_stays_in_their_range():
     assert np.all(trust[hole] == UNRELIABLE_WEIGHT) and np.all(trust[~hole] == 1.0)
 
 
-
 def test_lattice_mean_by_hand():
     """lattice_mean: the mean of a lens and the neighbours it has (-1: none), pass after
     pass; 0 passes leave the values as they are."""
@@ -226,8 +225,8 @@ def test_lattice_mean_by_hand():
 
 def test_lattice_mean_bounds_the_trust_between_adjacent_lenses():
     """One measured lens among filled ones weighs ten times each neighbour; two passes of
-    the lattice mean (the wide blends' default) bring every adjacent pair within 2.6x,
-    so that no lens takes a corner view's blend over its whole disc (issue 33's arcs),
+    the lattice mean (the blend's default) bring every adjacent pair within 2.6x, so
+    that no lens takes a corner view's blend over its whole disc (issue 33's arcs),
     while a measured region still outweighs a filled one away from their border."""
     calib = calib_for_optics(PlenopticOptics(focal_length=0.035, focus_distance=0.6,
                                              mla_pitch=130e-6, mla_f_number=2.8, k=5.0,
