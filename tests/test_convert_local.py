@@ -38,6 +38,21 @@ def lattice_coords(h: int, w: int, basis: np.ndarray) -> np.ndarray:
     return np.stack([xs, ys], axis=-1) @ np.linalg.inv(basis)
 
 
+def hex_cells(h: int, w: int) -> np.ndarray:
+    """(h, w, 2) int: each pixel's cell of a hexagonal lattice 1.5 times HEX."""
+    return np.floor(lattice_coords(h, w, HEX * 1.5)).astype(np.int64)
+
+
+def flatten_cells(img: np.ndarray, cell: np.ndarray, box: tuple[slice, slice]) -> np.ndarray:
+    """``img`` with each cell of ``cell`` (:func:`hex_cells`) inside ``box`` set to its
+    mean: a honeycomb of flat hexagons (the doll's face); in place, and returned."""
+    keys = cell[box][..., 0] * 100003 + cell[box][..., 1]
+    part = img[box]
+    _, inv = np.unique(keys.ravel(), return_inverse=True)
+    img[box] = (np.bincount(inv, part.ravel()) / np.bincount(inv))[inv].reshape(part.shape)
+    return img
+
+
 def test_lattice_frequencies_are_the_reciprocal_lattice():
     f = lattice_frequencies(HEX, 6)
     assert f.shape == (6, 2)
@@ -89,14 +104,9 @@ def test_worst_tile_sees_a_local_honeycomb_that_the_whole_view_hides():
     region with its own defect is not a textured tile and is not counted."""
     ref = smooth_scene(seed=1)
     h, w = ref.shape
-    ours = ref.copy()
-    cell = np.floor(lattice_coords(h, w, HEX * 1.5)).astype(np.int64)
+    cell = hex_cells(h, w)
     box = (slice(0, h // 6), slice(w // 6, 2 * w // 6))
-    keys = cell[box][..., 0] * 100003 + cell[box][..., 1]
-    part = ours[box]
-    _, inv = np.unique(keys.ravel(), return_inverse=True)
-    means = np.bincount(inv, part.ravel()) / np.bincount(inv)
-    ours[box] = means[inv].reshape(part.shape)
+    ours = flatten_cells(ref.copy(), cell, box)
     mask = np.ones(ref.shape, bool)
     whole = float(ssim_map(ref, ours).mean())
     found = tile_ssim(ref, ours, mask)
@@ -134,12 +144,8 @@ def test_worst_tile_takes_each_tiles_own_subpixel_shift():
         h // 3:2 * h // 3, w // 3:2 * w // 3].mean()) for dy in range(-2, 3)
         for dx in range(-2, 3))
     assert whole_pixel < found["worst"] - 0.05, (whole_pixel, found["worst"])
-    cell = np.floor(lattice_coords(h, w, HEX * 1.5)).astype(np.int64)
     box = (slice(0, h // 6), slice(w // 6, 2 * w // 6))
-    keys = cell[box][..., 0] * 100003 + cell[box][..., 1]
-    _, inv = np.unique(keys.ravel(), return_inverse=True)
-    part = ours[box]
-    ours[box] = (np.bincount(inv, part.ravel()) / np.bincount(inv))[inv].reshape(part.shape)
+    ours = flatten_cells(ours, hex_cells(h, w), box)
     assert tile_ssim(ref, ours, mask)["worst"] < 0.75
 
 
