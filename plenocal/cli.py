@@ -267,12 +267,25 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
                        (args.setup, "convert_setup.json")):
         if path is not None and not Path(path).is_file():
             raise ConvertError(f"{path}: {what} not found")
-    if Path(args.lenslet).suffix.lower() == ".yuv":
-        run_convert_video(args, settings, block, log)
-        return
-    threads = args.threads or default_threads()
-    shot = convert_files(args.lenslet, args.calib, None, args.views, settings,
-                         setup_json=args.setup, threads=threads)
+    out = Path(args.out)
+    made = not out.exists()
+    try:  # before the work: a folder that cannot be made fails now, not after the analysis
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConvertError(f"{out}: cannot make the output folder ({exc.strerror or exc})"
+                           ) from None
+    try:
+        if Path(args.lenslet).suffix.lower() == ".yuv":
+            run_convert_video(args, settings, block, log)
+            return
+        threads = args.threads or default_threads()
+        shot = convert_files(args.lenslet, args.calib, None, args.views, settings,
+                             setup_json=args.setup, threads=threads,
+                             grid_foreign=block["grid_foreign"])
+    except BaseException:
+        if made and not any(out.iterdir()):
+            out.rmdir()  # an input the conversion refused leaves no empty folder behind
+        raise
     log.info("%s: %dx%d, %s: D = %.2f px; grid: %s (convert.grid %s)", args.lenslet,
              shot.grid.width, shot.grid.height, args.calib, shot.calib.diameter,
              "refined from the image" if shot.grid_check["refined"] else "calib.xml's",
@@ -282,8 +295,6 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
              "%.2f s", stats["patch_size_px"]["min"], stats["patch_size_px"]["max"],
              stats["patch_size_px"]["median"], 100 * stats["patch_size_px"]["confident_share"],
              stats["width"], stats["height"], time.perf_counter() - t0)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     write_npy(out / "patch_size.npy", shot.used_patch)
     n = args.views * args.views
     t1, done = time.perf_counter(), 0

@@ -119,6 +119,45 @@ def test_convert_writes_what_rule_convert_writes(tmp_path, shot, capsys):
     assert json.loads((out2 / "disparity.json").read_text())["grid_check"]["refined"] is False
 
 
+def test_foreign_grid_stops_as_in_the_workflow(tmp_path, shot):
+    """A calib.xml whose pitch is 3 % off the micro images' (another camera's file): the
+    grid check finds it foreign, and the command stops with exit 2 naming the file and the
+    remedies, as rule convert_setup does (convert.grid_foreign: error), leaving no folder;
+    ``--set grid_foreign=warn`` converts on it all the same, ``--grid refine`` on the
+    lattice fitted to the image."""
+    lenslet, calib = shot
+    wrong = tmp_path / "other_camera.xml"
+    text = calib.read_text()
+    old = next(line for line in text.splitlines() if "<diameter" in line)
+    value = old.split(">")[1].split("<")[0]
+    wrong.write_text(text.replace(old, old.replace(value, f"{float(value) * 1.03:.6f}")))
+    args = [str(lenslet), str(wrong), "--views", "3", "--tile-size", "6", "--mla",
+            "keplerian"]
+    r = _cli("convert", *args, "-o", str(tmp_path / "stop"))
+    assert r.returncode == 2
+    assert "other_camera.xml" in r.stderr and "not on the micro images" in r.stderr
+    assert "--grid refine" in r.stderr and "grid_foreign=warn" in r.stderr
+    assert not (tmp_path / "stop").exists()
+    assert main(["convert", *args, "-o", str(tmp_path / "warn"), "--set",
+                 "grid_foreign=warn", "-q"]) == 0
+    g = json.loads((tmp_path / "warn" / "disparity.json").read_text())["grid_check"]
+    assert g["foreign"] is True and g["refined"] is False
+    assert main(["convert", *args, "-o", str(tmp_path / "refine"), "--grid", "refine",
+                 "-q"]) == 0
+    g = json.loads((tmp_path / "refine" / "disparity.json").read_text())["grid_check"]
+    assert g["foreign"] is True and g["refined"] is True
+
+
+def test_output_folder_that_cannot_be_made_fails_before_the_work(tmp_path, shot):
+    lenslet, calib = shot
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    r = _cli("convert", str(lenslet), str(calib), "-o", str(blocker / "views"))
+    assert r.returncode == 2
+    assert "cannot make the output folder" in r.stderr and "a_file" in r.stderr
+    assert "grid check" not in r.stderr  # stopped before the frame was read
+
+
 FRAMES = Path(__file__).resolve().parents[2] / "shared" / "real" / "frames"
 
 

@@ -165,7 +165,8 @@ def foreign_grid_error(check: GridCheck, calib_source: str, frame: str,
             f"{check.diameter_px:.1f} px lens, residual {check.residual_rms_px:.2f} px): it "
             "looks like another camera's or another sensor crop's file. Put this camera's "
             "calib.xml there, or set convert.grid: refine to convert on the lattice fitted to "
-            "the image, or convert.grid_foreign: warn to convert on this grid all the same")
+            "the image, or convert.grid_foreign: warn to convert on this grid all the same "
+            "(plenocal convert: --grid refine, or --set grid_foreign=warn)")
 
 
 def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: ConvertSettings,

@@ -641,16 +641,23 @@ def patch_size_picture(layout: ViewLayout, patch: np.ndarray, confident: np.ndar
 def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str | Path | None,
                   n_views: int, settings: ConvertSettings | None = None,
                   setup_json: str | Path | None = None,
-                  analysis: ConvertAnalysis | None = None, threads: int = 1) -> ShotConversion:
+                  analysis: ConvertAnalysis | None = None, threads: int = 1,
+                  grid_foreign: str = "error") -> ShotConversion:
     """Read the inputs of one shot (with every check) and prepare its conversion.
 
     ``setup_json``: the camera's ``convert_setup.json`` (rule ``convert_setup``): its MLA
     kind, tile and grid are used. Without it (one image, the command line) the grid is
     checked and chosen here per ``settings.grid``, and ``auto`` settings are read from
-    this image. ``analysis``: the shot's measurements made before
-    (:mod:`plenocal.convert.analysis`; rule ``convert_views``). ``threads``: see
-    :class:`ShotConversion`."""
-    from plenocal.convert.setup import check_and_grid, read_setup  # noqa: PLC0415
+    this image; a grid the check finds foreign (another camera's calib.xml) stops here
+    as it stops rule ``convert_setup``, unless ``grid_foreign`` is ``warn``
+    (``convert.grid_foreign``; :func:`plenocal.convert.setup.foreign_grid_error`).
+    ``analysis``: the shot's measurements made before (:mod:`plenocal.convert.analysis`;
+    rule ``convert_views``). ``threads``: see :class:`ShotConversion`."""
+    from plenocal.convert.setup import (  # noqa: PLC0415
+        check_and_grid,
+        foreign_grid_error,
+        read_setup,
+    )
 
     settings = settings or ConvertSettings()
     sensor = read_sensor_size(camera_yaml) if camera_yaml is not None else None
@@ -667,6 +674,9 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
         return shot
     grid, check = check_and_grid(image, calib, settings.grid)
     log.info("%s", check.summary())
+    error = foreign_grid_error(check, calib.source, str(lenslet), grid_foreign)
+    if error is not None:
+        raise ConvertError(error)
     for note in check.warnings:
         log.warning("%s: %s", lenslet, note)
     shot = ShotConversion(image, calib, n_views, settings, source=str(lenslet), grid=grid,
