@@ -148,6 +148,25 @@ def test_foreign_grid_stops_as_in_the_workflow(tmp_path, shot):
     assert g["foreign"] is True and g["refined"] is True
 
 
+def test_frame_without_texture_warns_that_the_mla_kind_is_assumed(tmp_path, shot, capsys):
+    """A flat frame (a lens cap on, a white calibration shot without the white): the
+    conversion runs, and says that it could not read the MLA kind and which it assumed,
+    on stderr and in disparity.json."""
+    lenslet, calib = shot
+    flat = tmp_path / "flat.png"
+    write_image(flat, np.full_like(read_image(lenslet), 128))
+    assert main(["convert", str(flat), str(calib), "-o", str(tmp_path / "v"), "--views", "3",
+                 "--tile-size", "6"]) == 0
+    err = capsys.readouterr().err
+    assert "the MLA kind cannot be read from this image" in err
+    warnings = json.loads((tmp_path / "v" / "disparity.json").read_text())["warnings"]
+    assert any("MLA kind cannot be read" in w for w in warnings)
+    # the textured frame decides it, and says nothing of the kind
+    assert main(["convert", str(lenslet), str(calib), "-o", str(tmp_path / "t"), "--views",
+                 "3", "--tile-size", "6"]) == 0
+    assert "cannot be read" not in capsys.readouterr().err
+
+
 def test_output_folder_that_cannot_be_made_fails_before_the_work(tmp_path, shot):
     lenslet, calib = shot
     blocker = tmp_path / "a_file"

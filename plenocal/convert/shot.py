@@ -251,6 +251,22 @@ def mla_contradiction(kind: str, scores: dict[str, float]) -> str | None:
             f"convert.mla or the dataset's mla; command line: --mla)")
 
 
+def mla_undecided(kind: str, scores: dict[str, float]) -> str | None:
+    """The warning for an MLA kind read from the image (``convert.mla: auto``) that the
+    image does not decide: the two ways' mean best ZNCC (``scores``) less than
+    :data:`MLA_CONTRADICTION` apart, or not measured (NaN), or None. A flat, dark or
+    noisy frame matches both ways alike (pure noise: 0.096 and 0.095; a black frame 0 and
+    0), and ``kind`` is then a coin's throw: a wrong one makes every view a mosaic."""
+    other = next(k for k in scores if k != kind)
+    if scores[kind] - scores[other] >= MLA_CONTRADICTION:
+        return None
+    return (f"the MLA kind cannot be read from this image: it matches as {kind} and as "
+            f"{other} alike (mean best ZNCC {scores[kind]:.3f} against {scores[other]:.3f}; "
+            f"a clear frame reads {MLA_CONTRADICTION:g} or more apart): {kind} is assumed. "
+            "Name the camera's kind (workflow: convert.mla or the dataset's mla; command "
+            "line: --mla), or decide it on a frame with texture")
+
+
 class ShotConversion:
     """One lenslet image: grid, patch sizes, layout and the per-shot render plan.
 
@@ -445,6 +461,10 @@ class ShotConversion:
             scores = {"keplerian": k, "galilean": g}
             log.info("%s: MLA kind from the image: %s (mean best ZNCC: points moving towards "
                      "the neighbour %.3f, away %.3f)", source, mla, k, g)
+            note = mla_undecided(mla, scores)
+            if note:
+                log.warning("%s: %s", source, note)
+                self.warnings.append(f"{source}: {note}")
         elif check_mla:
             check = pool.submit(detect_mla_kind, gray, self.grid, st.patch)
         patch = estimate_patch_size(gray, self.grid, st.patch, mla=mla, threads=self._threads,
