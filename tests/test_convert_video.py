@@ -330,6 +330,33 @@ def test_hold_steadies_patch_sizes_on_static_content():
     assert changed["hold"] < 0.75 * changed["off"], changed
 
 
+@needs_real
+@pytest.mark.parametrize("bits", [8, 10])
+def test_held_frames_measure_what_the_frame_alone_measures(bits):
+    """With the hold, a later frame's lenses that are not held take the sizes and
+    confidences the frame measures alone (``temporal: off``, where the frame's own
+    conversion measures it): the same grey image, an 8-bit recording's 8 bits included
+    (read as 16 bits it was 257 times too dark, no lens was confident, and every lens that
+    moved was filled from its neighbours instead of measured)."""
+    a, b, calib = _frames()
+    frames = [lenslet_frame(rgb_to_yuv(x.astype(np.float32) / 255.0, bits), bits)
+              for x in (a, b)]
+    assert frames[0].dtype == (np.uint8 if bits == 8 else np.uint16)
+    got = {}
+    for mode in ("hold", "off"):
+        conv = VideoConverter(calib, 5, ConvertSettings(), VideoSettings(temporal=mode))
+        first = conv.convert(frames[0], "clip[0]")
+        got[mode] = (first, conv.convert(frames[1], "clip[1]"))
+    first, held = got["hold"]
+    alone = got["off"][1]
+    moved = held.patch.raw != first.patch.raw
+    assert 5 <= moved.sum() < len(moved)
+    np.testing.assert_array_equal(held.patch.raw[moved], alone.patch.raw[moved])
+    np.testing.assert_array_equal(held.patch.confidence[moved], alone.patch.confidence[moved])
+    assert alone.patch.confident.mean() > 0.3
+    assert not any("no lens matched with confidence" in w for w in held.warnings)
+
+
 def test_yuv_to_rgb_by_rows_is_the_whole_frame():
     """lenslet_frame turns a frame into RGB in bands of rows (memory on 31-MP frames):
     every band is the same numbers as those rows of the whole frame, for even and odd

@@ -40,7 +40,7 @@ import numpy as np
 
 from plenocal.convert.analysis import ConvertAnalysis
 from plenocal.convert.errors import ConvertError
-from plenocal.convert.levels import to_unit_float
+from plenocal.convert.levels import significant_bits, to_unit_float
 from plenocal.convert.patchsize import (
     PatchSizeResult,
     estimate_patch_size,
@@ -265,9 +265,12 @@ class VideoConverter:
 
     def _measure(self, image: np.ndarray, st: ConvertSettings, source: str) -> ConvertAnalysis:
         """What :class:`ShotConversion` measures on a frame with a set-up (the kind is the
-        set-up's)."""
+        set-up's), on the same grey image: an 8-bit frame's 8 bits, a deeper frame's 16
+        (:func:`lenslet_frame`). An 8-bit frame read as 16 bits is 257 times too dark, and
+        the matching then finds no lens it can trust: every lens that moved was filled
+        from its neighbours, not measured."""
         assert self._grid is not None
-        gray = to_gray(to_unit_float(image, 16))
+        gray = to_gray(to_unit_float(image, significant_bits(image, st.bit_depth)))
         vignetting = lens_type_profiles(gray, self._grid)
         patch = estimate_patch_size(gray, self._grid, st.patch, mla=st.mla,
                                     threads=self.threads, vignetting=vignetting)
