@@ -131,7 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "replaced)")
     c.add_argument("--views", type=int, default=stage_defaults("dataset")["views"], metavar="N",
                    help="N x N views (default %(default)s, a dataset's in config.schema.yaml, "
-                        "as TLCT); N >= 1")
+                        "as TLCT); N odd (the centre is a view), N >= 1")
     kind = c.add_mutually_exclusive_group()
     kind.add_argument("--galilean", action="store_const", const="galilean", dest="mla",
                       help="the MLA is Galilean (micro images upright: a point moves away "
@@ -259,8 +259,9 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     from plenocal.io.files import write_image, write_images, write_json, write_npy  # noqa: PLC0415
 
     t0 = time.perf_counter()
-    if args.views < 1:
-        raise ConvertError(f"--views: must be >= 1 (got {args.views})")
+    if args.views < 1 or args.views % 2 == 0:
+        raise ConvertError(f"--views: an odd number >= 1, so that the central view is one "
+                           f"of them (got {args.views})")
     block = validate_convert_block(convert_config(args))
     settings = ConvertSettings.from_config(block)
     for path, what in ((args.lenslet, "lenslet image"), (args.calib, "calib.xml"),

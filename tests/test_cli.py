@@ -68,6 +68,10 @@ def test_missing_file_and_malformed_xml_exit_2(tmp_path, shot):
              "tile_sise=4")
     assert r.returncode == 2
     assert "tile_sise" in r.stderr
+    for n in ("0", "4"):  # checked before the frame is read
+        r = _cli("convert", str(lenslet), str(calib), "-o", str(tmp_path / "o"), "--views", n)
+        assert r.returncode == 2 and "--views: an odd number" in r.stderr, r.stderr
+        assert "grid check" not in r.stderr
     assert not (tmp_path / "o").exists()
 
 
