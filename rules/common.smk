@@ -671,7 +671,7 @@ STAGE_RULES = {
     "reg_b": r"rig_b",
     "depth": r"depth_a(_other)?(_\d+)?|depth_b(_other)?(_\d+){1,2}",
     "verify": (
-        r"view_features(_\d+){1,2}|view_matches|reprojection(_calib)?"
+        r"view_features(_\d+){1,2}|view_matches|reprojection(_calib|_complete)?"
         r"|baseline_(sfm|scratch)|depth_view|synthesis_exp\d+(_part)?|mpeg_views"
         r"|gt_errors|convert_quality"
     ),

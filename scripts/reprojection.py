@@ -1,5 +1,6 @@
-"""Rules reprojection_calib and reprojection: the reprojection error of one calibration
-(Table I of the paper), and the table of all of them."""
+"""Rules reprojection_calib, reprojection_complete and reprojection: the reprojection error
+of one calibration (Table I of the paper; the complete calibration's triangulation also
+written as a COLMAP model with its points), and the table of all of them."""
 import shutil
 from pathlib import Path
 
@@ -27,9 +28,14 @@ else:
     # COLMAP's working files beside the output, not in $TMPDIR: removed at the end, and a
     # killed job's by the next run of the same calibration's job (make_temp_dir; the jobs of
     # the other calibrations, which may run alongside, have prefixes of their own)
-    work = make_temp_dir(Path(sm.output[0]).parent, f".{sm.wildcards.calib}.")
+    calib = "complete" if sm.rule == "reprojection_complete" else sm.wildcards.calib
+    if calib == "complete":
+        from plenocal.convert.viewset import view_set_files
+
+        opts.update(model_dir=sm.output.model, images=view_set_files(sm.input.view_sets))
+    work = make_temp_dir(Path(sm.output[0]).parent, f".{calib}.")
     try:
-        row = rp.evaluate_calibration(sm.wildcards.calib, sm.input.calib, sm.input.database,
+        row = rp.evaluate_calibration(calib, sm.input.calib, sm.input.database,
                                       sm.params.central, work_dir=work, **opts)
     finally:
         shutil.rmtree(work, ignore_errors=True)

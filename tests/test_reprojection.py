@@ -258,6 +258,42 @@ def test_evaluate_calibration_reads_a_cameras_file_as_evaluate(sets, tmp_path):
     assert doc["num_images"] == 9 and doc["median_px"] < 0.2
 
 
+def test_the_triangulated_model_holds_the_calibration_and_coloured_points(sets, tmp_path):
+    """Rule reprojection_complete's model (calibration/colmap_points): every view with its
+    calibrated camera and pose, the points Table I triangulated, each reprojecting into
+    its views as Table I measured, coloured from the views; the same bytes twice."""
+    import pycolmap
+
+    _, vs, paths = sets
+    imgs = {k: v for k, v in paths.items() if k.startswith(("x00_y00", "hand00"))}
+    db = tmp_path / "views.db"
+    viewdb.build_view_database(imgs, db, tmp_path, max_num_features=2000)
+    cams = {k: v for k, v in vs.items() if k in imgs}
+    docs = [evaluate(cams, db, model_dir=tmp_path / f"model{k}", images=imgs)
+            for k in range(2)]
+    assert docs[0] == docs[1] == evaluate(cams, db)
+    for name in ("cameras.bin", "images.bin", "points3D.bin"):
+        assert ((tmp_path / "model0" / name).read_bytes()
+                == (tmp_path / "model1" / name).read_bytes())
+    rec = pycolmap.Reconstruction(str(tmp_path / "model0"))
+    assert rec.num_reg_images() == len(cams) == 18
+    assert rec.num_points3D() == docs[0]["num_points3D"] > 100
+    errs = []
+    for image in rec.images.values():
+        want = cams[image.name[:-4]]
+        got = cm.pinhole_from_colmap(image, rec.camera(image.camera_id))
+        np.testing.assert_allclose(got.K, want.K, atol=1e-9)
+        np.testing.assert_allclose(got.cam_to_world, want.cam_to_world, atol=1e-9)
+        for p2 in image.points2D:
+            if p2.has_point3D():
+                uv = want.project(rec.points3D[p2.point3D_id].xyz[None])[0]
+                errs.append(np.linalg.norm(uv - (np.asarray(p2.xy) - 0.5)))
+    assert len(errs) == docs[0]["num_observations"]
+    assert np.mean(errs) == pytest.approx(docs[0]["mean_px"], rel=1e-6)
+    colours = np.array([p.color for p in rec.points3D.values()])
+    assert colours.std(axis=0).min() > 5  # the scene's texture, not a flat default
+
+
 def test_table_i_rows_by_hand():
     evals = {"complete": {"num_images": 9, "mean_px": 0.3, "median_px": 0.2},
              "baseline_sfm": {"num_images": 9, "mean_px": 0.4, "median_px": 0.3}}

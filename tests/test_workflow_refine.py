@@ -55,6 +55,30 @@ def test_refinement_keeps_every_view_and_does_not_raise_the_errors(tiny_complete
     assert "The paper&#x27;s Eq. 6 result (all views, rigid alignment)" in html
 
 
+def test_colmap_points_hold_the_calibration_and_table_i_points(tiny_complete_run: Path):
+    """calibration/colmap_points (rule reprojection_complete): every view of
+    calibration/cameras.json with its camera and pose, the 3-D points of Table I's complete
+    row, and image names that the views folder holds (a Gaussian-splatting trainer's
+    images folder)."""
+    import cv2  # noqa: F401, PLC0415  (before pycolmap)
+    import pycolmap  # noqa: PLC0415
+
+    from plenocal.calib.reg_a.colmap import pinhole_from_colmap  # noqa: PLC0415
+
+    res = tiny_complete_run / "results" / "tiny"
+    cams = read_cameras(res / "calibration" / "cameras.json")
+    rows = read_reprojection_table(res / "eval" / "reprojection.json").rows
+    rec = pycolmap.Reconstruction(str(res / "calibration" / "colmap_points"))
+    assert rec.num_reg_images() == len(cams) == 90
+    assert rec.num_points3D() == rows["complete"]["num_points3D"] > 100
+    for image in rec.images.values():
+        assert (res / "views" / image.name).is_file(), image.name
+        got = pinhole_from_colmap(image, rec.camera(image.camera_id))
+        want = cams[image.name[:-4]]
+        np.testing.assert_allclose(got.K, want.K, atol=1e-9)
+        np.testing.assert_allclose(got.cam_to_world, want.cam_to_world, atol=1e-9)
+
+
 def max_rotation_deg(calib, truth, keys) -> float:
     """The largest rotation error over ``keys`` after gt_errors' rigid alignment of all
     the views the calibration and the truth share."""

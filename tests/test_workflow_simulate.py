@@ -159,7 +159,7 @@ def test_critical_chain_goes_first(tmp_path: Path):
         5: ["ground_truth_render", "ground_truth_render_central", "depth_view",
             "synthesis_exp3_part", "synthesis_exp3"],
         # ... and last what only feeds short jobs
-        0: ["reprojection_calib[complete]", "depth_a_other", "depth_b_other",
+        0: ["reprojection_complete", "depth_a_other", "depth_b_other",
             "convert_quality"],
     }
     for level, rules in levels.items():

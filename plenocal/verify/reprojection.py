@@ -276,12 +276,15 @@ def triangulated_stats(cameras: Mapping[str, PinholeCamera], database: str | Pat
                        min_angle_deg: float = _REPROJ["min_angle_deg"],
                        track_error_px: float = _REPROJ["track_error_px"],
                        seed: int = cm.DEFAULT_SEED, num_threads: int = cm.DEFAULT_THREADS,
-                       work_dir: str | Path | None = None) -> dict:
+                       work_dir: str | Path | None = None, model_dir: str | Path | None = None,
+                       images: Mapping[str, str | Path] | None = None) -> dict:
     """Reprojection error of the calibration ``cameras`` (``"<cam>/<view>"`` ->
     PinholeCamera) on the verified matches of the view ``database``
     (:mod:`plenocal.calib.reg_a.viewdb`): its images copied with one camera each set to the
     calibration, triangulation with poses and intrinsics fixed, then the statistics
-    (module docstring)."""
+    (module docstring). ``model_dir``: where the triangulated model is also written
+    (:func:`write_points_model`; ``images``: view key -> its image file, the points'
+    colours)."""
     if len(cameras) < 2:
         raise ValueError("reprojection error needs at least two views")
     tmp = Path(tempfile.mkdtemp(prefix="plenocal_reproj_", dir=work_dir))
@@ -332,9 +335,39 @@ def triangulated_stats(cameras: Mapping[str, PinholeCamera], database: str | Pat
                  "median %.4f px", stats["num_images"], stats["num_points3D"],
                  stats["num_observations"], stats["mean_px"] or float("nan"),
                  stats["median_px"] or float("nan"))
+        if model_dir is not None:
+            write_points_model(rec, model_dir, images, tmp)
         return stats
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def write_points_model(rec, model_dir: str | Path,
+                       images: Mapping[str, str | Path] | None = None,
+                       work_dir: str | Path | None = None) -> None:
+    """``rec`` (the triangulation of :func:`triangulated_stats`: every view a camera of its
+    own, set to the calibration, its pose the calibration's; the 3-D points with their
+    tracks) written as a COLMAP binary model into ``model_dir`` (atomically), each point
+    coloured by the mean of its observations in ``images`` (view key -> image file; the
+    model's image names are ``<key>.png``). Gaussian-splatting trainers that start from
+    COLMAP's points read it with the views as its images folder (README)."""
+    from plenocal.io.files import atomic_write_dir  # noqa: PLC0415
+
+    if images is not None:
+        root = Path(tempfile.mkdtemp(prefix="plenocal_colours_", dir=work_dir))
+        try:
+            for image_id in rec.reg_image_ids():
+                name = rec.image(image_id).name
+                key = name[:-4] if name.endswith(".png") else name
+                if key not in images:
+                    raise ValueError(f"{name}: no image file for the points' colours")
+                link = root / name
+                link.parent.mkdir(parents=True, exist_ok=True)
+                link.symlink_to(Path(images[key]).resolve())
+            rec.extract_colors_for_all_images(str(root))
+        finally:
+            shutil.rmtree(root, ignore_errors=True)
+    atomic_write_dir(model_dir, lambda tmp: rec.write_binary(str(tmp)))
 
 
 def reprojection_stats(cameras: Mapping[str, PinholeCamera], images: Mapping[str, str | Path],
