@@ -662,7 +662,7 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
                   n_views: int, settings: ConvertSettings | None = None,
                   setup_json: str | Path | None = None,
                   analysis: ConvertAnalysis | None = None, threads: int = 1,
-                  grid_foreign: str = "error") -> ShotConversion:
+                  grid_foreign: str = _CONVERT["grid_foreign"]) -> ShotConversion:
     """Read the inputs of one shot (with every check) and prepare its conversion.
 
     ``setup_json``: the camera's ``convert_setup.json`` (rule ``convert_setup``): its MLA
