@@ -7,6 +7,7 @@ from pathlib import Path
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
 from plenocal.artifacts.results import ReprojectionTable, write_reprojection_table
+from plenocal.convert.viewset import view_set_files
 from plenocal.io.files import make_temp_dir, read_json, write_json
 from plenocal.rulelog import log_to_file
 from plenocal.verify import reprojection as rp
@@ -30,8 +31,6 @@ else:
     # the other calibrations, which may run alongside, have prefixes of their own)
     calib = "complete" if sm.rule == "reprojection_complete" else sm.wildcards.calib
     if calib == "complete":
-        from plenocal.convert.viewset import view_set_files
-
         opts.update(model_dir=sm.output.model, images=view_set_files(sm.input.view_sets))
     work = make_temp_dir(Path(sm.output[0]).parent, f".{calib}.")
     try:

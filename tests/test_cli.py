@@ -15,7 +15,7 @@ from synth.lenslets import lenslet_from_patch_size, random_texture
 from plenocal.cli import build_parser, convert_config, main, validate_convert_block
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_image, write_image
-from plenocal.io.raytrix import LensType, RayCalib, write_calib
+from plenocal.io.raytrix import LensType, RayCalib, read_calib, write_calib
 from plenocal.names import view_names
 
 
@@ -131,10 +131,8 @@ def test_foreign_grid_stops_as_in_the_workflow(tmp_path, shot):
     lattice fitted to the image."""
     lenslet, calib = shot
     wrong = tmp_path / "other_camera.xml"
-    text = calib.read_text()
-    old = next(line for line in text.splitlines() if "<diameter" in line)
-    value = old.split(">")[1].split("<")[0]
-    wrong.write_text(text.replace(old, old.replace(value, f"{float(value) * 1.03:.6f}")))
+    c = read_calib(calib)
+    write_calib(RayCalib(**{**c.__dict__, "diameter": c.diameter * 1.03}), wrong)
     args = [str(lenslet), str(wrong), "--views", "3", "--tile-size", "6", "--mla",
             "keplerian"]
     r = _cli("convert", *args, "-o", str(tmp_path / "stop"))

@@ -406,18 +406,9 @@ class ShotConversion:
 
     @property
     def gray(self) -> np.ndarray:
-        """The image in grey, float32 0..1 (made once, in bands of rows: the same numbers
-        as from the whole float frame, without a float copy of a colour frame)."""
+        """The image in grey, float32 0..1 (made once: :func:`frame_gray`)."""
         if self._gray is None:
-            img = self._image
-            if img.ndim == 2:
-                self._gray = to_gray(to_unit_float(img, self.bits))
-            else:
-                gray = np.empty(img.shape[:2], np.float32)
-                for y in range(0, img.shape[0], GRAY_ROWS):
-                    band = slice(y, y + GRAY_ROWS)
-                    gray[band] = to_gray(to_unit_float(img[band], self.bits))
-                self._gray = gray
+            self._gray = frame_gray(self._image, self.bits)
         return self._gray
 
     def _safe_diameter(self, decided: float | None, source: str) -> SafeDiameter:
@@ -594,6 +585,20 @@ PLAN_ROWS = 64
 VIEW_BUDGET_BYTES = 256 << 20
 #: rows of a colour frame turned grey at a time
 GRAY_ROWS = 256
+
+
+def frame_gray(image: np.ndarray, bits: int) -> np.ndarray:
+    """``image`` (8- or 16-bit, grey or RGB, holding ``bits`` bits) in grey, float32 0..1,
+    what every measurement of a frame reads (:class:`ShotConversion`, the video path's
+    later frames). A colour frame is done in bands of :data:`GRAY_ROWS` rows: the same
+    numbers as from the whole float frame, without a float copy of it (145 MB at 12 MP)."""
+    if image.ndim == 2:
+        return to_gray(to_unit_float(image, bits))
+    gray = np.empty(image.shape[:2], np.float32)
+    for y in range(0, image.shape[0], GRAY_ROWS):
+        band = slice(y, y + GRAY_ROWS)
+        gray[band] = to_gray(to_unit_float(image[band], bits))
+    return gray
 
 
 def _round_to(v: np.ndarray, top: float, dtype: type) -> np.ndarray:

@@ -40,16 +40,15 @@ import numpy as np
 
 from plenocal.convert.analysis import ConvertAnalysis
 from plenocal.convert.errors import ConvertError
-from plenocal.convert.levels import significant_bits, to_unit_float
+from plenocal.convert.levels import significant_bits
 from plenocal.convert.patchsize import (
     PatchSizeResult,
     estimate_patch_size,
     fill_and_smooth,
     focus_weights,
-    to_gray,
 )
 from plenocal.convert.setup import ConverterSetup, decide_setup, write_setup
-from plenocal.convert.shot import ConvertSettings, ShotConversion
+from plenocal.convert.shot import ConvertSettings, ShotConversion, frame_gray
 from plenocal.convert.vignetting import lens_type_profiles
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import write_image, write_json
@@ -270,7 +269,7 @@ class VideoConverter:
         the matching then finds no lens it can trust: every lens that moved was filled
         from its neighbours, not measured."""
         assert self._grid is not None
-        gray = to_gray(to_unit_float(image, significant_bits(image, st.bit_depth)))
+        gray = frame_gray(image, significant_bits(image, st.bit_depth))
         vignetting = lens_type_profiles(gray, self._grid)
         patch = estimate_patch_size(gray, self._grid, st.patch, mla=st.mla,
                                     threads=self.threads, vignetting=vignetting)
