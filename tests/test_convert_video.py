@@ -177,6 +177,9 @@ def test_10bit_clip_to_10bit_view_videos_matching_the_frames_pngs(tmp_path):
     clip, xml, out, stderr, doc = _video_of(tmp_path, [a, b, a], 10, calib)
     for k in range(3):
         assert f"frame {k} ({k + 1}/3)" in stderr  # progress per frame
+    # the recording's bit depth said once, not a 16-bit image's bits per frame
+    assert stderr.count("10-bit recording, its frames read as 16-bit words") == 1
+    assert stderr.count("significant bits (max") <= 1  # the set-up's decision only
     W, H = doc["views"]["width"], doc["views"]["height"]
     assert W % 2 == 0 and H % 2 == 0
     files = doc["views"]["files"]

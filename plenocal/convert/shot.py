@@ -282,13 +282,16 @@ class ShotConversion:
     ``settings.safe_diameter`` (``auto``: measured on this image,
     :mod:`plenocal.convert.safediameter`). ``threads``: the measurements that do not wait
     for each other (the safe diameter, the MLA check, the vignetting profiles, the patch
-    sizes) run side by side on that many threads; the same numbers with any number."""
+    sizes) run side by side on that many threads; the same numbers with any number.
+    ``log_bits``: log a 16-bit image's significant bits (off for a recording's frames,
+    whose bit depth the recording's set-up line gives once)."""
 
     def __init__(self, image: np.ndarray, calib: RayCalib, n_views: int,
                  settings: ConvertSettings | None = None, source: str = "<image>",
                  grid: MicrolensGrid | None = None,
                  analysis: ConvertAnalysis | None = None, check_mla: bool = True,
-                 safe_diameter: float | None = None, threads: int = 1) -> None:
+                 safe_diameter: float | None = None, threads: int = 1,
+                 log_bits: bool = True) -> None:
         self.settings = st = settings or ConvertSettings()
         self.grid_check: dict | None = None  # set by whoever checked the grid
         self.warnings: list[str] = []
@@ -300,7 +303,7 @@ class ShotConversion:
                                f"the image is {W}x{H}")
         self.grid = grid if grid is not None else build_grid(calib, W, H)
         self.bits = significant_bits(image, st.bit_depth)
-        if image.dtype == np.uint16:
+        if image.dtype == np.uint16 and log_bits:
             log.info("%s: 16-bit image with %d significant bits (max %d)", source, self.bits,
                      int(image.max()))
         self._image = image

@@ -258,7 +258,8 @@ class VideoConverter:
             analysis = self._hold(self._measure(image, st, source), st)
         shot = ShotConversion(image, self.calib, self.n_views, st, source=source,
                               grid=self._grid, analysis=analysis, check_mla=False,
-                              safe_diameter=setup.safe_diameter_px, threads=self.threads)
+                              safe_diameter=setup.safe_diameter_px, threads=self.threads,
+                              log_bits=False)
         shot.grid_check = setup.grid_check
         return shot
 
@@ -295,6 +296,13 @@ class VideoConverter:
 # ---------------------------------------------------------------------------
 
 OUTPUT_FORMATS = ("png", "yuv")
+
+
+def _depth_note(bits: int) -> str:
+    """How a recording of ``bits`` bits is read (:func:`lenslet_frame`), for the log."""
+    if bits <= 8:
+        return "8-bit recording, converted on its 8 bits"
+    return f"{bits}-bit recording, its frames read as 16-bit words (16 significant bits)"
 
 
 def parse_frames(text: str | None, count: int, source: str = "--frames") -> range:
@@ -374,6 +382,7 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
         raise ConvertError(str(exc)) from None
     count = frame_count(path, fmt)
     chosen = parse_frames(frames, count)
+    log.info("%s: %s", path.name, _depth_note(fmt.bits))
     conv = VideoConverter(calib, n_views, settings, video, setup, grid_foreign, threads)
     if setup is None:
         k = chosen[0] if setup_frame is None else setup_frame
