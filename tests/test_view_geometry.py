@@ -64,7 +64,7 @@ def _magnification_read(eps_true: float) -> dict:
         rays = np.column_stack([uv, np.ones(len(uv))]) @ np.linalg.inv(c1.K).T @ c1.R.T
         z = (Z - c1.centre[2]) / rays[:, 2]
         pred = vg.predict(c1, c2, uv, z)
-        found = vg.match_patches(grey[i], grey[j], uv, pred, search=8, min_zncc=0.9)
+        found = vg.match_patches(grey[i], grey[j], uv, pred, search=8, min_peak=0.9)
         pairs.append((found - pred, (vg.predict(c1, c2, uv, z, eps=1e-4) - pred) / 1e-4))
     return vg.focal_scale(pairs)
 

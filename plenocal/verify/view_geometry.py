@@ -55,14 +55,14 @@ def _parabola(a: float, b: float, c: float) -> float:
 
 
 def match_patches(img1: np.ndarray, img2: np.ndarray, uv: np.ndarray, pred: np.ndarray,
-                  radius: int = 10, search: int = 4, min_zncc: float = 0.95,
+                  radius: int = 10, search: int = 4, min_peak: float = 0.95,
                   min_std: float = 0.02, depth: np.ndarray | None = None,
                   max_depth_step: float = 0.01) -> np.ndarray:
     """Where view 2 (``img2``, grey) shows the ``(2 radius + 1)``-square patch of view 1
     (``img1``) at each integer pixel ``uv`` (n, 2), searched within ``search`` px of
     ``pred`` (n, 2) by normalised correlation, sub-pixel by a parabola through the peak:
     (n, 2), NaN where the patch is flat (standard deviation under ``min_std`` of the
-    image's range), the peak is under ``min_zncc`` or on the search window's edge, the
+    image's range), the peak is under ``min_peak`` or on the search window's edge, the
     window leaves the image, or (``depth``: view 1's depth map) the patch's depth varies
     by more than ``max_depth_step`` of itself (a depth edge: the patch's centre is not
     what the match follows)."""
@@ -88,7 +88,7 @@ def match_patches(img1: np.ndarray, img2: np.ndarray, uv: np.ndarray, pred: np.n
         m = cv2.matchTemplate(b[iy - r - s:iy + r + s + 1, ix - r - s:ix + r + s + 1], t,
                               cv2.TM_CCOEFF_NORMED)
         j, i = np.unravel_index(int(np.argmax(m)), m.shape)
-        if m[j, i] < min_zncc or not (0 < i < m.shape[1] - 1 and 0 < j < m.shape[0] - 1):
+        if m[j, i] < min_peak or not (0 < i < m.shape[1] - 1 and 0 < j < m.shape[0] - 1):
             continue
         out[k] = (ix - s + i + _parabola(m[j, i - 1], m[j, i + 1], m[j, i]),
                   iy - s + j + _parabola(m[j - 1, i], m[j + 1, i], m[j, i]))
