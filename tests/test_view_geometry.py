@@ -91,3 +91,5 @@ def test_parallax_ratio_of_shortened_offsets():
     rx, ry = vg.parallax_ratio(offsets, shift, inv_z)
     assert rx == pytest.approx(-0.02, abs=1e-9)
     assert np.isnan(ry)
+    # no patch found: nothing to say
+    assert all(np.isnan(vg.parallax_ratio(np.full((400, 2), np.nan), shift, inv_z)))

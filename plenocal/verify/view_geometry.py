@@ -132,11 +132,14 @@ def parallax_ratio(offsets: np.ndarray, shift: np.ndarray, inv_depth: np.ndarray
     """The offsets' slope in inverse depth over the predicted shift's (x and y): 0 where
     the views show the true cameras' parallax, -0.02 where they show 2 % less. ``offsets``
     (found minus predicted) and ``shift`` (predicted minus the patch's own pixel), (n, 2);
-    ``inv_depth`` (n,). NaN along an axis the prediction does not move with depth."""
+    ``inv_depth`` (n,). NaN along an axis the prediction does not move with depth, and
+    where fewer than three patches were found."""
     ok = np.all(np.isfinite(offsets), axis=1)
+    if ok.sum() < 3:
+        return float("nan"), float("nan")
     G = np.column_stack([np.ones(int(ok.sum())), inv_depth[ok] - inv_depth[ok].mean()])
     out = []
-    span = float(np.ptp(inv_depth[ok])) if ok.any() else 0.0
+    span = float(np.ptp(inv_depth[ok]))
     for axis in (0, 1):
         slope_pred = np.linalg.lstsq(G, shift[ok, axis], rcond=None)[0][1]
         slope_off = np.linalg.lstsq(G, offsets[ok, axis], rcond=None)[0][1]
