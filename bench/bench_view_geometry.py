@@ -56,16 +56,19 @@ def measure(capture: str, step: int, set_stride: int) -> dict:
     shots = sorted({split_key(k)[0] for k in truth})
     views = sorted({split_key(k)[1] for k in truth})
     central = views[len(views) // 2]
-    cache: dict[tuple[str, str], np.ndarray] = {}
+    images: dict[tuple[str, str], np.ndarray] = {}
+    depths: dict[tuple[str, str], np.ndarray] = {}
 
     def grey(shot: str, view: str) -> np.ndarray:
-        if (shot, view) not in cache:
-            cache[(shot, view)] = _grey(d / "views" / shot / f"{view}.png")
-        return cache[(shot, view)]
+        if (shot, view) not in images:
+            images[(shot, view)] = _grey(d / "views" / shot / f"{view}.png")
+        return images[(shot, view)]
 
     def pair(s1: str, v1: str, s2: str, v2: str):
         c1, c2 = truth[f"{s1}/{v1}"], truth[f"{s2}/{v2}"]
-        depth = np.load(d / "ground_truth" / "depth" / s1 / f"{v1}.npy")
+        if (s1, v1) not in depths:
+            depths[(s1, v1)] = np.load(d / "ground_truth" / "depth" / s1 / f"{v1}.npy")
+        depth = depths[(s1, v1)]
         img = grey(s1, v1)
         uv = _grid(img.shape, step, 16)
         z = depth[uv[:, 1].astype(int), uv[:, 0].astype(int)].astype(float)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import subprocess
@@ -132,7 +133,7 @@ def test_foreign_grid_stops_as_in_the_workflow(tmp_path, shot):
     lenslet, calib = shot
     wrong = tmp_path / "other_camera.xml"
     c = read_calib(calib)
-    write_calib(RayCalib(**{**c.__dict__, "diameter": c.diameter * 1.03}), wrong)
+    write_calib(dataclasses.replace(c, diameter=c.diameter * 1.03), wrong)
     args = [str(lenslet), str(wrong), "--views", "3", "--tile-size", "6", "--mla",
             "keplerian"]
     r = _cli("convert", *args, "-o", str(tmp_path / "stop"))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from synth.scenes import default_scene, make_plane, render
 
-from plenocal.camera import PinholeCamera, pose
+from plenocal.camera import PinholeCamera, intrinsics, pose
 from plenocal.verify import view_geometry as vg
 
 F, W, H, Z = 400.0, 320, 240, 0.6
@@ -17,8 +17,8 @@ F_WIDE = 300.0
 
 
 def _cam(f: float, R: np.ndarray, centre, width: int = W, height: int = H) -> PinholeCamera:
-    K = np.array([[f, 0, (width - 1) / 2], [0, f, (height - 1) / 2], [0, 0, 1.0]])
-    return PinholeCamera(K, pose(R, np.asarray(centre, float)), width, height)
+    return PinholeCamera(intrinsics(f, (width - 1) / 2, (height - 1) / 2),
+                         pose(R, np.asarray(centre, float)), width, height)
 
 
 def _turn(deg_y: float, deg_x: float) -> np.ndarray:
@@ -61,8 +61,7 @@ def _magnification_read(eps_true: float) -> dict:
     for i, j in itertools.permutations(range(len(truth)), 2):
         c1, c2 = truth[i], truth[j]
         # the plane's z-depth in view 1 (fronto-parallel at Z in the world)
-        rays = np.column_stack([uv, np.ones(len(uv))]) @ np.linalg.inv(c1.K).T @ c1.R.T
-        z = (Z - c1.centre[2]) / rays[:, 2]
+        z = (Z - c1.centre[2]) / c1.rays(uv)[:, 2]
         pred = vg.predict(c1, c2, uv, z)
         found = vg.match_patches(grey[i], grey[j], uv, pred, search=8, min_peak=0.9)
         pairs.append((found - pred, (vg.predict(c1, c2, uv, z, eps=1e-4) - pred) / 1e-4))

@@ -20,6 +20,7 @@ Conventions: internal (:mod:`plenocal.camera`: OpenCV axes, pixel centres at int
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 
 import cv2
@@ -31,22 +32,18 @@ from plenocal.camera import PinholeCamera
 MIN_PARALLAX_PX = 0.05
 
 
-def _scaled_k(cam: PinholeCamera, eps: float) -> np.ndarray:
+def _scaled(cam: PinholeCamera, eps: float) -> PinholeCamera:
     K = np.array(cam.K, dtype=float)
     K[0, 0] *= 1.0 + eps
     K[1, 1] *= 1.0 + eps
-    return K
+    return dataclasses.replace(cam, K=K)
 
 
 def predict(cam1: PinholeCamera, cam2: PinholeCamera, uv: np.ndarray, z: np.ndarray,
             eps: float = 0.0) -> np.ndarray:
     """Pixels (n, 2) of view 2 that show view 1's pixels ``uv`` (n, 2) at z-depth ``z``
     (n,), both cameras' focal lengths scaled by ``1 + eps``."""
-    K1, K2 = _scaled_k(cam1, eps), _scaled_k(cam2, eps)
-    uv1 = np.column_stack([uv, np.ones(len(uv))])
-    Xw = ((uv1 @ np.linalg.inv(K1).T) * z[:, None]) @ cam1.R.T + cam1.centre
-    p = ((Xw - cam2.centre) @ cam2.R) @ K2.T
-    return p[:, :2] / p[:, 2:3]
+    return _scaled(cam2, eps).project(_scaled(cam1, eps).unproject(uv, z))[0]
 
 
 def _parabola(a: float, b: float, c: float) -> float:
@@ -133,18 +130,19 @@ def parallax_ratio(offsets: np.ndarray, shift: np.ndarray, inv_depth: np.ndarray
     the views show the true cameras' parallax, -0.02 where they show 2 % less. ``offsets``
     (found minus predicted) and ``shift`` (predicted minus the patch's own pixel), (n, 2);
     ``inv_depth`` (n,). NaN along an axis the prediction does not move with depth, and
-    where fewer than three patches were found."""
+    where fewer than three patches, or patches at one depth only, were found."""
     ok = np.all(np.isfinite(offsets), axis=1)
-    if ok.sum() < 3:
+    if ok.sum() < 3 or not np.ptp(inv_depth[ok]) > 0:
         return float("nan"), float("nan")
-    G = np.column_stack([np.ones(int(ok.sum())), inv_depth[ok] - inv_depth[ok].mean()])
-    out = []
-    span = float(np.ptp(inv_depth[ok]))
-    for axis in (0, 1):
-        slope_pred = np.linalg.lstsq(G, shift[ok, axis], rcond=None)[0][1]
-        slope_off = np.linalg.lstsq(G, offsets[ok, axis], rcond=None)[0][1]
-        # under MIN_PARALLAX_PX of parallax over the depths (a view beside the central one
-        # on the other axis): nothing to compare
-        out.append(float(slope_off / slope_pred) if abs(slope_pred) * span >= MIN_PARALLAX_PX
-                   else float("nan"))
+    x = inv_depth[ok] - inv_depth[ok].mean()
+    span = float(np.ptp(x))
+    # least-squares slopes in inverse depth (the intercepts drop out of the ratio)
+    slope_pred = x @ (shift[ok] - shift[ok].mean(axis=0))
+    slope_off = x @ (offsets[ok] - offsets[ok].mean(axis=0))
+    scale = float(x @ x)
+    # under MIN_PARALLAX_PX of parallax over the depths (a view beside the central one on
+    # the other axis): nothing to compare
+    out = [float(slope_off[a] / slope_pred[a])
+           if abs(slope_pred[a]) / scale * span >= MIN_PARALLAX_PX else float("nan")
+           for a in (0, 1)]
     return out[0], out[1]
