@@ -23,11 +23,10 @@ rule refine:
     priority: PRIORITY["calibration"]
     conda:
         "../envs/plenocal.yaml"
-    # refine.num_threads (1): the same bytes run after run for any number (BENCHMARKS.md, "The
-    # refinement's adjustments by sparse Cholesky"). With -j2, a two-thread job waits until
-    # both cores are free at once, and the verification's one-thread jobs keep one busy
-    # (BENCHMARKS.md, "Every point in the refinement; the refine job's threads; the
-    # alignment's speed")
+    # refine.num_threads (1): the same bytes for any number (BENCHMARKS.md, "The refine job's
+    # threads: the same bytes for any number"). With -j2, a two-thread job waits until both
+    # cores are free at once, and the verification's one-thread jobs keep one busy (the full
+    # run 430 s against 377 s); profiles/slurm gives it 2, where jobs do not share cores
     threads: lambda wc: stage_config("refine")["num_threads"]
     resources:
         mem_mb=3000,

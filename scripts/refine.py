@@ -1,20 +1,26 @@
 """Rule refine: the Eq. 6 calibration refined under the rig (plenocal.calib.refine), or,
 with refine.enabled false, copied as it is; written in every export format."""
 
-import shutil
-from pathlib import Path
+# first, before numpy, OpenCV and pycolmap size their thread pools: one thread each, so
+# that refine.num_threads changes the time and not a bit (plenocal.library_threads)
+from plenocal.library_threads import pin_library_threads
 
-import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
+pin_library_threads()
 
-from plenocal.artifacts.cameras import read_cameras, write_cameras
-from plenocal.artifacts.rig import RigB, read_rig
-from plenocal.calib.refine import RefineSettings, refine_calibration
-from plenocal.calib.reg_b.rig import rig_at_focal
-from plenocal.convert.viewset import view_set_files
-from plenocal.export.colmap_model import write_colmap
-from plenocal.export.mpeg import write_mpeg
-from plenocal.io.files import make_temp_dir, write_json
-from plenocal.rulelog import rule_logger
+import shutil  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import cv2  # noqa: E402, F401  (before pycolmap: see DESIGN.md on cv2/pycolmap)
+
+from plenocal.artifacts.cameras import read_cameras, write_cameras  # noqa: E402
+from plenocal.artifacts.rig import RigB, read_rig  # noqa: E402
+from plenocal.calib.refine import RefineSettings, refine_calibration  # noqa: E402
+from plenocal.calib.reg_b.rig import rig_at_focal  # noqa: E402
+from plenocal.convert.viewset import view_set_files  # noqa: E402
+from plenocal.export.colmap_model import write_colmap  # noqa: E402
+from plenocal.export.mpeg import write_mpeg  # noqa: E402
+from plenocal.io.files import make_temp_dir, write_json  # noqa: E402
+from plenocal.rulelog import rule_logger  # noqa: E402
 
 snakemake = globals()["snakemake"]
 log = rule_logger(snakemake, "refine")
@@ -22,7 +28,7 @@ sm = snakemake
 
 eq6 = read_cameras(sm.input.eq6)
 rig = read_rig(sm.input.rig)
-# every step on the job's threads (refine.num_threads: the same bytes run after run)
+# every step on the job's threads (refine.num_threads: the same bytes for any number)
 settings = RefineSettings.from_config(sm.params.refine, seed=int(sm.params.sfm["seed"]),
                                       num_threads=int(sm.threads))
 if settings.enabled:

@@ -131,7 +131,9 @@ INITIAL_TRUST_REGION = 1e9
 #: with (``OMP_NUM_THREADS`` when the process starts; Snakemake sets it to the job's
 #: threads) change the last digits (wide-s1's focal length 2110.668611612627 px with one,
 #: 2110.6686116311516 px with two), the same run after run (BENCHMARKS.md, "The
-#: refinement's adjustments by sparse Cholesky").
+#: refinement's adjustments by sparse Cholesky"), so rule refine's script pins them to one
+#: before pycolmap loads (:mod:`plenocal.library_threads`): its thread count then changes
+#: the time, not the bytes.
 LINEAR_SOLVER = "SPARSE_NORMAL_CHOLESKY"
 _REFINE = stage_defaults("refine")  # the defaults: config.schema.yaml's refine block
 _SFM = stage_defaults("sfm")  # the seed of COLMAP's steps
