@@ -66,6 +66,9 @@ GEOMETRIES = {
         "handheld": {"count": 9, "max_rotation_deg": 6},
         "main_lens": {"focus_distance_m": 0.65},
     },
+    # a fourth: the default array with a Galilean MLA (upright micro images), as the real
+    # Raytrix frames of shared/real/ read (README, "Converting real lenslet images")
+    "galilean": {"mla": {"kind": "galilean"}},
 }
 DEFAULT_SEEDS = (1, 2, 3, 4, 5)
 TARGETS = ("eval/gt_errors.json", "eval/reprojection.json", "eval/synthesis_exp1.json")
