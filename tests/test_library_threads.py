@@ -20,7 +20,7 @@ libs = {line.split()[-1] for line in open("/proc/self/maps") if "libgomp" in lin
 if not libs:
     print("no-libgomp")
 else:
-    print(*sorted(ctypes.CDLL(p).omp_get_max_threads() for p in libs))
+    print(*sorted({ctypes.CDLL(p).omp_get_max_threads() for p in libs}))
 """
 
 
