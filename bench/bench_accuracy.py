@@ -69,14 +69,9 @@ GEOMETRIES = {
     # a fourth: the default array with a Galilean MLA (upright micro images), as the real
     # Raytrix frames of shared/real/ read (README, "Converting real lenslet images")
     "galilean": {"mla": {"kind": "galilean"}},
-    # and the wide array with it
-    "wide-galilean": {
-        "array": {"cols": 5, "rows": 2, "step_m": 0.015},
-        "handheld": {"count": 5},
-        "main_lens": {"focus_distance_m": 0.55},
-        "mla": {"kind": "galilean"},
-    },
 }
+# and the wide array with it (the two set different keys)
+GEOMETRIES["wide-galilean"] = {**GEOMETRIES["wide"], **GEOMETRIES["galilean"]}
 DEFAULT_SEEDS = (1, 2, 3, 4, 5)
 TARGETS = ("eval/gt_errors.json", "eval/reprojection.json", "eval/synthesis_exp1.json")
 

@@ -64,7 +64,9 @@ def measure(capture: str, step: int, set_stride: int) -> dict:
             images[(shot, view)] = _grey(d / "views" / shot / f"{view}.png")
         return images[(shot, view)]
 
-    def pair(s1: str, v1: str, s2: str, v2: str):
+    def pair(s1: str, v1: str, s2: str, v2: str, deriv: bool = False):
+        """The patches, their depths, predicted and found places in view 2, and (``deriv``)
+        the prediction's derivative in the focal-length change."""
         c1, c2 = truth[f"{s1}/{v1}"], truth[f"{s2}/{v2}"]
         if (s1, v1) not in depths:
             depths[(s1, v1)] = np.load(d / "ground_truth" / "depth" / s1 / f"{v1}.npy")
@@ -76,13 +78,14 @@ def measure(capture: str, step: int, set_stride: int) -> dict:
         uv, z = uv[ok], z[ok]
         pred = vg.predict(c1, c2, uv, z)
         found = vg.match_patches(img, grey(s2, v2), uv, pred, depth=depth)
-        return uv, z, pred, found, (vg.predict(c1, c2, uv, z, eps=1e-4) - pred) / 1e-4
+        d_eps = (vg.predict(c1, c2, uv, z, eps=1e-4) - pred) / 1e-4 if deriv else None
+        return uv, z, pred, found, d_eps
 
     pairs = []
     for s1, s2 in itertools.permutations(shots, 2):
         if s1.startswith("hand") or s2.startswith("hand"):
-            _, _, pred, found, deriv = pair(s1, central, s2, central)
-            pairs.append((found - pred, deriv))
+            _, _, pred, found, d_eps = pair(s1, central, s2, central, deriv=True)
+            pairs.append((found - pred, d_eps))
     mag = vg.focal_scale(pairs)
     ratios: dict[str, list[tuple[float, float]]] = {v: [] for v in views if v != central}
     for s in shots[::set_stride]:
