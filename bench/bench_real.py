@@ -23,9 +23,9 @@ and with the README's kinds the Raytrix views are mosaics (Fujita2: 16 % of patc
 confident, T = 4, against 67 %, T = 8). The table follows the detection: Raytrix frames
 (Fujita2, Origami, Boxer-IrishMan-Gladiator2, R42_klein_crop) ``galilean``, TSPC frames
 (Boys2, HandTools) ``keplerian``. ``--mla auto`` lets the converter read it instead; a
-frame not in the table gets the default. Everything else is config.schema.yaml's
-``convert`` defaults (:func:`plenocal.cli.validate_convert_block`, as the command line
-``plenocal convert`` uses them).
+frame not in the table gets the default. Everything else is what the command line
+``plenocal convert`` converts with (:func:`plenocal.cli.command_line_block`:
+config.schema.yaml's ``convert`` defaults, the frame prefiltered).
 
 Local measures (issue 33), for the central view and the two corner views 0_0 and
 (N-1)_(N-1) of every frame against TLCT's views of the same frame (``centre.png``,
@@ -87,7 +87,7 @@ sys.path.insert(0, str(ROOT))
 
 from benchmd import Lines, update_sections  # noqa: E402
 
-from plenocal.cli import validate_convert_block  # noqa: E402
+from plenocal.cli import command_line_block  # noqa: E402
 from plenocal.convert import ConvertSettings, ShotConversion  # noqa: E402
 from plenocal.convert.gridcheck import grid_for_mode, refine_grid  # noqa: E402
 from plenocal.convert.localcheck import local_compare  # noqa: E402
@@ -176,7 +176,7 @@ def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
     image = load_lenslet(lenslet)
     H, W = image.shape[:2]
     seq = sequence(name)
-    cfg = validate_convert_block({"mla": MLA[seq]} if seq in MLA and mla_mode == "table" else {})
+    cfg = command_line_block({"mla": MLA[seq]} if seq in MLA and mla_mode == "table" else {})
     settings = ConvertSettings.from_config(cfg)
     t0 = time.perf_counter()
     file_grid = build_grid(calib, W, H)

@@ -13,6 +13,9 @@ Options map onto the keys of the config's ``convert`` block (``mla``, ``tile_siz
 and completed with its defaults (as the workflow's rule ``convert`` gets it; the
 workflow's config.yaml fixes ``tile_size: 6`` for its synthetic ground truth, the command
 line keeps the schema's ``auto``) and goes through :meth:`ConvertSettings.from_config`.
+One default differs from the workflow's: the command line prefilters the frame
+(``blend.prefilter`` 0.1, :data:`CLI_CONVERT_DEFAULTS`; ``--set blend.prefilter=0`` gives
+the workflow's views to the bit).
 Progress goes to stderr; errors (a missing file, a malformed calib.xml, a bad option or
 key) print one line naming the file or key and exit with status 2.
 """
@@ -20,11 +23,13 @@ key) print one line naming the file or key and exit with status 2.
 from __future__ import annotations
 
 import argparse
+import copy
 import dataclasses
 import logging
 import os
 import sys
 import time
+from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -32,6 +37,7 @@ import yaml
 
 from plenocal.config import stage_defaults
 from plenocal.convert.errors import ConvertError
+from plenocal.convert.prefilter import OPTIMAL_A
 from plenocal.convert.video import TEMPORAL_MODES
 from plenocal.io.yuv import (
     DEFAULT_MATRIX,
@@ -46,7 +52,9 @@ EXIT_USAGE = 2
 
 CONVERT_HELP = """\
 Convert one lenslet image into its N x N subaperture views (the RLC of the paper,
-Fig. 1 (a)). DIR receives what the workflow's rule `convert` writes:
+Fig. 1 (a)). DIR receives what the workflow's rule `convert` writes (the frame
+prefiltered against bilinear sampling's blur, blend.prefilter 0.1, where the workflow's
+views for the calibration are not; --set blend.prefilter=0 gives those):
 
   <r>_<c>.png        view (r, c) for r, c = 0..N-1 (uint8 RGB); r grows as the viewpoint
                      moves down, c as it moves right
@@ -222,9 +230,23 @@ def _size(text: str) -> tuple[int, int]:
     return size
 
 
+#: what ``plenocal convert`` sets over the config's ``convert`` defaults: the frame
+#: prefiltered against bilinear sampling's blur (``blend.prefilter``,
+#: :data:`plenocal.convert.prefilter.OPTIMAL_A`). Its views are for people, view synthesis,
+#: TMIV and NeRF; the workflow's feed the calibration's SIFT, which leaned the focal length
+#: on prefiltered views (+0.027 % on average over twenty simulated captures), so the
+#: config's default stays 0. The filter moves no view's geometry (an affine fit of a
+#: prefiltered view onto a plain one: scale within 0.0014 %, centre within 0.007 px), so a
+#: calibration made from the workflow's views holds for these. ``--set
+#: blend.prefilter=0`` gives the workflow's views, to the bit (BENCHMARKS.md, "The command
+#: line's views prefiltered, the workflow's not").
+CLI_CONVERT_DEFAULTS = {"blend": {"prefilter": OPTIMAL_A}}
+
+
 def convert_config(args: argparse.Namespace) -> dict:
-    """The convert block the options describe (``--set`` first, named options win)."""
-    cfg: dict = {}
+    """The convert block the options describe: :data:`CLI_CONVERT_DEFAULTS`, then
+    ``--set``, then the named options (each later one wins)."""
+    cfg: dict = copy.deepcopy(CLI_CONVERT_DEFAULTS)
     for item in args.set:
         key, sep, val = item.partition("=")
         if not sep or not key.strip():
@@ -239,6 +261,23 @@ def convert_config(args: argparse.Namespace) -> dict:
     if args.grid is not None:
         cfg["grid"] = args.grid
     return cfg
+
+
+def _merged(base: dict, over: Mapping) -> dict:
+    out = copy.deepcopy(base)
+    for key, value in over.items():
+        if isinstance(value, Mapping) and isinstance(out.get(key), dict):
+            out[key] = _merged(out[key], value)
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
+
+
+def command_line_block(block: Mapping | None = None) -> dict:
+    """The convert block ``plenocal convert`` converts with for the keys ``block`` sets
+    (nested blocks as dicts): :data:`CLI_CONVERT_DEFAULTS` under them, checked and completed
+    as :func:`validate_convert_block` does (what bench/bench_real.py measures)."""
+    return validate_convert_block(_merged(CLI_CONVERT_DEFAULTS, block or {}))
 
 
 def validate_convert_block(block: dict) -> dict:

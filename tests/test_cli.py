@@ -13,7 +13,15 @@ import numpy as np
 import pytest
 from synth.lenslets import lenslet_from_patch_size, random_texture
 
-from plenocal.cli import build_parser, convert_config, main, validate_convert_block
+from plenocal.cli import (
+    build_parser,
+    command_line_block,
+    convert_config,
+    main,
+    validate_convert_block,
+)
+from plenocal.config import stage_defaults
+from plenocal.convert.prefilter import OPTIMAL_A
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_image, write_image
 from plenocal.io.raytrix import LensType, RayCalib, read_calib, write_calib
@@ -83,16 +91,37 @@ def test_options_map_onto_the_convert_keys():
                       "upsample=1.5", "--set", "patch_size.block_samples=9"])
     cfg = convert_config(a)
     assert cfg == {"mla": "galilean", "tile_size": "auto", "grid": "refine", "bit_depth": 12,
-                   "upsample": 1.5, "patch_size": {"block_samples": 9}}
+                   "upsample": 1.5, "patch_size": {"block_samples": 9},
+                   "blend": {"prefilter": OPTIMAL_A}}
     a = p.parse_args(["convert", "l.png", "c.xml", "-o", "d", "--tile-size", "9"])
     cfg = convert_config(a)
-    assert cfg == {"tile_size": 9}  # the rest: the schema's defaults (grid auto, mla auto)
+    # the rest: the schema's defaults (grid auto, mla auto), the frame prefiltered
+    assert cfg == {"tile_size": 9, "blend": {"prefilter": OPTIMAL_A}}
     assert validate_convert_block(cfg)["grid"] == validate_convert_block(cfg)["mla"] == "auto"
     with pytest.raises(SystemExit):
         p.parse_args(["convert", "l.png", "c.xml", "-o", "d", "--tile-size", "big"])
     with pytest.raises(SystemExit):
         p.parse_args(["convert", "l.png", "c.xml", "-o", "d", "--galilean", "--mla",
                       "keplerian"])
+
+
+def test_the_command_line_prefilters_the_frame_and_the_workflow_does_not():
+    """plenocal convert's views are prefiltered (blend.prefilter OPTIMAL_A, > 0); the
+    config's default, which the workflow's views for the calibration take, stays 0; --set
+    blend.prefilter=0 gives the workflow's block, key for key."""
+    p = build_parser()
+    plain = ["convert", "l.png", "c.xml", "-o", "d"]
+    block = validate_convert_block(convert_config(p.parse_args(plain)))
+    assert OPTIMAL_A > 0 and block["blend"]["prefilter"] == OPTIMAL_A
+    assert block == command_line_block()
+    assert stage_defaults("convert.blend")["prefilter"] == 0
+    off = validate_convert_block(convert_config(p.parse_args(
+        [*plain, "--set", "blend.prefilter=0"])))
+    assert off == validate_convert_block({}) and off != block
+    # a nested key beside it keeps the prefilter
+    other = command_line_block({"blend": {"wide_slots": 5}, "mla": "galilean"})
+    assert other["blend"]["prefilter"] == OPTIMAL_A and other["blend"]["wide_slots"] == 5
+    assert other["mla"] == "galilean"
 
 
 def test_convert_writes_what_rule_convert_writes(tmp_path, shot, capsys):

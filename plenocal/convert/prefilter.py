@@ -31,7 +31,9 @@ is one pass over the frame (6-32 ms on the real frames).
 detail on the real frames, but the calibration made from them leaned: the focal length by
 +0.027 % on average over the twenty simulated captures, one of them past issue 32's 0.1 %
 (BENCHMARKS.md, "The frame prefiltered against bilinear sampling's blur"). It is for
-conversions outside the calibration (``plenocal convert --set blend.prefilter=0.1``).
+conversions outside the calibration: the command line ``plenocal convert`` takes it by
+default (:data:`plenocal.cli.CLI_CONVERT_DEFAULTS`; a view's geometry does not move with
+it, so the workflow's calibration holds for those views).
 """
 
 from __future__ import annotations
