@@ -655,7 +655,9 @@ def patch_size_picture(layout: ViewLayout, patch: np.ndarray, confident: np.ndar
     h = img.shape[0]
     bar_w, pad, text_w = 16, 8, 70
     panel = np.zeros((h, pad + bar_w + text_w, 3), dtype=np.uint8)
-    top, bottom = 20, max(h - 20, 21)
+    # the bar's top label (its baseline 4 px below the bar's top) clear of the title's
+    # descenders ("[p]" reach 3 px below its baseline, 14)
+    top, bottom = 26, max(h - 20, 27)
     ramp = np.linspace(255, 0, bottom - top).astype(np.uint8)
     panel[top:bottom, pad:pad + bar_w] = lut[ramp][:, None, ::-1]
     below, above = bool(np.any(patch < lo)), bool(np.any(patch > hi))
