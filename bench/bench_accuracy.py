@@ -72,6 +72,11 @@ GEOMETRIES = {
 }
 # and the wide array with it (the two set different keys)
 GEOMETRIES["wide-galilean"] = {**GEOMETRIES["wide"], **GEOMETRIES["galilean"]}
+# a Raytrix-like camera on the default array: Galilean, three interleaved lens types
+# (multi-focus), the grid turned by pi/2 and a small angle, as the real Raytrix frames'
+# calib.xml files give it (0.0007 rad beside pi/2: README, "Converting real lenslet images")
+GEOMETRIES["raytrix"] = {"mla": {"kind": "galilean", "lens_types": 3,
+                                 "rotation_rad": 1.5707963 + 0.0007}}
 DEFAULT_SEEDS = (1, 2, 3, 4, 5)
 TARGETS = ("eval/gt_errors.json", "eval/reprojection.json", "eval/synthesis_exp1.json")
 

@@ -33,8 +33,8 @@ interpolation 1.5x as fast as from float maps, whose conversion OpenCV 5 no long
 inside the remap).
 
 The frame the samples are read from may be prefiltered once against bilinear
-interpolation's blur (``convert.blend.prefilter``, :mod:`plenocal.convert.prefilter`; off
-by default).
+interpolation's blur (``convert.blend.prefilter``, :mod:`plenocal.convert.prefilter`: off
+in the config, which the workflow's views take; on in ``plenocal convert``).
 
 Everything that does not depend on the view is computed once per shot
 (:class:`RenderPlan`): the candidate lenses, their tile weights and the sampling

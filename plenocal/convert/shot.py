@@ -309,7 +309,8 @@ class ShotConversion:
         self._image = image
         # what the views sample: the image's own integers (no float copy of the frame),
         # prefiltered against bilinear sampling's blur where convert.blend.prefilter is set
-        # (plenocal.convert.prefilter; off by default)
+        # (plenocal.convert.prefilter; 0 in the config, which the workflow's views take,
+        # and 0.1 on the command line: plenocal.cli.CLI_CONVERT_DEFAULTS)
         self._render_source, self._render_scale = render_source(image, self.bits,
                                                                 st.render.prefilter)
         self._source_float: np.ndarray | None = None
