@@ -77,6 +77,8 @@ GEOMETRIES["wide-galilean"] = {**GEOMETRIES["wide"], **GEOMETRIES["galilean"]}
 # calib.xml files give it (0.0007 rad beside pi/2: README, "Converting real lenslet images")
 GEOMETRIES["raytrix"] = {"mla": {"kind": "galilean", "lens_types": 3,
                                  "rotation_rad": 1.5707963 + 0.0007}}
+# and the wide array with it
+GEOMETRIES["wide-raytrix"] = {**GEOMETRIES["wide"], **GEOMETRIES["raytrix"]}
 DEFAULT_SEEDS = (1, 2, 3, 4, 5)
 TARGETS = ("eval/gt_errors.json", "eval/reprojection.json", "eval/synthesis_exp1.json")
 
