@@ -32,7 +32,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import os
 import shutil
@@ -46,6 +45,8 @@ import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from benchmd import Lines, update_sections  # noqa: E402
+
+from plenocal.config import deep_update  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "bench" / "out" / "accuracy"
@@ -84,13 +85,6 @@ TARGETS = ("eval/gt_errors.json", "eval/reprojection.json", "eval/synthesis_exp1
 
 #: The issue's targets on the worst capture: (column, limit).
 LIMITS = {"focal_pct": 0.1, "centre_mm": 0.1, "rot_deg": 0.02, "scale_pct": 0.3}
-
-
-def deep_update(base: dict, over: dict) -> dict:
-    out = copy.deepcopy(base)
-    for k, v in over.items():
-        out[k] = deep_update(out.get(k, {}), v) if isinstance(v, dict) else v
-    return out
 
 
 def capture_config(geometry: str, seed: int, refine: bool = False) -> dict:

@@ -23,7 +23,6 @@ key) print one line naming the file or key and exit with status 2.
 from __future__ import annotations
 
 import argparse
-import copy
 import dataclasses
 import logging
 import os
@@ -35,7 +34,7 @@ from pathlib import Path
 
 import yaml
 
-from plenocal.config import stage_defaults
+from plenocal.config import deep_update, stage_defaults
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.prefilter import OPTIMAL_A
 from plenocal.convert.video import TEMPORAL_MODES
@@ -246,7 +245,7 @@ CLI_CONVERT_DEFAULTS = {"blend": {"prefilter": OPTIMAL_A}}
 def convert_config(args: argparse.Namespace) -> dict:
     """The convert block the options describe: :data:`CLI_CONVERT_DEFAULTS`, then
     ``--set``, then the named options (each later one wins)."""
-    cfg: dict = copy.deepcopy(CLI_CONVERT_DEFAULTS)
+    cfg = deep_update(CLI_CONVERT_DEFAULTS, {})
     for item in args.set:
         key, sep, val = item.partition("=")
         if not sep or not key.strip():
@@ -263,21 +262,11 @@ def convert_config(args: argparse.Namespace) -> dict:
     return cfg
 
 
-def _merged(base: dict, over: Mapping) -> dict:
-    out = copy.deepcopy(base)
-    for key, value in over.items():
-        if isinstance(value, Mapping) and isinstance(out.get(key), dict):
-            out[key] = _merged(out[key], value)
-        else:
-            out[key] = copy.deepcopy(value)
-    return out
-
-
 def command_line_block(block: Mapping | None = None) -> dict:
     """The convert block ``plenocal convert`` converts with for the keys ``block`` sets
     (nested blocks as dicts): :data:`CLI_CONVERT_DEFAULTS` under them, checked and completed
     as :func:`validate_convert_block` does (what bench/bench_real.py measures)."""
-    return validate_convert_block(_merged(CLI_CONVERT_DEFAULTS, block or {}))
+    return validate_convert_block(deep_update(CLI_CONVERT_DEFAULTS, block or {}))
 
 
 def validate_convert_block(block: dict) -> dict:

@@ -119,6 +119,16 @@ def with_defaults(block: str, cfg: Mapping[str, Any] | None) -> dict:
     return out
 
 
+def deep_update(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict:
+    """A copy of ``base`` with ``over``'s keys set into it, nested blocks key by key (a
+    block in ``over`` changes only the keys it names of ``base``'s block)."""
+    out = copy.deepcopy(dict(base))
+    for key, value in over.items():
+        out[key] = (deep_update(out.get(key, {}), value) if isinstance(value, Mapping)
+                    else copy.deepcopy(value))
+    return out
+
+
 def stage_defaults(block: str) -> dict:
     """The schema's defaults of config block ``block`` (see :func:`with_defaults`)."""
     return with_defaults(block, None)
