@@ -14,7 +14,9 @@ runs the workflow on every capture of a set and reports, per capture,
 * where the complete calibration's error comes from (gt_errors' ``sources``: registration
   A's focal length and shot poses, the hand-held shots, the scale of Eq. 5 and the rig),
 
-then the median and the worst case of every column. The captures are kept in
+then the median and the worst case of every column, and per geometry. ``--collect-only
+--kept`` reads every capture kept of the geometries, whatever its seed (the union of the
+sets run so far: BENCHMARKS.md, "Every kept capture"). The captures are kept in
 ``bench/out/accuracy/<geometry>-s<seed>/`` (one Snakemake working folder each, running the
 repository's own Snakefile): a second run reruns only what changed. Snakemake does not see
 a change inside the ``plenocal`` package (only in the rules and scripts), so after such a
@@ -26,7 +28,7 @@ code to measure first (a stale copy's views came out bit for bit those of its ow
 Usage::
 
     python bench/bench_accuracy.py [--seeds 1 2 3 4 5] [--geometries default wide]
-        [--forcerun RULE ...] [--collect-only] [--no-exp1] [--out BENCHMARKS.md]
+        [--forcerun RULE ...] [--collect-only [--kept]] [--no-exp1] [--out BENCHMARKS.md]
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import shutil
 import statistics
 import subprocess
@@ -148,6 +151,27 @@ def _abs(v):
     return None if v is None else abs(float(v))
 
 
+def current_exp1(work: Path) -> bool:
+    """Whether the capture's Exp. 1 file is there and no older than its calibration (a
+    capture re-measured with ``--no-exp1`` keeps an Exp. 1 of the cameras before)."""
+    exp1 = work / "results" / DATASET / "eval" / "synthesis_exp1.json"
+    cams = work / "results" / DATASET / "calibration" / "cameras.json"
+    return exp1.is_file() and cams.is_file() and exp1.stat().st_mtime >= cams.stat().st_mtime
+
+
+def kept_captures(geometries: list[str]) -> list[tuple[str, Path]]:
+    """Every kept capture of ``geometries`` (``bench/out/accuracy/<geometry>-s<seed>`` with
+    its ``gt_errors.json``), by geometry, then seed."""
+    found = []
+    for geom in geometries:
+        pat = re.compile(rf"{re.escape(geom)}-s(\d+)")
+        seeds = sorted(int(m.group(1)) for p in OUT.glob(f"{geom}-s*")
+                       if (m := pat.fullmatch(p.name))
+                       and (p / "results" / DATASET / "eval" / "gt_errors.json").is_file())
+        found += [(f"{geom}-s{s}", OUT / f"{geom}-s{s}") for s in seeds]
+    return found
+
+
 def collect(work: Path, exp1: bool = True) -> dict:
     """One capture's figures (the columns of the table); ``exp1``: with Exp. 1's (not
     with ``--no-exp1``, where a kept file may predate the calibration)."""
@@ -251,6 +275,39 @@ def summary_rows(results: dict[str, dict], columns) -> list[str]:
     return lines
 
 
+def geometry_of(capture: str) -> str:
+    """``wide-raytrix-s3`` -> ``wide-raytrix``."""
+    return capture.rsplit("-s", 1)[0]
+
+
+def geometry_rows(results: dict[str, dict]) -> list[str]:
+    """Per geometry, then over every capture: how many, and median / worst of the focal
+    length (with the signed errors' mean), centres, largest rotation and scale, and how many
+    captures are past each of :data:`LIMITS`."""
+    groups: dict[str, list[dict]] = {}
+    for name, r in results.items():
+        groups.setdefault(geometry_of(name), []).append(r)
+    if len(groups) > 1:
+        groups["all"] = list(results.values())
+    cols = [("focal_pct", "focal %", "{:.3f}"), ("centre_mm", "centres mm", "{:.3f}"),
+            ("rot_deg", "rotation deg", "{:.4f}"), ("scale_pct", "scale %", "{:.3f}")]
+    lines = ["| geometry | captures | " + " | ".join(f"{h} median / worst" for _, h, _ in cols)
+             + " | signed focal mean % | past a target (focal / centres / rotation / scale) |",
+             "|---|---:|" + "---|" * len(cols) + "---:|---|"]
+    for geom, rs in groups.items():
+        cells = []
+        for k, _, f in cols:
+            vals = [r[k] for r in rs]
+            cells.append(f"{f.format(statistics.median(vals))} / {f.format(max(vals))}")
+        signed = [r["focal_signed_pct"] for r in rs if r.get("focal_signed_pct") is not None]
+        past = " / ".join(str(sum(r[k] > lim for r in rs)) for k, lim in LIMITS.items())
+        label = f"**{geom}**" if geom == "all" else geom
+        lines.append(f"| {label} | {len(rs)} | " + " | ".join(cells) + " | "
+                     + _fmt("{:+.3f}", statistics.fmean(signed) if signed else None)
+                     + f" | {past} |")
+    return lines
+
+
 def ratio_rows(results: dict[str, dict]) -> list[str]:
     """Table I's ratios: complete / ground truth and complete / naive per capture."""
     lines = ["| capture | complete / truth | Eq. 6 / truth | complete / naive |",
@@ -341,15 +398,29 @@ def main() -> None:
                     help="the calibration and Table I only, without Exp. 1's depth maps and "
                          "view synthesis (a third of a capture's time): to re-measure after "
                          "a change before the calibration; the Exp. 1 columns read '-'")
+    ap.add_argument("--kept", action="store_true",
+                    help="with --collect-only: every kept capture of the geometries, whatever "
+                         "its seed (--seeds is not read); Exp. 1 where its file is as new as "
+                         "the calibration")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default=None, help="BENCHMARKS.md to update (its section)")
     args = ap.parse_args()
     if 0 in args.seeds:
         print("note: seed 0 is the default dataset's, the luckiest we know; it is not "
               "a capture the user brings", file=sys.stderr)
+    if args.kept and not args.collect_only:
+        ap.error("--kept reads the kept captures: give it with --collect-only")
+    if args.kept and args.refine:
+        ap.error("--kept reads the captures as kept, not their -refine clones")
     results: dict[str, dict] = {}
     walls: dict[str, float] = {}
-    for geom in args.geometries:
+    if args.kept:
+        captures = kept_captures(args.geometries)
+        if not captures:
+            raise SystemExit(f"no kept captures of {', '.join(args.geometries)} under {OUT}")
+        for name, work in captures:
+            results[name] = collect(work, exp1=not args.no_exp1 and current_exp1(work))
+    for geom in [] if args.kept else args.geometries:
         for seed in args.seeds:
             name = f"{geom}-s{seed}"
             work = OUT / name
@@ -366,11 +437,21 @@ def main() -> None:
             print(f"  {name}: " + ", ".join(f"{k} {_fmt(f, results[name].get(k))}"
                                             for k, _, f in COLUMNS[:6]), flush=True)
     out = Lines()
-    out.say(f"Captures: seeds {', '.join(map(str, args.seeds))} of geometries "
-            f"{', '.join(args.geometries)} (bench/bench_accuracy.py; {len(results)} captures). "
+    which = ("every kept capture" if args.kept else
+             f"seeds {', '.join(map(str, args.seeds))}")
+    out.say(f"Captures: {which} of geometries {', '.join(args.geometries)} "
+            f"(bench/bench_accuracy.py; {len(results)} captures). "
             "The complete calibration against the simulator's ground truth (rigid "
             "alignment, gt_errors), Table I's mean px on the same matches, Exp. 1's mean "
             "PSNR with our own depth.")
+    out.say("")
+    out.say("By geometry (the targets: " + ", ".join(
+        f"{k} {lim}" for k, lim in LIMITS.items()) + "):")
+    out.say("")
+    for line in geometry_rows(results):
+        out.say(line)
+    out.say("")
+    out.say("Per capture:")
     out.say("")
     for line in summary_rows(results, COLUMNS):
         out.say(line)
@@ -406,7 +487,8 @@ def main() -> None:
         out.say("Wall time per capture (s, what had to run): " + ", ".join(
             f"{k} {v:.0f}" for k, v in walls.items()))
     if args.out:
-        title = "Accuracy over captures" + (", the joint refinement on" if args.refine else "")
+        title = ("Every kept capture" if args.kept else "Accuracy over captures"
+                 + (", the joint refinement on" if args.refine else ""))
         update_sections(args.out, {f"{title} (issue 32)": list(out)})
 
 
