@@ -130,6 +130,24 @@ def test_vignetted_weak_texture_keeps_a_large_patch_size():
     assert np.median(plain.raw[inner & plain.confident]) < truth - 0.3  # the bias it removes
 
 
+def test_lens_profiles_by_parts_are_the_numbers_of_all_at_once(monkeypatch):
+    """The lenses' radial bins sampled a few lenses at a time (memory bounded on any
+    sensor) give the same bits as all lenses in one block."""
+    from plenocal.convert import vignetting
+    from plenocal.convert.patchsize import to_gray
+
+    opt = small_optics(600, 450)
+    _, grid, img = plane_lenslet(opt, 0.48)
+    grid.types = np.arange(len(grid.types)) % 3  # three lens types: the path by bins
+    gray = to_gray(img)
+    monkeypatch.setattr(vignetting, "BINS_CHUNK", 7)
+    by_parts = vignetting.lens_type_profiles(gray, grid)
+    monkeypatch.setattr(vignetting, "BINS_CHUNK", 10 ** 9)
+    at_once = vignetting.lens_type_profiles(gray, grid)
+    assert len(grid.centres) > 7 * 3
+    assert np.array_equal(by_parts[0], at_once[0]) and np.array_equal(by_parts[1], at_once[1])
+
+
 def test_patch_size_follows_the_content_not_the_middle_of_the_range():
     """Two planes (left half P=4.5, right half P=8): the map has both, not a blend."""
     opt = small_optics(480, 300)
