@@ -50,7 +50,11 @@ move right with c (``tests/test_groundtruth.py``).
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import math
+import threading
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -258,6 +262,63 @@ _KEY_MAX = (1 << 27) - 1  # quantised d2 clamped here: 32 tiles^2 or more away, 
 _KEY_BITS = 5  # the candidate's number in the key's low bits (up to 31 candidates)
 
 
+#: the most bytes of tables :func:`remembered_slots` keeps (a 12-MP TSPC frame's views of
+#: 1576 x 1190 px need 105 MB for their 7 slots; a 41-MP sensor's more than this, and
+#: the bands past it are computed each time, as without the block)
+SLOT_MEMO_BYTES = 256 << 20
+
+
+class _SlotMemo:
+    """:func:`nearest_slots`' tables by layout geometry and band, up to ``max_bytes``."""
+
+    def __init__(self, max_bytes: int) -> None:
+        self.max_bytes = max_bytes
+        self.used = 0
+        self.tables: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+        self.lock = threading.Lock()
+
+    def put(self, key: tuple, tables: tuple[np.ndarray, np.ndarray]) -> None:
+        size = sum(t.nbytes for t in tables)
+        with self.lock:
+            if key in self.tables or self.used + size > self.max_bytes:
+                return
+            for t in tables:
+                t.flags.writeable = False  # handed out again: nobody may change them
+            self.tables[key] = tables
+            self.used += size
+
+
+_slot_memo: _SlotMemo | None = None
+
+
+@contextlib.contextmanager
+def remembered_slots(max_bytes: int = SLOT_MEMO_BYTES) -> Iterator[None]:
+    """Within the block :func:`nearest_slots` keeps the tables it makes (read-only, up to
+    ``max_bytes``) and gives the same arrays when asked again for the same layout
+    geometry, band and counts: they depend on the layout alone, and the frames of one
+    recording share one layout (one set-up; :mod:`plenocal.convert.video`), so that
+    every frame after the first skips them (0.36 s a frame of a 12-MP TSPC recording on
+    one core). The numbers are those made without the block. Blocks do not nest."""
+    global _slot_memo
+    if _slot_memo is not None:
+        raise RuntimeError("remembered_slots: a block is already open")
+    _slot_memo = _SlotMemo(max_bytes)
+    try:
+        yield
+    finally:
+        _slot_memo = None
+
+
+def _slot_key(layout: ViewLayout, keep: int, k: int, rows: slice) -> tuple:
+    """What :func:`nearest_slots`' tables depend on: the layout's size, tile, lattice
+    basis and tile centres (a digest), the counts and the band's rows."""
+    h = hashlib.blake2b(digest_size=16)
+    for a in (layout.tile_centres, layout.basis):
+        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    return (layout.width, layout.height, layout.tile, h.hexdigest(), keep, k,
+            rows.indices(layout.height))
+
+
 def nearest_slots(layout: ViewLayout, keep: int = 3, k: int = 7, rows: slice = slice(None)
                   ) -> tuple[np.ndarray, np.ndarray]:
     """The ``keep`` nearest of :func:`nearest_lenses`'s ``k`` candidates, nearest first,
@@ -272,6 +333,19 @@ def nearest_slots(layout: ViewLayout, keep: int = 3, k: int = 7, rows: slice = s
     if k > len(_STEPS):
         raise ValueError(f"nearest_slots takes at most {len(_STEPS)} candidates, got {k}")
     keep = min(keep, k)
+    memo = _slot_memo
+    key = None if memo is None else _slot_key(layout, keep, k, rows)
+    if memo is not None and key in memo.tables:
+        return memo.tables[key]
+    idx, dist2 = _nearest_slots(layout, keep, k, rows)
+    if memo is not None:
+        memo.put(key, (idx, dist2))
+    return idx, dist2
+
+
+def _nearest_slots(layout: ViewLayout, keep: int, k: int, rows: slice
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`nearest_slots` computed."""
     table, cell, off = _lattice_lookup(layout, k, rows)
     # every candidate's lens and distance; row k: none (-1, inf)
     lens = np.empty((k + 1,) + cell.shape, np.int32)

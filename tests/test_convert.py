@@ -797,6 +797,48 @@ def test_radial_tables_follow_the_weight_formula_in_the_squared_radius(safe_diam
     assert step.max() < 0.06, step.max()
 
 
+def test_remembered_slots_give_the_same_tables_once_made(monkeypatch):
+    """Inside remembered_slots, nearest_slots makes each band's tables once per layout
+    geometry and hands the same read-only arrays out again (a recording's frames share one
+    layout), equal to those made without the block; another layout, band or count makes
+    its own; past the byte budget nothing is kept; outside the block nothing is."""
+    from plenocal import viewgeom
+    from plenocal.viewgeom import nearest_slots, remembered_slots
+
+    opt = small_optics(480, 300)
+    calib = calib_for_optics(opt)
+    grid = MicrolensGrid(calib, 480, 300)
+    shot = ShotConversion(lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 4)),
+                          calib, 5, FIXED_TILE)
+    layout = shot.layout
+    rows = slice(8, 40)
+    made = []
+    compute = viewgeom._nearest_slots
+    monkeypatch.setattr(viewgeom, "_nearest_slots",
+                        lambda *a: made.append(a[1:]) or compute(*a))
+    plain = nearest_slots(layout, keep=4, k=13, rows=rows)
+    with remembered_slots():
+        first = nearest_slots(layout, keep=4, k=13, rows=rows)
+        again = nearest_slots(replace(layout), keep=4, k=13, rows=slice(8, 40))
+        other = nearest_slots(layout, keep=3, k=13, rows=rows)
+        moved = replace(layout, tile_centres=layout.tile_centres + 0.5)
+        nearest_slots(moved, keep=4, k=13, rows=rows)
+        with pytest.raises(RuntimeError, match="already open"), remembered_slots():
+            pass
+    assert len(made) == 4  # plain, first, other, moved: again was remembered
+    assert again[0] is first[0] and again[1] is first[1]
+    assert not first[0].flags.writeable and not first[1].flags.writeable
+    for a, b in zip(plain, first, strict=True):
+        assert np.array_equal(a, b)
+    assert other[0].shape[0] == 3
+    with remembered_slots(max_bytes=1):  # nothing fits: made every time
+        nearest_slots(layout, keep=4, k=13, rows=rows)
+        nearest_slots(layout, keep=4, k=13, rows=rows)
+    assert len(made) == 6
+    nearest_slots(layout, keep=4, k=13, rows=rows)
+    assert len(made) == 7 and viewgeom._slot_memo is None
+
+
 @pytest.mark.parametrize("turn", [0.0, 0.37])
 def test_slots_are_the_true_nearest_lenses_and_every_lens_within_the_blend(turn):
     """nearest_slots against brute force over every used lens's tile centre: with the

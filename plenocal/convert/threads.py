@@ -53,3 +53,12 @@ def run_all(work, items: list, threads: int) -> None:
     with ThreadPoolExecutor(max_workers=threads) as pool:
         for _ in pool.map(work, items):
             pass
+
+
+def map_threads(work, items: list, threads: int) -> list:
+    """``[work(item) for item in items]``, the items side by side on ``threads`` threads
+    (in order on one); the results in the items' order, a worker's error raised here."""
+    if threads <= 1 or len(items) <= 1:
+        return [work(item) for item in items]
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        return list(pool.map(work, items))

@@ -30,10 +30,12 @@ would be. The README ("Lenslet video") gives the flicker measured with and witho
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -49,9 +51,10 @@ from plenocal.convert.patchsize import (
 )
 from plenocal.convert.setup import ConverterSetup, decide_setup, write_setup
 from plenocal.convert.shot import ConvertSettings, ShotConversion, frame_gray
+from plenocal.convert.threads import map_threads
 from plenocal.convert.vignetting import lens_type_profiles
 from plenocal.grid import MicrolensGrid
-from plenocal.io.files import write_image, write_json
+from plenocal.io.files import write_images, write_json
 from plenocal.io.raytrix import RayCalib
 from plenocal.io.yuv import (
     DEFAULT_MATRIX,
@@ -69,6 +72,7 @@ from plenocal.io.yuv import (
     yuv_to_rgb,
 )
 from plenocal.names import view_names
+from plenocal.viewgeom import remembered_slots
 
 log = logging.getLogger("plenocal.convert")
 
@@ -402,6 +406,9 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
     records: list[dict] = []
     view_fmt: YuvFormat | None = None
     t_all = time.perf_counter()
+    # the frames share one layout: the renderer's nearest-lens tables are made once
+    slots = contextlib.ExitStack()
+    slots.enter_context(remembered_slots())
     try:
         for i, k in enumerate(chosen):
             t0 = time.perf_counter()
@@ -426,12 +433,15 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
             deep = writer is not None and fmt.bits > 8
             for views in shot.view_groups(threads=threads,
                                           dtype=np.uint16 if deep else np.uint8):
-                for name, view in views.items():
-                    if writer is not None:
-                        writer.write(name, view_to_yuv(view, fmt.bits, video.matrix,
-                                                       video.range))
-                    else:
-                        write_image(folder / f"{name}.png", view)
+                if writer is not None:  # made side by side, written in view order
+                    planes = map_threads(partial(view_to_yuv, bits=fmt.bits,
+                                                 matrix=video.matrix, rng=video.range),
+                                         list(views.values()), threads)
+                    for name, yuv in zip(views, planes, strict=True):
+                        writer.write(name, yuv)
+                else:
+                    write_images(((folder / f"{name}.png", view)
+                                  for name, view in views.items()), threads)
                 views.clear()  # before the next group is rendered
             stats = shot.disparity()
             if out_format == "png":
@@ -450,6 +460,8 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
         if writer is not None:
             writer.close(complete=False)
         raise
+    finally:
+        slots.close()
     if writer is not None:
         writer.close()
     assert view_fmt is not None
