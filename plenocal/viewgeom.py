@@ -262,10 +262,10 @@ _KEY_MAX = (1 << 27) - 1  # quantised d2 clamped here: 32 tiles^2 or more away, 
 _KEY_BITS = 5  # the candidate's number in the key's low bits (up to 31 candidates)
 
 
-#: the most bytes of tables :func:`remembered_slots` keeps (a 12-MP TSPC frame's views of
-#: 1576 x 1190 px need 105 MB for their 7 slots; a 41-MP sensor's more than this, and
-#: the bands past it are computed each time, as without the block)
-SLOT_MEMO_BYTES = 256 << 20
+#: the most bytes of tables :func:`remembered_slots` keeps: a 12-MP TSPC frame's views of
+#: 1574 x 1190 px need 105 MB for their 7 slots; a 31-MP sensor's more than this, and
+#: the bands past it are made each time, as without the block (the memory stays bounded)
+SLOT_MEMO_BYTES = 128 << 20
 
 
 class _SlotMemo:

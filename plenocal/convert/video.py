@@ -406,9 +406,11 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
     records: list[dict] = []
     view_fmt: YuvFormat | None = None
     t_all = time.perf_counter()
-    # the frames share one layout: the renderer's nearest-lens tables are made once
+    # the frames share one layout: the renderer's nearest-lens tables are made once (a
+    # recording of one frame keeps none: nothing would ask again)
     slots = contextlib.ExitStack()
-    slots.enter_context(remembered_slots())
+    if len(chosen) > 1:
+        slots.enter_context(remembered_slots())
     try:
         for i, k in enumerate(chosen):
             t0 = time.perf_counter()
@@ -434,11 +436,14 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
             for views in shot.view_groups(threads=threads,
                                           dtype=np.uint16 if deep else np.uint8):
                 if writer is not None:  # made side by side, written in view order
-                    planes = map_threads(partial(view_to_yuv, bits=fmt.bits,
-                                                 matrix=video.matrix, rng=video.range),
-                                         list(views.values()), threads)
-                    for name, yuv in zip(views, planes, strict=True):
-                        writer.write(name, yuv)
+                    to_yuv = partial(view_to_yuv, bits=fmt.bits, matrix=video.matrix,
+                                     rng=video.range)
+                    group = list(views)
+                    for a in range(0, len(group), max(threads, 1)):  # planes of a few views
+                        part = group[a:a + max(threads, 1)]
+                        planes = map_threads(to_yuv, [views[n] for n in part], threads)
+                        for name, yuv in zip(part, planes, strict=True):
+                            writer.write(name, yuv)
                 else:
                     write_images(((folder / f"{name}.png", view)
                                   for name, view in views.items()), threads)
