@@ -329,7 +329,8 @@ def nearest_slots(layout: ViewLayout, keep: int = 3, k: int = 7, rows: slice = s
     candidate`` (one pass, at most ``keep`` min/max per candidate) instead of sorting
     (H, W, k) arrays; each slot's lens and distance are then read from the candidates'
     by the candidate number in its key. ``k``: up to ``len(_STEPS)`` (19) candidates
-    (:func:`candidates_within`)."""
+    (:func:`candidates_within`). Inside :func:`remembered_slots` the tables are made once
+    per layout geometry and band and handed out again, read-only."""
     if k > len(_STEPS):
         raise ValueError(f"nearest_slots takes at most {len(_STEPS)} candidates, got {k}")
     keep = min(keep, k)
