@@ -44,6 +44,15 @@ def small_optics(width: int = 400, height: int = 300) -> PlenopticOptics:
                            height=height)
 
 
+def patch6_shot(calib: RayCalib | None = None):
+    """(calib, grid, shot): the small camera's frame with every patch 6 px, converted at
+    :data:`FIXED_TILE` (``calib``: another calib.xml for the same sensor)."""
+    calib = calib or calib_for_optics(small_optics(480, 300))
+    grid = MicrolensGrid(calib, 480, 300)
+    return calib, grid, ShotConversion(
+        lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 4)), calib, 5, FIXED_TILE)
+
+
 def plane_lenslet(opt: PlenopticOptics, depth: float, seed: int = 0):
     calib = calib_for_optics(opt)
     grid = MicrolensGrid(calib, opt.width, opt.height)
@@ -629,11 +638,7 @@ def test_views_reaching_the_rim_take_the_wide_blend():
     assert (wide.slots, wide.fade_radius, wide.centre_power) == (4, 1.0, 3.0)
     assert (wider.slots, wider.fade_radius, wider.centre_power) == (7, 1.6, 1.0)
     assert RenderSettings().for_reach(0) == RenderSettings()
-    opt = small_optics(480, 300)
-    calib = calib_for_optics(opt)
-    grid = MicrolensGrid(calib, 480, 300)
-    shot = ShotConversion(lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 4)),
-                          calib, 5, FIXED_TILE)
+    calib, grid, shot = patch6_shot()
     P = float(np.median(shot.used_patch))
     slots = (3, 4, 7)
     reaches = set()
@@ -681,11 +686,7 @@ def test_each_slot_is_devignetted_with_its_lens_types_profile():
     from plenocal.convert.render import make_plans, render_view
     from plenocal.convert.vignetting import BIN_PX
 
-    opt = small_optics(480, 300)
-    calib = calib_for_optics(opt)
-    grid = MicrolensGrid(calib, 480, 300)
-    shot = ShotConversion(lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 4)),
-                          calib, 5, FIXED_TILE)
+    calib, grid, shot = patch6_shot()
     layout = shot.layout
     lens_type = (np.arange(len(grid.centres)) % 2).astype(np.int64)
     half = calib.safe_diameter / 2
@@ -805,11 +806,7 @@ def test_remembered_slots_give_the_same_tables_once_made(monkeypatch):
     from plenocal import viewgeom
     from plenocal.viewgeom import nearest_slots, remembered_slots
 
-    opt = small_optics(480, 300)
-    calib = calib_for_optics(opt)
-    grid = MicrolensGrid(calib, 480, 300)
-    shot = ShotConversion(lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 4)),
-                          calib, 5, FIXED_TILE)
+    calib, grid, shot = patch6_shot()
     layout = shot.layout
     rows = slice(8, 40)
     made = []
@@ -853,11 +850,9 @@ def test_slots_are_the_true_nearest_lenses_and_every_lens_within_the_blend(turn)
     assert [candidates_within(r) for r in (0.8, 1.0, 1.6)] == [7, 13, 19]
     with pytest.raises(ValueError, match="candidates"):
         candidates_within(1.8)
-    opt = small_optics(480, 300)
-    calib = RayCalib(**{**calib_for_optics(opt).__dict__, "rotation": math.pi / 2 + turn})
-    grid = MicrolensGrid(calib, 480, 300)
-    shot = ShotConversion(lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 4)),
-                          calib, 5, FIXED_TILE)
+    calib = RayCalib(**{**calib_for_optics(small_optics(480, 300)).__dict__,
+                        "rotation": math.pi / 2 + turn})
+    calib, grid, shot = patch6_shot(calib)
     layout = shot.layout
     rows = slice(layout.height // 3, layout.height // 3 + 24)
     ys = np.arange(layout.height, dtype=np.float64)[rows][:, None, None]
