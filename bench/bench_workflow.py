@@ -156,18 +156,18 @@ def full_run(config: dict, label: str, scratch: Path) -> dict:
 
 
 def calibration_run(config: dict, scratch: Path, refine_threads: int | None = None,
-                    label: str = "calibration") -> float:
+                    label: str = "calibration") -> tuple[float, bytes]:
     """Wall seconds of the calibration alone from a clean folder (``snakemake -j2
     results/<d>/calibration/cameras.json``: simulation, conversion, A, B, depth, scale,
-    merge, refine). ``refine_threads``: ``--set-threads refine=N`` (the README's advice for
-    a run of the calibration alone, where nothing else waits for the second core)."""
-    ds_name = next(iter(config["datasets"]))
+    merge, refine), and the cameras.json it wrote. ``refine_threads``: ``--set-threads
+    refine=N`` (the README's advice for a run of the calibration alone, where nothing else
+    waits for the second core)."""
+    target = f"results/{next(iter(config['datasets']))}/calibration/cameras.json"
     work = make_copy(scratch / label, config)
     extra = [] if refine_threads is None else ["--set-threads", f"refine={refine_threads}"]
     # the target first: --set-threads takes every argument after it
-    wall, _ = snakemake(work, f"results/{ds_name}/calibration/cameras.json", *extra,
-                        log=scratch / f"{label}.log")
-    return wall
+    wall, _ = snakemake(work, target, *extra, log=scratch / f"{label}.log")
+    return wall, (work / target).read_bytes()
 
 
 def busy_share(rules: dict[str, dict[str, float]], wall: float, cores: int = 2) -> float:
@@ -368,15 +368,12 @@ def main() -> None:
             print(f"cores busy: {100 * busy:.0f} % of the run")
             cal = cal2 = None
             if not args.skip_calibration:
-                cal = calibration_run(config, scratch)
+                cal, cams = calibration_run(config, scratch)
                 print(f"calibration alone from scratch: {cal:.1f} s")
-                cal2 = calibration_run(config, scratch, refine_threads=2,
-                                       label="calibration-refine2")
+                cal2, cams2 = calibration_run(config, scratch, refine_threads=2,
+                                              label="calibration-refine2")
                 print(f"calibration alone from scratch, --set-threads refine=2: {cal2:.1f} s")
-                ds_name = next(iter(config["datasets"]))
-                same = [(scratch / lab / "results" / ds_name / "calibration" / "cameras.json"
-                         ).read_bytes() for lab in ("calibration", "calibration-refine2")]
-                if same[0] != same[1]:
+                if cams != cams2:
                     raise RuntimeError("refine on two threads wrote other cameras than on one: "
                                        "plenocal.library_threads no longer pins the pools")
             sections["Full run"] = [
