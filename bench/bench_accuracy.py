@@ -83,6 +83,29 @@ GEOMETRIES["raytrix"] = {"mla": {"kind": "galilean", "lens_types": 3,
                                  "rotation_rad": 1.5707963 + 0.0007}}
 # and the wide array with it
 GEOMETRIES["wide-raytrix"] = {**GEOMETRIES["wide"], **GEOMETRIES["raytrix"]}
+# Three more, defined after the code they measure and tuned on nothing (BENCHMARKS.md,
+# "Three geometries no run had seen"): a longer main lens focused farther, on a scene
+# farther away (a narrower view: less of the turns' information); a 3 x 3 array with four
+# hand-held shots turned less; a 4 x 4 array with a Galilean MLA focused between the two
+GEOMETRIES["tele"] = {
+    "array": {"cols": 5, "rows": 3, "step_m": 0.02},
+    "handheld": {"count": 6, "max_offset_m": 0.05},
+    "main_lens": {"focal_length_mm": 50.0, "focus_distance_m": 1.0},
+    "scene": {"near_m": 0.8, "far_m": 1.3},
+}
+GEOMETRIES["small"] = {
+    "array": {"cols": 3, "rows": 3, "step_m": 0.012},
+    "handheld": {"count": 4, "max_rotation_deg": 8},
+    "main_lens": {"focus_distance_m": 0.5},
+    "scene": {"near_m": 0.4, "far_m": 0.62},
+}
+GEOMETRIES["square-galilean"] = {
+    "array": {"cols": 4, "rows": 4, "step_m": 0.01},
+    "handheld": {"count": 5, "max_rotation_deg": 9},
+    "main_lens": {"focus_distance_m": 0.7},
+    "scene": {"near_m": 0.55, "far_m": 0.9},
+    "mla": {"kind": "galilean"},
+}
 DEFAULT_SEEDS = (1, 2, 3, 4, 5)
 TARGETS = ("eval/gt_errors.json", "eval/reprojection.json", "eval/synthesis_exp1.json")
 
