@@ -724,6 +724,8 @@ def report_inputs(wildcards):
         out["refine"] = res(d, "calibration", "refine.json")
     if have("scale"):
         out["scale"] = res(d, "merge", "scale.json")
+    if have("map_a"):
+        out["reg_a"] = res(d, "reg_a", "reg_a.json")
     if have("rig_b"):
         out["rig"] = res(d, "reg_b", "rig.json")
     if is_synthetic(d) and have("convert_quality"):

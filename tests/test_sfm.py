@@ -7,6 +7,7 @@ import pytest
 from synth.scenes import default_scene, render, rig_cameras
 
 from plenocal.calib.reg_a.sfm import RegistrationError, check_shots, features_a, map_a, match_a
+from plenocal.calib.reg_a.uncertainty import focal_std_px
 from plenocal.camera import rotation_angle_deg, umeyama
 from plenocal.io.files import dumps_json, write_image, write_json
 from plenocal.report.sources import WARNING_SOURCES
@@ -61,6 +62,16 @@ def test_registration_a_recovers_focal_and_poses(capture, registered):
     assert rot < 0.2
     assert doc["mean_reprojection_error_px"] < 0.5
     assert (ra / "model" / "images.bin").is_file()
+
+
+def test_registration_a_says_how_firmly_its_focal_length_is_fixed(registered):
+    """reg_a.json's focal_std_px is the covariance's figure of the model it wrote (the
+    report shows it on real captures), and the focal length is within a few of it."""
+    ra, doc = registered
+    std = doc["focal_std_px"]
+    assert std == pytest.approx(focal_std_px(ra / "model"), rel=1e-9)  # the model read back
+    assert 0 < std < 0.05 * doc["focal_px"]
+    assert abs(doc["focal_px"] - F) < 4 * std
 
 
 def test_registration_a_is_deterministic(capture, registered, tmp_path):

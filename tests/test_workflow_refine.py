@@ -52,6 +52,8 @@ def test_refinement_keeps_every_view_and_does_not_raise_the_errors(tiny_complete
     assert rows["complete"]["num_images"] == rows["eq6"]["num_images"] == 90
     html = (res / "report" / "index.html").read_text()
     assert 'id="t1-eq6"' in html and 'id="kpi-refine"' in html
+    # the focal length with registration A's standard deviation, which needs no truth
+    assert 'id="kpi-focal"' in html and "&plusmn;" in html
     assert "The paper&#x27;s Eq. 6 result (all views, rigid alignment)" in html
 
 

@@ -20,6 +20,7 @@ from typing import TypeVar
 
 import numpy as np
 
+from plenocal.artifacts.reg_a import read_reg_a
 from plenocal.artifacts.results import (
     ConvertQuality,
     GroundTruthErrors,
@@ -613,6 +614,7 @@ def section_summary(page: Page) -> None:
                  f"{escape(rig.check.verdict)} "
                  f"{page.link(src.SOURCES['rig'][0], '[source]')}</span>")
     rf = _read(page, "refine", read_json)
+    focal_kpi(page, _read(page, "reg_a", read_reg_a), rf)
     if rf is not None and rf.get("enabled"):
         sv = rf["scale_vs_eq5"]
         page.add('<span class="kpi" id="kpi-refine">joint refinement<b>'
@@ -630,6 +632,28 @@ def section_summary(page: Page) -> None:
     if sc is None and rig is None and _absent(page, "scale") and _absent(page, "rig"):
         page.missing("scale")
         page.missing("rig")
+
+
+def focal_kpi(page: Page, reg_a, rf: dict | None) -> None:
+    """The focal length: the calibration's (the refined one where the refinement ran) and
+    registration A's with its standard deviation (COLMAP's covariance scaled by the
+    residuals: :mod:`plenocal.calib.reg_a.uncertainty`), which says how firmly this
+    capture's hand-held turns fix the focal length; the same on a real capture as on a
+    simulated one, since it needs no truth."""
+    if reg_a is None:
+        return
+    std = reg_a.stats.get("focal_std_px")
+    sd = ("(its standard deviation not estimated)" if not std else
+          f"&plusmn; {100 * std / reg_a.focal_px:.2f} % (1 sd, its covariance: how firmly "
+          "the hand-held shots' turns fix the focal length; README, \"How sure is the "
+          "focal length\")")
+    refined = rf is not None and rf.get("enabled") and "focal_px" in rf
+    f = rf["focal_px"]["refined"] if refined else reg_a.focal_px
+    what = (f"the joint refinement moved it {rf['focal_px']['change_pct']:+.3f} % from "
+            if refined else "as ")
+    page.add(f'<span class="kpi" id="kpi-focal">focal length<b>{f:.2f} px</b>{what}'
+             f"registration A's {reg_a.focal_px:.2f} px {sd} "
+             f"{page.link(src.SOURCES['reg_a'][0], '[source]')}</span>")
 
 
 #: what needs ground truth, and so cannot be checked on a real capture

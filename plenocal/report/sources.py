@@ -34,6 +34,7 @@ SOURCES: dict[str, tuple[str, str]] = {
     "ground_truth": ("ground_truth/cameras.json", "ground_truth"),
     "convert_quality": ("convert/quality.json", "convert_quality"),
     "scale": ("merge/scale.json", "scale"),
+    "reg_a": ("reg_a/reg_a.json", "map_a"),
     "rig": ("reg_b/rig.json", "rig_b"),
 }
 

@@ -7,7 +7,7 @@ The sources:
 registration A's focal length
     The complete calibration takes it as it is. Its statistical uncertainty
     (``focal_std_pct``) is what registration A's own bundle adjustment says of it
-    (:func:`plenocal.calib.reg_a.sfm.focal_std_px`): the shots of an array are parallel and
+    (:func:`plenocal.calib.reg_a.uncertainty.focal_std_px`): the shots of an array are parallel and
     a parallel array does not fix the focal length (it trades off against depth); only the
     hand-held shots' rotations and forward offsets do, and with them the hand-held geometry
     (``handheld``: how far their axes turn from the array's) sets the focal length's

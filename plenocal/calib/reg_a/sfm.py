@@ -34,6 +34,7 @@ import numpy as np
 from plenocal.artifacts.reg_a import RegistrationA
 from plenocal.artifacts.stage_warnings import WARNINGS_KEY, warning_list
 from plenocal.calib.reg_a import colmap as cm
+from plenocal.calib.reg_a.uncertainty import reconstruction_focal_std_px
 from plenocal.io.files import atomic_write_dir, make_temp_dir
 from plenocal.names import is_handheld_shot
 
@@ -243,6 +244,9 @@ def reg_a_dict(rec, mapper: str) -> RegistrationA:
         "mean_reprojection_error_px": float(errs.mean()) if errs.size else None,
         "median_reprojection_error_px": float(np.median(errs)) if errs.size else None,
         "colmap_mean_reprojection_error_px": float(rec.compute_mean_reprojection_error()),
+        # how firmly the data fix the focal length (the hand-held shots' turns; a parallel
+        # array alone does not): the report shows it where no truth is known
+        "focal_std_px": reconstruction_focal_std_px(rec),
     }
     return RegistrationA(focal_px=float(camera.params[0]), width=int(camera.width),
                          height=int(camera.height), mapper=mapper, cameras=cams, stats=stats)

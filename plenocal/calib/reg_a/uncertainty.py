@@ -23,7 +23,15 @@ def focal_std_px(model_dir: str | Path) -> float | None:
     ``model_dir`` (registration A's), or None where COLMAP cannot estimate it."""
     import pycolmap  # noqa: PLC0415
 
-    rec = pycolmap.Reconstruction(str(model_dir))
+    return reconstruction_focal_std_px(pycolmap.Reconstruction(str(model_dir)))
+
+
+def reconstruction_focal_std_px(rec) -> float | None:
+    """:func:`focal_std_px` of a reconstruction in memory (``pycolmap.Reconstruction``
+    with one shared camera; its values are read, not changed: the adjuster is built for
+    the covariance and never solved)."""
+    import pycolmap  # noqa: PLC0415
+
     if rec.num_cameras() != 1 or rec.num_reg_images() < 3:
         return None
     cfg = pycolmap.BundleAdjustmentConfig()
