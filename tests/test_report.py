@@ -22,7 +22,7 @@ from plenocal.artifacts import results as typed
 from plenocal.artifacts.cameras import write_cameras
 from plenocal.artifacts.disparity import FORMAT as DISPARITY_FORMAT
 from plenocal.artifacts.disparity import VERSION as DISPARITY_VERSION
-from plenocal.artifacts.reg_a import RegistrationA
+from plenocal.artifacts.reg_a import RegistrationA, write_reg_a
 from plenocal.artifacts.rig import write_rig
 from plenocal.artifacts.scale import ScaleResult, write_scale
 from plenocal.camera import PinholeCamera, intrinsics, pose
@@ -180,6 +180,26 @@ def build(res: Path) -> str:
 # ---------------------------------------------------------------------------
 # Content
 # ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("std", [0.6015, None])
+def test_focal_length_kpi_gives_registration_a_deviation(tmp_path, std):
+    """The summary's focal length: registration A's with its deviation where reg_a.json
+    has one (real captures too), else says it was not estimated; the refinement's
+    focal length where it ran."""
+    res = make_results(tmp_path)
+    cams = {c: PinholeCamera(intrinsics(120.3, W, H), np.eye(4), W, H) for c in CAMS}
+    stats = {} if std is None else {"focal_std_px": std}
+    write_reg_a(res / "reg_a" / "reg_a.json", RegistrationA(
+        focal_px=120.3, width=W, height=H, mapper="global", cameras=cams, stats=stats))
+    write_json(res / "calibration" / "refine.json", {"enabled": False})
+    html = build(res)
+    kpi = re.search(r'<span class="kpi" id="kpi-focal">(.*?)</span>', html, re.S).group(1)
+    assert "<b>120.30 px</b>as registration A's 120.30 px" in kpi
+    if std is None:
+        assert "not estimated" in kpi
+    else:
+        assert "&plusmn; 0.50 %" in kpi
 
 
 def test_table1_rows_pair_measurements_with_the_paper():

@@ -20,7 +20,7 @@ from typing import TypeVar
 
 import numpy as np
 
-from plenocal.artifacts.reg_a import read_reg_a
+from plenocal.artifacts.reg_a import RegistrationA, read_reg_a
 from plenocal.artifacts.results import (
     ConvertQuality,
     GroundTruthErrors,
@@ -634,7 +634,7 @@ def section_summary(page: Page) -> None:
         page.missing("rig")
 
 
-def focal_kpi(page: Page, reg_a, rf: dict | None) -> None:
+def focal_kpi(page: Page, reg_a: RegistrationA | None, rf: dict | None) -> None:
     """The focal length: the calibration's (the refined one where the refinement ran) and
     registration A's with its standard deviation (COLMAP's covariance scaled by the
     residuals: :mod:`plenocal.calib.reg_a.uncertainty`), which says how firmly this
