@@ -37,7 +37,9 @@ if refine.get("enabled"):
     # the paper's Eq. 6 result beside the refined one, and the refinement's own scale
     out["eq6"] = complete_errors(read_cameras(snakemake.input.eq6), truth)
     out["refinement"] = refine_errors(refine, r, out["scale"]["r_truth"])
-sigma = focal_std_px(snakemake.input.model)
+# map_a writes it into reg_a.json; a reg_a.json from before that has none: from the model
+sigma = (reg_a.stats["focal_std_px"] if "focal_std_px" in reg_a.stats
+         else focal_std_px(snakemake.input.model))
 out["sources"] = error_sources(truth, reg_a, {v: M for v, (_, M) in rig.view_poses().items()},
                                r, out, focal_std_px=sigma)
 s_ = out["sources"]
