@@ -55,6 +55,7 @@ from benchmd import Lines  # noqa: E402
 from plenocal.artifacts.cameras import read_cameras  # noqa: E402
 from plenocal.config import validate_config  # noqa: E402
 from plenocal.convert.viewset import read_view_set  # noqa: E402
+from plenocal.simulate.groundtruth import render_views  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 WORK = ROOT / "bench" / "out" / "view_sources"
@@ -74,8 +75,7 @@ def view_files(res: Path) -> dict[str, Path]:
 def held_central(res: Path) -> str:
     """The key of the held shot's central view (the shot the refinement holds)."""
     refine = json.loads((res / "calibration" / "refine.json").read_text())
-    views = sorted(v for k in view_files(res) if (v := k.split("/")[1]))
-    n = int(round(len(set(views)) ** 0.5))
+    n = int(round(len({key.split("/")[1] for key in view_files(res)}) ** 0.5))
     return f"{refine['hold_shot']}/{n // 2}_{n // 2}"
 
 
@@ -111,8 +111,6 @@ def fitted_softness(ours: np.ndarray, ideal: np.ndarray) -> tuple[float, float]:
 def _render_part(args) -> int:
     """Ideal renders of ``keys`` written over ``files`` (their times kept), blurred by
     ``sigma`` and given noise ``noise`` where these are above 0."""
-    from plenocal.simulate.groundtruth import render_views  # noqa: PLC0415
-
     scene, cams, supersample, keys, files, sigma, noise = args
     tmp = [f"{f}.ideal.png" for f in files]
     depth = [f"{f}.ideal.npy" for f in files]
@@ -260,17 +258,16 @@ def main() -> None:
         if not (res / "eval" / "gt_errors.json").is_file():
             raise SystemExit(f"{OUT / capture}: not a kept capture of bench_accuracy.py")
         key = held_central(res)
-        ideal = WORK / "_softness.png"
+        ideal = WORK / f"{capture}-softness.png"  # the held central view's ideal render
         ideal.parent.mkdir(parents=True, exist_ok=True)
         data = OUT / capture / "data" / DATASET
         cfg = validate_config(yaml.safe_load((OUT / capture / "config.yaml").read_text()))
-        from plenocal.simulate.groundtruth import render_views  # noqa: PLC0415
-
         render_views(data / "truth" / "scene.json", res / "ground_truth" / "cameras.json",
                      [key], int(cfg["datasets"][DATASET]["simulate"]["render"][
                          "ideal_supersample"]), [ideal], [ideal.with_suffix(".npy")],
                      log=lambda *x: None)
         softness = fitted_softness(_grey(view_files(res)[key]), _grey(ideal))
+        ideal.with_suffix(".npy").unlink()
         f = figures(OUT / capture)
         rows = [("ours", f, f"fitted on {key}: sigma {softness[0]:.2f} px, "
                  f"noise {softness[1]:.2f} grey levels")]
