@@ -258,8 +258,10 @@ def refine_runs(cap: KeptCapture, runs: list[str], rebuild) -> dict:
     original = rf.rig_reconstruction
     state = {"run": runs[0]}
 
-    def patched(tracks, views, shot_poses, width, height, point_ids, work_dir=None):
-        rec, model = original(tracks, views, shot_poses, width, height, point_ids, work_dir)
+    def patched(tracks, views, shot_poses, width, height, point_ids, work_dir=None,
+                keypoints=None):
+        rec, model = original(tracks, views, shot_poses, width, height, point_ids, work_dir,
+                              keypoints)
         return rebuild(state["run"], rec, tracks, point_ids), model
 
     out: dict = {"runs": {}, "median": {}}
