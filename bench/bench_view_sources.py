@@ -54,7 +54,7 @@ from benchmd import Lines  # noqa: E402
 
 from plenocal.artifacts.cameras import read_cameras  # noqa: E402
 from plenocal.config import validate_config  # noqa: E402
-from plenocal.convert.viewset import read_view_set  # noqa: E402
+from plenocal.convert.viewset import read_view_set, view_set_files  # noqa: E402
 from plenocal.simulate.groundtruth import render_views  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -66,10 +66,7 @@ MARGIN = 30  # px left out at a view's border by the softness fit
 
 def view_files(res: Path) -> dict[str, Path]:
     """``<shot>/<view>`` -> the PNG of every view of a capture's results folder."""
-    out = {}
-    for vs in sorted(res.glob("views/*/views.json")):
-        out.update({f"{vs.parent.name}/{n}": p for n, p in read_view_set(vs).items()})
-    return out
+    return view_set_files(sorted(res.glob("views/*/views.json")))
 
 
 def held_central(res: Path) -> str:
@@ -156,13 +153,9 @@ def oracle_patch(layout, centre_depth: np.ndarray, cam, right) -> np.ndarray:
     xi = np.clip(np.rint(xy[:, 0]).astype(int), 0, layout.width - 1)
     yi = np.clip(np.rint(xy[:, 1]).astype(int), 0, layout.height - 1)
     z = centre_depth[yi, xi].astype(float)
-    rays = np.linalg.solve(cam.K, np.c_[xy, np.ones(len(xy))].T).T
-    world = (cam.cam_to_world[:3, :3] @ (rays * z[:, None]).T).T + cam.cam_to_world[:3, 3]
-    w2c = np.linalg.inv(right.cam_to_world)
-    p = (right.K @ ((w2c[:3, :3] @ world.T).T + w2c[:3, 3]).T).T
-    with np.errstate(divide="ignore", invalid="ignore"):  # no surface: z = 0
-        disparity = xy[:, 0] - p[:, 0] / p[:, 2]
-        patch = layout.sign * layout.q * layout.tile / disparity
+    uv, _ = right.project(cam.unproject(xy, z))  # no surface (z = 0): the centre, any x
+    with np.errstate(divide="ignore", invalid="ignore"):
+        patch = layout.sign * layout.q * layout.tile / (xy[:, 0] - uv[:, 0])
     return np.where((z > 0) & np.isfinite(patch) & (patch > 0), patch, np.nan)
 
 
