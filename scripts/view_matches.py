@@ -26,6 +26,7 @@ try:
     info.update(viewdb.match_views(work / "database.db", shot_centres=centres,
                                    shot_neighbours=cfg["view_matching"]["shot_neighbours"],
                                    view_radius=cfg["view_matching"]["view_radius"],
+                                   within_shot=cfg["view_matching"]["within_shot"],
                                    seed=cfg["seed"], num_threads=sm.threads, work_dir=work,
                                    use_gpu=use_gpu))
     (work / "database.db").replace(out_db)

@@ -96,18 +96,45 @@ def test_view_pairs_by_hand():
               (("0_0", "0_1"), ("0_0", "1_1"), ("0_1", "0_2"), ("0_1", "1_1"), ("0_2", "1_1"))]
     centres = {"a": np.zeros(3), "b": np.array([1.0, 0, 0]), "c": np.array([3.0, 0, 0])}
     # one neighbour each: a-b (a's and b's nearest), b-c (c's nearest); never a-c
-    got = viewdb.view_pairs(names, centres, shot_neighbours=1, view_radius=1)
+    got = viewdb.view_pairs(names, centres, shot_neighbours=1, view_radius=1,
+                            within_shot="grid")
     assert [p for p in got if p[0].startswith("a/") and p[1].startswith("a/")] == within
     across = {(p[0][0], p[1][0]) for p in got if p[0][0] != p[1][0]}
     assert across == {("a", "b"), ("b", "c")}
     assert all(p[0][2:] == p[1][2:] for p in got if p[0][0] != p[1][0])
     assert len(got) == 3 * 5 + 2 * 4
     # None: every pair within a shot and the same view across every two shots
-    full = viewdb.view_pairs(names, centres, shot_neighbours=None, view_radius=None)
+    full = viewdb.view_pairs(names, centres, shot_neighbours=None, view_radius=None,
+                             within_shot="grid")
     assert len(full) == 3 * 6 + 3 * 4
+    # no shot here has a central view (rows 0-1), so "centre" pairs them as the grid does
+    assert viewdb.view_pairs(names, centres, shot_neighbours=1, view_radius=1) == got
     # names without views: exhaustive
     assert viewdb.view_pairs(["x.png", "y.png", "z.png"], None) == [
         ("x.png", "y.png"), ("x.png", "z.png"), ("y.png", "z.png")]
+
+
+def test_view_pairs_with_the_central_view_by_hand():
+    grid3 = [f"{r}_{c}" for r in range(3) for c in range(3)]
+    names = [f"{s}/{v}.png" for s in ("a", "b") for v in grid3] + ["c/0_0.png", "c/0_1.png"]
+    assert viewdb.central_views(names) == {"a": (1, 1), "b": (1, 1)}  # c: none
+    assert viewdb.central_views(["d/1_1.png", "d/1_3.png", "d/3_1.png", "d/3_3.png"]) == {}
+    assert viewdb.central_views([f"e/{r}_{c}" for r in (2, 3, 4) for c in (5, 6, 7)]) == {
+        "e": (3, 6)}
+    got = viewdb.view_pairs(names, None, shot_neighbours=None, view_radius=1)
+    within_a = [p for p in got if p[0].startswith("a/") and p[1].startswith("a/")]
+    # each of the eight other views with 1_1, and nothing else within the shot
+    assert within_a == sorted(tuple(sorted((f"a/{v}.png", "a/1_1.png")))
+                              for v in grid3 if v != "1_1")
+    across = [p for p in got if p[0][0] != p[1][0]]
+    # across shots the same view of every two shots, as with the grid
+    assert len(across) == 9 + 2 + 2 and all(p[0][2:] == p[1][2:] for p in across)
+    assert [p for p in got if p[0].startswith("c/") and p[1].startswith("c/")] == [
+        ("c/0_0.png", "c/0_1.png")]  # no central view: the grid's pairs
+    assert len(viewdb.view_pairs(names, None, shot_neighbours=None, view_radius=1,
+                                 within_shot="grid")) == 2 * 20 + 1 + 13
+    with pytest.raises(ValueError, match="within_shot"):
+        viewdb.view_pairs(names, None, within_shot="star")
 
 
 def test_nearest_shots_ties_by_name():
@@ -134,7 +161,7 @@ def test_rig_sets(sets, tmp_path):
     imgs = {k: v for k, v in paths.items() if k.startswith(("x00_y00", "hand00"))}
     db = tmp_path / "views.db"
     info = viewdb.build_view_database(imgs, db, tmp_path, max_num_features=2000)
-    assert info["num_images"] == 18 and info["num_pairs"] == 2 * 20 + 9
+    assert info["num_images"] == 18 and info["num_pairs"] == 2 * 8 + 9  # the central view's pairs
     out = evaluate_sets(RigB(rig), db)
     assert sorted(out["sets"]) == ["hand00", "x00_y00"]
     assert out["sets"]["hand00"]["num_images"] == 9

@@ -29,7 +29,7 @@ def test_baseline_registers_remaining_views(sets, tmp_path):
                                    for k, c in sub.items()})
     db = tmp_path / "views.db"
     viewdb.build_view_database(paths, db, tmp_path, shot_neighbours=None, view_radius=None,
-                               max_num_features=2000)
+                               within_shot="grid", max_num_features=2000)
     cameras, info = baseline_sfm(reg_a, db, "1_1")
     assert info["a_sfm_registered"] == len(vs) and info["a_sfm_unregistered"] == []
     scratch = scratch_sfm(db)

@@ -385,6 +385,7 @@ def reprojection_stats(cameras: Mapping[str, PinholeCamera], images: Mapping[str
         db = tmp / "views.db"
         viewdb.build_view_database({k: images[k] for k in cameras}, db, tmp,
                                    shot_neighbours=None, view_radius=None,
+                                   within_shot="grid",
                                    max_num_features=max_num_features, seed=seed,
                                    num_threads=num_threads)
         return triangulated_stats(cameras, db, seed=seed, num_threads=num_threads,

@@ -20,13 +20,17 @@ matching, whose pairs follow A's camera centres, merges the shots' features into
 database (:func:`merge_view_features`, as one extraction of all views would lay it
 out) and adds the verified matches (:func:`match_views`, rule ``view_matches``).
 
-Which pairs are matched (:func:`view_pairs`): within a shot, the views at most
-``view_radius`` apart on the N x N grid; across shots, the same view of each shot and
-its ``shot_neighbours`` nearest shots (by registration A's camera centres), with the
-shortest links that join the groups these may leave apart (:func:`nearest_shots`). Exhaustive
-matching of the default dataset's 700 views is 244,650 pairs and the "sets" pairing
-(every pair within a shot, the same view across every two shots) 17,850; this one
-about 4,000, and tracks still chain across the whole array through the overlaps.
+Which pairs are matched (:func:`view_pairs`): within a shot, each view and the shot's
+central view (``within_shot: centre``, the default: N x N - 1 pairs a shot, the tracks
+joined through the central view), or the views at most ``view_radius`` apart on the
+N x N grid (``within_shot: grid``: 72 pairs of 5 x 5 views at radius 1); across shots,
+the same view of each shot and its ``shot_neighbours`` nearest shots (by registration
+A's camera centres), with the shortest links that join the groups these may leave apart
+(:func:`nearest_shots`). Exhaustive matching of the default dataset's 700 views is
+244,650 pairs and the "sets" pairing (every pair within a shot, the same view across
+every two shots) 17,850; the grid at radius 1 about 3,000 and the central view's pairs
+about 1,600 (default-s21 of bench/bench_accuracy.py: 2,966 and 1,622). Tracks still
+chain across the whole array through the overlaps.
 """
 
 from __future__ import annotations
@@ -93,17 +97,45 @@ def nearest_shots(centres: Mapping[str, np.ndarray], k: int) -> set[tuple[str, s
     return out
 
 
+def central_views(names: Iterable[str]) -> dict[str, tuple[int, int]]:
+    """Each shot's central view on its grid, ``<cam>`` -> (row, col): the middle of the
+    rows and columns its ``<row>_<col>`` names span, where that is a whole view the shot
+    has. Shots without one (an even grid, a missing view, names off the grid) are left
+    out."""
+    grids: dict[str, set[tuple[int, int]]] = {}
+    for n in names:
+        cam, view = split_name(n)
+        g = _grid(view)
+        if g is not None:
+            grids.setdefault(cam, set()).add(g)
+    out = {}
+    for cam, g in grids.items():
+        rows, cols = [r for r, _ in g], [c for _, c in g]
+        twice = (min(rows) + max(rows), min(cols) + max(cols))
+        centre = (twice[0] // 2, twice[1] // 2)
+        if twice[0] % 2 == 0 and twice[1] % 2 == 0 and centre in g:
+            out[cam] = centre
+    return out
+
+
 def view_pairs(names: Iterable[str], shot_centres: Mapping[str, np.ndarray] | None = None,
                *, shot_neighbours: int | None = _MATCHING["shot_neighbours"],
-                  view_radius: int | None = _MATCHING["view_radius"]
+                  view_radius: int | None = _MATCHING["view_radius"],
+                  within_shot: str = _MATCHING["within_shot"]
                ) -> list[tuple[str, str]]:
     """Image pairs to match among ``<cam>/<view>.png`` names (module docstring).
 
-    ``view_radius`` None: every pair within a shot; ``shot_neighbours`` None (or no
-    centres): the same view across every two shots. Views whose names are not
-    ``<row>_<col>`` are paired with every view of their shot. Sorted."""
+    ``within_shot`` "centre": each view of a shot with the shot's central view
+    (:func:`central_views`; a shot without one is paired as "grid"); "grid": the views
+    at most ``view_radius`` apart (None: every pair within a shot). ``shot_neighbours``
+    None (or no centres): the same view across every two shots. Views whose names are
+    not ``<row>_<col>`` are paired with every view of their shot. Sorted."""
+    if within_shot not in ("centre", "grid"):
+        raise ValueError(f"config sfm.view_matching.within_shot = {within_shot!r}: "
+                         "centre or grid")
     names = sorted(names)
     shots = sorted({split_name(n)[0] for n in names})
+    central = central_views(names) if within_shot == "centre" else {}
     linked = None
     if shot_neighbours is not None and shot_centres is not None:
         known = {s: shot_centres[s] for s in shots if s in shot_centres}
@@ -116,7 +148,12 @@ def view_pairs(names: Iterable[str], shot_centres: Mapping[str, np.ndarray] | No
         cb, vb = split_name(b)
         if ca == cb:
             ga, gb = _grid(va), _grid(vb)
-            if (view_radius is None or ga is None or gb is None
+            if ga is None or gb is None:
+                out.append((a, b))
+            elif ca in central:
+                if central[ca] in (ga, gb):
+                    out.append((a, b))
+            elif (view_radius is None
                     or max(abs(ga[0] - gb[0]), abs(ga[1] - gb[1])) <= view_radius):
                 out.append((a, b))
         elif va == vb and (linked is None or tuple(sorted((ca, cb))) in linked):
@@ -224,6 +261,7 @@ def match_views(database: str | Path, *,
                 shot_centres: Mapping[str, np.ndarray] | None = None,
                 shot_neighbours: int | None = _MATCHING["shot_neighbours"],
                 view_radius: int | None = _MATCHING["view_radius"],
+                within_shot: str = _MATCHING["within_shot"],
                 seed: int = cm.DEFAULT_SEED, num_threads: int = cm.DEFAULT_THREADS,
                 work_dir: str | Path | None = None, use_gpu: bool = False) -> dict:
     """Match (on the GPU with ``use_gpu``) and verify, in the SIFT ``database`` itself, the pairs of
@@ -231,7 +269,7 @@ def match_views(database: str | Path, *,
     t0 = time.perf_counter()
     names = [f"{n}.png" for n in database_names(database)]
     pairs = view_pairs(names, shot_centres, shot_neighbours=shot_neighbours,
-                       view_radius=view_radius)
+                       view_radius=view_radius, within_shot=within_shot)
     # verified as pairs of two cameras: the shared camera's shared-focal estimator takes
     # 3.5x the time (plenocal.calib.reg_a.colmap._match_per_image)
     n_verified = cm.match(database, pairs, seed=seed, num_threads=num_threads,
@@ -242,7 +280,8 @@ def match_views(database: str | Path, *,
              len(pairs), n_verified, seconds)
     return {"num_images": len(names), "num_pairs": len(pairs),
             "num_verified_pairs": int(n_verified), "shot_neighbours": shot_neighbours,
-            "view_radius": view_radius, "matching_device": "cuda" if use_gpu else "cpu"}
+            "view_radius": view_radius, "within_shot": within_shot,
+            "matching_device": "cuda" if use_gpu else "cpu"}
 
 
 def rewrite_in_key_order(database: str | Path) -> None:
@@ -280,6 +319,7 @@ def build_view_database(images: Mapping[str, str | Path], database: str | Path,
                         shot_centres: Mapping[str, np.ndarray] | None = None,
                         shot_neighbours: int | None = _MATCHING["shot_neighbours"],
                         view_radius: int | None = _MATCHING["view_radius"],
+                        within_shot: str = _MATCHING["within_shot"],
                         max_num_features: int = cm.DEFAULT_MAX_FEATURES,
                         seed: int = cm.DEFAULT_SEED, num_threads: int = cm.DEFAULT_THREADS,
                         first_octave: int = cm.DEFAULT_FIRST_OCTAVE,
@@ -295,7 +335,8 @@ def build_view_database(images: Mapping[str, str | Path], database: str | Path,
                                  extractor=extractor, use_gpu=use_gpu)
     info.update(match_view_database(features, database, shot_centres=shot_centres,
                                     shot_neighbours=shot_neighbours,
-                                    view_radius=view_radius, seed=seed,
+                                    view_radius=view_radius,
+                                    within_shot=within_shot, seed=seed,
                                     num_threads=num_threads, work_dir=work_dir,
                                     use_gpu=use_gpu))
     features.unlink()
