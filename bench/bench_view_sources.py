@@ -55,6 +55,7 @@ from benchmd import Lines  # noqa: E402
 from plenocal.artifacts.cameras import read_cameras  # noqa: E402
 from plenocal.config import validate_config  # noqa: E402
 from plenocal.convert.viewset import read_view_set, view_set_files  # noqa: E402
+from plenocal.names import central_view, view_key  # noqa: E402
 from plenocal.simulate.groundtruth import render_views  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -73,7 +74,7 @@ def held_central(res: Path) -> str:
     """The key of the held shot's central view (the shot the refinement holds)."""
     refine = json.loads((res / "calibration" / "refine.json").read_text())
     n = int(round(len({key.split("/")[1] for key in view_files(res)}) ** 0.5))
-    return f"{refine['hold_shot']}/{n // 2}_{n // 2}"
+    return view_key(refine["hold_shot"], central_view(n))
 
 
 def _grey(path: Path) -> np.ndarray:
