@@ -675,6 +675,13 @@ STAGE_RULES = {
         r"|baseline_(sfm|scratch)|depth_view|synthesis_exp\d+(_part)?|mpeg_views"
         r"|gt_errors|convert_quality"
     ),
+    # a stage's jobs of one kind, by the name their rules share (the README's second
+    # table): the name a user reads in the log as view_features_2 and types without
+    # the job's number
+    "convert_views": r"convert_views(_\d+){1,2}",
+    "depth_b": r"depth_b(_\d+){1,2}",
+    "depth_b_other": r"depth_b_other(_\d+){1,2}",
+    "view_features": r"view_features(_\d+){1,2}",
 }
 
 

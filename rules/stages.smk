@@ -14,7 +14,9 @@ again and what depends on it. (--omit-from does not make its rules targets: it t
 the rules' own names.) (Added to --until's rules instead, a rule
 of the stage that another one's job needs would stop there: Snakemake starts nothing
 after a job of an --until rule.) A stage that is one rule (scale, merge, refine, report,
-...) is that rule; a stage whose name a rule has is left to it.
+...) is that rule; a stage whose name a rule has is left to it. A stage's jobs of one
+kind take the same kind of rule, by the name their rules share (convert_views,
+depth_b, depth_b_other, view_features: the README's second table).
 
 Included after every other rule file: the stages are read from the rules defined
 (common.smk STAGE_RULES, stage_rules, stage_outputs).

@@ -1,5 +1,6 @@
-"""Every stage name of the README's stage table works in `--until` and `--forcerun`
-(issue 35): dry runs on a copy of the complete tiny run.
+"""Every stage name of the README's stage table, and every name of its table of a stage's
+jobs of one kind (view_features, ...), works in `--until` and `--forcerun` (issue 35): dry
+runs on a copy of the complete tiny run.
 
 The README is the reference: its table names each stage (in brackets) and the stage's
 rules (`<k>`: a job's number). For each stage, `--forceall --until <stage>` plans every job
@@ -21,15 +22,21 @@ pytestmark = pytest.mark.workflow
 ASKED = {"convert", "reg_a", "reg_b", "depth", "scale", "merge", "refine", "verify", "report"}
 
 
+#: the README's tables of typed names: the stages, and a stage's jobs of one kind
+TABLES = ("| stage (its name in `--until`, `--forcerun`) | rules |",
+          "| jobs (their name in `--until`, `--forcerun`) | rules |")
+
+
 def readme_stages() -> tuple[dict[str, list[str]], list[str]]:
-    """({typed stage name: [rule-name regex]}, [every rule regex of the table])."""
+    """({typed name: [rule-name regex]}, [every rule regex of the tables])."""
     text = (ROOT / "README.md").read_text()
-    start = text.index("| stage (its name in `--until`, `--forcerun`) | rules |")
     rows = []
-    for line in text[start:].splitlines()[2:]:
-        if not line.startswith("|"):
-            break
-        rows.append(line.split("|")[1:3])
+    for table in TABLES:
+        start = text.index(table)
+        for line in text[start:].splitlines()[2:]:
+            if not line.startswith("|"):
+                break
+            rows.append(line.split("|")[1:3])
     stages, every = {}, []
     for stage_col, rules_col in rows:
         rules = []
