@@ -249,6 +249,9 @@ COLUMNS = [  # (key, header, format)
     ("centre_pct_step", "% step", "{:.2f}"),
     ("rot_deg", "rot. deg", "{:.4f}"),
     ("scale_pct", "scale r %", "{:.3f}"),
+    # the written calibration's own scale (a similarity fitted to the truth): the merge's r,
+    # or where refine.scale fits the stage's step to the refined array shots, that
+    ("residual_scale_pct", "written scale %", "{:.3f}"),
     ("eq5_scale_pct", "Eq. 5 r %", "{:.3f}"),
     ("step_scale_pct", "step r %", "{:.3f}"),
     ("table_complete", "T.I complete", "{:.4f}"),
@@ -458,7 +461,7 @@ def main() -> None:
                                           TARGETS[:2] if args.no_exp1 else TARGETS)
             results[name] = collect(work, exp1=not args.no_exp1)
             print(f"  {name}: " + ", ".join(f"{k} {_fmt(f, results[name].get(k))}"
-                                            for k, _, f in COLUMNS[:6]), flush=True)
+                                            for k, _, f in COLUMNS[:7]), flush=True)
     out = Lines()
     which = ("every kept capture" if args.kept else
              f"seeds {', '.join(map(str, args.seeds))}")

@@ -628,6 +628,8 @@ def refine_inputs(wildcards):
     }
     if refine_enabled():
         out["database"] = res(d, "matches", "database.db")
+        # the merge's scale source and the stage's step (refine.scale: auto)
+        out["scale"] = res(d, "merge", "scale.json")
         if stage_config("refine")["align"]["enabled"]:
             # the views themselves: the observations are aligned by their patches
             out["view_sets"] = view_sets(d, cams(d))

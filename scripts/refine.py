@@ -14,6 +14,7 @@ import cv2  # noqa: E402, F401  (before pycolmap: see DESIGN.md on cv2/pycolmap)
 
 from plenocal.artifacts.cameras import read_cameras, write_cameras  # noqa: E402
 from plenocal.artifacts.rig import RigB, read_rig  # noqa: E402
+from plenocal.artifacts.scale import read_scale  # noqa: E402
 from plenocal.calib.refine import RefineSettings, refine_calibration  # noqa: E402
 from plenocal.calib.reg_b.rig import rig_at_focal  # noqa: E402
 from plenocal.convert.viewset import view_set_files  # noqa: E402
@@ -32,6 +33,10 @@ rig = read_rig(sm.input.rig)
 settings = RefineSettings.from_config(sm.params.refine, seed=int(sm.params.sfm["seed"]),
                                       num_threads=int(sm.threads))
 if settings.enabled:
+    # the stage's step where the merge took its scale from it (refine.scale: auto fits it
+    # to the refined array shots)
+    scale = read_scale(sm.input.scale)
+    step_m = (float(scale.array_step["step_m"]) if scale.chosen == "array_step" else None)
     # COLMAP's working files beside the output, removed at the end (and a killed job's by
     # the next run: make_temp_dir)
     work = make_temp_dir(Path(sm.output.info).parent, ".refine.")
@@ -40,7 +45,7 @@ if settings.enabled:
             eq6, rig, sm.input.database, settings, hold_shot=sm.params.hold_shot,
             rig_at_focal=lambda f: RigB(rig_at_focal(rig.doc, f)), work_dir=work,
             images=view_set_files(sm.input.view_sets) if "view_sets" in sm.input.keys()
-            else None, align_threads=int(sm.threads))
+            else None, align_threads=int(sm.threads), step_m=step_m)
     finally:
         shutil.rmtree(work, ignore_errors=True)
     cams, info = result.cameras, {"enabled": True, **result.report}

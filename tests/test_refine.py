@@ -10,6 +10,7 @@ from synth.scenes import default_scene, render, rig_cameras, view_sets
 from plenocal.artifacts.rig import RigB
 from plenocal.calib import refine as rf
 from plenocal.calib.reg_a import viewdb
+from plenocal.calib.scale import array_step_scale
 from plenocal.camera import PinholeCamera, invert_pose, pose
 from plenocal.io.files import write_image
 from plenocal.verify.gt_errors import complete_errors
@@ -133,6 +134,50 @@ def test_settings_are_checked():
     for bad in (0, -0.5, "median"):
         with pytest.raises(ValueError, match="refine.loss_scale_px"):
             rf.RefineSettings(loss_scale_px=bad)
+    with pytest.raises(ValueError, match="refine.scale"):
+        rf.RefineSettings(scale="eq5")
+
+
+def test_the_stages_step_is_fitted_to_the_refined_array_shots(capture):
+    """Eq. 6 spread 1 % wider than the truth (the merge's r off, as registration A's
+    array shots' errors put it): refine.scale merge keeps that scale, auto gives the
+    refined array shots the stage's step, and so nearly the truth's scale (the four
+    refined shots' own errors: 0.17 % on this 2 x 2 array, 0.005 % median on the
+    simulator's arrays)."""
+    views, rig, db = capture
+    centre = {s: views[f"{s}/1_1"].centre for s in SHOTS}
+    step = float(np.linalg.norm(centre["x01_y00"] - centre["x00_y00"]))
+    assert np.linalg.norm(centre["x00_y01"] - centre["x00_y00"]) == pytest.approx(step)
+    eq6 = eq6_of(views, rig)
+    mean = np.mean([c.centre for c in eq6.values()], axis=0)
+    wide = {k: PinholeCamera(c.K, pose(c.R, mean + 1.01 * (c.centre - mean)), W, H)
+            for k, c in eq6.items()}
+
+    def step_of(cams) -> float:  # the lattice spacing of the array shots' central views
+        fit = array_step_scale({s: cams[f"{s}/1_1"].cam_to_world for s in SHOTS}, 1.0)
+        return fit["spacing_sfm"]
+
+    # Eq. 6's shots 1 mm off and 1 % wide: a refinement moves them past the 2 % gate
+    kw = {"max_shift_pct": 5.0}
+    kept = rf.refine_calibration(wide, rig, db, settings(scale="merge", **kw),
+                                 hold_shot="x00_y00")
+    fitted = rf.refine_calibration(wide, rig, db, settings(scale="auto", **kw),
+                                   hold_shot="x00_y00", step_m=step)
+    assert not fitted.report["rejected"], fitted.report["warnings"]
+    assert fitted.report["array_step_fit"]["n_shots"] == 4
+    assert "fitted to the 4 refined array shots" in fitted.report["scale_source"]
+    assert kept.report["array_step_fit"] is None
+    assert step_of(fitted.cameras) == pytest.approx(step, rel=1e-9)
+    scale_err = {name: abs(complete_errors(out.cameras, views)["residual_scale_err_pct"])
+                 for name, out in (("merge", kept), ("auto", fitted))}
+    assert scale_err["merge"] > 0.8, scale_err
+    assert scale_err["auto"] < 0.3 * scale_err["merge"], scale_err
+    # without a step (the merge took Eq. 5's r) auto is merge
+    plain = rf.refine_calibration(wide, rig, db, settings(scale="auto", **kw),
+                                  hold_shot="x00_y00")
+    assert plain.report["array_step_fit"] is None
+    assert all(np.array_equal(plain.cameras[k].cam_to_world, kept.cameras[k].cam_to_world)
+               for k in kept.cameras)
 
 
 def test_the_robust_loss_scale_follows_the_median_error_or_is_given():

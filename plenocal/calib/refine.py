@@ -35,7 +35,10 @@ registration B's rig is ``refine.rig`` (:data:`RIG_MODES`):
     the rig's size (B's baseline): its shape held, the result (frames, points and rig
     together, a gauge of this problem) scaled so that the shots' centres spread as Eq. 6's
     do, i.e. the merge's scale is kept (Eq. 5's r, or the stage's step's:
-    :mod:`plenocal.calib.scale`);
+    :mod:`plenocal.calib.scale`); where the merge took it from the stage's step,
+    ``refine.scale: auto`` (the default) fits that step to the refined array shots
+    instead of registration A's (:func:`refined_step_scale`: A's shots are off by its pose
+    errors, which the refinement takes out);
 ``scale_pp``
     as ``scale``, and each view's principal point (the central view's held: a common shift
     is a turn of every frame). The exact model's per-view shift is B's alpha; this lets the
@@ -86,6 +89,7 @@ from plenocal.artifacts.rig import RigB
 from plenocal.calib.groups import Groups
 from plenocal.calib.reg_a import colmap as cm
 from plenocal.calib.reg_a import viewdb
+from plenocal.calib.scale import array_step_scale
 from plenocal.calib.track_alignment import AlignSettings
 from plenocal.camera import PinholeCamera, invert_pose, k_to_colmap, pose, rotation_angle_deg
 from plenocal.config import settings_from, stage_defaults
@@ -98,6 +102,10 @@ log = logging.getLogger(__name__)
 #: the result keeps Eq. 5's scale: B's baseline refined, alpha held); scale_pp - its size and
 #: each view's principal point (B and, per view, alpha refined); free - each sensor's pose
 RIG_MODES = ("hold", "scale", "scale_pp", "free")
+#: the result's scale where the rig mode keeps the merge's (config refine.scale): auto - the
+#: stage's step fitted to the refined array shots where the merge took its scale from the
+#: step, else as merge; merge - the shots' centres spread as Eq. 6's
+SCALE_MODES = ("auto", "merge")
 FOCAL_MODES = ("hold", "refine")
 #: the matches the adjustment uses (config refine.matches): all of view_matches', or those
 #: between different shots only (the same view of two shots: no pair within a set)
@@ -146,6 +154,7 @@ class RefineSettings:
     enabled: bool = _REFINE["enabled"]
     focal: str = _REFINE["focal"]
     rig: str = _REFINE["rig"]
+    scale: str = _REFINE["scale"]
     matches: str = _REFINE["matches"]
     frames: str = _REFINE["frames"]
     max_points: int = _REFINE["max_points"]
@@ -163,6 +172,7 @@ class RefineSettings:
     def __post_init__(self) -> None:
         for key, value, allowed in (("focal", self.focal, FOCAL_MODES),
                                     ("rig", self.rig, RIG_MODES),
+                                    ("scale", self.scale, SCALE_MODES),
                                     ("matches", self.matches, MATCH_SETS),
                                     ("frames", self.frames, FRAME_MODES),
                                     ("loss", self.loss, LOSSES)):
@@ -596,7 +606,8 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
                        rig_at_focal: Callable[[float], RigB] | None = None,
                        work_dir: str | Path | None = None,
                        images: Mapping[str, str | Path] | None = None,
-                       align_threads: int | None = None) -> Refinement:
+                       align_threads: int | None = None,
+                       step_m: float | None = None) -> Refinement:
     """Refine the Eq. 6 calibration ``eq6`` (every view of every shot, metres) under the rig
     ``rig`` on the verified matches of the view ``database`` (module docstring).
     ``hold_shot``: the shot whose pose is held (the gauge). ``rig_at_focal``: registration
@@ -605,7 +616,10 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
     geometry when the focal length changes. ``images``: view key -> its image file, for
     ``settings.align`` (without them the observations stay where SIFT placed them), aligned
     on ``align_threads`` threads (``settings.num_threads`` if None; the same result on any
-    number)."""
+    number). ``step_m``: the stage's step (metres) where the merge took its scale from it
+    (``scale.json``'s ``chosen``: ``array_step``), None otherwise; with ``refine.scale:
+    auto`` the result's scale is that step fitted to the refined array shots
+    (:func:`refined_step_scale`)."""
     from plenocal.verify import reprojection as rp  # noqa: PLC0415
 
     t0 = time.perf_counter()
@@ -686,9 +700,11 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
     # the scale the adjustment reached: with the rig's sensors held, the one their metric
     # baselines give (independent of Eq. 5); a free rig leaves it where Eq. 6 put it
     scale_rig = spread(frame_centres(rec, model)) / size_eq6
-    applied = 1.0
+    applied, step_fit = 1.0, None
     if settings.scale_from_eq5:
-        applied = 1.0 / scale_rig
+        if settings.scale == "auto" and step_m is not None:
+            step_fit = refined_step_scale(rec, model, step_m)
+        applied = 1.0 / scale_rig if step_fit is None else step_fit["r"]
         rescale(rec, applied)
     after = observation_errors(rec, work_dir)
     cams = cameras_of(rec)
@@ -715,9 +731,9 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
             "what": "the shots' centres' spread over Eq. 6's, i.e. the scale over Eq. 5's r: "
                     "'rig' as the adjustment reached it (with the rig's sensor poses held, "
                     "the scale their metric baselines give), 'result' what was written"},
-        "scale_source": "Eq. 5 (the result scaled to Eq. 6's spread, the rig with it)"
-        if settings.scale_from_eq5 else "registration B's rig (its metric baselines)",
+        "scale_source": scale_source(settings, step_fit),
         "scale_applied": applied,
+        "array_step_fit": step_fit,
         "hold_shot": hold_shot,
         "rig_change": rig_change,
         "passes": passes,
@@ -748,6 +764,26 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
              report["observations"]["before"]["mean_px"] or math.nan,
              report["observations"]["after"]["mean_px"] or math.nan)
     return Refinement(cams, report, rig_views, sensors_before, sensor_params(rec))
+
+
+def refined_step_scale(rec, model: RigModel, step_m: float) -> dict | None:
+    """The stage's step ``step_m`` fitted to the refined array shots
+    (:func:`plenocal.calib.scale.array_step_scale` on the frames' poses, the units the
+    adjustment left): its ``r`` is the factor that gives them that step, metres per unit.
+    Registration A's array shots, which the merge's scale is fitted to, are off by its
+    pose errors (0.05-0.08 mm on the simulator's captures, a scale 0.1-0.3 % off); the
+    refined ones by far less. None where fewer than two array shots are refined."""
+    return array_step_scale(frame_poses(rec, model), step_m)
+
+
+def scale_source(settings: RefineSettings, step_fit: dict | None) -> str:
+    """What set the written result's scale (refine.json's ``scale_source``)."""
+    if not settings.scale_from_eq5:
+        return "registration B's rig (its metric baselines)"
+    if step_fit is not None:
+        return (f"the stage's step ({1000.0 * step_fit['step_m']:g} mm) fitted to the "
+                f"{step_fit['n_shots']} refined array shots (refine.scale: auto)")
+    return "Eq. 5 (the result scaled to Eq. 6's spread, the rig with it)"
 
 
 def loss_scale_of(settings: RefineSettings, before: np.ndarray) -> float:
