@@ -771,8 +771,8 @@ def refined_step_scale(rec, model: RigModel, step_m: float) -> dict | None:
     (:func:`plenocal.calib.scale.array_step_scale` on the frames' poses, the units the
     adjustment left): its ``r`` is the factor that gives them that step, metres per unit.
     Registration A's array shots, which the merge's scale is fitted to, are off by its
-    pose errors (0.05-0.08 mm on the simulator's captures, a scale 0.1-0.3 % off); the
-    refined ones by far less. None where fewer than two array shots are refined."""
+    pose errors (0.03-0.10 mm on the simulator's captures, their scale up to 0.3 % off);
+    the refined ones by far less. None where fewer than two array shots are refined."""
     return array_step_scale(frame_poses(rec, model), step_m)
 
 
