@@ -450,13 +450,8 @@ def bundle_adjust(rec, model: RigModel, settings: RefineSettings, *, refine_foca
 
 
 def frame_centres(rec, model: RigModel) -> dict[str, np.ndarray]:
-    """Each shot's rig (central view) centre, world coordinates."""
-    out = {}
-    for shot, fid in model.frame_of_shot.items():
-        M = np.eye(4)
-        M[:3, :] = np.asarray(rec.frame(fid).rig_from_world.matrix(), dtype=float)
-        out[shot] = invert_pose(M)[:3, 3]
-    return out
+    """Each shot's rig (central view) centre, world coordinates (:func:`frame_poses`)."""
+    return {shot: M[:3, 3] for shot, M in frame_poses(rec, model).items()}
 
 
 def spread(centres: Mapping[str, np.ndarray]) -> float:
