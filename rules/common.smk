@@ -618,20 +618,26 @@ def refine_enabled():
 
 
 def refine_inputs(wildcards):
-    """The Eq. 6 calibration and the rig; the matches of every view where the refinement
-    runs (refine.enabled false: the Eq. 6 result is copied, and the calibration waits for
-    no matching)."""
+    """The Eq. 6 calibration and the rig; where the refinement runs, the database of its
+    tracks: registration A's matches of the central views (refine.tracks: central) or the
+    matches of every view (views; rule view_matches). refine.enabled false: the Eq. 6
+    result is copied, and the calibration waits for no matching."""
     d = wildcards.dataset
     out = {
         "eq6": res(d, "calibration", "eq6", "cameras.json"),
         "rig": res(d, "reg_b", "rig.json"),
     }
     if refine_enabled():
-        out["database"] = res(d, "matches", "database.db")
+        if stage_config("refine")["tracks"] == "central":
+            out["database"] = res(d, "reg_a", "database.db")
+        else:
+            out["database"] = res(d, "matches", "database.db")
         # the merge's scale source and the stage's step (refine.scale: auto)
         out["scale"] = res(d, "merge", "scale.json")
-        if stage_config("refine")["align"]["enabled"]:
-            # the views themselves: the observations are aligned by their patches
+        refine = stage_config("refine")
+        if refine["align"]["enabled"] or refine["tracks"] == "central":
+            # the views themselves: the observations are aligned by their patches (the
+            # central views' points are carried into the other views by them)
             out["view_sets"] = view_sets(d, cams(d))
     return out
 

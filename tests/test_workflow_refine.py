@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from conftest import clone, snakemake
+from conftest import clone, snakemake, tiny_workflow
 
 from plenocal.artifacts.cameras import read_cameras
 from plenocal.artifacts.results import read_gt_errors, read_reprojection_table
@@ -119,3 +119,28 @@ def _same(res: Path) -> bool:
     return sorted(a) == sorted(b) and all(
         np.array_equal(a[k].cam_to_world, b[k].cam_to_world) and np.array_equal(a[k].K, b[k].K)
         for k in a)
+
+
+def _planned_rules(out: str) -> set[str]:
+    """The rules (by step: view_features_0 -> view_features) of a dry run's job list."""
+    import re  # noqa: PLC0415
+
+    return {re.sub(r"_\d+$", "", m) for m in re.findall(r"^(?:local)?rule (\w+):", out,
+                                                         flags=re.M)}
+
+
+def test_the_calibration_waits_for_no_view_matching_on_the_central_views_tracks(
+        tmp_path: Path):
+    """refine.tracks: central (the default) takes the refinement's points from registration
+    A's matches: the calibration alone plans no SIFT of the other views and no view
+    matching; refine.tracks: views plans both (plenocal.calib.central_tracks)."""
+    work = tiny_workflow(tmp_path / "w")
+    target = "results/tiny/calibration/cameras.json"
+    planned = {}
+    for tracks in ("central", "views"):
+        proc = snakemake(work, "-n", target, "--config", f'refine={{"tracks": "{tracks}"}}')
+        assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+        planned[tracks] = _planned_rules(proc.stdout + proc.stderr)
+    assert {"refine", "match_a", "convert_views"} <= planned["central"]
+    assert not {"view_features", "view_matches"} & planned["central"]
+    assert {"view_features", "view_matches", "refine"} <= planned["views"]

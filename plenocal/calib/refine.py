@@ -110,6 +110,11 @@ FOCAL_MODES = ("hold", "refine")
 #: the matches the adjustment uses (config refine.matches): all of view_matches', or those
 #: between different shots only (the same view of two shots: no pair within a set)
 MATCH_SETS = ("all", "across")
+#: where the adjustment's points come from (config refine.tracks): views - the verified
+#: matches of every view (rule view_matches); central - registration A's matches of the
+#: central views, carried into the other views by their patches
+#: (:mod:`plenocal.calib.central_tracks`)
+TRACK_SOURCES = ("views", "central")
 #: the shots' poses (config refine.frames): refined, or held as Eq. 6 gives them (then only
 #: what refine.rig frees of the rig, and the points, move)
 FRAME_MODES = ("refine", "hold")
@@ -156,6 +161,7 @@ class RefineSettings:
     rig: str = _REFINE["rig"]
     scale: str = _REFINE["scale"]
     matches: str = _REFINE["matches"]
+    tracks: str = _REFINE["tracks"]
     frames: str = _REFINE["frames"]
     max_points: int = _REFINE["max_points"]
     max_error_px: float = _REFINE["max_error_px"]
@@ -174,6 +180,7 @@ class RefineSettings:
                                     ("rig", self.rig, RIG_MODES),
                                     ("scale", self.scale, SCALE_MODES),
                                     ("matches", self.matches, MATCH_SETS),
+                                    ("tracks", self.tracks, TRACK_SOURCES),
                                     ("frames", self.frames, FRAME_MODES),
                                     ("loss", self.loss, LOSSES)):
             if value not in allowed:
@@ -254,10 +261,30 @@ def rig_reconstruction(tracks, views: Mapping[str, tuple[np.ndarray, np.ndarray]
     1.9 s for 700 views of 1,300 keypoints; or given (``keypoints``: image name -> (n, 2),
     COLMAP's convention, the aligned ones of :func:`aligned_keypoints`). Returns the
     reconstruction and its :class:`RigModel`."""
-    import pycolmap  # noqa: PLC0415
-
     from plenocal.verify.reprojection import read_keypoints  # noqa: PLC0415
 
+    if keypoints is None:
+        keypoints = read_keypoints(tracks, work_dir)
+    names = {image_id: tracks.image(image_id).name for image_id in sorted(tracks.images)}
+    points = {}
+    for pid in point_ids:
+        p = tracks.point3D(pid)
+        points[pid] = (p.xyz, [(e.image_id, e.point2D_idx) for e in p.track.elements])
+    return rig_reconstruction_of(names, points, keypoints, views, shot_poses, width, height)
+
+
+def rig_reconstruction_of(names: Mapping[int, str],
+                          points: Mapping[int, tuple[np.ndarray, list[tuple[int, int]]]],
+                          keypoints: Mapping[str, np.ndarray],
+                          views: Mapping[str, tuple[np.ndarray, np.ndarray]],
+                          shot_poses: Mapping[str, np.ndarray], width: int, height: int):
+    """:func:`rig_reconstruction` of plain data: ``names`` image id -> ``<shot>/<view>.png``,
+    ``points`` point id -> (X, its track's (image id, keypoint index) pairs), added in the
+    mapping's order, ``keypoints`` image name -> (n, 2) COLMAP's convention
+    (:class:`plenocal.calib.central_tracks.TrackSet` holds the three)."""
+    import pycolmap  # noqa: PLC0415
+
+    names_of = names
     names = sorted(views)
     central = [v for v in names if np.allclose(views[v][1], np.eye(4), atol=1e-12)]
     if len(central) != 1:
@@ -277,12 +304,12 @@ def rig_reconstruction(tracks, views: Mapping[str, tuple[np.ndarray, np.ndarray]
             rig.add_sensor(_camera_sensor(cam_of[v]), rigid3d(invert_pose(views[v][1])))
     rec.add_rig(rig)
     images = {}
-    for image_id in sorted(tracks.images):
-        im = tracks.image(image_id)
-        shot, view = split_key(im.name[:-4])
+    for image_id in sorted(names_of):
+        name = names_of[image_id]
+        shot, view = split_key(name[:-4])
         if shot not in shot_poses or view not in cam_of:
-            raise ValueError(f"{im.name}: not a view of the rig's shots")
-        images[image_id] = (shot, view, im)
+            raise ValueError(f"{name}: not a view of the rig's shots")
+        images[image_id] = (shot, view, name)
     shots = sorted(shot_poses)
     frame_of = {s: i + 1 for i, s in enumerate(shots)}
     for s in shots:
@@ -293,18 +320,18 @@ def rig_reconstruction(tracks, views: Mapping[str, tuple[np.ndarray, np.ndarray]
                 frame.add_data_id(pycolmap.data_t(sensor_id=_camera_sensor(cam_of[view]),
                                                   id=image_id))
         rec.add_frame(frame)
-    if keypoints is None:
-        keypoints = read_keypoints(tracks, work_dir)
-    for image_id, (shot, view, im) in images.items():
-        new = pycolmap.Image(name=im.name, keypoints=keypoints[im.name],
+    for image_id, (shot, view, name) in images.items():
+        new = pycolmap.Image(name=name, keypoints=keypoints[name],
                              camera_id=cam_of[view], image_id=image_id)
         new.frame_id = frame_of[shot]
         rec.add_image(new)
     for s in shots:
         rec.register_frame(frame_of[s])
-    for pid in point_ids:
-        p = tracks.point3D(pid)
-        rec.add_point3D(p.xyz, pycolmap.Track(p.track.elements))
+    for xyz, elements in points.values():
+        track = pycolmap.Track()
+        for image_id, idx in elements:
+            track.add_element(int(image_id), int(idx))
+        rec.add_point3D(np.asarray(xyz, float), track)
     return rec, RigModel(cam_of, frame_of, central)
 
 
@@ -615,8 +642,6 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
     (``scale.json``'s ``chosen``: ``array_step``), None otherwise; with ``refine.scale:
     auto`` the result's scale is that step fitted to the refined array shots
     (:func:`refined_step_scale`)."""
-    from plenocal.verify import reprojection as rp  # noqa: PLC0415
-
     t0 = time.perf_counter()
     views = rig.view_poses()
     shots = sorted({split_key(k)[0] for k in eq6})
@@ -628,6 +653,57 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
         raise ValueError(f"refinement: the held shot {hold_shot} is not calibrated")
     central = [v for v in views if np.allclose(views[v][1], np.eye(4), atol=1e-12)][0]
     shot_poses = {s: eq6[f"{s}/{central}"].cam_to_world for s in shots}
+    if settings.tracks == "central":
+        rec, model, n_tri, n_used, align, t_tri = _central_rig(
+            eq6, views, central, shot_poses, rig, database, settings, images, align_threads,
+            work_dir)
+    else:
+        rec, model, n_tri, n_used, align, t_tri = _views_rig(
+            eq6, views, shot_poses, rig, database, settings, images, align_threads,
+            work_dir)
+    log.info("rig reconstruction: %d shots x %d views, %d of %d points (%.1f s triangulation)",
+             len(shots), len(views), n_used, n_tri, t_tri)
+    return _adjusted(rec, model, eq6, rig, views, shots, central, shot_poses, settings,
+                     hold_shot=hold_shot, rig_at_focal=rig_at_focal, step_m=step_m,
+                     points={"triangulated": n_tri, "used": n_used}, align=align, t0=t0,
+                     t_tri=t_tri, work_dir=work_dir)
+
+
+def _central_rig(eq6, views, central, shot_poses, rig, database, settings, images,
+                 align_threads, work_dir):
+    """The rig reconstruction on registration A's tracks of the central views
+    (``refine.tracks: central``, :mod:`plenocal.calib.central_tracks`)."""
+    from plenocal.calib.central_tracks import central_track_set  # noqa: PLC0415
+
+    if images is None:
+        raise ValueError("refine.tracks central carries the central views' points into the "
+                         "other views by their pixels: the views' images are needed")
+    t0 = time.perf_counter()
+    tmp = Path(tempfile.mkdtemp(prefix="plenocal_refine_", dir=work_dir))
+    try:
+        ts, stats = central_track_set(database, eq6, central, images, settings, tmp,
+                                      align_threads)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    ids = sorted(ts.points)
+    ids = ids[::max(1, math.ceil(len(ids) / settings.max_points))]
+    if len(ids) < 100:
+        raise ValueError(f"refinement: only {len(ids)} points of registration A's central "
+                         "views seen in three or more views; set refine.tracks: views (the "
+                         "matches of every view) or refine.enabled: false")
+    rec, model = rig_reconstruction_of(ts.names, {pid: ts.points[pid] for pid in ids},
+                                       ts.keypoints, views, shot_poses, rig.width, rig.height)
+    return (rec, model, ts.triangulated, len(ids), {"enabled": True, **stats},
+            time.perf_counter() - t0)
+
+
+def _views_rig(eq6, views, shot_poses, rig, database, settings, images, align_threads,
+               work_dir):
+    """The rig reconstruction on the verified matches of every view (``refine.tracks:
+    views``: rule view_matches' database)."""
+    from plenocal.verify import reprojection as rp  # noqa: PLC0415
+
+    t0 = time.perf_counter()
     tmp = Path(tempfile.mkdtemp(prefix="plenocal_refine_", dir=work_dir))
     try:
         db = tmp / "database.db"
@@ -660,8 +736,14 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
         align["why"] = "no view images given: the observations are SIFT's keypoints"
     rec, model = rig_reconstruction(tracks, views, shot_poses, rig.width, rig.height, ids,
                                     work_dir, keypoints)
-    log.info("rig reconstruction: %d shots x %d views, %d of %d points (%.1f s triangulation)",
-             len(shots), len(views), len(ids), tracks.num_points3D(), t_tri)
+    return rec, model, int(tracks.num_points3D()), len(ids), align, t_tri
+
+
+def _adjusted(rec, model: RigModel, eq6, rig: RigB, views, shots, central, shot_poses,
+              settings: RefineSettings, *, hold_shot, rig_at_focal, step_m, points, align,
+              t0, t_tri, work_dir) -> Refinement:
+    """The adjustments of :func:`refine_calibration` on the rig reconstruction ``rec``, and
+    its report."""
     before = observation_errors(rec, work_dir)
     size_eq6 = spread(frame_centres(rec, model))
     sensors_before = sensor_params(rec)
@@ -713,7 +795,7 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
         "settings": asdict(settings),
         "shots": len(shots),
         "views": len(cams),
-        "points": {"triangulated": int(tracks.num_points3D()), "used": len(ids)},
+        "points": points,
         "observations": {"before": _stats(before), "after": _stats(after)},
         "loss": {"type": settings.loss, "scale_px": loss_scale},
         "alignment": align,

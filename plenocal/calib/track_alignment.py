@@ -344,13 +344,17 @@ def align_observations(obs: Observations, load: Callable[[int], np.ndarray],
 
 def track_observations(points: Mapping[int, tuple[np.ndarray, list[tuple[int, int]]]],
                        cameras: Mapping[int, tuple[np.ndarray, np.ndarray, np.ndarray]],
-                       keypoints: Mapping[int, np.ndarray]
+                       keypoints: Mapping[int, np.ndarray],
+                       may_reference: Callable[[int, int], bool] | None = None
                        ) -> tuple[Observations, list[tuple[int, int]]]:
     """The observations to align of ``points`` (point id -> (X (3,), its track's (image
     id, keypoint index) pairs)), each track's reference observation left out
     (:func:`reference_index`). ``cameras``: image id -> (K, R, t) in COLMAP's pixel
-    convention, ``x_cam = R x + t``; ``keypoints``: image id -> (m, 2). Returns them and
-    each row's (image id, keypoint index)."""
+    convention, ``x_cam = R x + t``; ``keypoints``: image id -> (m, 2). ``may_reference``
+    (image id, keypoint index) -> whether that observation may be its track's reference
+    (the one of those nearest the mean of all the track's camera centres; any where None,
+    or where the track has none that may). Returns them and each row's (image id,
+    keypoint index)."""
     ids = sorted(cameras)
     index = {i: m for m, i in enumerate(ids)}
     KK, RR, TT = (np.stack([cameras[i][m] for i in ids]) for m in range(3))
@@ -358,7 +362,14 @@ def track_observations(points: Mapping[int, tuple[np.ndarray, list[tuple[int, in
     rows, refs, xyz = [], [], []
     for pid in sorted(points):
         X, track = points[pid]
-        r = reference_index(np.array([centre[i] for i, _ in track]))
+        c = np.array([centre[i] for i, _ in track])
+        cand = ([j for j, el in enumerate(track) if may_reference(*el)]
+                if may_reference is not None else [])
+        if cand:
+            d = np.linalg.norm(c[cand] - c.mean(axis=0), axis=1)
+            r = cand[int(np.argmin(d))]
+        else:
+            r = reference_index(c)
         for j, el in enumerate(track):
             if j != r:
                 rows.append(el)
