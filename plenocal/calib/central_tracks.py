@@ -128,27 +128,28 @@ def extend_to_views(names: Mapping[int, str], keypoints: Mapping[str, np.ndarray
         lists[i_new].append(kp)
         counts[i_new] = len(kp)
     lead = dict(counts)
-    out_points = {}
-    for pid in sorted(points):
-        X, track = points[pid]
-        X = np.asarray(X, float)
-        elements = [(old_to_new[i], j) for i, j in track]
-        seen = {names[i][:-4] for i, _ in track}
-        for central_key in sorted(seen):
-            for k in by_shot[split_key(central_key)[0]]:
-                if k == central_key:
-                    continue
-                cam = cameras[k]
-                uv, z = _project_colmap(cam, X[None])
-                u, v = uv[0]
-                if not (z[0] > 0 and margin_px <= u <= cam.width - margin_px
-                        and margin_px <= v <= cam.height - margin_px):
-                    continue
-                i = new_id[k]
-                lists[i].append(uv)
-                elements.append((i, counts[i]))
-                counts[i] += 1
-        out_points[pid] = (X, sorted(elements))
+    pids = sorted(points)
+    X_all = np.array([np.asarray(points[p][0], float) for p in pids]).reshape(-1, 3)
+    elements = [[(old_to_new[i], j) for i, j in points[p][1]] for p in pids]
+    seen: dict[str, list[int]] = {}  # central view -> the rows of the points it sees
+    for r, p in enumerate(pids):
+        for key in sorted({names[i][:-4] for i, _ in points[p][1]}):
+            seen.setdefault(key, []).append(r)
+    for central_key in sorted(seen):
+        rows = np.array(seen[central_key])
+        for k in by_shot[split_key(central_key)[0]]:
+            if k == central_key:
+                continue
+            cam = cameras[k]
+            uv, z = _project_colmap(cam, X_all[rows])
+            ok = ((z > 0) & (uv[:, 0] >= margin_px) & (uv[:, 0] <= cam.width - margin_px)
+                  & (uv[:, 1] >= margin_px) & (uv[:, 1] <= cam.height - margin_px))
+            i = new_id[k]
+            lists[i].append(uv[ok])
+            for n, r in enumerate(rows[ok]):
+                elements[r].append((i, counts[i] + n))
+            counts[i] += int(ok.sum())
+    out_points = {p: (X_all[r], sorted(elements[r])) for r, p in enumerate(pids)}
     kps = {f"{k}.png": (np.concatenate(lists[new_id[k]]) if lists[new_id[k]]
                         else np.zeros((0, 2))) for k in keys}
     ts = TrackSet({i: f"{k}.png" for k, i in new_id.items()}, kps, out_points, len(points))
