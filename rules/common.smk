@@ -619,9 +619,9 @@ def refine_enabled():
 
 def refine_inputs(wildcards):
     """The Eq. 6 calibration and the rig; where the refinement runs, the database of its
-    tracks: registration A's matches of the central views (refine.tracks: central) or the
-    matches of every view (views; rule view_matches). refine.enabled false: the Eq. 6
-    result is copied, and the calibration waits for no matching."""
+    tracks: the central views' own matches (refine.tracks central, from match_central)
+    or the matches of every view (views, from view_matches). With refine.enabled false
+    the Eq. 6 result is copied, and the calibration waits for no matching."""
     d = wildcards.dataset
     out = {
         "eq6": res(d, "calibration", "eq6", "cameras.json"),
@@ -629,13 +629,13 @@ def refine_inputs(wildcards):
     }
     if refine_enabled():
         if stage_config("refine")["tracks"] == "central":
-            out["database"] = res(d, "reg_a", "database.db")
+            out["database"] = res(d, "matches", "central.db")
         else:
             out["database"] = res(d, "matches", "database.db")
         # the merge's scale source and the stage's step (refine.scale: auto)
         out["scale"] = res(d, "merge", "scale.json")
-        refine = stage_config("refine")
-        if refine["align"]["enabled"] or refine["tracks"] == "central":
+        cfg = stage_config("refine")
+        if cfg["align"]["enabled"] or cfg["tracks"] == "central":
             # the views themselves: the observations are aligned by their patches (the
             # central views' points are carried into the other views by them)
             out["view_sets"] = view_sets(d, cams(d))
@@ -675,7 +675,7 @@ def mpeg_views_targets(dataset):
 #: job's, as common.smk's chunk_rule and depth.smk name them)
 STAGE_RULES = {
     "convert": r"lenslet_frame|convert_setup|convert(_views)?(_\d+){1,2}",
-    "reg_a": r"features_a|match_a|map_a",
+    "reg_a": r"features_a|match_a|map_a|match_central",
     "reg_b": r"rig_b",
     "depth": r"depth_a(_other)?(_\d+)?|depth_b(_other)?(_\d+){1,2}",
     "verify": (

@@ -55,6 +55,31 @@ rule match_a:
         "../scripts/match_a.py"
 
 
+rule match_central:
+    input:
+        views=central_views,
+    output:
+        db="results/{dataset}/matches/central.db",
+        info="results/{dataset}/matches/central.json",
+    log:
+        log_path("match_central"),
+    benchmark:
+        bench_path("match_central")
+    priority: PRIORITY["calibration"]
+    conda:
+        "../envs/plenocal.yaml"
+    threads: lambda wc: stage_config("sfm")["num_threads"]
+    resources:
+        mem_mb=4000,
+        runtime=30,
+        gpu=gpus("sfm", "device"),
+    params:
+        sfm=lambda wc: sfm_params(),
+        contrast=lambda wc: stage_config("refine")["central_contrast"],
+    script:
+        "../scripts/match_central.py"
+
+
 rule map_a:
     input:
         db="results/{dataset}/reg_a/database.db",

@@ -38,9 +38,9 @@ def test_registration_as_database_is_copied_with_its_images_named_as_views(tmp_p
     assert got == [(1, "x00_y00/2_2.png"), (2, "hand00/2_2.png")]
     assert src.read_bytes() == before
     # a view database's names are not registration A's
-    with pytest.raises(ValueError, match="not registration A's database"):
+    with pytest.raises(ValueError, match="not a database of the central views"):
         ct.rename_central_images(dst, tmp_path / "c.db", "2_2")
-    with pytest.raises(FileNotFoundError, match="rule match_a"):
+    with pytest.raises(FileNotFoundError, match="rule match_central"):
         ct.rename_central_images(tmp_path / "none.db", tmp_path / "d.db", "2_2")
 
 

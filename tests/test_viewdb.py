@@ -127,6 +127,23 @@ def test_opencv_sift_is_deterministic_and_refuses_other_octaves(views, tmp_path)
                                      extractor="surf")
 
 
+def test_a_lower_contrast_threshold_keeps_the_keypoints_and_adds_weaker_ones(views):
+    """refine.central_contrast (rule match_central): the DoG extrema that pass 0.02 pass a
+    lower threshold too, at the same places, and weaker ones join them; the default is
+    registration A's 0.02."""
+    from plenocal.calib.reg_a import colmap as cm
+
+    paths, _ = views
+    gray = cv2.imread(str(next(iter(sorted(paths.values())))), cv2.IMREAD_GRAYSCALE)
+    kp, _ = cm.opencv_sift(gray)
+    assert cm.DEFAULT_CONTRAST == 0.02
+    assert cm.opencv_sift(gray, contrast=0.02)[0].tobytes() == kp.tobytes()
+    low, _ = cm.opencv_sift(gray, contrast=0.004)
+    assert len(low) > len(kp)
+    d = np.linalg.norm(kp[:, None, :2] - low[None, :, :2], axis=2)
+    assert (d.min(axis=1) < 1e-3).mean() > 0.95
+
+
 def test_root_sift_storage_by_hand():
     """COLMAP's L1_ROOT and uint8 storage: d / |d|_1, square root, min(round(512 d), 255)."""
     from plenocal.calib.reg_a.colmap import root_sift_uint8

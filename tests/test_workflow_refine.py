@@ -131,9 +131,10 @@ def _planned_rules(out: str) -> set[str]:
 
 def test_the_calibration_waits_for_no_view_matching_on_the_central_views_tracks(
         tmp_path: Path):
-    """refine.tracks: central (the default) takes the refinement's points from registration
-    A's matches: the calibration alone plans no SIFT of the other views and no view
-    matching; refine.tracks: views plans both (plenocal.calib.central_tracks)."""
+    """refine.tracks: central takes the refinement's points from the central views' own
+    matches (rule match_central): the calibration alone plans no SIFT of the other views
+    and no view matching; refine.tracks: views plans both and no match_central
+    (plenocal.calib.central_tracks)."""
     work = tiny_workflow(tmp_path / "w")
     target = "results/tiny/calibration/cameras.json"
     planned = {}
@@ -141,6 +142,7 @@ def test_the_calibration_waits_for_no_view_matching_on_the_central_views_tracks(
         proc = snakemake(work, "-n", target, "--config", f'refine={{"tracks": "{tracks}"}}')
         assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
         planned[tracks] = _planned_rules(proc.stdout + proc.stderr)
-    assert {"refine", "match_a", "convert_views"} <= planned["central"]
+    assert {"refine", "match_central", "convert_views"} <= planned["central"]
     assert not {"view_features", "view_matches"} & planned["central"]
     assert {"view_features", "view_matches", "refine"} <= planned["views"]
+    assert "match_central" not in planned["views"]

@@ -1,17 +1,19 @@
-"""The joint refinement's tracks from registration A's central views, carried into every
-other view of each shot by their patches (beyond the paper; config ``refine.tracks:
-central``, :mod:`plenocal.calib.refine`).
+"""The joint refinement's tracks from the central views' matches, carried into every other
+view of each shot by their patches (beyond the paper; config ``refine.tracks: central``,
+:mod:`plenocal.calib.refine`).
 
 Why: with ``refine.tracks: views`` the refinement's points are the verified matches of
 every view (rule ``view_matches``: SIFT of all N x N views of every shot, then their
 matching), which the calibration must wait for (BENCHMARKS.md, "The calibration alone").
 The observations are then moved by their patches anyway (``refine.align``,
 :mod:`plenocal.calib.track_alignment`): SIFT's keypoint in a view other than the central
-one only says where to start. Registration A has already matched the central views of
-every pair of shots (its database, ``reg_a/database.db``), so:
+one only says where to start. The central views of every pair of shots are matched as
+registration A matches them (rule ``match_central``, ``matches/central.db``: SIFT at
+``refine.central_contrast``, lower than A's, for about twice the keypoints; the database
+has registration A's form, images named ``<shot>.png``), so:
 
 1. the central views' verified matches are triangulated with the Eq. 6 cameras held fixed
-   (as rule ``view_matches``' are: :func:`central_reconstruction`);
+   (as rule ``view_matches``' are);
 2. each point is projected into every other view of each shot whose central view sees it
    (:func:`extend_to_views`): the Eq. 6 cameras place it within a few tenths of a pixel;
 3. every observation is aligned by its patch to its track's reference observation, which is
@@ -61,13 +63,14 @@ class TrackSet:
 
 
 def rename_central_images(src: str | Path, dst: str | Path, central: str) -> int:
-    """Copy registration A's database ``src`` to ``dst`` with each image ``<shot>.png``
-    renamed ``<shot>/<central>.png``, the name of the same view in the view sets. Returns
-    the number of images. ``src`` is left untouched."""
+    """Copy a database of the central views in registration A's form ``src`` (rule
+    ``match_central``'s, or registration A's own) to ``dst`` with each image
+    ``<shot>.png`` renamed ``<shot>/<central>.png``, the name of the same view in the view
+    sets. Returns the number of images. ``src`` is left untouched."""
     src, dst = Path(src), Path(dst)
     if not src.is_file():
-        raise FileNotFoundError(f"{src}: registration A's database is missing (rule match_a "
-                                "writes it): rerun the workflow")
+        raise FileNotFoundError(f"{src}: the central views' database is missing (rule "
+                                "match_central writes it): rerun the workflow")
     shutil.copyfile(src, dst)
     # closed, not only committed: a database in WAL mode keeps the change in its -wal file
     # until the last connection closes, and the copy is read as a file of its own
@@ -77,7 +80,7 @@ def rename_central_images(src: str | Path, dst: str | Path, central: str) -> int
         odd = [n for n in names if "/" in n or not n.endswith(".png")]
         if odd:
             raise ValueError(f"{src}: image {odd[0]!r} is not a shot's central view "
-                             "(<shot>.png): not registration A's database")
+                             "(<shot>.png): not a database of the central views")
         db.execute("UPDATE images SET name = substr(name, 1, length(name) - 4) || ? ",
                    (f"/{central}.png",))
         db.commit()
@@ -119,7 +122,7 @@ def extend_to_views(names: Mapping[int, str], keypoints: Mapping[str, np.ndarray
     for i, n in names.items():
         key = n[:-4]
         if key not in new_id:
-            raise ValueError(f"registration A's image {n}: no such view in the calibration")
+            raise ValueError(f"central view {n}: no such view in the calibration")
         old_to_new[i] = new_id[key]
     lists: dict[int, list[np.ndarray]] = {i: [] for i in new_id.values()}
     counts = {i: 0 for i in new_id.values()}
@@ -198,17 +201,18 @@ def aligned_track_set(ts: TrackSet, lead: Mapping[str, int],
     return TrackSet(dict(ts.names), keypoints, points, ts.triangulated), stats
 
 
-def central_track_set(database_a: str | Path, eq6: Mapping[str, PinholeCamera],
+def central_track_set(database: str | Path, eq6: Mapping[str, PinholeCamera],
                       central: str, images: Mapping[str, str | Path],
                       settings, work_dir: Path, align_threads: int | None = None
                       ) -> tuple[TrackSet, dict]:
-    """Steps 1-3 of the module docstring: registration A's database ``database_a`` (its
-    central views' verified matches), the Eq. 6 cameras of every view ``eq6``, the rig's
-    central view's name ``central``, the views' image files ``images`` (view key -> file),
-    ``settings`` the refinement's (:class:`plenocal.calib.refine.RefineSettings`: the
-    triangulation's thresholds, ``align`` and the threads), ``work_dir`` COLMAP's scratch
-    folder; ``align_threads`` the alignment's threads (``settings.num_threads`` where None;
-    the same result on any number). Returns the aligned track set and statistics."""
+    """Steps 1-3 of the module docstring: the central views' database ``database``
+    (their verified matches, registration A's form), the Eq. 6 cameras of every view
+    ``eq6``, the rig's central view's name ``central``, the views' image files ``images``
+    (view key -> file), ``settings`` the refinement's
+    (:class:`plenocal.calib.refine.RefineSettings`: the triangulation's thresholds,
+    ``align`` and the threads), ``work_dir`` COLMAP's scratch folder; ``align_threads``
+    the alignment's threads (``settings.num_threads`` where None; the same result on any
+    number). Returns the aligned track set and statistics."""
     import cv2  # noqa: PLC0415
 
     from plenocal.calib.reg_a import colmap as cm  # noqa: PLC0415
@@ -217,7 +221,7 @@ def central_track_set(database_a: str | Path, eq6: Mapping[str, PinholeCamera],
 
     t0 = time.perf_counter()
     renamed = work_dir / "reg_a.db"
-    rename_central_images(database_a, renamed, central)
+    rename_central_images(database, renamed, central)
     shots = sorted({split_key(k)[0] for k in eq6})
     keys = [f"{s}/{central}" for s in shots]
     db = work_dir / "central.db"

@@ -111,8 +111,8 @@ FOCAL_MODES = ("hold", "refine")
 #: between different shots only (the same view of two shots: no pair within a set)
 MATCH_SETS = ("all", "across")
 #: where the adjustment's points come from (config refine.tracks): views - the verified
-#: matches of every view (rule view_matches); central - registration A's matches of the
-#: central views, carried into the other views by their patches
+#: matches of every view (rule view_matches); central - the central views' matches (rule
+#: match_central, registration A's form), carried into the other views by their patches
 #: (:mod:`plenocal.calib.central_tracks`)
 TRACK_SOURCES = ("views", "central")
 #: the shots' poses (config refine.frames): refined, or held as Eq. 6 gives them (then only
@@ -671,7 +671,7 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
 
 def _central_rig(eq6, views, central, shot_poses, rig, database, settings, images,
                  align_threads, work_dir):
-    """The rig reconstruction on registration A's tracks of the central views
+    """The rig reconstruction on the tracks of the central views' matches
     (``refine.tracks: central``, :mod:`plenocal.calib.central_tracks`)."""
     from plenocal.calib.central_tracks import central_track_set  # noqa: PLC0415
 
@@ -688,8 +688,8 @@ def _central_rig(eq6, views, central, shot_poses, rig, database, settings, image
     ids = sorted(ts.points)
     ids = ids[::max(1, math.ceil(len(ids) / settings.max_points))]
     if len(ids) < 100:
-        raise ValueError(f"refinement: only {len(ids)} points of registration A's central "
-                         "views seen in three or more views; set refine.tracks: views (the "
+        raise ValueError(f"refinement: only {len(ids)} points of the central views' matches "
+                         "seen in three or more views; set refine.tracks: views (the "
                          "matches of every view) or refine.enabled: false")
     rec, model = rig_reconstruction_of(ts.names, {pid: ts.points[pid] for pid in ids},
                                        ts.keypoints, views, shot_poses, rig.width, rig.height)

@@ -59,6 +59,9 @@ def image_size(path: str | Path) -> tuple[int, int]:
 
 #: COLMAP's SIFT default: the scale space starts on the image upsampled 2x
 DEFAULT_FIRST_OCTAVE = -1
+#: SIFT's DoG peak threshold as OpenCV's ``contrastThreshold`` (COLMAP's default
+#: ``peak_threshold`` 0.02 / 3 with 3 scales per octave: OpenCV divides by them itself)
+DEFAULT_CONTRAST = 0.02
 
 #: SIFT implementations (config ``sfm.sift``): OpenCV's, set up as COLMAP's (about 6x
 #: faster than COLMAP's on one core), or COLMAP's own (SiftGPU on a GPU); the config's
@@ -106,11 +109,13 @@ def _device(use_gpu: bool):
 
 
 def _extraction_options(max_num_features: int, num_threads: int,
-                        first_octave: int = DEFAULT_FIRST_OCTAVE, use_gpu: bool = False):
+                        first_octave: int = DEFAULT_FIRST_OCTAVE, use_gpu: bool = False,
+                        contrast: float = DEFAULT_CONTRAST):
     """SIFT settings: COLMAP's defaults but the feature cap and the first octave
     (``first_octave`` 0: the scale space starts at the image's own resolution, about a
     third of the time of COLMAP's -1 and half the keypoints; see README, SIFT);
-    ``use_gpu``: SiftGPU on the first GPU."""
+    ``use_gpu``: SiftGPU on the first GPU; ``contrast``: the DoG peak threshold as OpenCV
+    gives it (:data:`DEFAULT_CONTRAST`), COLMAP's a third of it."""
     import pycolmap  # noqa: PLC0415
 
     opts = pycolmap.FeatureExtractionOptions()
@@ -118,6 +123,7 @@ def _extraction_options(max_num_features: int, num_threads: int,
     opts.use_gpu = use_gpu
     opts.sift.max_num_features = max_num_features
     opts.sift.first_octave = first_octave
+    opts.sift.peak_threshold = contrast / 3.0
     return opts
 
 
@@ -127,7 +133,8 @@ def extract_features(database: str | Path, image_dir: str | Path,
                      max_num_features: int = DEFAULT_MAX_FEATURES,
                      num_threads: int = DEFAULT_THREADS, seed: int = DEFAULT_SEED,
                      first_octave: int = DEFAULT_FIRST_OCTAVE,
-                     extractor: str = DEFAULT_EXTRACTOR, use_gpu: bool = False) -> None:
+                     extractor: str = DEFAULT_EXTRACTOR, use_gpu: bool = False,
+                     contrast: float = DEFAULT_CONTRAST) -> None:
     """SIFT into a new database. ``groups``: (image names, camera) pairs; all images of
     a group share one COLMAP camera. A group's camera, where given, is written with its
     intrinsics (``model`` PINHOLE or SIMPLE_PINHOLE, marked as a known focal length);
@@ -136,7 +143,8 @@ def extract_features(database: str | Path, image_dir: str | Path,
     (:func:`_extraction_options`). ``extractor``: ``"opencv"`` (:func:`opencv_sift`,
     COLMAP's settings, first octave -1 only, on the CPU) or ``"colmap"`` (COLMAP's own
     SIFT: SiftGPU with ``use_gpu``, else its CPU SIFT); the images, cameras and frames
-    are COLMAP's import either way."""
+    are COLMAP's import either way. ``contrast``: SIFT's DoG peak threshold
+    (:data:`DEFAULT_CONTRAST`)."""
     if extractor not in EXTRACTORS:
         raise ValueError(f"SIFT extractor {extractor!r}: use one of {', '.join(EXTRACTORS)} "
                          "(config key sfm.sift)")
@@ -176,7 +184,7 @@ def extract_features(database: str | Path, image_dir: str | Path,
                                       reader_options=reader,
                                       extraction_options=_extraction_options(
                                           max_num_features, num_threads, first_octave,
-                                          use_gpu),
+                                          use_gpu, contrast),
                                       device=device)
         else:
             with pycolmap.Database.open(str(database)):
@@ -184,13 +192,14 @@ def extract_features(database: str | Path, image_dir: str | Path,
             pycolmap.import_images(str(database), str(image_dir),
                                    camera_mode=pycolmap.CameraMode.SINGLE, image_names=names,
                                    options=reader)
-            _write_opencv_sift(database, Path(image_dir), set(names), max_num_features)
+            _write_opencv_sift(database, Path(image_dir), set(names), max_num_features,
+                               contrast)
         log.info("features (%s SIFT, %s): %d images of group %s", extractor,
                  sift_device(extractor, use_gpu), len(names), names[0])
 
 
 def _write_opencv_sift(database: Path, image_dir: Path, names: set[str],
-                       max_num_features: int) -> None:
+                       max_num_features: int, contrast: float = DEFAULT_CONTRAST) -> None:
     """:func:`opencv_sift` of the imported images ``names`` into ``database``."""
     import cv2  # noqa: PLC0415
     import pycolmap  # noqa: PLC0415
@@ -202,14 +211,14 @@ def _write_opencv_sift(database: Path, image_dir: Path, names: set[str],
             gray = cv2.imread(str(image_dir / im.name), cv2.IMREAD_GRAYSCALE)
             if gray is None:
                 raise OSError(f"{image_dir / im.name}: not a readable image")
-            kp, desc = opencv_sift(gray, max_num_features)
+            kp, desc = opencv_sift(gray, max_num_features, contrast)
             db.write_keypoints(im.image_id, kp)
             db.write_descriptors(im.image_id, pycolmap.FeatureDescriptors(
                 pycolmap.FeatureExtractorType.SIFT, desc))
 
 
-def opencv_sift(gray: np.ndarray, max_num_features: int = DEFAULT_MAX_FEATURES
-                ) -> tuple[np.ndarray, np.ndarray]:
+def opencv_sift(gray: np.ndarray, max_num_features: int = DEFAULT_MAX_FEATURES,
+                contrast: float = DEFAULT_CONTRAST) -> tuple[np.ndarray, np.ndarray]:
     """SIFT (Lowe 2004) of an 8-bit grey image by OpenCV, set up as COLMAP's CPU SIFT:
     3 scales per octave, first octave -1 (the image upsampled 2x, pixel-aligned as
     VLFeat's: OpenCV's plain upscale would shift every keypoint by +0.25 px), sigma 1.6, DoG peak
@@ -217,7 +226,8 @@ def opencv_sift(gray: np.ndarray, max_num_features: int = DEFAULT_MAX_FEATURES
     threshold 10, RootSIFT descriptors (L1-normalised, square-rooted) stored as
     ``round(512 d)`` in uint8 as COLMAP stores them, keypoints in COLMAP's pixel
     convention (centre of pixel (0, 0) at (0.5, 0.5)). At most ``max_num_features``,
-    the strongest. Single-threaded and deterministic.
+    the strongest. ``contrast``: the DoG peak threshold (OpenCV's ``contrastThreshold``;
+    lower keeps weaker extrema). Single-threaded and deterministic.
 
     Returns (N, 4) float32 keypoints (x, y, scale, orientation in radians) and (N, 128)
     uint8 descriptors, in OpenCV's order. On the default data's 500 x 376 views: about
@@ -231,7 +241,8 @@ def opencv_sift(gray: np.ndarray, max_num_features: int = DEFAULT_MAX_FEATURES
     cv2.setNumThreads(1)  # OpenCV's parallel loops could reorder the keypoints
     try:
         sift = cv2.SIFT_create(nfeatures=int(max_num_features), nOctaveLayers=3,
-                               contrastThreshold=0.02, edgeThreshold=10.0, sigma=1.6,
+                               contrastThreshold=float(contrast), edgeThreshold=10.0,
+                               sigma=1.6,
                                enable_precise_upscale=True)
         keypoints, desc = sift.detectAndCompute(gray, None)
     finally:

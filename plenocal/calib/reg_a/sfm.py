@@ -67,11 +67,14 @@ def features_a(views: Mapping[str, str | Path], image_dir: str | Path,
                database: str | Path, *,
                max_num_features: int = cm.DEFAULT_MAX_FEATURES, seed: int = cm.DEFAULT_SEED,
                num_threads: int = cm.DEFAULT_THREADS, first_octave: int = cm.DEFAULT_FIRST_OCTAVE,
-               extractor: str = cm.DEFAULT_EXTRACTOR, use_gpu: bool = False) -> dict:
+               extractor: str = cm.DEFAULT_EXTRACTOR, use_gpu: bool = False,
+               contrast: float = cm.DEFAULT_CONTRAST) -> dict:
     """Stage the central views (``views``: cam -> png) as ``<cam>.png`` in ``image_dir``
     and extract SIFT into a new ``database`` with one SIMPLE_PINHOLE camera for all
     (``first_octave``: the same SIFT setting as the view database's, so the naive
-    baseline and the proposed calibration start from the same kind of features)."""
+    baseline and the proposed calibration start from the same kind of features;
+    ``contrast``: SIFT's DoG peak threshold, :data:`plenocal.calib.reg_a.colmap.
+    DEFAULT_CONTRAST`)."""
     check_shots(sorted(views))
     sizes = {cam: cm.image_size(p) for cam, p in sorted(views.items())}
     if len(set(sizes.values())) != 1:
@@ -84,7 +87,8 @@ def features_a(views: Mapping[str, str | Path], image_dir: str | Path,
     names = cm.stage_images(views, image_dir)
     cm.extract_features(database, image_dir, [(names, None)], model="SIMPLE_PINHOLE",
                         max_num_features=max_num_features, num_threads=num_threads, seed=seed,
-                        first_octave=first_octave, extractor=extractor, use_gpu=use_gpu)
+                        first_octave=first_octave, extractor=extractor, use_gpu=use_gpu,
+                        contrast=contrast)
     import pycolmap  # noqa: PLC0415
 
     with pycolmap.Database.open(str(database)) as db:
