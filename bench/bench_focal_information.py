@@ -237,7 +237,10 @@ def kept_capture(capture: str) -> KeptCapture:
     """``bench/out/accuracy/<capture>`` read as the workflow's rule ``refine`` reads it."""
     res = OUT / capture / "results" / "synthetic"
     cfg = validate_config(yaml.safe_load((OUT / capture / "config.yaml").read_text()))
-    settings = rf.RefineSettings.from_config(cfg["refine"], seed=int(cfg["sfm"]["seed"]))
+    # the view database's tracks, whose observations this bench studies (refine.tracks)
+    settings = dataclasses.replace(
+        rf.RefineSettings.from_config(cfg["refine"], seed=int(cfg["sfm"]["seed"])),
+        tracks="views")
     truth = read_cameras(res / "ground_truth" / "cameras.json")
     rig = read_rig(res / "reg_b" / "rig.json")
     sim = cfg["datasets"]["synthetic"]["simulate"]["array"]

@@ -74,8 +74,10 @@ def eq6_of(views: dict[str, PinholeCamera], rig: RigB, seed: int = 1) -> dict[st
 
 
 def settings(**kw) -> rf.RefineSettings:
+    """The refinement on the view database's matches (refine.tracks: views) unless ``kw``
+    says otherwise (tests/test_central_tracks.py: central)."""
     return rf.RefineSettings(**{"max_points": 4000, "min_angle_deg": 0.1, "num_threads": 1,
-                                **kw})
+                                "tracks": "views", **kw})
 
 
 def test_refinement_moves_the_shots_towards_the_truth_and_keeps_every_view(capture):
