@@ -13,9 +13,12 @@ This step adjusts them together, as COLMAP 4 models a camera rig
   view is the reference sensor);
 * each sensor has one camera, shared by all shots (its principal point as registration
   B's view model gives it);
-* the 3-D points are the verified matches of every view (rule ``view_matches``, the
-  matches Table I triangulates) triangulated with the Eq. 6 cameras held fixed
-  (:func:`plenocal.verify.reprojection.triangulate`), at most ``max_points`` of them;
+* the 3-D points (``refine.tracks``, :data:`TRACK_SOURCES`), at most ``max_points`` of
+  them: ``central`` (the default) the central views' own matches (rule ``match_central``)
+  triangulated with the Eq. 6 cameras held fixed and carried into each shot's other views
+  by their patches (:mod:`plenocal.calib.central_tracks`); ``views`` the verified matches
+  of every view (rule ``view_matches``, the matches Table I triangulates) triangulated the
+  same way (:func:`plenocal.verify.reprojection.triangulate`);
 * their observations aligned by their patches to their track's reference observation
   (``refine.align``, :mod:`plenocal.calib.track_alignment`, given the views' images:
   :func:`aligned_keypoints`), since SIFT's placement on soft views leans the focal length.
@@ -631,7 +634,9 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
                        align_threads: int | None = None,
                        step_m: float | None = None) -> Refinement:
     """Refine the Eq. 6 calibration ``eq6`` (every view of every shot, metres) under the rig
-    ``rig`` on the verified matches of the view ``database`` (module docstring).
+    ``rig`` on the verified matches of ``database``: the central views' (rule
+    ``match_central``) with ``settings.tracks`` central, every view's (rule
+    ``view_matches``) with views (module docstring).
     ``hold_shot``: the shot whose pose is held (the gauge). ``rig_at_focal``: registration
     B's rig rebuilt for another focal length (its baselines follow the focal length:
     :func:`plenocal.calib.reg_b.exact_model.exact_model`); without it the rig keeps B's
