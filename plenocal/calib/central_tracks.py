@@ -39,12 +39,16 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from plenocal.calib import track_alignment as ta
 from plenocal.camera import PinholeCamera, invert_pose, k_to_colmap
 from plenocal.names import split_key
+
+if TYPE_CHECKING:
+    from plenocal.calib.refine import RefineSettings
 
 log = logging.getLogger(__name__)
 
@@ -203,7 +207,8 @@ def aligned_track_set(ts: TrackSet, lead: Mapping[str, int],
 
 def central_track_set(database: str | Path, eq6: Mapping[str, PinholeCamera],
                       central: str, images: Mapping[str, str | Path],
-                      settings, work_dir: Path, align_threads: int | None = None
+                      settings: RefineSettings, work_dir: Path,
+                      align_threads: int | None = None
                       ) -> tuple[TrackSet, dict]:
     """Steps 1-3 of the module docstring: the central views' database ``database``
     (their verified matches, registration A's form), the Eq. 6 cameras of every view

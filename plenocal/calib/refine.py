@@ -276,18 +276,17 @@ def rig_reconstruction(tracks, views: Mapping[str, tuple[np.ndarray, np.ndarray]
     return rig_reconstruction_of(names, points, keypoints, views, shot_poses, width, height)
 
 
-def rig_reconstruction_of(names: Mapping[int, str],
+def rig_reconstruction_of(image_names: Mapping[int, str],
                           points: Mapping[int, tuple[np.ndarray, list[tuple[int, int]]]],
                           keypoints: Mapping[str, np.ndarray],
                           views: Mapping[str, tuple[np.ndarray, np.ndarray]],
                           shot_poses: Mapping[str, np.ndarray], width: int, height: int):
-    """:func:`rig_reconstruction` of plain data: ``names`` image id -> ``<shot>/<view>.png``,
-    ``points`` point id -> (X, its track's (image id, keypoint index) pairs), added in the
-    mapping's order, ``keypoints`` image name -> (n, 2) COLMAP's convention
+    """:func:`rig_reconstruction` of plain data: ``image_names`` image id ->
+    ``<shot>/<view>.png``, ``points`` point id -> (X, its track's (image id, keypoint index)
+    pairs), added in the mapping's order, ``keypoints`` image name -> (n, 2) COLMAP's convention
     (:class:`plenocal.calib.central_tracks.TrackSet` holds the three)."""
     import pycolmap  # noqa: PLC0415
 
-    names_of = names
     names = sorted(views)
     central = [v for v in names if np.allclose(views[v][1], np.eye(4), atol=1e-12)]
     if len(central) != 1:
@@ -307,8 +306,8 @@ def rig_reconstruction_of(names: Mapping[int, str],
             rig.add_sensor(_camera_sensor(cam_of[v]), rigid3d(invert_pose(views[v][1])))
     rec.add_rig(rig)
     images = {}
-    for image_id in sorted(names_of):
-        name = names_of[image_id]
+    for image_id in sorted(image_names):
+        name = image_names[image_id]
         shot, view = split_key(name[:-4])
         if shot not in shot_poses or view not in cam_of:
             raise ValueError(f"{name}: not a view of the rig's shots")
@@ -674,8 +673,11 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
                      t_tri=t_tri, work_dir=work_dir)
 
 
-def _central_rig(eq6, views, central, shot_poses, rig, database, settings, images,
-                 align_threads, work_dir):
+def _central_rig(eq6: Mapping[str, PinholeCamera], views: Mapping[str, tuple],
+                 central: str, shot_poses: Mapping[str, np.ndarray], rig: RigB,
+                 database: str | Path, settings: RefineSettings,
+                 images: Mapping[str, str | Path] | None, align_threads: int | None,
+                 work_dir: str | Path | None) -> tuple:
     """The rig reconstruction on the tracks of the central views' matches
     (``refine.tracks: central``, :mod:`plenocal.calib.central_tracks`)."""
     from plenocal.calib.central_tracks import central_track_set  # noqa: PLC0415
@@ -702,8 +704,10 @@ def _central_rig(eq6, views, central, shot_poses, rig, database, settings, image
             time.perf_counter() - t0)
 
 
-def _views_rig(eq6, views, shot_poses, rig, database, settings, images, align_threads,
-               work_dir):
+def _views_rig(eq6: Mapping[str, PinholeCamera], views: Mapping[str, tuple],
+               shot_poses: Mapping[str, np.ndarray], rig: RigB, database: str | Path,
+               settings: RefineSettings, images: Mapping[str, str | Path] | None,
+               align_threads: int | None, work_dir: str | Path | None) -> tuple:
     """The rig reconstruction on the verified matches of every view (``refine.tracks:
     views``: rule view_matches' database)."""
     from plenocal.verify import reprojection as rp  # noqa: PLC0415
