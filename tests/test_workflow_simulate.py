@@ -185,8 +185,8 @@ def test_gpu_jobs_ask_for_a_gpu_only_where_the_config_names_cuda(tmp_path: Path)
     and depth jobs one GPU each (a cluster sends them to a GPU node) and no other job;
     the default ``auto`` asks for none (it takes a GPU only where a job finds one)."""
     work = tiny_workflow(tmp_path / "w")
-    gpu_rules = {"features_a", "match_a", "view_features", "view_matches", "depth_a",
-                 "depth_b", "depth_a_other", "depth_b_other"}
+    gpu_rules = {"features_a", "match_a", "match_central", "view_features", "view_matches",
+                 "depth_a", "depth_b", "depth_a_other", "depth_b_other"}
     proc = run(work, "-n", "--config", 'sfm={"device": "cuda"}', 'depth={"backend": "colmap"}')
     assert proc.returncode == 0, proc.stderr[-3000:]
     gpus = _planned_gpus(proc.stdout + proc.stderr)
