@@ -188,7 +188,9 @@ def aligned_track_set(ts: TrackSet, lead: Mapping[str, int],
     uv, aligned, stats = ta.align_observations(obs, lambda i: load(ts.names[i][:-4]),
                                                settings, num_threads)
     rows = np.asarray(rows, int).reshape(-1, 2)
-    projected = np.array([j >= lead_of[i] for i, j in rows], bool)
+    lead_by_id = np.zeros(max(ts.names) + 1, int)
+    lead_by_id[list(lead_of)] = list(lead_of.values())
+    projected = rows[:, 1] >= lead_by_id[rows[:, 0]]
     drop = projected & ~aligned
     keypoints = {n: kp.copy() for n, kp in ts.keypoints.items()}
     for i, sel in ta.rows_of(rows[:, 0]).items():
