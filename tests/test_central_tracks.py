@@ -86,6 +86,39 @@ def test_a_point_is_carried_into_every_view_of_the_shots_that_see_it():
     assert carried == ["x00_y00/0_0", "x00_y00/1_1"]  # in 2_2 it falls 5.9 px from the edge
 
 
+def test_carry_every_takes_each_point_into_its_share_of_the_views():
+    """refine.carry_every 2 on one shot of five views (central 2_2): point rows 0 and 1 (of
+    ids 3 and 8) go into the other views 0_0, 1_1, 3_3, 4_4 (j = 0..3) where (j + row) is
+    even: row 0 into j 0 and 2 (0_0, 3_3), row 1 into j 1 and 3 (1_1, 4_4)."""
+    views = ("0_0", "1_1", "2_2", "3_3", "4_4")
+    cams = {f"x00_y00/{v}": _cam(0.01 * (i - 2)) for i, v in enumerate(views)}
+    c = np.array([(W - 1) / 2 + 0.5, (H - 1) / 2 + 0.5])
+    names = {1: "x00_y00/2_2.png"}
+    keypoints = {"x00_y00/2_2.png": np.array([c, c + [3.0, 0.0]])}
+    X = np.array([0.0, 0.0, 2.0])
+    points = {3: (X, [(1, 0)]), 8: (X + [3.0 * 2.0 / F, 0.0, 0.0], [(1, 1)])}
+    full, _ = ct.extend_to_views(names, keypoints, points, cams, margin_px=7.0)
+    half, _ = ct.extend_to_views(names, keypoints, points, cams, margin_px=7.0, stride=2)
+
+    def carried(ts, pid):
+        return sorted(ts.names[i][:-4].split("/")[1] for i, _ in ts.points[pid][1])
+
+    assert carried(full, 3) == carried(full, 8) == list(views)
+    assert carried(half, 3) == ["0_0", "2_2", "3_3"]
+    assert carried(half, 8) == ["1_1", "2_2", "4_4"]
+    # each carried observation is the same pixel as with every view
+    for pid in (3, 8):
+        for i, j in half.points[pid][1]:
+            name = half.names[i]
+            k = dict(full.points[pid][1])[i]
+            assert np.array_equal(half.keypoints[name][j], full.keypoints[name][k])
+    assert ct.strided(np.arange(6), 1, 3).tolist() == [False, False, True, False, False, True]
+    with pytest.raises(ValueError, match="carry_every"):
+        ct.strided(np.arange(3), 0, 0)
+    with pytest.raises(ValueError, match="refine.carry_every"):
+        rf.RefineSettings(carry_every=0)
+
+
 def test_a_projection_the_alignment_cannot_confirm_is_dropped_and_sift_kept():
     """Three views of one shot (the same image, as a shot's views nearly are): SIFT's
     keypoint in the central view is the reference; a projection 0.4 px off is moved onto

@@ -15,7 +15,10 @@ has registration A's form, images named ``<shot>.png``), so:
 1. the central views' verified matches are triangulated with the Eq. 6 cameras held fixed
    (as rule ``view_matches``' are);
 2. each point is projected into every other view of each shot whose central view sees it
-   (:func:`extend_to_views`): the Eq. 6 cameras place it within a few tenths of a pixel;
+   (:func:`extend_to_views`): the Eq. 6 cameras place it within a few tenths of a pixel
+   (moving it by the residual the central view's SIFT keypoint leaves was tried: that
+   residual is SIFT's own noise, not shared by the other views, and a third more
+   projections failed their alignment on a small-geometry capture);
 3. every observation is aligned by its patch to its track's reference observation, which is
    one of the central views' SIFT keypoints (:func:`aligned_track_set`); a projected
    observation whose alignment fails (it left the image, moved more than
@@ -106,13 +109,17 @@ def _project_colmap(cam: PinholeCamera, X: np.ndarray) -> tuple[np.ndarray, np.n
 
 def extend_to_views(names: Mapping[int, str], keypoints: Mapping[str, np.ndarray],
                     points: Mapping[int, tuple[np.ndarray, list[tuple[int, int]]]],
-                    cameras: Mapping[str, PinholeCamera], margin_px: float
-                    ) -> tuple[TrackSet, dict[str, int]]:
+                    cameras: Mapping[str, PinholeCamera], margin_px: float,
+                    stride: int = 1) -> tuple[TrackSet, dict[str, int]]:
     """The tracks of the central views (``names``: their image ids -> ``<shot>/<central>
     .png``, ``keypoints`` their SIFT keypoints by name, ``points`` the triangulated points
     on them) carried into every view of ``cameras`` (``"<shot>/<view>"`` -> camera) of the
     shots whose central view observes each point: the point projected by the view's camera,
-    kept where it falls at least ``margin_px`` inside the image and in front of it.
+    kept where it falls at least ``margin_px`` inside the image and in front of it, and
+    only into every ``stride``-th of the shot's other views (``refine.carry_every``): the
+    point in row r of the sorted point ids goes into the views whose place j among the
+    shot's other views (sorted keys) has ``(j + r) % stride == 0``, so that each point still
+    spans the set and each view keeps its share of the points (:func:`strided`).
     Returns the track set over every view (image ids 1.. in the order of the sorted view
     keys; a view's projected keypoints after its own SIFT keypoints where it has any) and,
     by image name, how many SIFT keypoints lead each image's list (the rest are
@@ -143,10 +150,10 @@ def extend_to_views(names: Mapping[int, str], keypoints: Mapping[str, np.ndarray
         for key in sorted({names[i][:-4] for i, _ in points[p][1]}):
             seen.setdefault(key, []).append(r)
     for central_key in sorted(seen):
-        rows = np.array(seen[central_key])
-        for k in by_shot[split_key(central_key)[0]]:
-            if k == central_key:
-                continue
+        seen_rows = np.array(seen[central_key])
+        others = [k for k in by_shot[split_key(central_key)[0]] if k != central_key]
+        for j, k in enumerate(others):
+            rows = seen_rows[strided(seen_rows, j, stride)]
             cam = cameras[k]
             uv, z = _project_colmap(cam, X_all[rows])
             ok = ((z > 0) & (uv[:, 0] >= margin_px) & (uv[:, 0] <= cam.width - margin_px)
@@ -161,6 +168,15 @@ def extend_to_views(names: Mapping[int, str], keypoints: Mapping[str, np.ndarray
                         else np.zeros((0, 2))) for k in keys}
     ts = TrackSet({i: f"{k}.png" for k, i in new_id.items()}, kps, out_points, len(points))
     return ts, {f"{k}.png": lead[new_id[k]] for k in keys}
+
+
+def strided(rows: np.ndarray, j: int, stride: int) -> np.ndarray:
+    """Which of the point rows ``rows`` (n,) go into a shot's ``j``-th non-central view
+    with ``refine.carry_every`` ``stride`` (:func:`extend_to_views`): a boolean mask (n,),
+    true where ``(j + row) % stride == 0``; all true for a stride of 1."""
+    if stride < 1:
+        raise ValueError(f"config refine.carry_every = {stride}: at least 1")
+    return (np.asarray(rows, int) + j) % stride == 0
 
 
 def aligned_track_set(ts: TrackSet, lead: Mapping[str, int],
@@ -245,7 +261,7 @@ def central_track_set(database: str | Path, eq6: Mapping[str, PinholeCamera],
               for pid in rec.point3D_ids()}
     t_tri = time.perf_counter() - t0
     margin = float(settings.align.radius_px) + 2.0
-    ts, lead = extend_to_views(names, keypoints, points, eq6, margin)
+    ts, lead = extend_to_views(names, keypoints, points, eq6, margin, settings.carry_every)
     missing = sorted(set(eq6) - set(images))
     if missing:
         raise ValueError(f"refine.tracks central: no image file for {len(missing)} views "

@@ -165,6 +165,7 @@ class RefineSettings:
     scale: str = _REFINE["scale"]
     matches: str = _REFINE["matches"]
     tracks: str = _REFINE["tracks"]
+    carry_every: int = _REFINE["carry_every"]
     frames: str = _REFINE["frames"]
     max_points: int = _REFINE["max_points"]
     max_error_px: float = _REFINE["max_error_px"]
@@ -193,6 +194,9 @@ class RefineSettings:
                                                  and self.loss_scale_px > 0):
             raise ValueError(f"config refine.loss_scale_px = {self.loss_scale_px!r}: a "
                              "positive number of pixels, or auto")
+        if self.carry_every < 1:
+            raise ValueError(f"config refine.carry_every = {self.carry_every}: at least 1 "
+                             "(1 carries each point into every view)")
         if self.max_points < 100:
             raise ValueError(f"config refine.max_points = {self.max_points}: at least 100")
 
