@@ -623,7 +623,10 @@ def section_summary(page: Page) -> None:
                  f"{escape(rf['settings']['focal'])}</b>scale {escape(rf['scale_source'])}; "
                  f"B's rig alone gives {_fmt(sv['rig'], 5)} x Eq. 5's r; observations "
                  f"{_fmt(rf['observations']['before']['mean_px'], 4)} -> "
-                 f"{_fmt(rf['observations']['after']['mean_px'], 4)} px "
+                 f"{_fmt(rf['observations']['after']['mean_px'], 4)} px over "
+                 f"{_fmt(rf['observations']['after'].get('n'))} observations of "
+                 f"{_fmt(rf.get('points', {}).get('used'))} points, "
+                 f"{escape(track_source(rf['settings']))} "
                  f"{page.link(src.SOURCES['refine'][0], '[source]')}</span>")
     elif rf is not None:
         page.add('<span class="kpi" id="kpi-refine">joint refinement<b>off</b>'
@@ -632,6 +635,23 @@ def section_summary(page: Page) -> None:
     if sc is None and rig is None and _absent(page, "scale") and _absent(page, "rig"):
         page.missing("scale")
         page.missing("rig")
+
+
+def track_source(settings: dict) -> str:
+    """Where the refinement's points came from, in words, from refine.json's ``settings``
+    (``tracks``, ``carry_every``)."""
+    if settings.get("tracks") == "views":
+        return "from the matches of every view (refine.tracks: views)"
+    every = int(settings.get("carry_every", 1))
+    into = "all" if every == 1 else f"every {_ordinal(every)}"
+    return (f"from the central views' matches carried into {into} of each shot's other "
+            f"views (refine.tracks: central, carry_every: {every})")
+
+
+def _ordinal(n: int) -> str:
+    """1st, 2nd, 3rd, 4th ... 11th, 12th, 13th, 21st."""
+    suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"{n}{suffix}"
 
 
 def focal_kpi(page: Page, reg_a: RegistrationA | None, rf: dict | None) -> None:
