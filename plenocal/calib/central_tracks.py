@@ -14,8 +14,9 @@ has registration A's form, images named ``<shot>.png``), so:
 
 1. the central views' verified matches are triangulated with the Eq. 6 cameras held fixed
    (as rule ``view_matches``' are);
-2. each point is projected into every other view of each shot whose central view sees it
-   (:func:`extend_to_views`): the Eq. 6 cameras place it within a few tenths of a pixel
+2. each point is projected into the other views of each shot whose central view sees it,
+   every ``refine.carry_every``-th of them (:func:`extend_to_views`, :func:`strided`): the
+   Eq. 6 cameras place it within a few tenths of a pixel
    (moving it by the residual the central view's SIFT keypoint leaves was tried: that
    residual is SIFT's own noise, not shared by the other views, and a third more
    projections failed their alignment on a small-geometry capture);
