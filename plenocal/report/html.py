@@ -642,7 +642,7 @@ def track_source(settings: dict) -> str:
     (``tracks``, ``carry_every``)."""
     if settings.get("tracks") == "views":
         return "from the matches of every view (refine.tracks: views)"
-    every = int(settings.get("carry_every", 1))
+    every = int(settings["carry_every"])
     into = "all" if every == 1 else f"every {_ordinal(every)}"
     return (f"from the central views' matches carried into {into} of each shot's other "
             f"views (refine.tracks: central, carry_every: {every})")
