@@ -145,7 +145,10 @@ def extend_to_views(names: Mapping[int, str], keypoints: Mapping[str, np.ndarray
     lead = dict(counts)
     pids = sorted(points)
     X_all = np.array([np.asarray(points[p][0], float) for p in pids]).reshape(-1, 3)
-    elements = [[(old_to_new[i], j) for i, j in points[p][1]] for p in pids]
+    # every observation as (point row, image id, keypoint index): the central views' own
+    # first, then each carried one, grouped by point at the end
+    own = [(r, old_to_new[i], j) for r, p in enumerate(pids) for i, j in points[p][1]]
+    observed = [np.array(own, int).reshape(-1, 3)]
     seen: dict[str, list[int]] = {}  # central view -> the rows of the points it sees
     for r, p in enumerate(pids):
         for key in sorted({names[i][:-4] for i, _ in points[p][1]}):
@@ -161,10 +164,15 @@ def extend_to_views(names: Mapping[int, str], keypoints: Mapping[str, np.ndarray
                   & (uv[:, 1] >= margin_px) & (uv[:, 1] <= cam.height - margin_px))
             i = new_id[k]
             lists[i].append(uv[ok])
-            for n, r in enumerate(rows[ok]):
-                elements[r].append((i, counts[i] + n))
-            counts[i] += int(ok.sum())
-    out_points = {p: (X_all[r], sorted(elements[r])) for r, p in enumerate(pids)}
+            n = int(ok.sum())
+            observed.append(np.stack([rows[ok], np.full(n, i), counts[i] + np.arange(n)], 1))
+            counts[i] += n
+    obs = np.concatenate(observed)
+    obs = obs[np.lexsort((obs[:, 2], obs[:, 1], obs[:, 0]))]
+    ends = np.searchsorted(obs[:, 0], np.arange(len(pids)), side="right").tolist()
+    pairs = list(zip(obs[:, 1].tolist(), obs[:, 2].tolist(), strict=True))
+    out_points = {p: (X_all[r], pairs[ends[r - 1] if r else 0:ends[r]])
+                  for r, p in enumerate(pids)}
     kps = {f"{k}.png": (np.concatenate(lists[new_id[k]]) if lists[new_id[k]]
                         else np.zeros((0, 2))) for k in keys}
     ts = TrackSet({i: f"{k}.png" for k, i in new_id.items()}, kps, out_points, len(points))
@@ -201,7 +209,6 @@ def aligned_track_set(ts: TrackSet, lead: Mapping[str, int],
     lead_of = {i: lead[n] for i, n in ts.names.items()}
     obs, rows = ta.track_observations(ts.points, cams, by_id,
                                       may_reference=lambda i, j: j < lead_of[i])
-    ids = sorted(ts.names)
     uv, aligned, stats = ta.align_observations(obs, lambda i: load(ts.names[i][:-4]),
                                                settings, num_threads)
     rows = np.asarray(rows, int).reshape(-1, 2)
@@ -220,7 +227,7 @@ def aligned_track_set(ts: TrackSet, lead: Mapping[str, int],
         if len(kept) >= min_track:
             points[pid] = (X, kept)
     stats = {**stats, "projected": int(projected.sum()), "dropped": int(drop.sum()),
-             "images": len(ids)}
+             "images": len(ts.names)}
     return TrackSet(dict(ts.names), keypoints, points, ts.triangulated), stats
 
 
