@@ -160,6 +160,21 @@ def oracle_patch(layout, centre_depth: np.ndarray, cam, right) -> np.ndarray:
     return np.where((z > 0) & np.isfinite(patch) & (patch > 0), patch, np.nan)
 
 
+def true_depth_maps(work: Path, cfg: dict) -> None:
+    """The true depth of every shot's central view (rule ``ground_truth_render``), made in
+    the copy ``work`` where the capture lacks them (a capture made with ``--no-exp1``
+    rendered none)."""
+    res = work / "results" / DATASET
+    wanted = []
+    for vs in sorted(res.glob("views/*/views.json")):
+        n = int(round(len(read_view_set(vs)) ** 0.5))
+        rel = f"ground_truth/depth/{vs.parent.name}/{n // 2}_{n // 2}.npy"
+        if not (res / rel).is_file():
+            wanted.append(rel)
+    if wanted:
+        run_capture(work, cfg, [], 2, targets=tuple(wanted))
+
+
 def rerender_with_oracle(work: Path, cfg: dict) -> list[float]:
     """Every view of the copy ``work`` rendered again with the truth's patch sizes
     (:func:`oracle_patch`); returns each shot's median |estimated / true - 1| (%)."""
@@ -212,6 +227,21 @@ def figures(work: Path) -> dict:
             "median": r["observations"]["after"]["median_px"], "kept": not r["rejected"]}
 
 
+def view_rules(src: Path, cfg: dict) -> list[str]:
+    """The rules that read the replaced views, to run again (their mtimes are kept, so
+    that the conversion's followers stay as they are): SIFT of every view (rules
+    ``view_features_<k>``, the view matches and ``refine.tracks: views``), and with
+    ``refine.tracks: central`` (the default) rule ``match_central`` (the central views'
+    own SIFT) and rule ``refine`` (whose alignment reads every view). Without the last
+    two a central-tracks capture's refinement is not run again, and every kind reads as
+    the converted views."""
+    sift_jobs = len(list((src / "results" / DATASET / "benchmarks" / "view_features").glob("*")))
+    rules = [f"view_features_{k}" for k in range(sift_jobs)]
+    if cfg["refine"]["tracks"] == "central":
+        rules += ["match_central", "refine"]
+    return rules
+
+
 def run(capture: str, kind: str, softness: tuple[float, float]) -> tuple[dict, str]:
     """One capture with its views of ``kind``: the figures and a note."""
     src = OUT / capture
@@ -223,6 +253,7 @@ def run(capture: str, kind: str, softness: tuple[float, float]) -> tuple[dict, s
     t0 = time.perf_counter()
     note = ""
     if kind == "oracle":
+        true_depth_maps(work, cfg)
         err = rerender_with_oracle(work, validate_config(cfg))
         note = f"patch sizes {min(err):.2f}-{max(err):.2f} % off the truth (shot medians)"
     else:
@@ -232,8 +263,7 @@ def run(capture: str, kind: str, softness: tuple[float, float]) -> tuple[dict, s
         note = (f"sigma {sigma:.2f} px" if kind == "blur" else
                 f"sigma {sigma:.2f} px, noise {noise:.2f}" if kind == "noise" else "")
     t1 = time.perf_counter()
-    sift_jobs = len(list((src / "results" / DATASET / "benchmarks" / "view_features").glob("*")))
-    run_capture(work, cfg, [f"view_features_{k}" for k in range(sift_jobs)], 2,
+    run_capture(work, cfg, view_rules(src, validate_config(cfg)), 2,
                 targets=("eval/gt_errors.json",))
     note += f"{'; ' if note else ''}views {t1 - t0:.0f} s, rerun {time.perf_counter() - t1:.0f} s"
     return figures(work), note
