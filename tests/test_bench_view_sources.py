@@ -52,3 +52,17 @@ def test_fitted_softness_recovers_blur_gain_and_noise():
     # an unblurred, noise-free copy reads as such
     sigma, noise = bvs.fitted_softness(0.8 * ideal + 10.0, ideal)
     assert sigma == 0.0 and noise < 1e-3
+
+
+def test_view_rules_run_the_central_tracks_again(tmp_path):
+    # two SIFT jobs in the kept capture; the central tracks read the views through rule
+    # match_central and rule refine (the bench keeps the replaced views' file times, so
+    # only the rules named here run again): without them every kind reads as our views
+    bench = tmp_path / "results" / bvs.DATASET / "benchmarks" / "view_features"
+    bench.mkdir(parents=True)
+    for k in range(2):
+        (bench / f"part{k}.tsv").write_text("s\n1\n")
+    sift = ["view_features_0", "view_features_1"]
+    assert bvs.view_rules(tmp_path, {"refine": {"tracks": "central"}}) == [
+        *sift, "match_central", "refine"]
+    assert bvs.view_rules(tmp_path, {"refine": {"tracks": "views"}}) == sift
