@@ -3,10 +3,12 @@ simulator's ideal pinhole renders of the same cameras (issue 32).
 
 For each kept capture of ``bench_accuracy.py`` (``bench/out/accuracy/<capture>/``), a copy
 of it (``bench/out/view_sources/<capture>-<kind>/``) has every subaperture view replaced,
-and the chain from the views on runs again as the workflow runs it: SIFT of every view
-(rules ``view_features_<k>``), the view matches, the joint refinement, the errors against
-the truth. Registration A, B, the depth maps, Eq. 5 and Eq. 6 stay the kept capture's (on
-the converted views): only what the refinement observes changes. The kinds:
+and the chain from the views on runs again as the workflow runs it (:func:`view_rules`):
+SIFT of every view (rules ``view_features_<k>``) and the view matches, the central views'
+own matches (rule ``match_central``, for ``refine.tracks: central``, the default), the
+joint refinement, the errors against the truth. Registration A, B, the depth maps, Eq. 5
+and Eq. 6 stay the kept capture's (on the converted views): only what the refinement
+observes changes. The kinds:
 
 * ``ideal``: the simulator's ideal pinhole render of each view's true camera
   (:func:`plenocal.simulate.groundtruth.render_views`, the config's
