@@ -170,7 +170,7 @@ def true_depth_maps(work: Path, cfg: dict) -> None:
     wanted = []
     for vs in sorted(res.glob("views/*/views.json")):
         n = int(round(len(read_view_set(vs)) ** 0.5))
-        rel = f"ground_truth/depth/{vs.parent.name}/{n // 2}_{n // 2}.npy"
+        rel = f"ground_truth/depth/{vs.parent.name}/{central_view(n)}.npy"
         if not (res / rel).is_file():
             wanted.append(rel)
     if wanted:
@@ -252,20 +252,21 @@ def run(capture: str, kind: str, softness: tuple[float, float]) -> tuple[dict, s
     work.parent.mkdir(parents=True, exist_ok=True)
     clone_capture(src, work)
     cfg = yaml.safe_load((work / "config.yaml").read_text())
+    valid = validate_config(cfg)  # the config with its defaults, validated once
     t0 = time.perf_counter()
     note = ""
     if kind == "oracle":
         true_depth_maps(work, cfg)
-        err = rerender_with_oracle(work, validate_config(cfg))
+        err = rerender_with_oracle(work, valid)
         note = f"patch sizes {min(err):.2f}-{max(err):.2f} % off the truth (shot medians)"
     else:
         sigma = softness[0] if kind in ("blur", "noise") else 0.0
         noise = softness[1] if kind == "noise" else 0.0
-        replace_by_renders(work, validate_config(cfg), sigma, noise)
+        replace_by_renders(work, valid, sigma, noise)
         note = (f"sigma {sigma:.2f} px" if kind == "blur" else
                 f"sigma {sigma:.2f} px, noise {noise:.2f}" if kind == "noise" else "")
     t1 = time.perf_counter()
-    run_capture(work, cfg, view_rules(src, validate_config(cfg)), 2,
+    run_capture(work, cfg, view_rules(src, valid), 2,
                 targets=("eval/gt_errors.json",))
     note += f"{'; ' if note else ''}views {t1 - t0:.0f} s, rerun {time.perf_counter() - t1:.0f} s"
     return figures(work), note
