@@ -24,11 +24,15 @@ change name the stages to run again, e.g. ``--forcerun refine``. The rules' scri
 the ``plenocal`` package of the checkout that holds this script and its Snakefile, not the
 one installed: a copy of the repository used for a run of its own must be brought to the
 code to measure first (a stale copy's views came out bit for bit those of its own commit).
+A setting is compared on the same captures with ``--set KEY=VALUE``: each capture is
+cloned to ``<capture>-<label>`` (its files' times kept) and only what the change reaches
+runs there.
 
 Usage::
 
     python bench/bench_accuracy.py [--seeds 1 2 3 4 5] [--geometries default wide]
         [--forcerun RULE ...] [--collect-only [--kept]] [--no-exp1] [--out BENCHMARKS.md]
+        [--set refine.tracks=both [--label both]]
 """
 
 from __future__ import annotations
@@ -113,17 +117,46 @@ TARGETS = ("eval/gt_errors.json", "eval/reprojection.json", "eval/synthesis_exp1
 LIMITS = {"focal_pct": 0.1, "centre_mm": 0.1, "rot_deg": 0.02, "scale_pct": 0.3}
 
 
-def capture_config(geometry: str, seed: int, refine: bool = False) -> dict:
-    """config.yaml with the default dataset's simulate block set to the geometry and seed;
-    ``refine``: with the joint refinement on (its other settings the config's)."""
+def capture_config(geometry: str, seed: int, changes: dict | None = None) -> dict:
+    """config.yaml with the default dataset's simulate block set to the geometry and seed,
+    and ``changes`` (nested, as :func:`parse_changes` gives them) over the rest."""
     cfg = yaml.safe_load((ROOT / "config.yaml").read_text())
     (name, ds), = cfg["datasets"].items()
     sim = deep_update(ds["simulate"], GEOMETRIES[geometry])
     sim["seed"] = seed
     cfg["datasets"] = {DATASET: {**ds, "simulate": sim}}
-    if refine:
-        cfg["refine"] = {**(cfg.get("refine") or {}), "enabled": True}
-    return cfg
+    return deep_update(cfg, changes or {})
+
+
+def parse_changes(items: list[str]) -> dict:
+    """``--set`` items ``a.b.c=VALUE`` (a dotted config key, a YAML value) as one nested
+    dict; the simulated dataset (``datasets``) is the geometry's and the seed's, not
+    changed here."""
+    out: dict = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        parts = key.strip().split(".")
+        if not sep or not all(parts):
+            raise ValueError(f"--set {item!r}: give KEY=VALUE with a dotted config key, "
+                             "e.g. refine.tracks=both")
+        if parts[0] == "datasets":
+            raise ValueError(f"--set {item!r}: the dataset is the geometry's and the seed's "
+                             "(--geometries, --seeds)")
+        node = out
+        for p in parts[:-1]:
+            node = node.setdefault(p, {})
+            if not isinstance(node, dict):
+                raise ValueError(f"--set {item!r}: {p} is set to a value above")
+        node[parts[-1]] = yaml.safe_load(value)
+    return out
+
+
+def variant_label(items: list[str]) -> str:
+    """The clones' folder suffix for ``--set`` items without ``--label``: the values
+    joined (``refine.tracks=both`` -> ``tracks-both``)."""
+    label = "_".join(f"{k.split('.')[-1]}-{v}" for k, _, v in (i.partition("=")
+                                                                 for i in items))
+    return re.sub(r"[^A-Za-z0-9_.-]+", "", label)
 
 
 def clone_capture(src: Path, dest: Path) -> None:
@@ -428,6 +461,14 @@ def main() -> None:
                     help="with --collect-only: every kept capture of the geometries, whatever "
                          "its seed (--seeds is not read); Exp. 1 where its file is as new as "
                          "the calibration")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="a config change (dotted key, YAML value; repeatable), e.g. "
+                         "refine.tracks=both: each capture is cloned to "
+                         "<capture>-<label> and only what the change reaches runs again "
+                         "there, the kept captures left as they are")
+    ap.add_argument("--label", default=None,
+                    help="with --set: the clones' suffix (default: the values, "
+                         "e.g. tracks-both)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default=None, help="BENCHMARKS.md to update (its section)")
     args = ap.parse_args()
@@ -436,8 +477,16 @@ def main() -> None:
               "a capture the user brings", file=sys.stderr)
     if args.kept and not args.collect_only:
         ap.error("--kept reads the kept captures: give it with --collect-only")
-    if args.kept and args.refine:
-        ap.error("--kept reads the captures as kept, not their -refine clones")
+    if args.refine:
+        args.set.append("refine.enabled=true")
+        args.label = args.label or "refine"
+    try:
+        changes = parse_changes(args.set)
+    except ValueError as e:
+        ap.error(str(e))
+    label = (args.label or variant_label(args.set)) if args.set else None
+    if args.kept and label:
+        ap.error("--kept reads the captures as kept, not their clones (--set, --refine)")
     results: dict[str, dict] = {}
     walls: dict[str, float] = {}
     if args.kept:
@@ -450,13 +499,13 @@ def main() -> None:
         for seed in args.seeds:
             name = f"{geom}-s{seed}"
             work = OUT / name
-            if args.refine:
-                base, work = work, OUT / f"{name}-refine"
+            if label:
+                base, work = work, OUT / f"{name}-{label}"
                 if not work.exists() and base.exists() and not args.collect_only:
                     clone_capture(base, work)
             if not args.collect_only:
                 print(f"[{time.strftime('%H:%M:%S')}] {name}: running ...", flush=True)
-                walls[name] = run_capture(work, capture_config(geom, seed, args.refine),
+                walls[name] = run_capture(work, capture_config(geom, seed, changes),
                                           args.forcerun, args.jobs, args.triggers,
                                           TARGETS[:2] if args.no_exp1 else TARGETS)
             results[name] = collect(work, exp1=not args.no_exp1)
@@ -514,7 +563,7 @@ def main() -> None:
             f"{k} {v:.0f}" for k, v in walls.items()))
     if args.out:
         title = ("Every kept capture" if args.kept else "Accuracy over captures"
-                 + (", the joint refinement on" if args.refine else ""))
+                 + (f", {', '.join(args.set)}" if args.set else ""))
         update_sections(args.out, {f"{title} (issue 32)": list(out)})
 
 

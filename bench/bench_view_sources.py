@@ -233,13 +233,13 @@ def view_rules(src: Path, cfg: dict) -> list[str]:
     """The rules that read the replaced views, to run again (their mtimes are kept, so
     that the conversion's followers stay as they are): SIFT of every view (rules
     ``view_features_<k>``, the view matches and ``refine.tracks: views``), and with
-    ``refine.tracks: central`` (the default) rule ``match_central`` (the central views'
-    own SIFT) and rule ``refine`` (whose alignment reads every view). Without the last
-    two a central-tracks capture's refinement is not run again, and every kind reads as
-    the converted views."""
+    ``refine.tracks: central`` (the default) or ``both`` rule ``match_central`` (the
+    central views' own SIFT) and rule ``refine`` (whose alignment reads every view).
+    Without the last two a central-tracks capture's refinement is not run again, and every
+    kind reads as the converted views."""
     sift_jobs = len(list((src / "results" / DATASET / "benchmarks" / "view_features").glob("*")))
     rules = [f"view_features_{k}" for k in range(sift_jobs)]
-    if cfg["refine"]["tracks"] == "central":
+    if cfg["refine"]["tracks"] != "views":
         rules += ["match_central", "refine"]
     return rules
 

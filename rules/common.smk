@@ -619,8 +619,8 @@ def refine_enabled():
 
 def refine_inputs(wildcards):
     """The Eq. 6 calibration and the rig; where the refinement runs, the database of its
-    tracks: the central views' own matches (refine.tracks central, from match_central)
-    or the matches of every view (views, from view_matches). With refine.enabled false
+    tracks: the central views' own matches (refine.tracks central, from match_central),
+    the matches of every view (views, from view_matches) or both. With refine.enabled false
     the Eq. 6 result is copied, and the calibration waits for no matching."""
     d = wildcards.dataset
     out = {
@@ -628,14 +628,17 @@ def refine_inputs(wildcards):
         "rig": res(d, "reg_b", "rig.json"),
     }
     if refine_enabled():
-        if stage_config("refine")["tracks"] == "central":
-            out["database"] = res(d, "matches", "central.db")
-        else:
+        tracks = stage_config("refine")["tracks"]
+        if tracks == "views":
             out["database"] = res(d, "matches", "database.db")
+        else:
+            out["database"] = res(d, "matches", "central.db")
+        if tracks == "both":
+            out["view_database"] = res(d, "matches", "database.db")
         # the merge's scale source and the stage's step (refine.scale: auto)
         out["scale"] = res(d, "merge", "scale.json")
         cfg = stage_config("refine")
-        if cfg["align"]["enabled"] or cfg["tracks"] == "central":
+        if cfg["align"]["enabled"] or cfg["tracks"] != "views":
             # the views themselves: the observations are aligned by their patches (the
             # central views' points are carried into the other views by them)
             out["view_sets"] = view_sets(d, cams(d))

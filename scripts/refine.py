@@ -45,7 +45,8 @@ if settings.enabled:
             eq6, rig, sm.input.database, settings, hold_shot=sm.params.hold_shot,
             rig_at_focal=lambda f: RigB(rig_at_focal(rig.doc, f)), work_dir=work,
             images=view_set_files(sm.input.view_sets) if "view_sets" in sm.input.keys()
-            else None, align_threads=int(sm.threads), step_m=step_m)
+            else None, align_threads=int(sm.threads), step_m=step_m,
+            view_database=sm.input.get("view_database"))
     finally:
         shutil.rmtree(work, ignore_errors=True)
     cams, info = result.cameras, {"enabled": True, **result.report}

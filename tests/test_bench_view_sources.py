@@ -65,4 +65,6 @@ def test_view_rules_run_the_central_tracks_again(tmp_path):
     sift = ["view_features_0", "view_features_1"]
     assert bvs.view_rules(tmp_path, {"refine": {"tracks": "central"}}) == [
         *sift, "match_central", "refine"]
+    assert bvs.view_rules(tmp_path, {"refine": {"tracks": "both"}}) == [
+        *sift, "match_central", "refine"]
     assert bvs.view_rules(tmp_path, {"refine": {"tracks": "views"}}) == sift

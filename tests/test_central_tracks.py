@@ -145,6 +145,37 @@ def test_a_projection_the_alignment_cannot_confirm_is_dropped_and_sift_kept():
     assert np.array_equal(out.keypoints["x00_y00/1_1.png"], ts.keypoints["x00_y00/1_1.png"])
 
 
+def test_two_track_sets_join_by_image_name_with_their_indices_moved():
+    """refine.tracks both: the images matched by name, b's keypoints after a's, b's points
+    after a's with their keypoint indices moved past a's (hand-built sets)."""
+    a = ct.TrackSet({1: "s/0_0.png", 2: "s/1_1.png"},
+                    {"s/0_0.png": np.array([[1.0, 2.0]]),
+                     "s/1_1.png": np.array([[3.0, 4.0], [5.0, 6.0]])},
+                    {7: (np.array([0.0, 0.0, 1.0]), [(1, 0), (2, 1)])}, 9)
+    # b numbers its images otherwise, and has one a lacks
+    b = ct.TrackSet({1: "s/1_1.png", 2: "s/2_2.png", 3: "s/0_0.png"},
+                    {"s/1_1.png": np.array([[7.0, 8.0]]), "s/2_2.png": np.array([[9.0, 9.0]]),
+                     "s/0_0.png": np.array([[0.5, 0.5], [1.5, 1.5]])},
+                    {2: (np.array([1.0, 0.0, 2.0]), [(1, 0), (2, 0), (3, 1)])}, 4)
+    j = ct.joined(a, b)
+    assert j.names == {1: "s/0_0.png", 2: "s/1_1.png", 3: "s/2_2.png"}
+    np.testing.assert_array_equal(j.keypoints["s/1_1.png"], [[3, 4], [5, 6], [7, 8]])
+    np.testing.assert_array_equal(j.keypoints["s/0_0.png"], [[1, 2], [0.5, 0.5], [1.5, 1.5]])
+    np.testing.assert_array_equal(j.keypoints["s/2_2.png"], [[9, 9]])
+    assert sorted(j.points) == [7, 8]
+    assert j.points[7][1] == [(1, 0), (2, 1)]
+    # b's point: s/1_1 keypoint 0 -> 2, s/2_2 (new id 3) 0 -> 0, s/0_0 keypoint 1 -> 2
+    assert j.points[8][1] == [(2, 2), (3, 0), (1, 2)]
+    for pid, (X, elements) in j.points.items():
+        src = a if pid == 7 else b
+        np.testing.assert_array_equal(X, next(iter(src.points.values()))[0])
+        for i, k in elements:
+            assert k < len(j.keypoints[j.names[i]])
+    assert j.triangulated == 13
+    # the sets given are left as they were
+    assert len(a.keypoints["s/1_1.png"]) == 2 and sorted(a.points) == [7]
+
+
 @pytest.fixture(scope="module")
 def database_a(capture, tmp_path_factory):  # noqa: F811
     """Registration A's database of the capture's central views, as rules features_a and
@@ -179,6 +210,31 @@ def test_the_refinement_on_the_central_views_tracks_moves_the_shots_towards_the_
     with pytest.raises(ValueError, match="images are needed"):
         rf.refine_calibration(eq6, rig, database_a, settings(tracks="central"),
                               hold_shot="x00_y00")
+
+
+def test_both_track_sets_adjust_the_central_and_the_views_points_together(
+        capture, database_a):  # noqa: F811
+    views, rig, db = capture
+    images = {name: db.parent / f"{name}.png" for name in views}
+    eq6 = eq6_of(views, rig)
+    before = complete_errors(eq6, views)
+    central = rf.refine_calibration(eq6, rig, database_a, settings(tracks="central"),
+                                    hold_shot="x00_y00", images=images)
+    both = rf.refine_calibration(eq6, rig, database_a, settings(tracks="both"),
+                                 hold_shot="x00_y00", images=images, view_database=db)
+    assert sorted(both.cameras) == sorted(eq6)
+    assert not both.report["rejected"], both.report.get("warnings")
+    after = complete_errors(both.cameras, views)
+    assert after["centre_rmse_mm"] < 0.5 * before["centre_rmse_mm"]
+    assert after["rotation_err_deg"]["max"] < before["rotation_err_deg"]["max"]
+    assert abs(after["focal_err_signed_pct"]) < 0.3
+    # the views' points come on top of the central ones, each set's alignment reported
+    assert both.report["points"]["used"] > central.report["points"]["used"]
+    align = both.report["alignment"]
+    assert align["central"]["projected"] > 0 and align["views"]["enabled"]
+    with pytest.raises(ValueError, match="view database"):
+        rf.refine_calibration(eq6, rig, database_a, settings(tracks="both"),
+                              hold_shot="x00_y00", images=images)
 
 
 def test_the_central_tracks_are_the_same_bytes_on_one_and_two_threads(capture, database_a):  # noqa: F811

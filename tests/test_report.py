@@ -536,3 +536,17 @@ def test_page_renders_in_headless_chromium(tmp_path):
     keep = os.environ.get("PLENOCAL_REPORT_SCREENSHOT")
     if keep:
         shutil.copy(shot, keep)
+
+
+def test_the_refinements_track_source_is_said_in_words_for_each_setting():
+    from plenocal.report.html import track_source
+
+    assert track_source({"tracks": "views", "carry_every": 3}) == (
+        "from the matches of every view (refine.tracks: views)")
+    assert track_source({"tracks": "central", "carry_every": 1}) == (
+        "from the central views' matches carried into all of each shot's other views "
+        "(refine.tracks: central, carry_every: 1)")
+    both = track_source({"tracks": "both", "carry_every": 3})
+    assert "every 3rd of each shot's other views" in both
+    assert "and from the matches of every view" in both
+    assert both.endswith("(refine.tracks: both, carry_every: 3)")

@@ -136,12 +136,12 @@ def test_the_calibration_waits_for_no_view_matching_on_the_central_views_tracks(
         tmp_path: Path):
     """refine.tracks: central takes the refinement's points from the central views' own
     matches (rule match_central): the calibration alone plans no SIFT of the other views
-    and no view matching; refine.tracks: views plans both and no match_central
-    (plenocal.calib.central_tracks)."""
+    and no view matching; refine.tracks: views plans both and no match_central; both
+    plans all three (plenocal.calib.central_tracks)."""
     work = tiny_workflow(tmp_path / "w")
     target = "results/tiny/calibration/cameras.json"
     planned = {}
-    for tracks in ("central", "views"):
+    for tracks in ("central", "views", "both"):
         proc = snakemake(work, "-n", target, "--config", f'refine={{"tracks": "{tracks}"}}')
         assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
         planned[tracks] = _planned_rules(proc.stdout + proc.stderr)
@@ -149,3 +149,5 @@ def test_the_calibration_waits_for_no_view_matching_on_the_central_views_tracks(
     assert not {"view_features", "view_matches"} & planned["central"]
     assert {"view_features", "view_matches", "refine"} <= planned["views"]
     assert "match_central" not in planned["views"]
+    # both: the two matchings
+    assert {"match_central", "view_features", "view_matches", "refine"} <= planned["both"]

@@ -70,6 +70,42 @@ class TrackSet:
     triangulated: int
 
 
+def joined(a: TrackSet, b: TrackSet) -> TrackSet:
+    """The tracks of ``a`` and ``b`` in one set (``refine.tracks: both``): the images
+    matched by name (``a``'s ids kept, ``b``'s other images numbered after ``a``'s
+    largest), each image's keypoints ``a``'s then ``b``'s (``b``'s indices moved past
+    ``a``'s), ``a``'s points then ``b``'s (ids moved past ``a``'s largest). A point of ``b``
+    stays a point of its own even where ``a`` has one at the same place: the two sets come
+    from different matches and neither knows the other's points. ``triangulated`` the sum."""
+    id_of = {name: i for i, name in a.names.items()}
+    if len(id_of) != len(a.names):
+        raise ValueError("tracks: two images of one set share a name")
+    names = dict(a.names)
+    next_id = max(names, default=0) + 1
+    b_to_new = {}
+    for i in sorted(b.names):
+        name = b.names[i]
+        if name not in id_of:
+            id_of[name] = next_id
+            names[next_id] = name
+            next_id += 1
+        b_to_new[i] = id_of[name]
+    empty = np.zeros((0, 2))
+    offset = {}
+    keypoints = {n: np.asarray(k, float).reshape(-1, 2) for n, k in a.keypoints.items()}
+    for name in sorted(b.keypoints):
+        own = keypoints.get(name, empty)
+        offset[name] = len(own)
+        keypoints[name] = np.concatenate([own, np.asarray(b.keypoints[name], float)
+                                          .reshape(-1, 2)])
+    points = dict(a.points)
+    base = max(points, default=0) + 1
+    for k, pid in enumerate(sorted(b.points)):
+        X, elements = b.points[pid]
+        points[base + k] = (X, [(b_to_new[i], offset[b.names[i]] + j) for i, j in elements])
+    return TrackSet(names, keypoints, points, a.triangulated + b.triangulated)
+
+
 def rename_central_images(src: str | Path, dst: str | Path, central: str) -> int:
     """Copy a database of the central views in registration A's form ``src`` (rule
     ``match_central``'s, or registration A's own) to ``dst`` with each image

@@ -18,7 +18,11 @@ This step adjusts them together, as COLMAP 4 models a camera rig
   triangulated with the Eq. 6 cameras held fixed and carried into each shot's other views
   by their patches (:mod:`plenocal.calib.central_tracks`); ``views`` the verified matches
   of every view (rule ``view_matches``, the matches Table I triangulates) triangulated the
-  same way (:func:`plenocal.verify.reprojection.triangulate`);
+  same way (:func:`plenocal.verify.reprojection.triangulate`); ``both`` the two sets in one
+  adjustment, each its own points (:func:`plenocal.calib.central_tracks.joined`): the
+  central tracks span the shots through their central views, the views' tracks tie the
+  views of a set to each other through their own matches (BENCHMARKS.md, "Both track
+  sets");
 * their observations aligned by their patches to their track's reference observation
   (``refine.align``, :mod:`plenocal.calib.track_alignment`, given the views' images:
   :func:`aligned_keypoints`), since SIFT's placement on soft views leans the focal length.
@@ -89,6 +93,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocal.artifacts.rig import RigB
+from plenocal.calib.central_tracks import TrackSet, joined
 from plenocal.calib.groups import Groups
 from plenocal.calib.reg_a import colmap as cm
 from plenocal.calib.reg_a import viewdb
@@ -116,8 +121,9 @@ MATCH_SETS = ("all", "across")
 #: where the adjustment's points come from (config refine.tracks): views - the verified
 #: matches of every view (rule view_matches); central - the central views' matches (rule
 #: match_central, registration A's form), carried into the other views by their patches
-#: (:mod:`plenocal.calib.central_tracks`)
-TRACK_SOURCES = ("views", "central")
+#: (:mod:`plenocal.calib.central_tracks`); both - the two sets of points in one adjustment
+#: (:func:`plenocal.calib.central_tracks.joined`)
+TRACK_SOURCES = ("views", "central", "both")
 #: the shots' poses (config refine.frames): refined, or held as Eq. 6 gives them (then only
 #: what refine.rig frees of the rig, and the points, move)
 FRAME_MODES = ("refine", "hold")
@@ -268,6 +274,17 @@ def rig_reconstruction(tracks, views: Mapping[str, tuple[np.ndarray, np.ndarray]
     1.9 s for 700 views of 1,300 keypoints; or given (``keypoints``: image name -> (n, 2),
     COLMAP's convention, the aligned ones of :func:`aligned_keypoints`). Returns the
     reconstruction and its :class:`RigModel`."""
+    ts = track_set_of(tracks, point_ids, work_dir, keypoints)
+    return rig_reconstruction_of(ts.names, ts.points, ts.keypoints, views, shot_poses, width,
+                                 height)
+
+
+def track_set_of(tracks, point_ids: list[int], work_dir: str | Path | None = None,
+                 keypoints: Mapping[str, np.ndarray] | None = None) -> TrackSet:
+    """The points ``point_ids`` of the reconstruction ``tracks`` as plain data: every image
+    of ``tracks`` by its id, its keypoints (read through ``tracks``'s binary files under
+    ``work_dir`` where ``keypoints`` is None, as :func:`rig_reconstruction` says) and the
+    points with their tracks, in the order of ``point_ids``."""
     from plenocal.verify.reprojection import read_keypoints  # noqa: PLC0415
 
     if keypoints is None:
@@ -277,7 +294,7 @@ def rig_reconstruction(tracks, views: Mapping[str, tuple[np.ndarray, np.ndarray]
     for pid in point_ids:
         p = tracks.point3D(pid)
         points[pid] = (p.xyz, [(e.image_id, e.point2D_idx) for e in p.track.elements])
-    return rig_reconstruction_of(names, points, keypoints, views, shot_poses, width, height)
+    return TrackSet(names, dict(keypoints), points, int(tracks.num_points3D()))
 
 
 def rig_reconstruction_of(image_names: Mapping[int, str],
@@ -635,11 +652,13 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
                        work_dir: str | Path | None = None,
                        images: Mapping[str, str | Path] | None = None,
                        align_threads: int | None = None,
-                       step_m: float | None = None) -> Refinement:
+                       step_m: float | None = None,
+                       view_database: str | Path | None = None) -> Refinement:
     """Refine the Eq. 6 calibration ``eq6`` (every view of every shot, metres) under the rig
     ``rig`` on the verified matches of ``database``: the central views' (rule
-    ``match_central``) with ``settings.tracks`` central, every view's (rule
-    ``view_matches``) with views (module docstring).
+    ``match_central``) with ``settings.tracks`` central or both, every view's (rule
+    ``view_matches``) with views; with both, also those of ``view_database`` (rule
+    ``view_matches``') (module docstring).
     ``hold_shot``: the shot whose pose is held (the gauge). ``rig_at_focal``: registration
     B's rig rebuilt for another focal length (its baselines follow the focal length:
     :func:`plenocal.calib.reg_b.exact_model.exact_model`); without it the rig keeps B's
@@ -661,14 +680,27 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
         raise ValueError(f"refinement: the held shot {hold_shot} is not calibrated")
     central = [v for v in views if np.allclose(views[v][1], np.eye(4), atol=1e-12)][0]
     shot_poses = {s: eq6[f"{s}/{central}"].cam_to_world for s in shots}
-    if settings.tracks == "central":
-        rec, model, n_tri, n_used, align, t_tri = _central_rig(
-            eq6, views, central, shot_poses, rig, database, settings, images, align_threads,
-            work_dir)
+    if settings.tracks == "views":
+        ts, align, t_tri = _view_tracks(eq6, database, settings, images, align_threads,
+                                        work_dir)
     else:
-        rec, model, n_tri, n_used, align, t_tri = _views_rig(
-            eq6, views, shot_poses, rig, database, settings, images, align_threads,
-            work_dir)
+        ts, align, t_tri = _central_tracks(eq6, central, database, settings, images,
+                                           align_threads, work_dir)
+    if settings.tracks == "both":
+        if view_database is None:
+            raise ValueError("refine.tracks both adds the matches of every view to the "
+                             "central views': the view database (rule view_matches) is "
+                             "needed")
+        ts_views, align_views, t_views = _view_tracks(eq6, view_database, settings, images,
+                                                      align_threads, work_dir)
+        ts, t_tri = joined(ts, ts_views), t_tri + t_views
+        align = {"enabled": True, "central": align, "views": align_views}
+    if len(ts.points) < 100:
+        raise ValueError(f"refinement: only {len(ts.points)} points seen in three or more "
+                         f"views ({_TOO_FEW[settings.tracks]}), or set refine.enabled: false")
+    rec, model = rig_reconstruction_of(ts.names, ts.points, ts.keypoints, views, shot_poses,
+                                       rig.width, rig.height)
+    n_tri, n_used = ts.triangulated, len(ts.points)
     log.info("rig reconstruction: %d shots x %d views, %d of %d points (%.1f s triangulation)",
              len(shots), len(views), n_used, n_tri, t_tri)
     return _adjusted(rec, model, eq6, rig, views, shots, central, shot_poses, settings,
@@ -677,18 +709,29 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
                      t_tri=t_tri, work_dir=work_dir)
 
 
-def _central_rig(eq6: Mapping[str, PinholeCamera], views: Mapping[str, tuple],
-                 central: str, shot_poses: Mapping[str, np.ndarray], rig: RigB,
-                 database: str | Path, settings: RefineSettings,
-                 images: Mapping[str, str | Path] | None, align_threads: int | None,
-                 work_dir: str | Path | None) -> tuple:
-    """The rig reconstruction on the tracks of the central views' matches
-    (``refine.tracks: central``, :mod:`plenocal.calib.central_tracks`)."""
+#: the remedy where a track source gives too few points
+_TOO_FEW = {
+    "views": "the views have too few matches: see matches/matches.json",
+    "central": "of the central views' matches; set refine.tracks: views or both (with the "
+               "matches of every view)",
+    "both": "the central views' and every view's matches together; see "
+            "matches/matches.json",
+}
+
+
+def _central_tracks(eq6: Mapping[str, PinholeCamera], central: str, database: str | Path,
+                    settings: RefineSettings, images: Mapping[str, str | Path] | None,
+                    align_threads: int | None, work_dir: str | Path | None
+                    ) -> tuple[TrackSet, dict, float]:
+    """The tracks of the central views' matches (``database``, rule match_central's),
+    carried into the other views (:mod:`plenocal.calib.central_tracks`), at most
+    ``settings.max_points`` of them (every k-th point id); their alignment's statistics
+    and the time taken."""
     from plenocal.calib.central_tracks import central_track_set  # noqa: PLC0415
 
     if images is None:
-        raise ValueError("refine.tracks central carries the central views' points into the "
-                         "other views by their pixels: the views' images are needed")
+        raise ValueError(f"refine.tracks {settings.tracks} carries the central views' points "
+                         "into the other views by their pixels: the views' images are needed")
     t0 = time.perf_counter()
     tmp = Path(tempfile.mkdtemp(prefix="plenocal_refine_", dir=work_dir))
     try:
@@ -698,22 +741,20 @@ def _central_rig(eq6: Mapping[str, PinholeCamera], views: Mapping[str, tuple],
         shutil.rmtree(tmp, ignore_errors=True)
     ids = sorted(ts.points)
     ids = ids[::max(1, math.ceil(len(ids) / settings.max_points))]
-    if len(ids) < 100:
-        raise ValueError(f"refinement: only {len(ids)} points of the central views' matches "
-                         "seen in three or more views; set refine.tracks: views (the "
-                         "matches of every view) or refine.enabled: false")
-    rec, model = rig_reconstruction_of(ts.names, {pid: ts.points[pid] for pid in ids},
-                                       ts.keypoints, views, shot_poses, rig.width, rig.height)
-    return (rec, model, ts.triangulated, len(ids), {"enabled": True, **stats},
-            time.perf_counter() - t0)
+    kept = TrackSet(ts.names, ts.keypoints, {pid: ts.points[pid] for pid in ids},
+                    ts.triangulated)
+    return kept, {"enabled": True, **stats}, time.perf_counter() - t0
 
 
-def _views_rig(eq6: Mapping[str, PinholeCamera], views: Mapping[str, tuple],
-               shot_poses: Mapping[str, np.ndarray], rig: RigB, database: str | Path,
-               settings: RefineSettings, images: Mapping[str, str | Path] | None,
-               align_threads: int | None, work_dir: str | Path | None) -> tuple:
-    """The rig reconstruction on the verified matches of every view (``refine.tracks:
-    views``: rule view_matches' database)."""
+def _view_tracks(eq6: Mapping[str, PinholeCamera], database: str | Path,
+                 settings: RefineSettings, images: Mapping[str, str | Path] | None,
+                 align_threads: int | None, work_dir: str | Path | None
+                 ) -> tuple[TrackSet, dict, float]:
+    """The tracks of the verified matches of every view (``database``, rule view_matches'),
+    triangulated with the Eq. 6 cameras, at most ``settings.max_points`` of them
+    (:func:`select_points`), their observations aligned by their patches where
+    ``settings.align`` says so and the images are given; the alignment's statistics and
+    the triangulation's time."""
     from plenocal.verify import reprojection as rp  # noqa: PLC0415
 
     t0 = time.perf_counter()
@@ -735,21 +776,15 @@ def _views_rig(eq6: Mapping[str, PinholeCamera], views: Mapping[str, tuple],
         shutil.rmtree(tmp, ignore_errors=True)
     t_tri = time.perf_counter() - t0
     ids = select_points(tracks, settings.max_points)
-    if len(ids) < 100:
-        raise ValueError(f"refinement: only {len(ids)} points seen in three or more views; "
-                         "the views have too few matches (see matches/matches.json), or set "
-                         "refine.enabled: false")
     keypoints, align = None, {"enabled": False}
-    if settings.align.enabled and images is not None:
+    if settings.align.enabled and images is not None and ids:
         keypoints, stats = aligned_keypoints(
             tracks, ids, images, settings.align,
             settings.num_threads if align_threads is None else align_threads, work_dir)
         align = {"enabled": True, **stats}
     elif settings.align.enabled:
         align["why"] = "no view images given: the observations are SIFT's keypoints"
-    rec, model = rig_reconstruction(tracks, views, shot_poses, rig.width, rig.height, ids,
-                                    work_dir, keypoints)
-    return rec, model, int(tracks.num_points3D()), len(ids), align, t_tri
+    return track_set_of(tracks, ids, work_dir, keypoints), align, t_tri
 
 
 def _adjusted(rec, model: RigModel, eq6, rig: RigB, views, shots, central, shot_poses,

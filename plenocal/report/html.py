@@ -644,6 +644,10 @@ def track_source(settings: dict) -> str:
         return "from the matches of every view (refine.tracks: views)"
     every = int(settings["carry_every"])
     into = "all" if every == 1 else f"every {_ordinal(every)}"
+    if settings.get("tracks") == "both":
+        return (f"from the central views' matches carried into {into} of each shot's other "
+                "views and from the matches of every view, in one adjustment "
+                f"(refine.tracks: both, carry_every: {every})")
     return (f"from the central views' matches carried into {into} of each shot's other "
             f"views (refine.tracks: central, carry_every: {every})")
 

@@ -1,0 +1,35 @@
+"""bench/bench_accuracy.py's config changes (--set): dotted keys with YAML values over
+config.yaml, the clones' label, and the errors for what it cannot take."""
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+import bench_accuracy as ba  # noqa: E402
+
+
+def test_set_items_nest_their_dotted_keys_with_yaml_values():
+    got = ba.parse_changes(["refine.tracks=both", "refine.align.radius_px=4",
+                            "refine.enabled=true"])
+    assert got == {"refine": {"tracks": "both", "align": {"radius_px": 4}, "enabled": True}}
+    assert ba.variant_label(["refine.tracks=both", "sfm.sift=colmap"]) == (
+        "tracks-both_sift-colmap")
+
+
+def test_a_capture_config_takes_the_changes_over_the_geometry_and_seed():
+    cfg = ba.capture_config("small", 34, ba.parse_changes(["refine.tracks=both"]))
+    assert cfg["refine"]["tracks"] == "both"
+    sim = cfg["datasets"][ba.DATASET]["simulate"]
+    assert sim["seed"] == 34 and sim["array"]["cols"] == 3
+    # without changes, config.yaml's own refine block (or none) is left as it is
+    assert ba.capture_config("small", 34).get("refine") == (
+        ba.capture_config("small", 34, {}).get("refine"))
+
+
+@pytest.mark.parametrize("item", ["refine.tracks", "=both", "refine..tracks=x",
+                                  "datasets.synthetic.simulate.seed=3"])
+def test_a_set_item_it_cannot_take_is_refused_by_name(item):
+    with pytest.raises(ValueError, match="--set"):
+        ba.parse_changes([item])
