@@ -1,6 +1,7 @@
 """bench/bench_accuracy.py's config changes (--set): dotted keys with YAML values over
 config.yaml, the clones' label, and the errors for what it cannot take."""
 
+import os
 import sys
 from pathlib import Path
 
@@ -33,3 +34,22 @@ def test_a_capture_config_takes_the_changes_over_the_geometry_and_seed():
 def test_a_set_item_it_cannot_take_is_refused_by_name(item):
     with pytest.raises(ValueError, match="--set"):
         ba.parse_changes([item])
+
+
+def test_a_clone_links_the_images_and_copies_the_rest_with_their_times(tmp_path):
+    src, dest = tmp_path / "cap", tmp_path / "cap-x"
+    files = ["data/synthetic/a.png", f"results/{ba.DATASET}/views/s/0_0.png",
+             f"results/{ba.DATASET}/calibration/cameras.json"]
+    for i, f in enumerate(files):
+        (src / f).parent.mkdir(parents=True, exist_ok=True)
+        (src / f).write_text(f"{i}")
+        os.utime(src / f, ns=(10**18 + i, 10**18 + i))
+    (src / ".snakemake" / "locks").mkdir(parents=True)
+    ba.clone_capture(src, dest)
+    for f in files:
+        assert (dest / f).read_text() == (src / f).read_text()
+        assert (dest / f).stat().st_mtime_ns == (src / f).stat().st_mtime_ns
+    assert (dest / files[0]).stat().st_ino == (src / files[0]).stat().st_ino
+    assert (dest / files[1]).stat().st_ino == (src / files[1]).stat().st_ino
+    assert (dest / files[2]).stat().st_ino != (src / files[2]).stat().st_ino
+    assert not (dest / ".snakemake" / "locks").exists()
