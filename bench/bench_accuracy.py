@@ -289,6 +289,7 @@ def collect(work: Path, exp1: bool = True) -> dict:
     rf = work / "results" / DATASET / "calibration" / "refine.json"
     if rf.is_file():
         out["refine"] = json.loads(rf.read_text())
+    out["refine_job"] = refine_job(work)
     return out
 
 
@@ -453,6 +454,59 @@ def refine_rows(results: dict[str, dict]) -> list[str]:
     return lines
 
 
+def refine_job(work: Path) -> tuple[float, float] | None:
+    """Rule ``refine``'s last benchmark record in a capture: (seconds, peak RSS MB)."""
+    files = sorted((work / "results" / DATASET / "benchmarks" / "refine").glob("*"))
+    if not files:
+        return None
+    last = files[-1].read_text().strip().splitlines()[-1].split("\t")
+    return float(last[0]), float(last[2])
+
+
+PAIRED = [("focal_signed_pct", "focal % signed", "{:+.3f}"), ("centre_mm", "centres mm",
+                                                                 "{:.3f}"),
+          ("rot_deg", "rot. deg", "{:.4f}"), ("residual_scale_pct", "scale %", "{:.3f}")]
+
+
+def paired_rows(base: dict[str, dict], other: dict[str, dict], label: str) -> list[str]:
+    """Each capture as kept against its ``label`` clone, side by side (``a -> b``): the
+    complete calibration's focal length (signed), centres, largest rotation, written scale
+    and the refine job's seconds and peak memory (its benchmark file: noisy where other
+    runs shared the cores); then the median and the worst (in size) of each, and how many
+    captures are past each of :data:`LIMITS`."""
+    names = [n for n in base if n in other]
+    lines = ["| capture | " + " | ".join(f"{h}: as kept -> {label}" for _, h, _ in PAIRED)
+             + " | refine job s | refine job MB |", "|---|" + "---:|" * (len(PAIRED) + 2)]
+
+    def cell(k: str, f: str, a: dict, b: dict) -> str:
+        return f"{_fmt(f, a.get(k))} -> {_fmt(f, b.get(k))}"
+
+    for n in names:
+        jobs = [base[n].get("refine_job"), other[n].get("refine_job")]
+        sec = " -> ".join(_fmt("{:.0f}", j and j[0]) for j in jobs)
+        mb = " -> ".join(_fmt("{:.0f}", j and j[1]) for j in jobs)
+        lines.append(f"| {n} | " + " | ".join(cell(k, f, base[n], other[n])
+                                               for k, _, f in PAIRED) + f" | {sec} | {mb} |")
+    for what in ("median", "worst"):
+        cells = []
+        for k, _, f in PAIRED:
+            pair = []
+            for src in (base, other):
+                vals = [abs(src[n][k]) for n in names if src[n].get(k) is not None]
+                v = (statistics.median(vals) if what == "median" else max(vals)) if vals \
+                    else None
+                pair.append(_fmt(f.replace("+", ""), v))
+            cells.append(" -> ".join(pair))
+        lines.append(f"| **{what}** (in size) | " + " | ".join(cells) + " | | |")
+    keys = {"focal_pct": "focal", "centre_mm": "centres", "rot_deg": "rotation",
+            "scale_pct": "scale"}
+    past = "; ".join(
+        f"{keys[k]} {sum(base[n][k] > lim for n in names)} -> "
+        f"{sum(other[n][k] > lim for n in names)}" for k, lim in LIMITS.items())
+    lines += ["", f"Captures past a target ({len(names)} pairs), as kept -> {label}: {past}."]
+    return lines
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=list(DEFAULT_SEEDS))
@@ -486,6 +540,9 @@ def main() -> None:
     ap.add_argument("--label", default=None,
                     help="with --set: the clones' suffix (default: the values, "
                          "e.g. tracks-both)")
+    ap.add_argument("--paired", action="store_true",
+                    help="with --collect-only and --set: each capture as kept against its "
+                         "clone, side by side, in a section of its own")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default=None, help="BENCHMARKS.md to update (its section)")
     args = ap.parse_args()
@@ -502,9 +559,13 @@ def main() -> None:
     except ValueError as e:
         ap.error(str(e))
     label = (args.label or variant_label(args.set)) if args.set else None
+    if args.paired and not (args.collect_only and label):
+        ap.error("--paired reads kept captures against their clones: give it with "
+                 "--collect-only and --set")
     if args.kept and label:
         ap.error("--kept reads the captures as kept, not their clones (--set, --refine)")
     results: dict[str, dict] = {}
+    kept: dict[str, dict] = {}  # --paired: the captures as kept
     walls: dict[str, float] = {}
     if args.kept:
         captures = kept_captures(args.geometries)
@@ -526,6 +587,9 @@ def main() -> None:
                                           args.forcerun, args.jobs, args.triggers,
                                           TARGETS[:2] if args.no_exp1 else TARGETS)
             results[name] = collect(work, exp1=not args.no_exp1)
+            if args.paired and (base / "results" / DATASET / "eval" / "gt_errors.json"
+                                ).is_file():
+                kept[name] = collect(base, exp1=False)
             print(f"  {name}: " + ", ".join(f"{k} {_fmt(f, results[name].get(k))}"
                                             for k, _, f in COLUMNS[:7]), flush=True)
     out = Lines()
@@ -578,10 +642,21 @@ def main() -> None:
         out.say("")
         out.say("Wall time per capture (s, what had to run): " + ", ".join(
             f"{k} {v:.0f}" for k, v in walls.items()))
+    sections = {}
+    if args.paired:
+        pair = Lines()
+        pair.say(f"Seeds {', '.join(map(str, args.seeds))} of geometries "
+                 f"{', '.join(args.geometries)}, each capture as kept (config.yaml) -> its "
+                 f"clone with {', '.join(args.set)} (bench/bench_accuracy.py --collect-only "
+                 "--paired); the complete calibration against the simulator's truth:")
+        pair.say("")
+        for line in paired_rows(kept, results, label):
+            pair.say(line)
+        sections[f"Paired: {', '.join(args.set)} (issue 32)"] = list(pair)
     if args.out:
         title = ("Every kept capture" if args.kept else "Accuracy over captures"
                  + (f", {', '.join(args.set)}" if args.set else ""))
-        update_sections(args.out, {f"{title} (issue 32)": list(out)})
+        update_sections(args.out, {f"{title} (issue 32)": list(out), **sections})
 
 
 if __name__ == "__main__":

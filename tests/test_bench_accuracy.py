@@ -53,3 +53,22 @@ def test_a_clone_links_the_images_and_copies_the_rest_with_their_times(tmp_path)
     assert (dest / files[1]).stat().st_ino == (src / files[1]).stat().st_ino
     assert (dest / files[2]).stat().st_ino != (src / files[2]).stat().st_ino
     assert not (dest / ".snakemake" / "locks").exists()
+
+
+def test_paired_rows_put_each_capture_beside_its_clone_with_the_worst_in_size():
+    def cap(f, c, job=None):
+        return {"focal_signed_pct": f, "focal_pct": abs(f), "centre_mm": c, "rot_deg": 0.01,
+                "residual_scale_pct": 0.01, "scale_pct": 0.05, "refine_job": job}
+
+    base = {"a-s1": cap(-0.15, 0.02, (50.0, 800.0)), "a-s2": cap(0.02, 0.03)}
+    other = {"a-s1": cap(-0.05, 0.01, (90.0, 1600.0)), "a-s2": cap(0.12, 0.03)}
+    lines = ba.paired_rows(base, other, "both")
+    row = next(line for line in lines if line.startswith("| a-s1 "))
+    assert "-0.150 -> -0.050" in row and "| 50 -> 90 | 800 -> 1600 |" in row
+    assert "| - -> - | - -> - |" in next(line for line in lines if line.startswith("| a-s2 "))
+    worst = next(line for line in lines if line.startswith("| **worst**"))
+    assert "| 0.150 -> 0.120 |" in worst
+    median = next(line for line in lines if line.startswith("| **median**"))
+    assert "| 0.085 -> 0.085 |" in median
+    assert lines[-1] == ("Captures past a target (2 pairs), as kept -> both: focal 1 -> 1; "
+                         "centres 0 -> 0; rotation 0 -> 0; scale 0 -> 0.")
