@@ -586,6 +586,11 @@ def main() -> None:
                 walls[name] = run_capture(work, capture_config(geom, seed, changes),
                                           args.forcerun, args.jobs, args.triggers,
                                           TARGETS[:2] if args.no_exp1 else TARGETS)
+            if args.collect_only and not (work / "results" / DATASET / "eval"
+                                          / "gt_errors.json").is_file():
+                print(f"  {work.name}: not measured yet (no eval/gt_errors.json): left out",
+                      file=sys.stderr)
+                continue
             results[name] = collect(work, exp1=not args.no_exp1)
             if args.paired and (base / "results" / DATASET / "eval" / "gt_errors.json"
                                 ).is_file():
