@@ -54,7 +54,8 @@ def test_refinement_keeps_every_view_and_does_not_raise_the_errors(tiny_complete
     assert 'id="t1-eq6"' in html and 'id="kpi-refine"' in html
     # the refinement's points and where they came from (refine.tracks, carry_every)
     assert ("from the central views&#x27; matches carried into every 3rd of each shot&#x27;s "
-            "other views (refine.tracks: central, carry_every: 3)") in html
+            "other views and from the matches of every view, in one adjustment "
+            "(refine.tracks: both, carry_every: 3)") in html
     # the focal length with registration A's standard deviation, which needs no truth
     assert 'id="kpi-focal"' in html and "&plusmn;" in html
     assert "The paper&#x27;s Eq. 6 result (all views, rigid alignment)" in html

@@ -14,15 +14,15 @@ This step adjusts them together, as COLMAP 4 models a camera rig
 * each sensor has one camera, shared by all shots (its principal point as registration
   B's view model gives it);
 * the 3-D points (``refine.tracks``, :data:`TRACK_SOURCES`), at most ``max_points`` of
-  them: ``central`` (the default) the central views' own matches (rule ``match_central``)
-  triangulated with the Eq. 6 cameras held fixed and carried into each shot's other views
-  by their patches (:mod:`plenocal.calib.central_tracks`); ``views`` the verified matches
-  of every view (rule ``view_matches``, the matches Table I triangulates) triangulated the
-  same way (:func:`plenocal.verify.reprojection.triangulate`); ``both`` the two sets in one
-  adjustment, each its own points (:func:`plenocal.calib.central_tracks.joined`): the
-  central tracks span the shots through their central views, the views' tracks tie the
-  views of a set to each other through their own matches (BENCHMARKS.md, "Both track
-  sets");
+  them: ``central`` the central views' own matches (rule ``match_central``) triangulated
+  with the Eq. 6 cameras held fixed and carried into each shot's other views by their
+  patches (:mod:`plenocal.calib.central_tracks`); ``views`` the verified matches of every
+  view (rule ``view_matches``, the matches Table I triangulates) triangulated the same way
+  (:func:`plenocal.verify.reprojection.triangulate`); ``both`` (the default) the two sets
+  in one adjustment, each its own points (:func:`plenocal.calib.central_tracks.joined`):
+  the central tracks span the shots through their central views, the views' tracks tie
+  the views of a set to each other through their own matches (BENCHMARKS.md, "Both track
+  sets on fresh captures");
 * their observations aligned by their patches to their track's reference observation
   (``refine.align``, :mod:`plenocal.calib.track_alignment`, given the views' images:
   :func:`aligned_keypoints`), since SIFT's placement on soft views leans the focal length.
