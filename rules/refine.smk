@@ -1,7 +1,9 @@
 """Joint refinement of every view of every shot under the rig (beyond the paper): the
-Eq. 6 calibration of rule merge adjusted on the matches of rule view_matches, written in
-every export format to calibration/ (plenocal.calib.refine). With refine.enabled false,
-calibration/ holds the Eq. 6 result as it is."""
+Eq. 6 calibration of rule merge adjusted on the points refine.tracks names (both, the
+default: the central views' matches of rule match_central carried into every view, and
+every view's matches of rule view_matches), written in every export format to
+calibration/ (plenocal.calib.refine). With refine.enabled false, calibration/ holds the
+Eq. 6 result as it is."""
 
 
 rule refine:

@@ -702,6 +702,9 @@ def _tracks_rig(eq6: Mapping[str, PinholeCamera], views: Mapping[str, tuple], ce
     """The rig reconstruction on the tracks ``settings.tracks`` names (module docstring):
     (reconstruction, :class:`RigModel`, points triangulated, points used, the alignment's
     statistics, the triangulation's seconds)."""
+    if settings.tracks == "both" and view_database is None:
+        raise ValueError("refine.tracks both adds the matches of every view to the central "
+                         "views': the view database (rule view_matches) is needed")
     if settings.tracks == "views":
         ts, align, t_tri = _view_tracks(eq6, database, settings, images, align_threads,
                                         work_dir)
@@ -709,10 +712,6 @@ def _tracks_rig(eq6: Mapping[str, PinholeCamera], views: Mapping[str, tuple], ce
         ts, align, t_tri = _central_tracks(eq6, central, database, settings, images,
                                            align_threads, work_dir)
     if settings.tracks == "both":
-        if view_database is None:
-            raise ValueError("refine.tracks both adds the matches of every view to the "
-                             "central views': the view database (rule view_matches) is "
-                             "needed")
         ts_views, align_views, t_views = _view_tracks(eq6, view_database, settings, images,
                                                       align_threads, work_dir)
         ts, t_tri = joined(ts, ts_views), t_tri + t_views
