@@ -5,7 +5,8 @@ For each kept capture of ``bench_accuracy.py`` (``bench/out/accuracy/<capture>/`
 of it (``bench/out/view_sources/<capture>-<kind>/``) has every subaperture view replaced,
 and the chain from the views on runs again as the workflow runs it (:func:`view_rules`):
 SIFT of every view (rules ``view_features_<k>``) and the view matches, the central views'
-own matches (rule ``match_central``, for ``refine.tracks: central``, the default), the
+own matches (rule ``match_central``, for ``refine.tracks: both``, the default, and
+``central``), the
 joint refinement, the errors against the truth. Registration A, B, the depth maps, Eq. 5
 and Eq. 6 stay the kept capture's (on the converted views): only what the refinement
 observes changes. The kinds:
@@ -233,7 +234,7 @@ def view_rules(src: Path, cfg: dict) -> list[str]:
     """The rules that read the replaced views, to run again (their mtimes are kept, so
     that the conversion's followers stay as they are): SIFT of every view (rules
     ``view_features_<k>``, the view matches and ``refine.tracks: views``), and with
-    ``refine.tracks: central`` (the default) or ``both`` rule ``match_central`` (the
+    ``refine.tracks: both`` (the default) or ``central`` rule ``match_central`` (the
     central views' own SIFT) and rule ``refine`` (whose alignment reads every view).
     Without the last two a central-tracks capture's refinement is not run again, and every
     kind reads as the converted views."""

@@ -628,7 +628,8 @@ def refine_inputs(wildcards):
         "rig": res(d, "reg_b", "rig.json"),
     }
     if refine_enabled():
-        tracks = stage_config("refine")["tracks"]
+        cfg = stage_config("refine")
+        tracks = cfg["tracks"]
         if tracks == "views":
             out["database"] = res(d, "matches", "database.db")
         else:
@@ -637,8 +638,7 @@ def refine_inputs(wildcards):
             out["view_database"] = res(d, "matches", "database.db")
         # the merge's scale source and the stage's step (refine.scale: auto)
         out["scale"] = res(d, "merge", "scale.json")
-        cfg = stage_config("refine")
-        if cfg["align"]["enabled"] or cfg["tracks"] != "views":
+        if cfg["align"]["enabled"] or tracks != "views":
             # the views themselves: the observations are aligned by their patches (the
             # central views' points are carried into the other views by them)
             out["view_sets"] = view_sets(d, cams(d))
