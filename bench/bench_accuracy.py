@@ -114,7 +114,11 @@ DEFAULT_SEEDS = (1, 2, 3, 4, 5)
 TARGETS = ("eval/gt_errors.json", "eval/reprojection.json", "eval/synthesis_exp1.json")
 
 #: The issue's targets on the worst capture: (column, limit).
-LIMITS = {"focal_pct": 0.1, "centre_mm": 0.1, "rot_deg": 0.02, "scale_pct": 0.3}
+#: The scale judged is the written calibration's own (``residual_scale_pct``: the similarity
+#: that fits it to the truth), as the focal length, centres and rotations are the written
+#: calibration's; the merge's r (``scale_pct``, the paper's Eq. 6 result in
+#: ``calibration/eq6/``) is a column of its own and a line after the verdict.
+LIMITS = {"focal_pct": 0.1, "centre_mm": 0.1, "rot_deg": 0.02, "residual_scale_pct": 0.3}
 
 
 def capture_config(geometry: str, seed: int, changes: dict | None = None) -> dict:
@@ -299,7 +303,7 @@ COLUMNS = [  # (key, header, format)
     ("centre_mm", "centres mm", "{:.3f}"),
     ("centre_pct_step", "% step", "{:.2f}"),
     ("rot_deg", "rot. deg", "{:.4f}"),
-    ("scale_pct", "scale r %", "{:.3f}"),
+    ("scale_pct", "merge r %", "{:.3f}"),  # the Eq. 6 result's scale (calibration/eq6/)
     # the written calibration's own scale (a similarity fitted to the truth): the merge's r,
     # or where refine.scale fits the stage's step to the refined array shots, that
     ("residual_scale_pct", "written scale %", "{:.3f}"),
@@ -359,15 +363,16 @@ def geometry_of(capture: str) -> str:
 
 def geometry_rows(results: dict[str, dict]) -> list[str]:
     """Per geometry, then over every capture: how many, and median / worst of the focal
-    length (with the signed errors' mean), centres, largest rotation and scale, and how many
-    captures are past each of :data:`LIMITS`."""
+    length (with the signed errors' mean), centres, largest rotation and written scale, and
+    how many captures are past each of :data:`LIMITS`."""
     groups: dict[str, list[dict]] = {}
     for name, r in results.items():
         groups.setdefault(geometry_of(name), []).append(r)
     if len(groups) > 1:
         groups["all"] = list(results.values())
     cols = [("focal_pct", "focal %", "{:.3f}"), ("centre_mm", "centres mm", "{:.3f}"),
-            ("rot_deg", "rotation deg", "{:.4f}"), ("scale_pct", "scale %", "{:.3f}")]
+            ("rot_deg", "rotation deg", "{:.4f}"),
+            ("residual_scale_pct", "written scale %", "{:.3f}")]
     lines = ["| geometry | captures | " + " | ".join(f"{h} median / worst" for _, h, _ in cols)
              + " | signed focal mean % | past a target (focal / centres / rotation / scale) |",
              "|---|---:|" + "---|" * len(cols) + "---:|---|"]
@@ -499,7 +504,7 @@ def paired_rows(base: dict[str, dict], other: dict[str, dict], label: str) -> li
             cells.append(" -> ".join(pair))
         lines.append(f"| **{what}** (in size) | " + " | ".join(cells) + " | | |")
     keys = {"focal_pct": "focal", "centre_mm": "centres", "rot_deg": "rotation",
-            "scale_pct": "scale"}
+            "residual_scale_pct": "scale"}
     past = "; ".join(
         f"{keys[k]} {sum(base[n][k] > lim for n in names)} -> "
         f"{sum(other[n][k] > lim for n in names)}" for k, lim in LIMITS.items())
@@ -643,6 +648,12 @@ def main() -> None:
     out.say("Targets on the worst capture: " + "; ".join(
         f"{k} {worst[k]:.4g} (<= {lim}: {'pass' if worst[k] <= lim else 'FAIL'})"
         for k, lim in LIMITS.items()))
+    merge_r = [r["scale_pct"] for r in results.values() if r.get("scale_pct") is not None]
+    if merge_r:
+        lim = LIMITS["residual_scale_pct"]
+        out.say(f"The paper's Eq. 6 alone (`calibration/eq6/`): the merge's r at most "
+                f"{max(merge_r):.4g} % off, {sum(v > lim for v in merge_r)} of {len(merge_r)} "
+                f"captures past {lim} % (not the verdict: the written calibration's scale is).")
     if walls:
         out.say("")
         out.say("Wall time per capture (s, what had to run): " + ", ".join(

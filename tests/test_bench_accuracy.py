@@ -72,3 +72,15 @@ def test_paired_rows_put_each_capture_beside_its_clone_with_the_worst_in_size():
     assert "| 0.085 -> 0.085 |" in median
     assert lines[-1] == ("Captures past a target (2 pairs), as kept -> both: focal 1 -> 1; "
                          "centres 0 -> 0; rotation 0 -> 0; scale 0 -> 0.")
+
+
+def test_the_scale_target_judges_the_written_calibration_not_the_merge():
+    # the merge's r (the paper's Eq. 6 result) past 0.3 %, the written calibration's
+    # scale within it: the capture is not past the scale target
+    cap = {"focal_pct": 0.02, "focal_signed_pct": -0.02, "centre_mm": 0.01, "rot_deg": 0.004,
+           "scale_pct": 0.34, "residual_scale_pct": 0.028}
+    far = {**cap, "residual_scale_pct": 0.31}
+    rows = ba.geometry_rows({"small-s1": cap, "small-s2": far})
+    row = next(line for line in rows if line.startswith("| small "))
+    assert row.endswith("| 0 / 0 / 0 / 1 |")
+    assert "0.169 / 0.310" in row  # the written scale's median / worst, not the merge's
