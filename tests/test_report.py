@@ -308,7 +308,7 @@ def test_every_section_is_shown_from_the_typed_files(tmp_path):
     for key in SECTIONS[:-1]:  # (one depth preview is absent on purpose)
         assert 'class="missing"' not in by[key], (key, by[key][:500])
     assert 'id="table1"' in by["table1"] and "<td>0.702</td>" in by["table1"]
-    assert by["gt"].count('<tr id="gt-') == 9
+    assert by["gt"].count('<tr id="gt-') == 11  # one row per target (gt_errors.TARGETS)
     assert "0.0201</b>Eq. 5 mean 0.0201" in by["summary"] and "exact model" in by["summary"]
     for key, names in (("exp1", ["complete", "ground_truth"]), ("exp2", ["complete/x01_y01"]),
                        ("exp3", ["complete/central", "complete/lateral",

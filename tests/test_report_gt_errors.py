@@ -84,13 +84,16 @@ def reg_a(focal=F, turn=None):
                          cameras={s: PinholeCamera(np.eye(3), M, W, H) for s, M in poses.items()})
 
 
-def calib(global_scale=1.0):
+def calib(global_scale=1.0, focal_scale=1.0):
     G = pose(rot([1, 1, 0], 12.0), [0.05, 0.0, -0.2])
     out = {}
     for k, cam in truth().items():
         M = G @ cam.cam_to_world
         M[:3, 3] *= global_scale
-        out[k] = PinholeCamera(cam.K, M, W, H)
+        K = cam.K.copy()
+        K[0, 0] *= focal_scale
+        K[1, 1] *= focal_scale
+        out[k] = PinholeCamera(K, M, W, H)
     return out
 
 
@@ -146,6 +149,22 @@ def test_known_perturbations_are_measured():
     assert verdict["b_baseline_pct"] is False  # 1.5 % > 1 %
     assert verdict["b_pp_px"] is False  # 0.7 px > 0.5 px
     assert verdict["scale_pct"] is True
+    assert verdict["all_scale_pct"] is True  # 0.1 % <= 0.3 %
+    assert verdict["all_focal_pct"] is True
+
+
+def test_the_complete_calibration_is_judged_by_issue_32s_targets():
+    # a focal length 0.15 % long and the centres 0.4 % too far apart: past issue 32's 0.1 %
+    # and 0.3 %, with the registrations' own targets untouched
+    res = gt_errors(truth(), calib=calib(global_scale=1.004, focal_scale=1.0015))
+    verdict = {c["name"]: (c["pass"], c["target"]) for c in res["checks"]}
+    assert verdict["all_focal_pct"] == (False, 0.1)
+    assert verdict["all_scale_pct"] == (False, 0.3)
+    assert res["complete"]["focal_err_pct"]["max"] == pytest.approx(0.15, rel=1e-6)
+    close = gt_errors(truth(), calib=calib(global_scale=1.002, focal_scale=1.0009))
+    verdict = {c["name"]: c["pass"] for c in close["checks"]}
+    assert verdict["all_focal_pct"] is True and verdict["all_scale_pct"] is True
+    assert {c["name"]: c["target"] for c in close["checks"]}["all_rotation_deg"] == 0.02
 
 
 def test_missing_stages_leave_checks_open_and_bad_truth_is_named():

@@ -1,13 +1,14 @@
 """The report page: ``results/<dataset>/report/index.html``.
 
-One self-contained HTML file (CSS inline, images embedded as data URIs, SVG figures
-inline, no script) that opens from disk: Table I beside the paper's values, the errors
-against ground truth with the targets of issues 4-5, the camera array in 3-D, the PSNR
-grids of Figs. 7-9 as heat maps with the dB lost to calibration, synthesised versus
-captured crops as in Fig. 10, the converter's quality and the patch-size and depth
-previews. A section whose source is absent says so and names the rule that makes it;
-every figure links its source file (relative links, so the results folder can be moved).
-The bytes depend only on the inputs (no timestamps, sorted iteration).
+One self-contained HTML file (CSS inline, images embedded as data URIs, SVG figures inline,
+no script) that opens from disk: Table I beside the paper's values, the errors against
+ground truth with the targets (issues 4-5 for the registrations, issue 32 for the complete
+calibration), the camera array in 3-D, the PSNR grids of Figs. 7-9 as heat maps with the dB
+lost to calibration, synthesised versus captured crops as in Fig. 10, the converter's
+quality and the patch-size and depth previews. A section whose source is absent says so and
+names the rule that makes it; every figure links its source file (relative links, so the
+results folder can be moved). The bytes depend only on the inputs (no timestamps, sorted
+iteration).
 """
 
 from __future__ import annotations
