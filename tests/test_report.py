@@ -28,7 +28,7 @@ from plenocal.artifacts.scale import ScaleResult, write_scale
 from plenocal.camera import PinholeCamera, intrinsics, pose
 from plenocal.convert.quality import summarise
 from plenocal.io.files import write_image, write_json
-from plenocal.report.html import build_report
+from plenocal.report.html import _hundredths, build_report
 from plenocal.report.sources import PAPER_TABLE1, layout, table1_rows, table_name
 from plenocal.verify.gt_errors import gt_errors
 from plenocal.verify.synthesis import psnr_tables
@@ -550,3 +550,10 @@ def test_the_refinements_track_source_is_said_in_words_for_each_setting():
     assert "every 3rd of each shot's other views" in both
     assert "and from the matches of every view" in both
     assert both.endswith("(refine.tracks: both, carry_every: 3)")
+
+
+def test_a_difference_that_rounds_to_zero_reads_0_00_not_minus():
+    assert _hundredths(-0.001) == "0.00"
+    assert _hundredths(0.004) == "0.00"
+    assert _hundredths(-0.006) == "-0.01"
+    assert _hundredths(0.114) == "0.11"

@@ -148,6 +148,11 @@ def _verdict(ok: bool | None) -> str:
     return '<span class="pass">pass</span>' if ok else '<span class="fail">FAIL</span>'
 
 
+def _hundredths(d: float) -> str:
+    """``d`` to two decimals, a difference that rounds to zero as 0.00, never -0.00."""
+    return f"{round(d, 2) + 0.0:.2f}"
+
+
 T = TypeVar("T")
 
 
@@ -391,11 +396,11 @@ def _psnr_section(page: Page, key: str, result: SynthesisResult | None, paper: s
         extra = ""
         if name in lost:
             d, n = lost[name]
-            extra = (f"<br>{d:.2f} dB lost to calibration (vs ground-truth cameras, {n} views) "
-                     f"{_verdict(d <= 0.5)}")
+            extra = (f"<br>{_hundredths(d)} dB lost to calibration (vs ground-truth cameras, "
+                     f"{n} views) {_verdict(d <= 0.5)}")
         if name in surface:
             d, n = surface[name]
-            extra += (f"<br>{d:.2f} dB on the surfaces ({n} views: off occlusion edges, "
+            extra += (f"<br>{_hundredths(d)} dB on the surfaces ({n} views: off occlusion edges, "
                       "README 'Ground truth in the synthesis experiments')")
         kpis.append(f'<span class="kpi" id="kpi-{escape(key)}-{escape(name)}">'
                     f"{escape(name)}<b>{t.mean_db:.2f} dB</b>mean over {len(t.psnr_db)} views"
