@@ -6,7 +6,8 @@ runs the workflow on every capture of a set and reports, per capture,
 
 * the complete calibration (the refined one where ``refine`` runs, and the paper's Eq. 6
   result beside it): focal length, centres (mm and % of the array step), rotations, the
-  scale (Eq. 5's r, and the refinement's own scale where it ran);
+  written calibration's scale (what the verdict judges), the merge's r, Eq. 5's r and the
+  stage's step's r;
 * Table I on the same matches: the complete calibration, the paper's Eq. 6 result, the
   naive A+SfM and the ground-truth cameras (mean px, and the ratio to the ground truth's);
 * the Exp. 1 PSNR with our own depth (the complete calibration, and the ground-truth
