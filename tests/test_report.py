@@ -28,7 +28,7 @@ from plenocal.artifacts.scale import ScaleResult, write_scale
 from plenocal.camera import PinholeCamera, intrinsics, pose
 from plenocal.convert.quality import summarise
 from plenocal.io.files import write_image, write_json
-from plenocal.report.html import _hundredths, build_report
+from plenocal.report.html import _hundredths, build_report, shot_means_table
 from plenocal.report.sources import PAPER_TABLE1, layout, table1_rows, table_name
 from plenocal.verify.gt_errors import gt_errors
 from plenocal.verify.synthesis import psnr_tables
@@ -557,3 +557,13 @@ def test_a_difference_that_rounds_to_zero_reads_0_00_not_minus():
     assert _hundredths(0.004) == "0.00"
     assert _hundredths(-0.006) == "-0.01"
     assert _hundredths(0.114) == "0.11"
+
+
+def test_the_shot_means_are_laid_out_as_the_array():
+    html = shot_means_table({"x00_y00": 30.0, "x01_y00": 31.0, "x00_y01": 29.5,
+                             "hand00": 28.25})
+    rows = re.findall(r"<tr>(.*?)</tr>", html)
+    assert rows[0] == ("<th class=l>mean PSNR [dB]</th><th>x00</th><th>x01</th>")
+    assert rows[1] == "<th class=l>y00</th><td>30.00</td><td>31.00</td>"
+    assert rows[2] == "<th class=l>y01</th><td>29.50</td><td></td>"  # no x01_y01
+    assert "hand-held" in rows[3] and "hand00 28.25" in rows[3]

@@ -13,7 +13,7 @@ iteration).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from html import escape
 from pathlib import Path
@@ -424,15 +424,33 @@ def _psnr_section(page: Page, key: str, result: SynthesisResult | None, paper: s
                  f"<figcaption>{escape(cap)}. Source: {page.link(src.SOURCES[key][0])}"
                  "</figcaption></figure>")
         if g.kind == "views":
-            means = src.shot_means(t)
-            page.add("<table><tr><th class=l>shot</th>" + "".join(
-                f"<th>{escape(c)}</th>" for c in means) + "</tr><tr><td class=l>mean "
-                "PSNR [dB]</td>" + "".join(f"<td>{v:.2f}</td>" for v in means.values())
-                + "</tr></table>")
+            page.add(shot_means_table(src.shot_means(t)))
         if g.outside:
             page.add("<p class=note>Hand-held shots: " + ", ".join(
                 f"{escape(k)} {v:.2f} dB" for k, v in sorted(g.outside.items())) + "</p>")
 
+
+
+def shot_means_table(means: Mapping[str, float]) -> str:
+    """The mean PSNR per shot as the array is laid out (a row per array row y, a column per
+    column x, as the heat map above it), the hand-held shots in a row of their own: one
+    row of every shot ran past the page on arrays of more than a dozen shots."""
+    placed = {c: array_position(c) for c in means}
+    cols = sorted({p[0] for p in placed.values() if p is not None})
+    rows = sorted({p[1] for p in placed.values() if p is not None})
+    at = {p: means[c] for c, p in placed.items() if p is not None}
+    html = ['<table class="shot-means"><tr><th class=l>mean PSNR [dB]</th>'
+            + "".join(f"<th>x{c:02d}</th>" for c in cols) + "</tr>"]
+    for r in rows:
+        html.append(f"<tr><th class=l>y{r:02d}</th>" + "".join(
+            f"<td>{at[(c, r)]:.2f}</td>" if (c, r) in at else "<td></td>" for c in cols)
+            + "</tr>")
+    hand = [c for c, p in placed.items() if p is None]
+    if hand:
+        html.append(f'<tr><th class=l>hand-held</th><td colspan="{max(1, len(cols))}" '
+                    'class=l>' + ", ".join(f"{escape(c)} {means[c]:.2f}" for c in hand)
+                    + "</td></tr>")
+    return "".join(html) + "</table>"
 
 @dataclass(frozen=True)
 class Fig10Image:
