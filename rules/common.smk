@@ -9,7 +9,7 @@ from pathlib import Path
 from plenocal.config import ConfigError, canonicalize, validate_config
 from plenocal.calib.reg_b.datasheet import DatasheetError, load_datasheet
 from plenocal.io.lenslet import CaptureError, VideoShot, scan_lenslet_folder
-from plenocal import names
+from plenocal import job_memory, names
 from plenocal.names import central_view, view_names
 
 # COLMAP's logging (glog) to standard error alone, which every job's script sends to its
@@ -644,6 +644,14 @@ def refine_inputs(wildcards):
             out["view_sets"] = view_sets(d, cams(d))
     return out
 
+
+
+def refine_mem_mb(wildcards, input):
+    """Rule refine's memory request: it grows with the match databases the job reads
+    (plenocal.job_memory). Snakemake evaluates it again when the job is about to run, once
+    the databases exist."""
+    dbs = [input[k] for k in ("database", "view_database") if k in input.keys()]
+    return job_memory.refine_mem_mb(sum(os.path.getsize(f) for f in dbs if os.path.exists(f)))
 
 def refine_targets(dataset):
     return [

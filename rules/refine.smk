@@ -31,7 +31,7 @@ rule refine:
     # run 430 s against 377 s); profiles/slurm gives it 2, where jobs do not share cores
     threads: lambda wc: stage_config("refine")["num_threads"]
     resources:
-        mem_mb=3000,
+        mem_mb=refine_mem_mb,
         runtime=30,
     params:
         refine=lambda wc: stage_config("refine"),

@@ -6,6 +6,7 @@ paper's method alone."""
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +14,7 @@ import pytest
 import yaml
 from conftest import clone, snakemake, tiny_workflow
 
+from plenocal import job_memory
 from plenocal.artifacts.cameras import read_cameras
 from plenocal.artifacts.results import read_gt_errors, read_reprojection_table
 
@@ -152,3 +154,27 @@ def test_the_calibration_waits_for_no_view_matching_on_the_central_views_tracks(
     assert "match_central" not in planned["views"]
     # both: the two matchings
     assert {"match_central", "view_features", "view_matches", "refine"} <= planned["both"]
+
+
+def _refine_mem_mb(out: str) -> int:
+    import re  # noqa: PLC0415
+
+    block = out[out.index("rule refine:"):]
+    return int(re.search(r"\bmem_mb=(\d+)", block).group(1))
+
+
+def test_the_refine_jobs_memory_request_grows_with_its_match_databases(
+        tiny_complete_run: Path, tmp_path: Path):
+    """SLURM kills a job past its request: rule refine's grows with the databases it reads
+    (plenocal.job_memory), from the 3 GB that every measured geometry fits under."""
+    work = clone(tiny_complete_run, tmp_path / "run")
+    target = "results/tiny/calibration/cameras.json"
+    proc = snakemake(work, "-n", "--forcerun", "refine", target)
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    assert _refine_mem_mb(proc.stdout + proc.stderr) == 3000  # the tiny capture's are small
+    matches = work / "results" / "tiny" / "matches"
+    os.truncate(matches / "database.db", 400 * 10**6)  # a larger array's, as a sparse file
+    size = sum((matches / f).stat().st_size for f in ("database.db", "central.db"))
+    proc = snakemake(work, "-n", "--forcerun", "refine", target)
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    assert _refine_mem_mb(proc.stdout + proc.stderr) == job_memory.refine_mem_mb(size) > 4500

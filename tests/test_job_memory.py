@@ -1,0 +1,19 @@
+"""The memory requests that grow with the capture (plenocal.job_memory), against
+hand-computed cases."""
+
+import pytest
+
+from plenocal.job_memory import refine_mem_mb
+
+
+def test_the_refine_request_is_a_fixed_part_and_ten_times_the_databases():
+    assert refine_mem_mb(0) == 3000  # never under the 3 GB every measured geometry fits
+    assert refine_mem_mb(167 * 10**6) == 3000  # the default array's: 500 + 1,670 MB
+    assert refine_mem_mb(250 * 10**6) == 3000  # 500 + 2,500: the floor exactly
+    assert refine_mem_mb(400 * 10**6) == 4500
+    assert refine_mem_mb(400 * 10**6 + 1) == 4501  # rounded up, never down
+
+
+def test_a_negative_size_is_refused():
+    with pytest.raises(ValueError, match="-1 bytes"):
+        refine_mem_mb(-1)
