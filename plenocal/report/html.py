@@ -430,7 +430,6 @@ def _psnr_section(page: Page, key: str, result: SynthesisResult | None, paper: s
                 f"{escape(k)} {v:.2f} dB" for k, v in sorted(g.outside.items())) + "</p>")
 
 
-
 def shot_means_table(means: Mapping[str, float]) -> str:
     """The mean PSNR per shot as the array is laid out (a row per array row y, a column per
     column x, as the heat map above it), the hand-held shots in a row of their own: one
@@ -451,6 +450,7 @@ def shot_means_table(means: Mapping[str, float]) -> str:
                     'class=l>' + ", ".join(f"{escape(c)} {means[c]:.2f}" for c in hand)
                     + "</td></tr>")
     return "".join(html) + "</table>"
+
 
 @dataclass(frozen=True)
 class Fig10Image:
