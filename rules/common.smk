@@ -650,7 +650,9 @@ def refine_mem_mb(wildcards, input):
     (plenocal.job_memory). Snakemake evaluates it again when the job is about to run, once
     the databases exist."""
     dbs = [input[k] for k in ("database", "view_database") if k in input.keys()]
-    return job_memory.refine_mem_mb(sum(os.path.getsize(f) for f in dbs if os.path.exists(f)))
+    return job_memory.refine_mem_mb(
+        sum(os.path.getsize(f) for f in dbs if os.path.exists(f))
+    )
 
 
 def refine_targets(dataset):
