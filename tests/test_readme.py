@@ -31,3 +31,16 @@ def test_the_contents_list_names_every_section_in_order():
     listed = re.findall(r"^- \[([^\]]+)\]\(#([^)]+)\)$", contents, flags=re.M)
     assert [h for h, _ in listed] == headings
     assert [a for _, a in listed] == [_anchor(h) for h in headings]
+
+
+def test_every_section_the_code_points_to_is_in_the_readme():
+    """The report, the errors and the config's descriptions send the user to a README
+    section by its name (README, 'MLA kinds'); a renamed section must not strand them."""
+    pattern = re.compile(r"""README,? ['"]([^'"]+)['"]""")
+    files = [*ROOT.glob("plenocal/**/*.py"), *ROOT.glob("scripts/*.py"),
+             *ROOT.glob("rules/*.smk"), ROOT / "config.schema.yaml"]
+    refs = {(m.group(1).strip(), f.relative_to(ROOT).as_posix())
+            for f in files for m in pattern.finditer(f.read_text())}
+    assert len(refs) >= 5  # the pattern finds the pointers
+    missing = sorted((name, where) for name, where in refs if name not in TEXT)
+    assert not missing, missing
