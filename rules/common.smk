@@ -645,14 +645,23 @@ def refine_inputs(wildcards):
     return out
 
 
+def _bytes_of(input, keys):
+    """The summed size of the job's inputs ``keys`` that exist (none before they are made:
+    Snakemake works a job's resources out again when it is about to run)."""
+    paths = [input[k] for k in keys if k in input.keys()]
+    return sum(os.path.getsize(f) for f in paths if os.path.exists(f))
+
+
 def refine_mem_mb(wildcards, input):
     """Rule refine's memory request: it grows with the match databases the job reads
-    (plenocal.job_memory). Snakemake evaluates it again when the job is about to run, once
-    the databases exist."""
-    dbs = [input[k] for k in ("database", "view_database") if k in input.keys()]
-    return job_memory.refine_mem_mb(
-        sum(os.path.getsize(f) for f in dbs if os.path.exists(f))
-    )
+    (plenocal.job_memory)."""
+    return job_memory.refine_mem_mb(_bytes_of(input, ("database", "view_database")))
+
+
+def reprojection_mem_mb(wildcards, input):
+    """A Table I triangulation's memory request: it grows with the view database
+    (plenocal.job_memory)."""
+    return job_memory.reprojection_mem_mb(_bytes_of(input, ("database",)))
 
 
 def refine_targets(dataset):

@@ -3,7 +3,7 @@ hand-computed cases."""
 
 import pytest
 
-from plenocal.job_memory import refine_mem_mb
+from plenocal.job_memory import refine_mem_mb, reprojection_mem_mb
 
 
 def test_the_refine_request_is_a_fixed_part_and_ten_times_the_databases():
@@ -14,6 +14,14 @@ def test_the_refine_request_is_a_fixed_part_and_ten_times_the_databases():
     assert refine_mem_mb(400 * 10**6 + 1) == 4501  # rounded up, never down
 
 
+def test_table_is_triangulations_ask_for_a_fixed_part_and_six_times_the_database():
+    assert reprojection_mem_mb(0) == 1500
+    assert reprojection_mem_mb(207 * 10**6) == 1500  # dense: 200 + 1,242 MB
+    assert reprojection_mem_mb(400 * 10**6) == 2600
+
+
 def test_a_negative_size_is_refused():
     with pytest.raises(ValueError, match="-1 bytes"):
         refine_mem_mb(-1)
+    with pytest.raises(ValueError, match="reprojection_mem_mb"):
+        reprojection_mem_mb(-5)

@@ -156,25 +156,33 @@ def test_the_calibration_waits_for_no_view_matching_on_the_central_views_tracks(
     assert {"match_central", "view_features", "view_matches", "refine"} <= planned["both"]
 
 
-def _refine_mem_mb(out: str) -> int:
+def _mem_mb(out: str, rule: str) -> int:
+    """The memory request of the dry run's first job of ``rule``."""
     import re  # noqa: PLC0415
 
-    block = out[out.index("rule refine:"):]
+    block = out[out.index(f"rule {rule}:"):]
     return int(re.search(r"\bmem_mb=(\d+)", block).group(1))
 
 
-def test_the_refine_jobs_memory_request_grows_with_its_match_databases(
-        tiny_complete_run: Path, tmp_path: Path):
-    """SLURM kills a job past its request: rule refine's grows with the databases it reads
-    (plenocal.job_memory), from the 3 GB that every measured geometry fits under."""
+def test_the_memory_requests_grow_with_the_match_databases(tiny_complete_run: Path,
+                                                            tmp_path: Path):
+    """SLURM kills a job past its request: rule refine's and Table I's triangulations' grow
+    with the databases they read (plenocal.job_memory), from the fixed requests that every
+    measured geometry fits under."""
     work = clone(tiny_complete_run, tmp_path / "run")
-    target = "results/tiny/calibration/cameras.json"
+    target = "results/tiny/eval/reprojection/complete.json"
     proc = snakemake(work, "-n", "--forcerun", "refine", target)
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
-    assert _refine_mem_mb(proc.stdout + proc.stderr) == 3000  # the tiny capture's are small
+    out = proc.stdout + proc.stderr
+    # the tiny capture's databases are small
+    assert (_mem_mb(out, "refine"), _mem_mb(out, "reprojection_complete")) == (3000, 1500)
     matches = work / "results" / "tiny" / "matches"
     os.truncate(matches / "database.db", 400 * 10**6)  # a larger array's, as a sparse file
-    size = sum((matches / f).stat().st_size for f in ("database.db", "central.db"))
+    view_db = (matches / "database.db").stat().st_size
+    both = view_db + (matches / "central.db").stat().st_size
     proc = snakemake(work, "-n", "--forcerun", "refine", target)
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
-    assert _refine_mem_mb(proc.stdout + proc.stderr) == job_memory.refine_mem_mb(size) > 4500
+    out = proc.stdout + proc.stderr
+    assert _mem_mb(out, "refine") == job_memory.refine_mem_mb(both) > 4500
+    assert _mem_mb(out, "reprojection_complete") == job_memory.reprojection_mem_mb(
+        view_db) == 2600
