@@ -237,6 +237,11 @@ def current_exp1(work: Path) -> bool:
     return exp1.is_file() and cams.is_file() and exp1.stat().st_mtime >= cams.stat().st_mtime
 
 
+def measured(work: Path) -> bool:
+    """Whether the capture in ``work`` has been measured (its ``eval/gt_errors.json``)."""
+    return (work / "results" / DATASET / "eval" / "gt_errors.json").is_file()
+
+
 def kept_captures(geometries: list[str]) -> list[tuple[str, Path]]:
     """Every kept capture of ``geometries`` (``bench/out/accuracy/<geometry>-s<seed>`` with
     its ``gt_errors.json``), by geometry, then seed."""
@@ -244,8 +249,7 @@ def kept_captures(geometries: list[str]) -> list[tuple[str, Path]]:
     for geom in geometries:
         pat = re.compile(rf"{re.escape(geom)}-s(\d+)")
         seeds = sorted(int(m.group(1)) for p in OUT.glob(f"{geom}-s*")
-                       if (m := pat.fullmatch(p.name))
-                       and (p / "results" / DATASET / "eval" / "gt_errors.json").is_file())
+                       if (m := pat.fullmatch(p.name)) and measured(p))
         found += [(f"{geom}-s{s}", OUT / f"{geom}-s{s}") for s in seeds]
     return found
 
@@ -592,14 +596,12 @@ def main() -> None:
                 walls[name] = run_capture(work, capture_config(geom, seed, changes),
                                           args.forcerun, args.jobs, args.triggers,
                                           TARGETS[:2] if args.no_exp1 else TARGETS)
-            if args.collect_only and not (work / "results" / DATASET / "eval"
-                                          / "gt_errors.json").is_file():
+            if args.collect_only and not measured(work):
                 print(f"  {work.name}: not measured yet (no eval/gt_errors.json): left out",
                       file=sys.stderr)
                 continue
             results[name] = collect(work, exp1=not args.no_exp1)
-            if args.paired and (base / "results" / DATASET / "eval" / "gt_errors.json"
-                                ).is_file():
+            if args.paired and measured(base):
                 kept[name] = collect(base, exp1=False)
             print(f"  {name}: " + ", ".join(f"{k} {_fmt(f, results[name].get(k))}"
                                             for k, _, f in COLUMNS[:7]), flush=True)
