@@ -205,9 +205,9 @@ def test_a_subject_on_black_is_checked_on_its_lit_lenses():
     """Issue 33's doll on black, made from Boys2: every lens outside an ellipse around one
     face black. 15 % of the lenses are measured, too few for the old rule, which kept the
     file's grid (11 px off there: the corner views then show arcs and a honeycomb on the
-    hair); 62 % of the lit ones. The check is verified on its lit lenses, the drift under
-    the face is plain, and the refined lattice lies there nearer the whole frame's than
-    the file's grid does."""
+    hair); 61 % of the lit ones. The check is verified on its lit lenses, the drift is
+    judged under the face (the worst lens lies in the black), and the refined lattice lies
+    there nearer the whole frame's than the file's grid does."""
     from scipy.spatial import cKDTree  # noqa: PLC0415
 
     from plenocal.convert.gridcheck import MIN_SHARE  # noqa: PLC0415
@@ -221,12 +221,30 @@ def test_a_subject_on_black_is_checked_on_its_lit_lenses():
     assert check.measured_share < MIN_SHARE < 0.5 < check.lit_share
     assert abs(check.lit - keep.sum()) < 0.1 * keep.sum()
     assert check.verified and not check.foreign and check.refine_auto, check.summary()
+    assert check.judged_drift_px < check.drift_max_px  # judged at a lit lens, not the worst
     whole = refine_grid(grid, check_grid(img, grid)).centres
     ref = whole[cKDTree(whole).query(c[keep])[1]]  # the whole frame's lattice at the face
     on_black = refine_grid(grid, check).centres
     fitted = np.linalg.norm(on_black[cKDTree(on_black).query(ref)[1]] - ref, axis=1)
     file = np.linalg.norm(c[keep] - ref, axis=1)
     assert np.median(fitted) < 0.6 * np.median(file), (np.median(fitted), np.median(file))
+
+
+@pytest.mark.skipif(not FRAMES.is_dir(), reason="shared/real/frames not present")
+def test_a_right_file_on_black_is_not_refined_by_the_fits_extrapolation():
+    """Origami made black around its centre: its file is right to a pixel (the whole frame
+    drifts 1.5 px at its worst lens). The fit from the lit part extrapolates to the black
+    corners, whose drift passes 4 of its standard errors there; under the subject, where
+    the views have content, it is under the 1 px bar, and the file's grid stays."""
+    img, calib = _read_frame("Origami")
+    H, W = img.shape[:2]
+    grid = MicrolensGrid(calib, W, H)
+    c = grid.centres
+    keep = ((c[:, 0] / W - 0.5) / 0.2) ** 2 + ((c[:, 1] / H - 0.5) / 0.2) ** 2 <= 1
+    check = check_grid(_on_black(img, grid, keep), grid)
+    assert check.verified and not check.foreign
+    assert check.drift_max_px > AUTO_DRIFT_PX and check.drift_max_px > 4 * check.drift_stderr_px
+    assert check.judged_drift_px < AUTO_DRIFT_PX and not check.refine_auto
 
 
 @pytest.mark.skipif(not FRAMES.is_dir(), reason="shared/real/frames not present")

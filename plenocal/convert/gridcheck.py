@@ -59,13 +59,17 @@ offsets are the files', not the method's. (The grey-level phase says the same in
 - ``auto`` (the rule of :func:`decide`): refine when the file's grid drifts from the fitted
   lattice by more than ``AUTO_DRIFT_PX`` = 1 px at its worst lens, and there by more than
   ``AUTO_DRIFT_SIGMAS`` = 4 standard errors of that lens's fitted drift, and the file is
-  not foreign; or when the worst of the lit lenses (below) passes the same test. The
-  standard error grows where the fit extrapolates past the measured lenses. On a frame
-  whose lit lenses fill one part of the sensor (a subject on black), the worst lens lies
-  in the black, where the error is too large to tell, while the drift under the subject is
-  plain: 10.7 px against a standard error of 1.6 px on Boys2 made black around one
-  face. Only one more lens is tested, not every lens, so that the check's own systematic
-  error (below) does not pass the test somewhere by chance.
+  not foreign. Where fewer than ``PARTIAL_LIT`` (half) of the lenses are lit (a subject on
+  black, below), the worst lit lens is judged instead: the worst lens lies in the black,
+  where the views show nothing and the fit only extrapolates from the lit part. Its
+  standard error there understates how wrong the extrapolation can be: on the Raytrix
+  frames made black around a subject (Fujita2, Origami), whose files are right to a pixel,
+  the worst lens read 2.6 +- 0.4 and 1.4 +- 0.3 px, the worst lit one 0.96 and 0.45 px. On
+  Boys2 made black around one face the worst lit lens reads 7.7 +- 1.4 px (refined; the
+  worst lens, in the black, 11.0 +- 4.1). HandTools made black around its centre keeps the
+  file's grid: 4.6 +- 1.9 px at its worst lit lens, under 4 standard errors (its 9 % of
+  lenses measured scatter 6 px about any lattice), and its corner views there are cut up
+  to 5 px off the micro images' centres.
   Why 1 px: a centre error of ``e`` px shifts that lens's tile in a view by ``e T / P``
   output pixels (seams at tile borders), so half a pixel would be the ideal bar, but it is
   below what the check can tell apart from its own systematic error: on the 28 shots of the
@@ -85,15 +89,15 @@ offsets are the files', not the method's. (The grey-level phase says the same in
 - Fewer than ``MIN_SHARE`` of the lit lenses measured (or none fitted): the check cannot
   confirm the grid either way (``verified`` false, a warning); auto keeps the file's grid.
   A lens is lit where the mean of its micro image's central disc (a quarter of the pitch
-  across) is at least ``LIT_FRACTION`` (a tenth) of the 95th percentile of those means over
-  the sensor: a micro image of a black background holds no light to measure the lattice
-  by, and counting it would hold a frame of a subject on black (a doll's face in the middle
-  of a TSPC frame; Boys2 with all but 574 of its 2,762 lenses made black: 14 % of its lenses
-  measured, 70 % of its lit ones) to the file's grid, 17 px off on that camera, and its
-  views to the arcs and lattice of off-centre patches. The lit lenses' share moves little
-  with the fraction (Boys2 on black 0.69-0.73, R42_klein_crop 0.16-0.18, every other frame
-  here 0.31 or more, at a twentieth to a fifth), and a frame whose micro images are all dim
-  keeps every lens lit: the fraction is of the frame's own bright lenses.
+  across) stands ``LIT_FRACTION`` (a tenth) of the way from the darkest lenses' level to the
+  brightest ones' (:func:`lit_lenses`). A micro image of a black background holds no light
+  to measure the lattice by, and counting it held a frame of a subject on black (the doll's
+  face in the middle of a TSPC frame; made here from Boys2, every lens but 574 of its 2,762
+  black: 15 % of its lenses measured, 61 % of its 550 lit ones) to the file's grid, 11 px
+  off under the face there, and its corner views to arcs and a honeycomb on the hair. The
+  lit lenses' share moves little with the fraction (a twentieth to a fifth): Boys2 on black
+  0.61-0.62, R42_klein_crop 0.10-0.17, the other real frames 0.22 or more (Fujita2_f150
+  0.22-0.23, whose share of all its lenses measured was 0.21).
   A far-off grid (another camera's pitch) ends here, and so does R42_klein_crop, whose file
   is right: 16 % of its lenses measured, and the lattice it fits (18 px off the file's at
   the centre) is wrong - the views made on the file's grid are clean, those made with the
@@ -116,7 +120,11 @@ from plenocal.io.raytrix import RayCalib
 AUTO_DRIFT_PX = 1.0  # refine (convert.grid: auto) past this drift of the file's grid
 AUTO_DRIFT_SIGMAS = 4.0  # ... and when the drift is this many standard errors
 MIN_SHARE = 0.2  # fewer lit lenses measured than this: the grid is not on the micro images
-LIT_FRACTION = 0.1  # of the bright lenses' level (95th percentile): a lens lit, measurable
+LIT_FRACTION = 0.1  # of the way from the dark lenses' level to the bright ones': lit
+LIT_PERCENTILES = (1.0, 99.0)  # the dark and the bright lenses' levels
+# fewer of the lenses lit than this: the drift is judged at the worst lit lens, not the
+# worst lens on the sensor
+PARTIAL_LIT = 0.5
 FOREIGN_PITCH = 0.02  # fitted pitch this far from the file's: another camera's file
 FOREIGN_OFFSET = 0.25  # lenses: fitted lattice this far from the file's at the image centre
 FOREIGN_RESIDUAL = 0.2  # lenses: measurements this far from any lattice (rms)
@@ -169,6 +177,8 @@ class GridCheck:
     measured_share: float  # of every lens
     lit: int  # lenses whose micro images hold light to measure (lit_lenses)
     lit_share: float  # of the lit lenses, those measured: verified from MIN_SHARE
+    judged_drift_px: float  # the drift convert.grid auto judges (module docstring)
+    judged_stderr_px: float  # ... and its standard error
     fitted: bool
     drift_max_px: float  # file grid vs fitted lattice, over every lens on the sensor
     drift_rms_px: float
@@ -202,9 +212,10 @@ class GridCheck:
                              decimals=True)
              for k, v in asdict(self).items()}
         del d["seconds"]
-        d["rule"] = (f"convert.grid auto refines when the drift at the worst lens, or at the "
-                     f"worst lit lens, is > {AUTO_DRIFT_PX} px and > {AUTO_DRIFT_SIGMAS:g} x "
-                     "its standard error there (drift_stderr_px: the worst lens's), verified "
+        d["rule"] = (f"convert.grid auto refines when the drift at the judged lens (the worst "
+                     f"one; the worst lit one where fewer than {PARTIAL_LIT:g} of the lenses "
+                     f"are lit) is > {AUTO_DRIFT_PX} px and > {AUTO_DRIFT_SIGMAS:g} x its "
+                     f"standard error (judged_drift_px, judged_stderr_px), verified "
                      f"(lit_share >= {MIN_SHARE}) and not foreign")
         return d
 
@@ -347,8 +358,11 @@ def _measure(image: np.ndarray, origin: np.ndarray, A: np.ndarray, centres: np.n
 
 def lit_lenses(g: np.ndarray, pts: np.ndarray, Ds: float) -> np.ndarray:
     """(n,) bool: the lenses at ``pts`` (pixels of ``g``, micro images ``Ds`` px across)
-    whose central disc, a quarter of the pitch across (a box of that width), holds at
-    least :data:`LIT_FRACTION` of the 95th percentile of every lens's such mean."""
+    whose central disc, a quarter of the pitch across (a box of that width), stands above
+    the darkest lenses' level by at least :data:`LIT_FRACTION` of the way to the brightest
+    lenses' (the :data:`LIT_PERCENTILES` of every lens's such mean: a black level, as a
+    video's limited range has, counts as dark, and a subject on one lens in a hundred still
+    sets the bright level)."""
     r = max(1, int(round(Ds / 8)))
     m = cv2.blur(g, (2 * r + 1, 2 * r + 1), borderType=cv2.BORDER_REPLICATE)
     H, W = g.shape
@@ -357,7 +371,8 @@ def lit_lenses(g: np.ndarray, pts: np.ndarray, Ds: float) -> np.ndarray:
     mean = m[y, x].astype(np.float64)
     if len(mean) == 0:
         return np.zeros(0, bool)
-    return mean >= LIT_FRACTION * float(np.percentile(mean, 95))
+    dark, bright = np.percentile(mean, LIT_PERCENTILES)
+    return mean >= dark + LIT_FRACTION * (bright - dark)
 
 
 def _coefficients(f: np.ndarray, ks: np.ndarray, o_s: np.ndarray, Ds: float, box: int,
@@ -500,7 +515,8 @@ def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
         return GridCheck(
             width=W, height=H, diameter_px=float(D), lenses=n_lens, measured=measured,
             measured_share=float(share), lit=n_lit, lit_share=float(lit_share),
-            fitted=False, drift_max_px=math.nan,
+            fitted=False, judged_drift_px=math.nan, judged_stderr_px=math.nan,
+            drift_max_px=math.nan,
             drift_rms_px=math.nan, drift_stderr_px=math.nan, regions={}, offset_px=nan2,
             pitch_ratio=math.nan, rotation_deg=math.nan, affine=[], origin=nan2, A=[],
             similarity_origin=nan2, residual_rms_px=math.nan,
@@ -536,11 +552,13 @@ def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
     foreign = bool(verified and (abs(scale - 1) > FOREIGN_PITCH
                                  or float(np.linalg.norm(off)) > FOREIGN_OFFSET * D
                                  or res_rms > FOREIGN_RESIDUAL * D))
-    # the worst lens, and the worst lit one (a subject on black: the worst lens lies in the
-    # black, where the fit extrapolates and its error is large)
-    tested = [worst] + ([int(np.flatnonzero(lit)[np.argmax(dn[lit])])] if lit.any() else [])
-    refine_auto = bool(verified and not foreign and any(
-        dn[i] > AUTO_DRIFT_PX and dn[i] > AUTO_DRIFT_SIGMAS * se[i] for i in tested))
+    # the lens whose drift decides: the worst one; on a frame lit on a part of the sensor
+    # only (a subject on black) the worst lit one, where the views have content (the worst
+    # lens lies in the black, where the fit extrapolates)
+    partial = n_lit < PARTIAL_LIT * n_lens
+    judged = int(np.flatnonzero(lit)[np.argmax(dn[lit])]) if partial and n_lit else worst
+    refine_auto = bool(verified and not foreign and dn[judged] > AUTO_DRIFT_PX
+                       and dn[judged] > AUTO_DRIFT_SIGMAS * se[judged])
     if not verified:
         warnings.append(
             f"grid check: only {100 * lit_share:.0f}% of the {n_lit} lit lenses measured: the "
@@ -560,6 +578,7 @@ def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
     return GridCheck(
         width=W, height=H, diameter_px=float(D), lenses=n_lens, measured=measured,
         measured_share=float(share), lit=n_lit, lit_share=float(lit_share), fitted=True,
+        judged_drift_px=float(dn[judged]), judged_stderr_px=float(se[judged]),
         drift_max_px=float(dn.max()),
         drift_rms_px=float(np.sqrt(np.mean(dn ** 2))), drift_stderr_px=stderr,
         regions=regions, offset_px=(float(off[0]), float(off[1])),
