@@ -328,7 +328,8 @@ WARNING_SOURCES: tuple[tuple[str, Callable[[Path], Sequence[str]]], ...] = (
     ("reg_a/features.json", _features_warnings),  # registration A: views with few features
     ("reg_b/rig.json", _rig_warnings),  # registration B: Eqs. 2-3 inverse check failed
     ("merge/scale.json", _scale_warnings),  # Eq. 5 and the stage's step disagree
-    ("calibration/refine.json", _refine_warnings),  # the refinement rejected
+    # the refinement rejected, or a shot registration A placed badly
+    ("calibration/refine.json", _refine_warnings),
 )
 
 
