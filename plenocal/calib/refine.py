@@ -86,7 +86,7 @@ import math
 import shutil
 import tempfile
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -521,17 +521,15 @@ def frame_poses(rec, model: RigModel) -> dict[str, np.ndarray]:
     return out
 
 
-def shot_groups(rec, model: RigModel) -> list[list[str]]:
-    """The shots as the points tie them: two shots are in one group where a chain of
-    points links them. Several groups where the matches leave them apart (rule
-    view_matches pairs each shot with its nearest shots only, which can split the array
-    in two): then no point fixes where one group lies relative to another. Each group
-    sorted, the groups by their first shot."""
-    shot_of_frame = {fid: shot for shot, fid in model.frame_of_shot.items()}
-    groups = Groups(model.frame_of_shot)
-    for pid in rec.point3D_ids():
-        first, *rest = sorted({shot_of_frame[rec.image(el.image_id).frame_id]
-                               for el in rec.point3D(pid).track.elements})
+def shot_groups(ties: list[frozenset[str]], shots: Iterable[str]) -> list[list[str]]:
+    """The shots as the points ``ties`` (:func:`point_shots`) tie them: two shots are in
+    one group where a chain of points links them. Several groups where the matches leave
+    them apart (rule view_matches pairs each shot with its nearest shots only, which can
+    split the array in two): then no point fixes where one group lies relative to another.
+    Each group sorted, the groups by their first shot."""
+    groups = Groups(shots)
+    for seen in ties:
+        first, *rest = sorted(seen)
         for other in rest:
             groups.join(other, first)
     return groups.groups()
@@ -860,7 +858,8 @@ def _adjusted(rec, model: RigModel, eq6, rig: RigB, views, shots, central, shot_
                                     refine_rig=free_rig, hold_frame=hold_shot,
                                     refine_pp=settings.rig == "scale_pp",
                                     loss_scale_px=loss_scale)
-    groups = shot_groups(rec, model)
+    ties = point_shots(rec, model)
+    groups = shot_groups(ties, model.frame_of_shot)
     placed = {}
     if len(groups) > 1 and settings.frames == "refine":
         # no point ties one group to another: each keeps Eq. 6's place (place_groups)
@@ -906,7 +905,6 @@ def _adjusted(rec, model: RigModel, eq6, rig: RigB, views, shots, central, shot_
         "rig_change": rig_change,
         "passes": passes,
     }
-    ties = point_shots(rec, model)
     report.update(shot_shifts(eq6, cams, shots, central, settings.max_shift_pct, ties,
                               settings.min_tie_points))
     report["shot_groups"] = groups
