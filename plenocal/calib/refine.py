@@ -918,15 +918,20 @@ def _adjusted(rec, model: RigModel, eq6, rig: RigB, views, shots, central, shot_
         report["warnings"].append(msg)
         log.warning(msg)
     report["gain"] = fit_gain(before, after, settings.min_gain_pct)
-    for msg in report["warnings"][:len(report["corrected_shots"])]:
-        log.warning(msg)
+    corrected = len(report["corrected_shots"])
     if report["rejected"]:
         log.warning(report["warnings"][0])
         cams = dict(eq6)
     elif not report["gain"]["kept"]:
         log.info(report["gain"]["why"])
         report["rejected"] = True
+        # the shots' corrections go with the refinement (their warnings say it is kept)
+        report["corrected_shots"] = {}
+        del report["warnings"][:corrected]
         cams = dict(eq6)
+    else:
+        for msg in report["warnings"][:corrected]:
+            log.warning(msg)
     log.info("refinement took %.1f s (%.1f s triangulation)", time.perf_counter() - t0, t_tri)
     log.info("refined: focal %.4f -> %.4f px (%+.4f %%), scale vs Eq. 5 %.6f (rig held: "
              "%.6f), observations mean %.4f -> %.4f px", focal_a, focal,
@@ -1005,7 +1010,7 @@ def shot_shifts(eq6: Mapping[str, PinholeCamera], refined: Mapping[str, PinholeC
     ``min_tie_points`` of the adjustment's points ``ties`` (:func:`point_shots`) tie it to
     the shots that moved less: registration A, which places every shot of Eq. 6, can place
     one badly (a hand-held shot 8.5 mm and 0.33 deg off on a capture of the tele geometry,
-    whose refinement, tied to the other shots by 471 points, put it within 0.03 mm), and
+    whose refinement, the shot tied to the others by 471 points, met every target), and
     the refinement is kept, with a warning that names the shot. Where fewer points tie it
     (or ``ties`` is None), the shot slid where no point held it: the refinement is
     rejected, with a warning, and the Eq. 6 result is written instead (a group of shots
