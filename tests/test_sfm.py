@@ -183,3 +183,23 @@ def test_few_features_warning_is_in_the_output(tmp_path):
     write_json(tmp_path / "features.json", info)
     read = dict(WARNING_SOURCES)["reg_a/features.json"]
     assert read(tmp_path / "features.json") == tuple(info["warnings"])
+
+
+def test_a_shot_held_by_few_points_is_a_warning_the_report_reads(tmp_path):
+    """tele-s36's hand03 was held by 19 points against a median of 1,221, and was 8.5 mm
+    off; the weakest shot of every other kept capture had a third of its median or more."""
+    from plenocal.artifacts.reg_a import RegistrationA, read_reg_a, write_reg_a  # noqa: PLC0415
+    from plenocal.calib.reg_a.sfm import WEAK_SHOT_SHARE, weak_shots  # noqa: PLC0415
+    from plenocal.camera import PinholeCamera  # noqa: PLC0415
+
+    points = {"x00_y00": 1221, "x01_y00": 1300, "hand00": 974, "hand03": 19}
+    (msg,) = weak_shots(points)
+    assert "shot hand03 by 19 points" in msg and "median of 1098" in msg  # (974 + 1221) / 2
+    assert weak_shots({**points, "hand03": 434}) == []  # tele-s34's weakest: a third
+    assert weak_shots({"a": 100, "b": int(100 * WEAK_SHOT_SHARE)}) == []
+    cam = PinholeCamera(np.diag([500.0, 500.0, 1.0]), np.eye(4), 64, 48)
+    reg = RegistrationA(500.0, 64, 48, "incremental", {"hand03": cam},
+                        stats={"points_per_shot": points, "warnings": [msg]})
+    write_reg_a(tmp_path / "reg_a.json", reg)
+    assert read_reg_a(tmp_path / "reg_a.json").stats["warnings"] == [msg]
+    assert dict(WARNING_SOURCES)["reg_a/reg_a.json"](tmp_path / "reg_a.json") == (msg,)

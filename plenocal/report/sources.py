@@ -282,6 +282,10 @@ def _convert_setup_warnings(path: Path) -> tuple[str, ...]:
     return read_setup(path).warnings
 
 
+def _reg_a_warnings(path: Path) -> tuple[str, ...]:
+    return read_warnings(path, "reg_a.json (registration A)", "rerun rule map_a")
+
+
 def _features_warnings(path: Path) -> tuple[str, ...]:
     return read_warnings(path, "features.json (registration A's features)",
                          "rerun rule features_a")
@@ -326,6 +330,7 @@ WARNING_SOURCES: tuple[tuple[str, Callable[[Path], Sequence[str]]], ...] = (
     ("views/convert_setup.json", _convert_setup_warnings),
     ("views/{cam}/disparity.json", read_disparity_warnings),  # confident patch sizes
     ("reg_a/features.json", _features_warnings),  # registration A: views with few features
+    ("reg_a/reg_a.json", _reg_a_warnings),  # registration A: shots held by few points
     ("reg_b/rig.json", _rig_warnings),  # registration B: Eqs. 2-3 inverse check failed
     ("merge/scale.json", _scale_warnings),  # Eq. 5 and the stage's step disagree
     # the refinement rejected, or a shot registration A placed badly
