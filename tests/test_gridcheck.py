@@ -190,14 +190,23 @@ def test_boys2_file_grid_drifts_towards_the_right_edge():
     assert after.max() < 0.35 * tspc.max()
 
 
-def _on_black(img: np.ndarray, grid: MicrolensGrid, keep: np.ndarray) -> np.ndarray:
-    """``img`` with the micro images of every lens but ``keep`` black (a sensor's dark
-    noise, grey 3 +- 1.2): a subject in front of a black background."""
+def _on_black(name: str, centre: tuple[float, float], axes: tuple[float, float]):
+    """Frame ``name`` with the micro images of every lens outside an ellipse (``centre``
+    and half ``axes`` in shares of the frame's width and height) black, a sensor's dark
+    noise (grey 3 +- 1.2): a subject in front of a black background. Returns the frame,
+    its file grid, the kept lenses and the grid check of the frame on black."""
+    img, calib = _read_frame(name)
+    H, W = img.shape[:2]
+    grid = MicrolensGrid(calib, W, H)
+    c = grid.centres
+    keep = (((c[:, 0] / W - centre[0]) / axes[0]) ** 2
+            + ((c[:, 1] / H - centre[1]) / axes[1]) ** 2 <= 1)
     mask = np.zeros(img.shape[:2], np.uint8)
-    for x, y in grid.centres[keep]:
+    for x, y in c[keep]:
         cv2.circle(mask, (int(round(x)), int(round(y))), int(0.55 * grid.diameter), 255, -1)
     dark = np.clip(np.random.default_rng(0).normal(3.0, 1.2, img.shape), 0, 255)
-    return np.where(mask[..., None] > 0, img, dark.astype(img.dtype))
+    black = np.where(mask[..., None] > 0, img, dark.astype(img.dtype))
+    return img, grid, keep, check_grid(black, grid)
 
 
 @pytest.mark.skipif(not FRAMES.is_dir(), reason="shared/real/frames not present")
@@ -212,12 +221,8 @@ def test_a_subject_on_black_is_checked_on_its_lit_lenses():
 
     from plenocal.convert.gridcheck import MIN_SHARE  # noqa: PLC0415
 
-    img, calib = _read_frame("Boys2")
-    H, W = img.shape[:2]
-    grid = MicrolensGrid(calib, W, H)
+    img, grid, keep, check = _on_black("Boys2", (0.66, 0.33), (0.22, 0.30))
     c = grid.centres
-    keep = ((c[:, 0] / W - 0.66) / 0.22) ** 2 + ((c[:, 1] / H - 0.33) / 0.30) ** 2 <= 1
-    check = check_grid(_on_black(img, grid, keep), grid)
     assert check.measured_share < MIN_SHARE < 0.5 < check.lit_share
     assert abs(check.lit - keep.sum()) < 0.1 * keep.sum()
     assert check.verified and not check.foreign and check.refine_auto, check.summary()
@@ -236,12 +241,7 @@ def test_a_right_file_on_black_is_not_refined_by_the_fits_extrapolation():
     drifts 1.5 px at its worst lens). The fit from the lit part extrapolates to the black
     corners, whose drift passes 4 of its standard errors there; under the subject, where
     the views have content, it is under the 1 px bar, and the file's grid stays."""
-    img, calib = _read_frame("Origami")
-    H, W = img.shape[:2]
-    grid = MicrolensGrid(calib, W, H)
-    c = grid.centres
-    keep = ((c[:, 0] / W - 0.5) / 0.2) ** 2 + ((c[:, 1] / H - 0.5) / 0.2) ** 2 <= 1
-    check = check_grid(_on_black(img, grid, keep), grid)
+    _, _, _, check = _on_black("Origami", (0.5, 0.5), (0.2, 0.2))
     assert check.verified and not check.foreign
     assert check.drift_max_px > AUTO_DRIFT_PX and check.drift_max_px > 4 * check.drift_stderr_px
     assert check.judged_drift_px < AUTO_DRIFT_PX and not check.refine_auto

@@ -73,6 +73,20 @@ def eq6_of(views: dict[str, PinholeCamera], rig: RigB, seed: int = 1) -> dict[st
     return out
 
 
+def shot_moved(cams: dict[str, PinholeCamera], rig: RigB, shot: str, dx_m: float,
+               turn_deg: float = 0.0) -> dict[str, PinholeCamera]:
+    """``cams`` with every view of ``shot`` moved ``dx_m`` along x and turned ``turn_deg``
+    about y, as a whole (its rig kept)."""
+    out = dict(cams)
+    for view in rig.view_poses():
+        c = cams[f"{shot}/{view}"]
+        M = c.cam_to_world.copy()
+        M[:3, :3] = _rot([0, 1, 0], turn_deg) @ M[:3, :3]
+        M[0, 3] += dx_m
+        out[f"{shot}/{view}"] = PinholeCamera(c.K, M, W, H)
+    return out
+
+
 def settings(**kw) -> rf.RefineSettings:
     """The refinement on the view database's matches (refine.tracks: views) unless ``kw``
     says otherwise (tests/test_central_tracks.py: central)."""
@@ -220,12 +234,7 @@ def test_a_wrong_focal_length_is_pulled_back_towards_the_truth(capture):
 def test_a_refinement_that_moves_a_shot_far_is_rejected(capture):
     views, rig, _ = capture
     eq6 = eq6_of(views, rig)
-    moved = dict(eq6)
-    for view in rig.view_poses():  # one shot slid 5 mm sideways, as a whole
-        c = eq6[f"hand01/{view}"]
-        M = c.cam_to_world.copy()
-        M[0, 3] += 0.005
-        moved[f"hand01/{view}"] = PinholeCamera(c.K, M, W, H)
+    moved = shot_moved(eq6, rig, "hand01", 0.005)  # one shot slid 5 mm sideways
     out = rf.shot_shifts(eq6, moved, list(SHOTS), "1_1", 2.0)
     assert out["rejected"] and "hand01" in out["warnings"][0]
     assert out["max_shift_mm"] > 3.0 and out["limit_mm"] < out["max_shift_mm"]
@@ -242,12 +251,7 @@ def test_a_shot_moved_far_but_tied_to_the_others_is_a_correction(capture):
     kept. Points shared only among the moved shots, or too few, do not hold it."""
     views, rig, _ = capture
     eq6 = eq6_of(views, rig)
-    moved = dict(eq6)
-    for view in rig.view_poses():
-        c = eq6[f"hand01/{view}"]
-        M = c.cam_to_world.copy()
-        M[0, 3] += 0.005
-        moved[f"hand01/{view}"] = PinholeCamera(c.K, M, W, H)
+    moved = shot_moved(eq6, rig, "hand01", 0.005)
     tied = [frozenset({"hand01", "x00_y00"})] * 150 + [frozenset({"x00_y00", "x01_y00"})] * 9
     out = rf.shot_shifts(eq6, moved, list(SHOTS), "1_1", 2.0, tied, 100)
     assert not out["rejected"] and out["corrected_shots"] == {"hand01": 150}
@@ -258,12 +262,7 @@ def test_a_shot_moved_far_but_tied_to_the_others_is_a_correction(capture):
     assert few["rejected"] and few["corrected_shots"] == {}
     assert "only 99 of its points" in few["warnings"][0]
     # two shots that moved together, tied to each other only: nothing holds them
-    both = dict(moved)
-    for view in rig.view_poses():
-        c = eq6[f"hand00/{view}"]
-        M = c.cam_to_world.copy()
-        M[0, 3] += 0.005
-        both[f"hand00/{view}"] = PinholeCamera(c.K, M, W, H)
+    both = shot_moved(moved, rig, "hand00", 0.005)
     pair = [frozenset({"hand00", "hand01"})] * 500
     assert rf.shot_shifts(eq6, both, list(SHOTS), "1_1", 2.0, pair, 100)["rejected"]
 
@@ -274,13 +273,7 @@ def test_a_badly_placed_eq6_shot_is_moved_back_and_the_refinement_kept(capture):
     kept, with a warning naming it."""
     views, rig, db = capture
     eq6 = eq6_of(views, rig)
-    bad = dict(eq6)
-    for view in rig.view_poses():
-        c = eq6[f"hand01/{view}"]
-        M = c.cam_to_world.copy()
-        M[:3, :3] = _rot([0, 1, 0], 0.3) @ M[:3, :3]
-        M[:3, 3] += [0.008, 0.0, 0.0]
-        bad[f"hand01/{view}"] = PinholeCamera(c.K, M, W, H)
+    bad = shot_moved(eq6, rig, "hand01", 0.008, turn_deg=0.3)
     out = rf.refine_calibration(bad, rig, db, settings(rig="scale", max_shift_pct=5.0),
                                 hold_shot="x00_y00")
     rep = out.report

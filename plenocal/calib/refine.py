@@ -1042,8 +1042,9 @@ def shot_shifts(eq6: Mapping[str, PinholeCamera], refined: Mapping[str, PinholeC
     loose = [s for s in far if held[s] < min_tie_points]
     worst = int(np.argmax(moved))
     shift = dict(zip(shots, moved, strict=True))
+    turn = dict(zip(shots, turned, strict=True))
     out = {"shot_shift_mm": {s: 1000.0 * float(m) for s, m in shift.items()},
-           "shot_turn_deg": dict(zip(shots, turned, strict=True)),
+           "shot_turn_deg": turn,
            "max_shift_mm": 1000.0 * float(moved[worst]), "limit_mm": 1000.0 * limit,
            "shot_ties": None if ties is None else shot_ties(ties, list(shots)),
            "corrected_shots": {} if loose else {s: held[s] for s in far},
@@ -1061,7 +1062,7 @@ def shot_shifts(eq6: Mapping[str, PinholeCamera], refined: Mapping[str, PinholeC
     else:
         for s in far:
             out["warnings"].append(
-                f"Eq. 6 placed shot {s} {1000 * shift[s]:.2f} mm and {turned[shots.index(s)]:.3f} "
+                f"Eq. 6 placed shot {s} {1000 * shift[s]:.2f} mm and {turn[s]:.3f} "
                 f"deg from where the joint refinement puts it, {held[s]} points tying it to "
                 f"the shots that moved less than {1000 * limit:.2f} mm: registration A "
                 "placed it badly (see reg_a/), and the refinement is kept (calibration/eq6/ "
