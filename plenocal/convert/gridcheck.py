@@ -68,8 +68,9 @@ offsets are the files', not the method's. (The grey-level phase says the same in
   Boys2 made black around one face the worst lit lens reads 7.7 +- 1.4 px (refined; the
   worst lens, in the black, 11.0 +- 4.1). HandTools made black around its centre keeps the
   file's grid: 4.6 +- 1.9 px at its worst lit lens, under 4 standard errors (its 9 % of
-  lenses measured scatter 6 px about any lattice), and its corner views there are cut up
-  to 5 px off the micro images' centres.
+  lenses measured scatter 6 px about any lattice). Its file grid is 3-5 px off under the
+  subject there (the whole frame's fit), and its corner views show no arc or honeycomb at
+  100 % (BENCHMARKS.md, "HandTools on black, looked at"); Boys2's 11 px did.
   Why 1 px: a centre error of ``e`` px shifts that lens's tile in a view by ``e T / P``
   output pixels (seams at tile borders), so half a pixel would be the ideal bar, but it is
   below what the check can tell apart from its own systematic error: on the 28 shots of the
