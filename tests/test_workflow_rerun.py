@@ -17,6 +17,7 @@ import yaml
 from conftest import clone, snakemake
 
 from plenocal.names import central_view, view_names
+from plenocal.report.sources import stage_warnings
 
 VERIFY_RULES = {"synthesis_exp1", "synthesis_exp2", "synthesis_exp3_part", "synthesis_exp3",
                 "report", "all"}
@@ -61,6 +62,18 @@ def test_complete_run_leaves_nothing_to_do(complete_run: Path):
     assert planned(complete_run) == {}
     assert (complete_run / "results/tiny/report/index.html").is_file()
     assert (complete_run / "results/tiny/calibration/cameras.json").is_file()
+
+
+def test_complete_run_report_reads_every_stage_record(complete_run: Path):
+    """The report's warnings box reads every stage's record of a plain run: none is
+    "unreadable" (registration A wrote its ``warnings`` key only where a shot was weak, and
+    every report of a run without one said reg_a.json was unreadable)."""
+    results = complete_run / "results/tiny"
+    cams = sorted(p.name for p in (results / "views").iterdir() if p.is_dir())
+    found, read = stage_warnings(results, cams)
+    assert read >= len(cams) + 4  # disparity.json per shot, convert_setup, reg_a, ...
+    assert not [w for w in found if w.message.startswith("unreadable")], found
+    assert "unreadable" not in (results / "report/index.html").read_text()
 
 
 def test_verification_change_reruns_only_verification(complete_run: Path, tmp_path: Path):

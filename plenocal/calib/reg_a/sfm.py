@@ -280,8 +280,9 @@ def reg_a_dict(rec, mapper: str) -> RegistrationA:
     weak = weak_shots(points)
     for msg in weak:
         log.warning(msg)
-    if weak:
-        stats[WARNINGS_KEY] = warning_list(weak)
+    # always written, empty where no shot is weak: the report refuses a record without the
+    # key (plenocal.artifacts.stage_warnings), as it should a file of another version
+    stats[WARNINGS_KEY] = warning_list(weak)
     return RegistrationA(focal_px=float(camera.params[0]), width=int(camera.width),
                          height=int(camera.height), mapper=mapper, cameras=cams, stats=stats)
 
