@@ -194,7 +194,7 @@ def _on_black(name: str, centre: tuple[float, float], axes: tuple[float, float])
     """Frame ``name`` with the micro images of every lens outside an ellipse (``centre``
     and half ``axes`` in shares of the frame's width and height) black, a sensor's dark
     noise (grey 3 +- 1.2): a subject in front of a black background. Returns the frame,
-    its file grid, the kept lenses and the grid check of the frame on black."""
+    its file grid, the kept lenses, the grid check of the frame on black and that frame."""
     img, calib = _read_frame(name)
     H, W = img.shape[:2]
     grid = MicrolensGrid(calib, W, H)
@@ -206,7 +206,7 @@ def _on_black(name: str, centre: tuple[float, float], axes: tuple[float, float])
         cv2.circle(mask, (int(round(x)), int(round(y))), int(0.55 * grid.diameter), 255, -1)
     dark = np.clip(np.random.default_rng(0).normal(3.0, 1.2, img.shape), 0, 255)
     black = np.where(mask[..., None] > 0, img, dark.astype(img.dtype))
-    return img, grid, keep, check_grid(black, grid)
+    return img, grid, keep, check_grid(black, grid), black
 
 
 @pytest.mark.skipif(not FRAMES.is_dir(), reason="shared/real/frames not present")
@@ -221,7 +221,7 @@ def test_a_subject_on_black_is_checked_on_its_lit_lenses():
 
     from plenocal.convert.gridcheck import MIN_SHARE  # noqa: PLC0415
 
-    img, grid, keep, check = _on_black("Boys2", (0.66, 0.33), (0.22, 0.30))
+    img, grid, keep, check, _ = _on_black("Boys2", (0.66, 0.33), (0.22, 0.30))
     c = grid.centres
     assert check.measured_share < MIN_SHARE < 0.5 < check.lit_share
     assert abs(check.lit - keep.sum()) < 0.1 * keep.sum()
@@ -241,10 +241,23 @@ def test_a_right_file_on_black_is_not_refined_by_the_fits_extrapolation():
     drifts 1.5 px at its worst lens). The fit from the lit part extrapolates to the black
     corners, whose drift passes 4 of its standard errors there; under the subject, where
     the views have content, it is under the 1 px bar, and the file's grid stays."""
-    _, _, _, check = _on_black("Origami", (0.5, 0.5), (0.2, 0.2))
+    _, grid, _, check, black = _on_black("Origami", (0.5, 0.5), (0.2, 0.2))
     assert check.verified and not check.foreign
     assert check.drift_max_px > AUTO_DRIFT_PX and check.drift_max_px > 4 * check.drift_stderr_px
     assert check.judged_drift_px < AUTO_DRIFT_PX and not check.refine_auto
+    # its warning says what auto does: keep the file's grid (it said "auto corrects it")
+    (note,) = [w for w in check.warnings if "drifts" in w]
+    assert note.startswith(f"grid check: the calib.xml grid drifts up to "
+                           f"{check.drift_max_px:.2f} px from the micro-image centres, in "
+                           f"the dark part of the frame; under the lit lenses "
+                           f"{check.judged_drift_px:.2f} +- ")
+    assert "under the 1 px bar: convert.grid auto keeps the file's grid" in note
+    assert "auto corrects it" not in note
+    # with convert.grid refine the fitted lattice is used, and the warning says so
+    _, refined = grid_for_mode(black, grid, "refine")
+    (note,) = [w for w in refined.warnings if "drifts" in w]
+    assert note.endswith("; corrected: the views use the lattice fitted to the image "
+                         "(convert.grid: refine)")
 
 
 @pytest.mark.skipif(not FRAMES.is_dir(), reason="shared/real/frames not present")

@@ -236,18 +236,34 @@ class GridCheck:
                 + ("" if self.verified else " - UNVERIFIED (too few lit lenses measured)"))
 
 
+_DRIFT_HEAD = "grid check: the calib.xml grid drifts up to "
+
+
 def _drift_warning(drift_px: float, refined_by: str | None) -> str:
     """The warning of a calib.xml grid that drifts from the micro images, with what was
     done about it: nothing yet (``refined_by`` None: the check alone says how to correct
     it), or the views use the lattice fitted to the image (``convert.grid`` =
     ``refined_by``), so that a warning on the report's first screen does not ask for a
     correction that was made."""
-    head = (f"grid check: the calib.xml grid drifts up to {drift_px:.2f} px from the "
-            "micro-image centres")
+    head = f"{_DRIFT_HEAD}{drift_px:.2f} px from the micro-image centres"
     if refined_by is None:
         return head + " (convert.grid: refine / auto corrects it)"
     return (head + "; corrected: the views use the lattice fitted to the image "
             f"(convert.grid: {refined_by})")
+
+
+def _kept_warning(drift_px: float, judged_px: float, judged_se: float, partial: bool) -> str:
+    """The warning of a drift past :data:`AUTO_DRIFT_PX` that ``auto`` does not correct:
+    where the views have content (the worst lit lens of a frame lit in part) the drift is
+    under the bar, or within :data:`AUTO_DRIFT_SIGMAS` standard errors of the fit. Said so,
+    not "auto corrects it", which a frame of a right file on black read before."""
+    where = "under the lit lenses" if partial else "at its worst lens"
+    why = (f"under the {AUTO_DRIFT_PX:g} px bar" if judged_px <= AUTO_DRIFT_PX else
+           f"within {AUTO_DRIFT_SIGMAS:g} standard errors of the fit")
+    return (f"{_DRIFT_HEAD}{drift_px:.2f} px from the micro-image centres"
+            f"{', in the dark part of the frame' if partial else ''}; {where} "
+            f"{judged_px:.2f} +- {judged_se:.2f} px, {why}: convert.grid auto keeps the "
+            "file's grid (convert.grid: refine uses the lattice fitted to the image)")
 
 
 def grid_for_mode(image: np.ndarray, grid: MicrolensGrid, mode: str
@@ -258,10 +274,9 @@ def grid_for_mode(image: np.ndarray, grid: MicrolensGrid, mode: str
     check = check_grid(image, grid)
     check.mode = mode
     check.refined = decide(mode, check)
-    if check.refined:
-        uncorrected = _drift_warning(check.drift_max_px, None)
-        check.warnings = [_drift_warning(check.drift_max_px, mode) if w == uncorrected else w
-                          for w in check.warnings]
+    if check.refined:  # the drift's warning says it was corrected
+        check.warnings = [_drift_warning(check.drift_max_px, mode)
+                          if w.startswith(_DRIFT_HEAD) else w for w in check.warnings]
     if mode == "refine" and not check.fitted:
         check.warnings.append("convert.grid refine: the lattice could not be fitted; the "
                               "file's grid is used")
@@ -575,7 +590,9 @@ def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
             f"{dn.max():.1f} px of a {D:.1f} px lens): is calib.xml for this camera and this "
             "sensor crop?")
     elif dn.max() > AUTO_DRIFT_PX:
-        warnings.append(_drift_warning(float(dn.max()), None))
+        warnings.append(_drift_warning(float(dn.max()), None) if refine_auto else
+                        _kept_warning(float(dn.max()), float(dn[judged]), float(se[judged]),
+                                      partial))
     return GridCheck(
         width=W, height=H, diameter_px=float(D), lenses=n_lens, measured=measured,
         measured_share=float(share), lit=n_lit, lit_share=float(lit_share), fitted=True,
