@@ -122,6 +122,15 @@ GEOMETRIES["tall"] = {
     "scene": {"near_m": 0.45, "far_m": 0.85},
     "sensor": {"full_well_e": 20000, "bit_depth": 12},
 }
+# and a twelfth, the same way: the tele camera with a Raytrix-like MLA (three lens types,
+# the grid turned), on a 4 x 3 array, with the real sensor's effects of tall and a lens
+# barrel that clips the oblique bundles (mechanical vignetting at the sensor's edges)
+GEOMETRIES["tele-raytrix"] = {
+    **GEOMETRIES["tele"], "array": {"cols": 4, "rows": 3, "step_m": 0.02},
+    "mla": GEOMETRIES["raytrix"]["mla"], "sensor": GEOMETRIES["tall"]["sensor"],
+    "main_lens": {**GEOMETRIES["tele"]["main_lens"], "vignetting": {
+        "stop_distance_mm": 20.0, "stop_diameter_scale": 1.2}},
+}
 DEFAULT_SEEDS = (1, 2, 3, 4, 5)
 TARGETS = ("eval/gt_errors.json", "eval/reprojection.json", "eval/synthesis_exp1.json")
 
