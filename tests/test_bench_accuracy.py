@@ -84,3 +84,16 @@ def test_the_scale_target_judges_the_written_calibration_not_the_merge():
     row = next(line for line in rows if line.startswith("| small "))
     assert row.endswith("| 0 / 0 / 0 / 1 |")
     assert "0.169 / 0.310" in row  # the written scale's median / worst, not the merge's
+
+
+@pytest.mark.parametrize("geometry", sorted(ba.GEOMETRIES))
+def test_every_geometry_gives_a_config_the_schema_takes(geometry):
+    """A geometry's simulate block is a config the workflow accepts (a key misspelt or out of
+    range is refused here, not after a capture's first minutes)."""
+    from plenocal.config import validate_config  # noqa: PLC0415
+
+    cfg = validate_config(ba.capture_config(geometry, 38))
+    sim = cfg["datasets"][ba.DATASET]["simulate"]
+    assert sim["seed"] == 38
+    for key, value in ba.GEOMETRIES[geometry].get("array", {}).items():
+        assert sim["array"][key] == value
