@@ -203,3 +203,31 @@ def test_a_shot_held_by_few_points_is_a_warning_the_report_reads(tmp_path):
     write_reg_a(tmp_path / "reg_a.json", reg)
     assert read_reg_a(tmp_path / "reg_a.json").stats["warnings"] == [msg]
     assert dict(WARNING_SOURCES)["reg_a/reg_a.json"](tmp_path / "reg_a.json") == (msg,)
+
+
+def test_a_mapper_that_builds_no_model_gives_way_to_the_other(registered, tmp_path,
+                                                              monkeypatch):
+    """COLMAP's global mapper built no model from a held-out capture's 21 views (tele-s39:
+    its bundle adjustment left no 3-D point); the incremental one registers them. map_a
+    tries the other mapper once, uses it, and says so in reg_a.json's warnings."""
+    from plenocal.calib.reg_a import sfm  # noqa: PLC0415
+
+    ra, _ = registered
+    real = sfm.run_mapper
+
+    def global_fails(database, image_dir, *, mapper, **kw):
+        return {} if mapper == "global" else real(database, image_dir, mapper=mapper, **kw)
+
+    monkeypatch.setattr(sfm, "run_mapper", global_fails)
+    doc = map_a(ra / "database.db", ra / "images", tmp_path / "model",
+                mapper="global").to_dict()
+    assert doc["mapper"] == "incremental"
+    (note, *_) = doc["warnings"]
+    assert note.startswith("registration A: the global mapper (sfm.mapper) failed "
+                           "(registration A (global) built no model from")
+    assert note.endswith("the incremental mapper registered every view and is used")
+    # neither mapper: the first one's error, and the second's after it
+    monkeypatch.setattr(sfm, "run_mapper", lambda *a, **kw: {})
+    with pytest.raises(RegistrationError, match=r"^registration A \(global\) built no "
+                       r"model .* \(sfm.mapper incremental, tried next, failed too: "):
+        map_a(ra / "database.db", ra / "images", tmp_path / "model2", mapper="global")

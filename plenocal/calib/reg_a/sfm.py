@@ -311,11 +311,34 @@ def map_a(database: str | Path, image_dir: str | Path, model_dir: str | Path, *,
             names = sorted(im.name for im in db.read_all_images())
         check_shots([n[:-4] for n in names])
         recs = run_mapper(db_copy, image_dir, mapper=mapper, seed=seed, num_threads=num_threads)
+        used, note = mapper, None
+        try:
+            rec = check_models(recs, names, mapper)
+        except RegistrationError as first:
+            # the other mapper, once, on a fresh copy: COLMAP's global mapper built no model
+            # from the 21 views of a held-out capture (tele-s39: its bundle adjustment left no
+            # 3-D point) that the incremental one registers
+            other = "incremental" if mapper == "global" else "global"
+            log.warning("%s; trying sfm.mapper %s", first, other)
+            shutil.copyfile(database, db_copy)
+            recs = run_mapper(db_copy, image_dir, mapper=other, seed=seed,
+                              num_threads=num_threads)
+            try:
+                rec = check_models(recs, names, other)
+            except RegistrationError as second:
+                raise RegistrationError(f"{first} (sfm.mapper {other}, tried next, failed "
+                                        f"too: {second})") from None
+            used = other
+            note = (f"registration A: the {mapper} mapper (sfm.mapper) failed ({first}); the "
+                    f"{other} mapper registered every view and is used")
+            log.warning("%s", note)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     seconds = time.perf_counter() - t0
-    rec = check_models(recs, names, mapper)
-    log.info("map_a (%s): %d images, %d points, %.1f s", mapper, rec.num_reg_images(),
+    log.info("map_a (%s): %d images, %d points, %.1f s", used, rec.num_reg_images(),
              rec.num_points3D(), seconds)
     write_model(rec, model_dir)
-    return reg_a_dict(rec, mapper)
+    reg = reg_a_dict(rec, used)
+    if note:
+        reg.stats[WARNINGS_KEY] = warning_list([note, *reg.stats[WARNINGS_KEY]])
+    return reg
