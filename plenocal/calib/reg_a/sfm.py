@@ -296,7 +296,8 @@ def map_a(database: str | Path, image_dir: str | Path, model_dir: str | Path, *,
           mapper: str = cm.SFM_DEFAULTS["mapper"], seed: int = cm.DEFAULT_SEED,
           num_threads: int = cm.DEFAULT_THREADS) -> dict:
     """Map, check that every view registered into one model, write the model; returns
-    registration A (what ``reg_a.json`` holds)."""
+    registration A (what ``reg_a.json`` holds). Where ``mapper`` builds no such model, the
+    other mapper is tried once and used if it does, with a warning in the record."""
     import pycolmap  # noqa: PLC0415
 
     t0 = time.perf_counter()
