@@ -239,13 +239,18 @@ class GridCheck:
 _DRIFT_HEAD = "grid check: the calib.xml grid drifts up to "
 
 
+def _drift_head(drift_px: float) -> str:
+    """The start every drift warning shares (:func:`grid_for_mode` finds them by it)."""
+    return f"{_DRIFT_HEAD}{drift_px:.2f} px from the micro-image centres"
+
+
 def _drift_warning(drift_px: float, refined_by: str | None) -> str:
     """The warning of a calib.xml grid that drifts from the micro images, with what was
     done about it: nothing yet (``refined_by`` None: the check alone says how to correct
     it), or the views use the lattice fitted to the image (``convert.grid`` =
     ``refined_by``), so that a warning on the report's first screen does not ask for a
     correction that was made."""
-    head = f"{_DRIFT_HEAD}{drift_px:.2f} px from the micro-image centres"
+    head = _drift_head(drift_px)
     if refined_by is None:
         return head + " (convert.grid: refine / auto corrects it)"
     return (head + "; corrected: the views use the lattice fitted to the image "
@@ -260,8 +265,8 @@ def _kept_warning(drift_px: float, judged_px: float, judged_se: float, partial: 
     where = "under the lit lenses" if partial else "at its worst lens"
     why = (f"under the {AUTO_DRIFT_PX:g} px bar" if judged_px <= AUTO_DRIFT_PX else
            f"within {AUTO_DRIFT_SIGMAS:g} standard errors of the fit")
-    return (f"{_DRIFT_HEAD}{drift_px:.2f} px from the micro-image centres"
-            f"{', in the dark part of the frame' if partial else ''}; {where} "
+    return (f"{_drift_head(drift_px)}{', in the dark part of the frame' if partial else ''}; "
+            f"{where} "
             f"{judged_px:.2f} +- {judged_se:.2f} px, {why}: convert.grid auto keeps the "
             "file's grid (convert.grid: refine uses the lattice fitted to the image)")
 

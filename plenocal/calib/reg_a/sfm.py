@@ -26,7 +26,7 @@ from __future__ import annotations
 import logging
 import shutil
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -241,9 +241,10 @@ def weak_shots(points: Mapping[str, int], share: float = WEAK_SHOT_SHARE) -> lis
             for shot, n in sorted(points.items()) if n < share * median]
 
 
-def reg_a_dict(rec, mapper: str) -> RegistrationA:
+def reg_a_dict(rec, mapper: str, notes: Sequence[str] = ()) -> RegistrationA:
     """Registration A of a single-camera reconstruction (``reg_a.json``, internal
-    convention; :mod:`plenocal.artifacts.reg_a`)."""
+    convention; :mod:`plenocal.artifacts.reg_a`); ``notes``: warnings before the weak
+    shots' (the mapper that was used instead of the configured one)."""
     cams = {}
     points = {}
     camera = None
@@ -282,7 +283,7 @@ def reg_a_dict(rec, mapper: str) -> RegistrationA:
         log.warning(msg)
     # always written, empty where no shot is weak: the report refuses a record without the
     # key (plenocal.artifacts.stage_warnings), as it should a file of another version
-    stats[WARNINGS_KEY] = warning_list(weak)
+    stats[WARNINGS_KEY] = warning_list([*notes, *weak])
     return RegistrationA(focal_px=float(camera.params[0]), width=int(camera.width),
                          height=int(camera.height), mapper=mapper, cameras=cams, stats=stats)
 
@@ -311,35 +312,39 @@ def map_a(database: str | Path, image_dir: str | Path, model_dir: str | Path, *,
         with pycolmap.Database.open(str(db_copy)) as db:
             names = sorted(im.name for im in db.read_all_images())
         check_shots([n[:-4] for n in names])
-        recs = run_mapper(db_copy, image_dir, mapper=mapper, seed=seed, num_threads=num_threads)
-        used, note = mapper, None
-        try:
-            rec = check_models(recs, names, mapper)
-        except RegistrationError as first:
-            # the other mapper, once, on a fresh copy: COLMAP's global mapper built no model
-            # from the 21 views of a held-out capture (tele-s39: its bundle adjustment left no
-            # 3-D point) that the incremental one registers
-            other = "incremental" if mapper == "global" else "global"
-            log.warning("%s; trying sfm.mapper %s", first, other)
-            shutil.copyfile(database, db_copy)
-            recs = run_mapper(db_copy, image_dir, mapper=other, seed=seed,
-                              num_threads=num_threads)
-            try:
-                rec = check_models(recs, names, other)
-            except RegistrationError as second:
-                raise RegistrationError(f"{first} (sfm.mapper {other}, tried next, failed "
-                                        f"too: {second})") from None
-            used = other
-            note = (f"registration A: the {mapper} mapper (sfm.mapper) failed ({first}); the "
-                    f"{other} mapper registered every view and is used")
-            log.warning("%s", note)
+        rec, used, note = _map_either(database, db_copy, image_dir, names, mapper, seed,
+                                      num_threads)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     seconds = time.perf_counter() - t0
     log.info("map_a (%s): %d images, %d points, %.1f s", used, rec.num_reg_images(),
              rec.num_points3D(), seconds)
     write_model(rec, model_dir)
-    reg = reg_a_dict(rec, used)
-    if note:
-        reg.stats[WARNINGS_KEY] = warning_list([note, *reg.stats[WARNINGS_KEY]])
-    return reg
+    return reg_a_dict(rec, used, [note] if note else [])
+
+
+def _map_either(database: str | Path, db_copy: Path, image_dir: str | Path,
+                names: list[str], mapper: str, seed: int, num_threads: int
+                ) -> tuple[object, str, str | None]:
+    """The model of ``mapper`` holding every view of ``names`` or, where it builds none,
+    the other mapper's, run once on a fresh copy of ``database``: (model, the mapper used, a
+    warning when it is the other). COLMAP's global mapper built no model from the 21 views
+    of a held-out capture (tele-s39: its bundle adjustment left no 3-D point) that the
+    incremental one registers. Where both fail, the first error stands, with the second's."""
+    recs = run_mapper(db_copy, image_dir, mapper=mapper, seed=seed, num_threads=num_threads)
+    try:
+        return check_models(recs, names, mapper), mapper, None
+    except RegistrationError as first:
+        other = "incremental" if mapper == "global" else "global"
+        log.warning("%s; trying sfm.mapper %s", first, other)
+        shutil.copyfile(database, db_copy)
+        recs = run_mapper(db_copy, image_dir, mapper=other, seed=seed, num_threads=num_threads)
+        try:
+            rec = check_models(recs, names, other)
+        except RegistrationError as second:
+            raise RegistrationError(f"{first} (sfm.mapper {other}, tried next, failed too: "
+                                    f"{second})") from None
+        note = (f"registration A: the {mapper} mapper (sfm.mapper) failed ({first}); the "
+                f"{other} mapper registered every view and is used")
+        log.warning("%s", note)
+        return rec, other, note
