@@ -227,3 +227,25 @@ def test_unverified_grid_warned_and_kept(tmp_path, capsys):
     assert main([*args, "-o", str(tmp_path / "refine"), "--grid", "refine", "-q"]) == 0
     g = json.loads((tmp_path / "refine" / "disparity.json").read_text())["grid_check"]
     assert g["refined"] is True
+
+
+@pytest.mark.skipif(not FRAMES.is_dir(), reason="shared/real/frames not present")
+def test_another_cameras_calib_xml_on_a_frame_the_check_cannot_read_stops(tmp_path, capsys):
+    """R42_klein_crop with Origami's calib.xml: the grid check measures none of the lenses
+    it takes as lit and the micro images match nothing as either MLA kind (0.06 at best):
+    the conversion stops before any view, naming the file and the remedies; with
+    grid_foreign=warn it converts all the same. With its own file (0.96) it converts."""
+    frame = str(FRAMES / "R42_klein_crop.png")
+    args = ["--views", "1", "--tile-size", "4", "-q"]
+    out = tmp_path / "foreign"
+    assert main(["convert", frame, str(FRAMES / "Origami.xml"), "-o", str(out), *args]) == 2
+    err = capsys.readouterr().err
+    for words in ("Origami.xml", "microlens grid is not found in", "R42_klein_crop.png",
+                  "--set grid_foreign=warn"):
+        assert words in err, (words, err)
+    assert not list(out.glob("*.png"))  # stopped before any view
+    assert main(["convert", frame, str(FRAMES / "Origami.xml"), "-o", str(tmp_path / "warn"),
+                 *args, "--set", "grid_foreign=warn"]) == 0
+    assert (tmp_path / "warn" / "0_0.png").is_file()
+    assert main(["convert", frame, str(FRAMES / "R42_klein_crop.xml"), "-o",
+                 str(tmp_path / "own"), *args]) == 0

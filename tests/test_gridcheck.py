@@ -444,6 +444,40 @@ def test_foreign_grid_stops_convert_setup():
         foreign_grid_error(check, "calib.xml", "x", "ignore")
 
 
+def test_a_grid_the_check_cannot_confirm_on_micro_images_that_match_nothing_stops():
+    """The check confirms nothing (too few lit lenses measured) and the micro images match
+    their neighbours as neither MLA kind: another camera's calib.xml whose grid falls
+    between this frame's micro images, or a frame with too little to decide on. The
+    set-up stops with the remedies (unmatched_frame_error), unless told to go on; a right
+    file the check cannot confirm (R42_klein_crop: 0.96) and a frame of one grey level (its
+    views are flat) are left to the warnings."""
+    from types import SimpleNamespace  # noqa: PLC0415
+
+    from plenocal.convert.errors import ConvertError  # noqa: PLC0415
+    from plenocal.convert.setup import UNMATCHED_ZNCC, unmatched_frame_error  # noqa: PLC0415
+
+    unconfirmed = SimpleNamespace(verified=False, lit_share=0.12, lit=22146)
+    foreign = {"keplerian": 0.027, "galilean": 0.109}  # HandTools with Fujita2's file
+    msg = unmatched_frame_error(unconfirmed, foreign, "Fujita2.xml", "HandTools.png")
+    for words in ("Fujita2.xml", "HandTools.png", "12% of the 22146", "0.11", "as galilean",
+                  "another camera's", "--setup-frame", "convert.grid_foreign: warn"):
+        assert words in msg, (words, msg)
+    assert unmatched_frame_error(unconfirmed, foreign, "a", "b", "warn") is None
+    confirmed = SimpleNamespace(verified=True, lit_share=0.6, lit=100)
+    assert unmatched_frame_error(confirmed, foreign, "a", "b") is None
+    right = {"keplerian": 0.287, "galilean": 0.960}  # R42_klein_crop with its own file
+    assert unmatched_frame_error(unconfirmed, right, "a", "b") is None
+    at = {"keplerian": 0.1, "galilean": UNMATCHED_ZNCC}
+    assert unmatched_frame_error(unconfirmed, at, "a", "b") is None
+    below = {"keplerian": 0.1, "galilean": UNMATCHED_ZNCC - 0.01}
+    assert unmatched_frame_error(unconfirmed, below, "a", "b") is not None
+    for flat in ({"keplerian": 0.0, "galilean": 0.0}, {"keplerian": math.nan,
+                                                      "galilean": math.nan}, None):
+        assert unmatched_frame_error(unconfirmed, flat, "a", "b") is None
+    with pytest.raises(ConvertError, match="grid_foreign"):
+        unmatched_frame_error(unconfirmed, foreign, "a", "b", "ignore")
+
+
 def _at_offset(a: np.ndarray, offset_bytes: int) -> np.ndarray:
     """A copy of ``a`` whose data starts ``offset_bytes`` past a 64-byte boundary."""
     raw = np.empty(a.nbytes + 128, np.uint8)

@@ -169,12 +169,63 @@ def foreign_grid_error(check: GridCheck, calib_source: str, frame: str,
             "(plenocal convert: --grid refine, or --set grid_foreign=warn)")
 
 
+#: the mean best ZNCC of neighbouring micro images (:func:`plenocal.convert.patchsize.
+#: detect_mla_kind`, the better of the two MLA kinds) below which a frame whose grid the
+#: check could not confirm is taken as one that calib.xml does not describe
+#: (:func:`unmatched_frame_error`). Measured on full frames: each real frame of
+#: shared/real with its own calib.xml 0.84-0.97 (R42_klein_crop, whose grid the check
+#: cannot confirm, 0.96), the simulator 0.98; the real frames with another camera's file,
+#: where the check could not confirm the grid either, 0.06-0.48, and 0.65 where the file's
+#: pitch is twice the frame's (R42_klein_crop with Boys2's: every other lens matches)
+UNMATCHED_ZNCC = 0.75
+
+
+def unmatched_frame_error(check: GridCheck, scores: dict[str, float] | None,
+                          calib_source: str, frame: str,
+                          policy: str = _CONVERT["grid_foreign"]) -> str | None:
+    """The error that stops the run where the grid check could not confirm the calib.xml
+    grid (``check.verified`` false: too few lit lenses measured) and the micro images do
+    not match their neighbours as either MLA kind either (``scores``: each kind's mean
+    best ZNCC, best under :data:`UNMATCHED_ZNCC`), or None. Either the file is another
+    camera's, whose grid lies between this frame's micro images so that the check finds
+    nothing to measure, or the frame shows too little to convert; the views would be a
+    mosaic of misplaced patches either way. ``policy`` ``warn`` (convert.grid_foreign)
+    converts all the same. A frame without any texture is left to the warnings (its views
+    are flat, not wrong; :func:`plenocal.convert.shot.mla_undecided` says that the kind
+    was assumed): both scores 0 or not measured, which only a frame whose matched lenses
+    hold one grey level each gives (the ZNCC of two constant blocks is taken as 0; sensor
+    noise alone reads about 0.1)."""
+    if policy not in GRID_FOREIGN:
+        raise ConvertError(f"convert.grid_foreign: {policy!r} is not one of "
+                           f"{', '.join(GRID_FOREIGN)}")
+    if policy == "warn" or check.verified or not scores:
+        return None
+    measured = {k: v for k, v in scores.items() if np.isfinite(v)}
+    if not any(measured.values()):  # none measured, or nothing varied: no texture
+        return None
+    kind = max(measured, key=measured.get)
+    if measured[kind] >= UNMATCHED_ZNCC:
+        return None
+    return (f"{calib_source}: its microlens grid is not found in {frame}: the grid check "
+            f"measured only {100 * check.lit_share:.0f}% of the {check.lit} lenses it takes "
+            f"as lit, and neighbouring micro images match at best {measured[kind]:.2f} "
+            f"(mean best ZNCC, as {kind}), where a frame with its own calib.xml matches "
+            f"{UNMATCHED_ZNCC:g} or more. Either calib.xml is another camera's or another "
+            "sensor crop's (put this camera's there), or the frame is too dark, flat or "
+            "out of focus to decide the conversion on (decide it on a frame with texture: "
+            "the workflow's central array shot; plenocal convert on a recording: "
+            "--setup-frame K). The views would be a mosaic of misplaced patches. To "
+            "convert all the same: convert.grid_foreign: warn (plenocal convert: --set "
+            "grid_foreign=warn)")
+
+
 def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: ConvertSettings,
                  source: str, grid_foreign: str = _CONVERT["grid_foreign"]
                  ) -> tuple[ConverterSetup, ShotConversion]:
     """Decide the per-camera set-up on one shot; returns it and that shot's conversion.
     A foreign grid stops here (:func:`foreign_grid_error`, ``grid_foreign``: the config's
-    ``convert.grid_foreign``) before any view is made."""
+    ``convert.grid_foreign``) before any view is made, and so does a grid the check could
+    not confirm on a frame whose micro images match nothing (:func:`unmatched_frame_error`)."""
     grid, check = check_and_grid(image, calib, settings.grid)
     log.info("%s: %s", source, check.summary())
     error = foreign_grid_error(check, calib.source, source, grid_foreign)
@@ -192,6 +243,10 @@ def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: Con
         pitch = round_floats(float(grid.diameter), LATTICE_DIGITS)
         grid = lattice_grid(calib, grid.width, grid.height, lattice, pitch)
     shot = ShotConversion(image, calib, n_views, settings, source=source, grid=grid)
+    error = unmatched_frame_error(check, shot.match_scores, calib.source, source,
+                                  grid_foreign)
+    if error is not None:
+        raise ConvertError(error)
     warnings = [f"{source}: {w}" for w in check.warnings] + shot.warnings
     setup = ConverterSetup(
         mla=shot.mla, tile=int(shot.layout.tile), grid_mode=settings.grid,

@@ -294,6 +294,10 @@ class ShotConversion:
                  log_bits: bool = True) -> None:
         self.settings = st = settings or ConvertSettings()
         self.grid_check: dict | None = None  # set by whoever checked the grid
+        # each MLA kind's mean best ZNCC as measured on this image (read with auto, or
+        # checked where the kind is set), None where not measured: the set-up's check
+        # that calib.xml describes the frame (plenocal.convert.setup.unmatched_frame_error)
+        self.match_scores: dict[str, float] | None = None
         self.warnings: list[str] = []
         self.calib = calib
         self.n_views = n_views
@@ -349,6 +353,8 @@ class ShotConversion:
                                    "this shot")
         self.analysis: ConvertAnalysis = analysis
         self.mla, self.mla_scores = analysis.mla, analysis.mla_scores
+        if self.match_scores is None:  # the kind read from the image (auto)
+            self.match_scores = analysis.mla_scores
         self.patch: PatchSizeResult = analysis.patch
         self.warnings += [f"{source}: {note}" for note in self.patch.warnings]
         inside = self.grid.inside(0.0)
@@ -468,7 +474,8 @@ class ShotConversion:
             log.warning("%s: %s", source, note)
         if check is not None:
             _, k, g = check.result()
-            note = mla_contradiction(st.mla, {"keplerian": k, "galilean": g})
+            self.match_scores = {"keplerian": k, "galilean": g}
+            note = mla_contradiction(st.mla, self.match_scores)
             if note:
                 log.warning("%s: %s", source, note)
                 self.warnings.append(f"{source}: {note}")
@@ -688,6 +695,7 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
         check_and_grid,
         foreign_grid_error,
         read_setup,
+        unmatched_frame_error,
     )
 
     settings = settings or ConvertSettings()
@@ -712,6 +720,10 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
         log.warning("%s: %s", lenslet, note)
     shot = ShotConversion(image, calib, n_views, settings, source=str(lenslet), grid=grid,
                           analysis=analysis, threads=threads)
+    error = unmatched_frame_error(check, shot.match_scores, calib.source, str(lenslet),
+                                  grid_foreign)
+    if error is not None:
+        raise ConvertError(error)
     shot.grid_check = check.to_dict()
     shot.warnings = [f"{lenslet}: {w}" for w in check.warnings] + shot.warnings
     return shot
