@@ -48,6 +48,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from plenocal.calib import track_alignment as ta
+from plenocal.calib.view_greys import grey_of
 from plenocal.camera import PinholeCamera, invert_pose, k_to_colmap
 from plenocal.names import split_key
 
@@ -280,7 +281,7 @@ def central_track_set(database: str | Path, eq6: Mapping[str, PinholeCamera],
     ``align`` and the threads), ``work_dir`` COLMAP's scratch folder; ``align_threads``
     the alignment's threads (``settings.num_threads`` where None; the same result on any
     number). Returns the aligned track set and statistics."""
-    import cv2  # noqa: PLC0415
+    import cv2  # noqa: F401, PLC0415  (before pycolmap: DESIGN.md, "Known traps")
 
     from plenocal.calib.reg_a import colmap as cm  # noqa: PLC0415
     from plenocal.calib.reg_a import viewdb  # noqa: PLC0415
@@ -312,10 +313,7 @@ def central_track_set(database: str | Path, eq6: Mapping[str, PinholeCamera],
                          f"({', '.join(missing[:5])}): rerun the conversion")
 
     def load(key: str) -> np.ndarray:
-        grey = cv2.imread(str(images[key]), cv2.IMREAD_GRAYSCALE | cv2.IMREAD_ANYDEPTH)
-        if grey is None:
-            raise ValueError(f"{images[key]}: not a readable image (refine reads the views)")
-        return grey
+        return grey_of(images, key)
 
     t1 = time.perf_counter()
     aligned, stats = aligned_track_set(

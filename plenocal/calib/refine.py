@@ -99,6 +99,7 @@ from plenocal.calib.reg_a import colmap as cm
 from plenocal.calib.reg_a import viewdb
 from plenocal.calib.scale import array_step_scale
 from plenocal.calib.track_alignment import AlignSettings
+from plenocal.calib.view_greys import ViewGreys, grey_of
 from plenocal.camera import PinholeCamera, invert_pose, k_to_colmap, pose, rotation_angle_deg
 from plenocal.config import settings_from, stage_defaults
 from plenocal.names import split_key
@@ -375,8 +376,6 @@ def aligned_keypoints(tracks, point_ids: list[int], images: Mapping[str, str | P
     those observing the points ``point_ids`` aligned to their track's reference observation
     by their patches (:mod:`plenocal.calib.track_alignment`), with its statistics.
     ``images``: view key (``<shot>/<view>``) -> the view's image file."""
-    import cv2  # noqa: PLC0415
-
     from plenocal.calib import track_alignment as ta  # noqa: PLC0415
     from plenocal.verify.reprojection import read_keypoints  # noqa: PLC0415
 
@@ -399,11 +398,7 @@ def aligned_keypoints(tracks, point_ids: list[int], images: Mapping[str, str | P
                          f"({', '.join(missing[:5])}): rerun the conversion")
 
     def load(i: int) -> np.ndarray:
-        path = images[name_of[i][:-4]]
-        grey = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE | cv2.IMREAD_ANYDEPTH)
-        if grey is None:
-            raise ValueError(f"{path}: not a readable image (refine.align reads the views)")
-        return grey
+        return grey_of(images, name_of[i][:-4])
 
     t0 = time.perf_counter()
     obs, rows = ta.track_observations(points, cameras, by_id)
@@ -731,6 +726,10 @@ def _tracks_rig(eq6: Mapping[str, PinholeCamera], views: Mapping[str, tuple], ce
     if settings.tracks == "both" and view_database is None:
         raise ValueError("refine.tracks both adds the matches of every view to the central "
                          "views': the view database (rule view_matches) is needed")
+    if settings.tracks == "both" and images is not None:
+        # both alignments read the same views: decoded once (freed with this call, before
+        # the adjustments)
+        images = ViewGreys(images)
     if settings.tracks == "views":
         ts, align, t_tri = _view_tracks(eq6, database, settings, images, align_threads,
                                         work_dir)
