@@ -184,9 +184,9 @@ def unmatched_frame_error(check: GridCheck, scores: dict[str, float] | None,
                           calib_source: str, frame: str,
                           policy: str = _CONVERT["grid_foreign"]) -> str | None:
     """The error that stops the run where the grid check could not confirm the calib.xml
-    grid (``check.verified`` false: too few lit lenses measured) and the micro images do
-    not match their neighbours as either MLA kind either (``scores``: each kind's mean
-    best ZNCC, best under :data:`UNMATCHED_ZNCC`), or None. Either the file is another
+    grid (``check.verified`` false: too few lit lenses measured) and the micro images
+    match their neighbours as neither MLA kind (``scores``: each kind's mean best ZNCC,
+    the better under :data:`UNMATCHED_ZNCC`), or None. Either the file is another
     camera's, whose grid lies between this frame's micro images so that the check finds
     nothing to measure, or the frame shows too little to convert; the views would be a
     mosaic of misplaced patches either way. ``policy`` ``warn`` (convert.grid_foreign)
