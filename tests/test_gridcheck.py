@@ -478,6 +478,28 @@ def test_a_grid_the_check_cannot_confirm_on_micro_images_that_match_nothing_stop
         unmatched_frame_error(unconfirmed, foreign, "a", "b", "ignore")
 
 
+@pytest.mark.skipif(not FRAMES.is_dir(), reason="shared/real/frames not present")
+def test_the_workflows_set_up_stops_on_another_cameras_file_it_cannot_judge():
+    """Rule convert_setup's decision (decide_setup) on R42_klein_crop with Origami's
+    calib.xml: stopped, naming both files; with grid_foreign warn, and with its own file
+    (the check cannot confirm it either), decided."""
+    from plenocal.convert import ConvertSettings  # noqa: PLC0415
+    from plenocal.convert.errors import ConvertError  # noqa: PLC0415
+    from plenocal.convert.setup import decide_setup  # noqa: PLC0415
+    from plenocal.io.raytrix import read_calib  # noqa: PLC0415
+
+    img, own = _read_frame("R42_klein_crop")
+    other = read_calib(FRAMES / "Origami.xml")
+    settings = ConvertSettings.from_config({"grid": "auto", "tile_size": 4})
+    with pytest.raises(ConvertError) as exc:
+        decide_setup(img, other, 3, settings, source="data/r/lenslet/x00_y00.png")
+    assert "Origami.xml" in str(exc.value) and "x00_y00.png" in str(exc.value)
+    setup, _ = decide_setup(img, other, 3, settings, source="x", grid_foreign="warn")
+    assert setup.grid_check["verified"] is False
+    setup, _ = decide_setup(img, own, 3, settings, source="x")
+    assert setup.grid_check["verified"] is False and setup.mla == "galilean"
+
+
 def _at_offset(a: np.ndarray, offset_bytes: int) -> np.ndarray:
     """A copy of ``a`` whose data starts ``offset_bytes`` past a 64-byte boundary."""
     raw = np.empty(a.nbytes + 128, np.uint8)
