@@ -145,6 +145,13 @@ GRID_FOREIGN = ("error", "warn")
 _CONVERT = stage_defaults("convert")  # the schema's defaults (grid_foreign: error)
 
 
+def _check_policy(policy: str) -> None:
+    """ConvertError unless ``policy`` is a ``convert.grid_foreign`` value."""
+    if policy not in GRID_FOREIGN:
+        raise ConvertError(f"convert.grid_foreign: {policy!r} is not one of "
+                           f"{', '.join(GRID_FOREIGN)}")
+
+
 def foreign_grid_error(check: GridCheck, calib_source: str, frame: str,
                        policy: str = _CONVERT["grid_foreign"]) -> str | None:
     """The error that stops the run when the grid check found the calib.xml grid foreign
@@ -152,9 +159,7 @@ def foreign_grid_error(check: GridCheck, calib_source: str, frame: str,
     (``policy`` ``warn``: the user goes on; ``convert.grid`` ``refine``: the views use the
     lattice fitted to the image). Converting on a foreign grid gives views that registration
     A cannot match, and its error then blames the texture and the overlap."""
-    if policy not in GRID_FOREIGN:
-        raise ConvertError(f"convert.grid_foreign: {policy!r} is not one of "
-                           f"{', '.join(GRID_FOREIGN)}")
+    _check_policy(policy)
     if not check.foreign or check.refined or policy == "warn":
         return None
     dx, dy = check.offset_px
@@ -195,9 +200,7 @@ def unmatched_frame_error(check: GridCheck, scores: dict[str, float] | None,
     was assumed): both scores 0 or not measured, which only a frame whose matched lenses
     hold one grey level each gives (the ZNCC of two constant blocks is taken as 0; sensor
     noise alone reads about 0.1)."""
-    if policy not in GRID_FOREIGN:
-        raise ConvertError(f"convert.grid_foreign: {policy!r} is not one of "
-                           f"{', '.join(GRID_FOREIGN)}")
+    _check_policy(policy)
     if policy == "warn" or check.verified or not scores:
         return None
     measured = {k: v for k, v in scores.items() if np.isfinite(v)}
