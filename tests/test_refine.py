@@ -362,3 +362,93 @@ def test_the_refined_cameras_are_the_same_bytes_on_one_and_two_threads(capture):
         for key, cam in runs[0].cameras.items():
             assert cam.K.tobytes() == out.cameras[key].K.tobytes(), key
             assert cam.cam_to_world.tobytes() == out.cameras[key].cam_to_world.tobytes(), key
+
+
+def test_a_principal_point_shift_is_the_turn_that_moves_the_image_centre_as_far():
+    """Hand-computed: f = 500 px, a shift of (+2, -1) px puts the optical axis's point at
+    x = 2 / 500, y = -1 / 500 in normalised coordinates, by a rotation."""
+    R = rf.turn_of_shift(np.array([2.0, -1.0]), 500.0)
+    assert np.allclose(R @ R.T, np.eye(3), atol=1e-15)
+    assert np.isclose(np.linalg.det(R), 1.0)
+    x = R @ np.array([0.0, 0.0, 1.0])
+    assert np.isclose(x[0] / x[2], 2.0 / 500.0, rtol=0, atol=1e-15)
+    assert np.isclose(x[1] / x[2], -1.0 / 500.0, rtol=0, atol=1e-15)
+    assert np.allclose(rf.turn_of_shift(np.zeros(2), 500.0), np.eye(3), atol=0)
+
+
+def _two_shot_rig(tmp_path, shift_px):
+    """A 2-view rig (1_1 central, 1_2 3 mm to its right) in two shots, 40 points near the
+    optical axes 2 m away, each seen by every image where its principal point is
+    ``shift_px`` off the rig's."""
+    f, w, h = 500.0, 320, 240
+    K = np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1.0]])
+    right = np.eye(4)
+    right[0, 3] = 0.003
+    rig_views = {"1_1": (K, np.eye(4)), "1_2": (K, right)}
+    shots = {"x00_y00": pose(np.eye(3), np.zeros(3)),
+             "x01_y00": pose(_rot([0, 1, 0], 3.0), np.array([0.05, 0.0, 0.0]))}
+    rng = np.random.default_rng(3)
+    X = np.column_stack([rng.uniform(-0.08, 0.08, 40), rng.uniform(-0.06, 0.06, 40),
+                         rng.uniform(1.9, 2.1, 40)])
+    Ks = K.copy()
+    Ks[:2, 2] += shift_px
+    names, keypoints = {}, {}
+    for i, (shot, M) in enumerate(sorted(shots.items())):
+        for j, (view, (_, B)) in enumerate(sorted(rig_views.items())):
+            name = f"{shot}/{view}.png"
+            names[2 * i + j + 1] = name
+            uv = PinholeCamera(Ks, M @ B, w, h).project(X)[0]
+            keypoints[name] = uv + 0.5  # COLMAP's pixel centres
+    points = {k + 1: (X[k], [(image_id, k) for image_id in sorted(names)])
+              for k in range(len(X))}
+    rec, model = rf.rig_reconstruction_of(names, points, keypoints, rig_views, shots, w, h)
+    return rec, model, rig_views, f
+
+
+def test_turning_the_frames_takes_a_common_principal_point_shift_and_keeps_the_held_one(
+        tmp_path):
+    """Observations made with every principal point 1.2, -0.7 px off: with the rig's
+    principal points they are as far off; with the frames turned by turn_of_shift about the
+    held shot, they fit again (to second order over the points' field, 50 times closer),
+    and the held frame keeps its pose."""
+    shift = np.array([1.2, -0.7])
+    rec, model, rig_views, f = _two_shot_rig(tmp_path, shift)
+    before = rf.observation_errors(rec, tmp_path)
+    assert np.median(before) > 1.2
+    held = np.asarray(rec.frame(model.frame_of_shot["x00_y00"]).rig_from_world.matrix())
+    rf.turn_frames(rec, model, rf.turn_of_shift(shift, f), "x00_y00")
+    after = rf.observation_errors(rec, tmp_path)
+    # second order: x^2 |shift| px at normalised x up to 0.1 (the turned shot's points)
+    assert after.max() < 0.025 and np.median(after) < 0.005, (after.max(), np.median(after))
+    assert np.allclose(rec.frame(model.frame_of_shot["x00_y00"]).rig_from_world.matrix(),
+                       held, rtol=0, atol=1e-12)
+
+
+def test_the_final_pass_starts_where_the_focal_pass_ended(tmp_path):
+    """warm_start: after a focal pass that shifted every principal point together, the
+    final pass starts from a cost near the focal pass's end (B's principal points back
+    alone start it far above), the central view's principal point B's again; with
+    frames: hold, B's cameras as they are."""
+    shift = np.array([1.2, -0.7])
+    rec, model, rig_views, f = _two_shot_rig(tmp_path, shift)
+    for v, cid in model.camera_of_view.items():  # the focal pass's end: every point shifted
+        p = np.array(rec.camera(cid).params, dtype=float)
+        p[2:4] += shift
+        p[2] += 0.05 if v == "1_2" else 0.0  # and one view's own offset
+        rec.camera(cid).params = p
+    assert rf.observation_errors(rec, tmp_path).max() < 0.06
+    turn = rf.warm_start(rec, model, rig_views, settings(rig="scale_pp"), f, "x00_y00")
+    assert np.isclose(turn, np.degrees(np.hypot(*np.arctan(shift / f))), rtol=1e-3)
+    pp = rf.principal_points(rec, model)
+    central_b = np.array(rf._colmap_params(rig_views["1_1"][0])[2:4])
+    assert np.array_equal(pp["1_1"], central_b)
+    assert np.allclose(pp["1_2"] - central_b, [0.05, 0.0], atol=1e-9)  # its own offset kept
+    # the focal pass's end again, to the turn's second order (test above)
+    assert rf.observation_errors(rec, tmp_path).max() < 0.05 + 0.025
+    cold, _, _, _ = _two_shot_rig(tmp_path, shift)
+    rf.set_intrinsics(cold, model, rig_views)  # B's principal points back alone
+    assert np.median(rf.observation_errors(cold, tmp_path)) > 1.2
+    held, _, _, _ = _two_shot_rig(tmp_path, shift)
+    assert rf.warm_start(held, model, rig_views, settings(frames="hold"), f, "x00_y00") == 0.0
+    assert np.array_equal(rf.principal_points(held, model)["1_2"],
+                          np.array(rf._colmap_params(rig_views["1_2"][0])[2:4]))

@@ -63,7 +63,9 @@ The focal length is one for the whole array, as the paper shares it (Section II-
 ``focal: refine`` (the default) frees it in a first pass: each sensor's focal length and
 principal point (COLMAP gives each sensor its own camera), their mean focal length weighted
 by observations then held, B's rig built again for it, and a second pass as ``refine.rig``
-says; ``focal: hold`` keeps registration A's. A parallel array does not fix the focal length
+says, of at most ``final_iterations``, started where the first ended (:func:`warm_start`:
+the first pass's common principal-point shift turned into the frames); ``focal: hold``
+keeps registration A's. A parallel array does not fix the focal length
 (it trades off against depth): the hand-held shots' turns do, and registration A sees them
 in 28 central views only (:mod:`plenocal.calib.reg_a.uncertainty`: a standard deviation
 of 0.3-0.5 % on the simulator's captures). Every view of them fixes it better, on two
@@ -180,6 +182,7 @@ class RefineSettings:
     loss: str = _REFINE["loss"]
     loss_scale_px: float | str = _REFINE["loss_scale_px"]
     max_iterations: int = _REFINE["max_iterations"]
+    final_iterations: int = _REFINE["final_iterations"]
     max_shift_pct: float = _REFINE["max_shift_pct"]
     min_tie_points: int = _REFINE["min_tie_points"]
     min_gain_pct: float = _REFINE["min_gain_pct"]
@@ -443,13 +446,14 @@ def _loss(name: str):
 
 def bundle_adjust(rec, model: RigModel, settings: RefineSettings, *, refine_focal: bool,
                   refine_rig: bool, hold_frame: str, loss_scale_px: float,
-                  refine_pp: bool = False) -> dict:
+                  refine_pp: bool = False, max_iterations: int | None = None) -> dict:
     """COLMAP's bundle adjustment of ``rec``: frames and points, each sensor's focal length
     where ``refine_focal``, each sensor's principal point where ``refine_pp`` (the central
     view's held unless the focal lengths are freed too: a common shift is a turn of every
     frame), the rig's sensors where ``refine_rig``; the frame of ``hold_frame`` held (the
-    gauge's rotation and translation); ``settings.loss`` at the scale ``loss_scale_px``.
-    Returns the solver's summary."""
+    gauge's rotation and translation); ``settings.loss`` at the scale ``loss_scale_px``;
+    at most ``max_iterations`` (``settings.max_iterations`` if None). Returns the solver's
+    summary."""
     import pycolmap  # noqa: PLC0415
 
     cfg = pycolmap.BundleAdjustmentConfig()
@@ -469,7 +473,8 @@ def bundle_adjust(rec, model: RigModel, settings: RefineSettings, *, refine_foca
     o.ceres.loss_function_type = _loss(settings.loss)
     o.ceres.loss_function_scale = float(loss_scale_px)
     s = o.ceres.solver_options
-    s.max_num_iterations = int(settings.max_iterations)
+    s.max_num_iterations = int(settings.max_iterations if max_iterations is None
+                               else max_iterations)
     s.initial_trust_region_radius = INITIAL_TRUST_REGION
     # the normal equations by sparse Cholesky, not COLMAP's choice (the Schur complement):
     # the same bytes run after run on any number of Ceres threads, and faster (LINEAR_SOLVER)
@@ -634,10 +639,63 @@ def shared_focal(rec, model: RigModel) -> tuple[float, dict[str, float]]:
     return float((w * f).sum() / w.sum()), per
 
 
-def set_intrinsics(rec, model: RigModel, views: Mapping[str, tuple[np.ndarray, np.ndarray]]
-                   ) -> None:
+def set_intrinsics(rec, model: RigModel, views: Mapping[str, tuple[np.ndarray, np.ndarray]],
+                   offsets: Mapping[str, np.ndarray] | None = None) -> None:
+    """Each sensor's camera as ``views`` gives it (registration B's K); with ``offsets``
+    (view -> (dx, dy) px), its principal point moved by them."""
     for v, cid in model.camera_of_view.items():
-        rec.camera(cid).params = _colmap_params(views[v][0])
+        params = _colmap_params(views[v][0])
+        if offsets is not None:
+            params[2] += float(offsets[v][0])
+            params[3] += float(offsets[v][1])
+        rec.camera(cid).params = params
+
+
+def principal_points(rec, model: RigModel) -> dict[str, np.ndarray]:
+    """Each view's principal point (COLMAP's pixel convention), px."""
+    return {v: np.array(rec.camera(cid).params[2:4], dtype=float)
+            for v, cid in model.camera_of_view.items()}
+
+
+def turn_of_shift(shift_px: np.ndarray, focal_px: float) -> np.ndarray:
+    """The turn of a camera (3 x 3, applied to camera coordinates: x right, y down, z
+    forward) that moves its image as the shift ``shift_px`` = (dx, dy) of its principal
+    point does, exactly at the image centre, to first order elsewhere: the least rotation
+    that takes the optical axis to the direction (dx / f, dy / f, 1), about the axis
+    (-dy, dx, 0) by ``atan(|shift| / f)`` (Rodrigues' formula)."""
+    d = np.asarray(shift_px, dtype=float)
+    norm = float(np.hypot(d[0], d[1]))
+    if norm == 0.0:
+        return np.eye(3)
+    k = np.array([-d[1], d[0], 0.0]) / norm
+    angle = math.atan(norm / focal_px)
+    Kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * Kx + (1.0 - math.cos(angle)) * (Kx @ Kx)
+
+
+def turn_frames(rec, model: RigModel, turn: np.ndarray, hold_shot: str) -> None:
+    """Turn every frame of ``rec`` by ``turn`` in its own (rig) axes, and the world about
+    the held shot's rig so that its frame keeps its pose: with ``H`` the held frame's
+    rig_from_world, the points go to ``T p`` with ``T = H^-1 R H`` and each frame's
+    rig_from_world ``F`` to ``R F T^-1`` (for the held one ``H`` again). What every frame
+    sees moves as if each view's principal point had moved by the shift of
+    :func:`turn_of_shift`: the common shift of the focal pass taken back into the frames
+    (:func:`_adjusted`)."""
+    R4 = np.eye(4)
+    R4[:3, :3] = turn
+    H = np.eye(4)
+    H[:3, :] = np.asarray(rec.frame(model.frame_of_shot[hold_shot]).rig_from_world.matrix(),
+                          dtype=float)
+    T = invert_pose(H) @ R4 @ H
+    A, b = T[:3, :3], T[:3, 3]
+    for pid in rec.point3D_ids():
+        point = rec.point3D(pid)
+        point.xyz = A @ np.asarray(point.xyz, dtype=float) + b
+    T_inv = invert_pose(T)
+    for fid in sorted(model.frame_of_shot.values()):
+        F = np.eye(4)
+        F[:3, :] = np.asarray(rec.frame(fid).rig_from_world.matrix(), dtype=float)
+        rec.frame(fid).rig_from_world = rigid3d(R4 @ F @ T_inv)
 
 
 def set_rig(rec, model: RigModel, views: Mapping[str, tuple[np.ndarray, np.ndarray]]) -> None:
@@ -827,6 +885,42 @@ def _view_tracks(eq6: Mapping[str, PinholeCamera], database: str | Path,
     return track_set_of(tracks, ids, work_dir, keypoints), align, t_tri
 
 
+def warm_start(rec, model: RigModel, views: Mapping[str, tuple[np.ndarray, np.ndarray]],
+               settings: RefineSettings, focal: float, hold_shot: str) -> float:
+    """Registration B's cameras at the shared focal length (``views``: the rig built again
+    for ``focal``) set back after the focal pass, so that the final pass starts where the
+    focal pass ended; the turn it took (degrees).
+
+    The focal pass frees every view's principal point, the central view's too, and with
+    one frame held a shift common to all of them is a turn of every other frame (module
+    docstring): the pass ends with them shifted together by about a pixel (small-s41: 1.09,
+    0.23 px), the frames turned to match. B's principal points set back alone leave the
+    final pass that turn to make again, every frame and point about the held one, from a
+    cost 2-4.7 times the focal pass's end (BENCHMARKS.md, "The final pass started where the
+    focal pass ended"). So the central view's shift from B's is turned into the frames
+    (:func:`turn_of_shift`, :func:`turn_frames`: the same images to first order), and where
+    the final pass refines the principal points (``rig: scale_pp``) each view starts at
+    the focal pass's, less that shift: the central view's is B's, as before. With
+    ``frames: hold`` no frame may turn: B's cameras only, as before."""
+    focal_pass = principal_points(rec, model)
+    b = {v: np.array(_colmap_params(views[v][0])[2:4]) for v in model.camera_of_view}
+    if settings.frames == "hold":
+        set_intrinsics(rec, model, views)
+        return 0.0
+    shift = focal_pass[model.central] - b[model.central]
+    offsets = None
+    if settings.rig == "scale_pp":
+        offsets = {v: (np.zeros(2) if v == model.central else focal_pass[v] - shift - b[v])
+                   for v in model.camera_of_view}
+    set_intrinsics(rec, model, views, offsets)
+    turn = turn_of_shift(shift, focal)
+    turn_frames(rec, model, turn, hold_shot)
+    angle = rotation_angle_deg(turn, np.eye(3))
+    log.info("the focal pass's common principal-point shift (%+.3f, %+.3f) px turned into "
+             "the frames (%.4f deg) before the final pass", shift[0], shift[1], angle)
+    return angle
+
+
 def _adjusted(rec, model: RigModel, eq6, rig: RigB, views, shots, central, shot_poses,
               settings: RefineSettings, *, hold_shot, rig_at_focal, step_m, points, align,
               t0, t_tri, work_dir) -> Refinement:
@@ -849,14 +943,17 @@ def _adjusted(rec, model: RigModel, eq6, rig: RigB, views, shots, central, shot_
         focal, per_sensor = shared_focal(rec, model)
         rig_views = (rig_at_focal(focal).view_poses() if rig_at_focal is not None
                      else {v: (_with_focal(K, focal), M) for v, (K, M) in views.items()})
-        set_intrinsics(rec, model, rig_views)
+        passes["focal"]["turn_deg"] = warm_start(rec, model, rig_views, settings, focal,
+                                                 hold_shot)
         if not free_rig:
             set_rig(rec, model, rig_views)
             sensors_before = sensor_params(rec)
     passes["final"] = bundle_adjust(rec, model, settings, refine_focal=False,
                                     refine_rig=free_rig, hold_frame=hold_shot,
                                     refine_pp=settings.rig == "scale_pp",
-                                    loss_scale_px=loss_scale)
+                                    loss_scale_px=loss_scale,
+                                    max_iterations=(settings.final_iterations
+                                                    if settings.focal == "refine" else None))
     ties = point_shots(rec, model)
     groups = shot_groups(ties, model.frame_of_shot)
     placed = {}
