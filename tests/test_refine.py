@@ -452,3 +452,28 @@ def test_the_final_pass_starts_where_the_focal_pass_ended(tmp_path):
     assert rf.warm_start(held, model, rig_views, settings(frames="hold"), f, "x00_y00") == 0.0
     assert np.array_equal(rf.principal_points(held, model)["1_2"],
                           np.array(rf._colmap_params(rig_views["1_2"][0])[2:4]))
+
+
+def test_the_final_pass_stops_at_its_own_cap_and_ends_lower_than_from_bs_cameras(
+        capture, monkeypatch):
+    """refine.final_iterations caps the final pass (Ceres counts its first evaluation as an
+    iteration), max_iterations the focal pass; started where the focal pass ended, the final
+    pass ends at a lower cost than from B's cameras set back with the frames as the focal
+    pass left them (the start before warm_start), at the same cap."""
+    views, rig, db = capture
+    eq6 = eq6_of(views, rig)
+    out = rf.refine_calibration(eq6, rig, db, settings(final_iterations=2),
+                                hold_shot="x00_y00")
+    focal, final = out.report["passes"]["focal"], out.report["passes"]["final"]
+    assert final["iterations"] <= 3 < focal["iterations"] <= 11
+    assert focal["turn_deg"] > 0.0
+
+    def cold(rec, model, views, settings, focal, hold_shot):
+        rf.set_intrinsics(rec, model, views)
+        return 0.0
+
+    monkeypatch.setattr(rf, "warm_start", cold)
+    before = rf.refine_calibration(eq6, rig, db, settings(final_iterations=2),
+                                   hold_shot="x00_y00").report["passes"]["final"]
+    assert final["initial_cost"] < before["initial_cost"]
+    assert final["final_cost"] < before["final_cost"]
