@@ -680,7 +680,7 @@ def turn_frames(rec, model: RigModel, turn: np.ndarray, hold_shot: str) -> None:
     rig_from_world ``F`` to ``R F T^-1`` (for the held one ``H`` again). What every frame
     sees moves as if each view's principal point had moved by the shift of
     :func:`turn_of_shift`: the common shift of the focal pass taken back into the frames
-    (:func:`_adjusted`)."""
+    (:func:`warm_start`)."""
     R4 = np.eye(4)
     R4[:3, :3] = turn
     H = np.eye(4)
