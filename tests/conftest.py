@@ -77,3 +77,23 @@ def tiny_complete_run(tmp_path_factory, tiny_tmpdir) -> Path:
     proc = snakemake(work, tmpdir=tiny_tmpdir)
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-4000:]
     return work
+
+
+# Under pytest-xdist (pyproject's addopts: two workers, ``--dist loadgroup``) every test
+# module runs whole on one worker, so its module fixtures are made once. The modules that
+# start from the session's complete tiny run share one worker (one run, not one a worker)
+# and go first, in collection order kept (``--no-loadscope-reorder``): they are the
+# suite's longest part, and the other worker takes every other module meanwhile.
+SHARED_RUN = "tiny_complete_run"
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Each item's xdist group: its module's name, or :data:`SHARED_RUN` for every item of a
+    module where any test needs that run; those modules' items moved to the front."""
+    shared = {item.module.__name__ for item in items
+              if SHARED_RUN in getattr(item, "fixturenames", ())}
+    for item in items:
+        name = item.module.__name__
+        item.add_marker(pytest.mark.xdist_group(SHARED_RUN if name in shared else name))
+    items.sort(key=lambda item: item.module.__name__ not in shared)
