@@ -91,9 +91,12 @@ SHARED_RUN = "tiny_complete_run"
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Each item's xdist group: its module's name, or :data:`SHARED_RUN` for every item of a
     module where any test needs that run; those modules' items moved to the front."""
-    shared = {item.module.__name__ for item in items
+    def module(item: pytest.Item) -> str:
+        return item.nodeid.split("::")[0]
+
+    shared = {module(item) for item in items
               if SHARED_RUN in getattr(item, "fixturenames", ())}
     for item in items:
-        name = item.module.__name__
+        name = module(item)
         item.add_marker(pytest.mark.xdist_group(SHARED_RUN if name in shared else name))
-    items.sort(key=lambda item: item.module.__name__ not in shared)
+    items.sort(key=lambda item: module(item) not in shared)
