@@ -88,8 +88,8 @@ SHARED_RUN = "tiny_complete_run"
 
 
 @pytest.hookimpl(tryfirst=True)
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Each item's xdist group: its module's name, or :data:`SHARED_RUN` for every item of a
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Each item's xdist group: its module's file, or :data:`SHARED_RUN` for every item of a
     module where any test needs that run; those modules' items moved to the front."""
     def module(item: pytest.Item) -> str:
         return item.nodeid.split("::")[0]
