@@ -618,30 +618,73 @@ def refine_enabled():
 
 
 def refine_inputs(wildcards):
-    """The Eq. 6 calibration and the rig; where the refinement runs, the database of its
-    tracks: the central views' own matches (refine.tracks central, from match_central),
-    the matches of every view (views, from view_matches) or both. With refine.enabled false
-    the Eq. 6 result is copied, and the calibration waits for no matching."""
+    """The Eq. 6 calibration and the rig; where the refinement runs, the track sets of
+    rule refine_tracks that refine.tracks names (central, views or both) and the merge's
+    scale. With refine.enabled false the Eq. 6 result is copied, and the calibration waits
+    for no matching."""
     d = wildcards.dataset
     out = {
         "eq6": res(d, "calibration", "eq6", "cameras.json"),
         "rig": res(d, "reg_b", "rig.json"),
     }
+    # --forcerun refine, the stage's name, makes its track sets again too (as stage_outputs
+    # does for a stage of several rules: evaluated before Snakemake decides what runs)
+    dag = workflow.dag
+    if any(rl.name == "refine" for rl in dag.forcerules):
+        dag.forcerules.update(stage_rules("refine"))
     if refine_enabled():
-        cfg = stage_config("refine")
-        tracks = cfg["tracks"]
-        if tracks == "views":
-            out["database"] = res(d, "matches", "database.db")
-        else:
-            out["database"] = res(d, "matches", "central.db")
-        if tracks == "both":
-            out["view_database"] = res(d, "matches", "database.db")
+        out["tracks"] = [
+            res(d, "refine", "tracks", s)
+            for s in TRACK_SOURCES[stage_config("refine")["tracks"]]
+        ]
         # the merge's scale source and the stage's step (refine.scale: auto)
         out["scale"] = res(d, "merge", "scale.json")
-        if cfg["align"]["enabled"] or tracks != "views":
-            # the views themselves: the observations are aligned by their patches (the
-            # central views' points are carried into the other views by them)
-            out["view_sets"] = view_sets(d, cams(d))
+    return out
+
+
+def track_config():
+    """The refine keys that a track set depends on (the params of rule refine_tracks); a
+    change to the adjustments' own (the loss, the passes, the rig's and the focal length's
+    modes) remakes no track set."""
+    cfg = stage_config("refine")
+    return {k: cfg[k] for k in TRACK_KEYS if k in cfg}
+
+
+#: the refine: keys of :func:`track_config` (plenocal.calib.refine.make_track_set)
+TRACK_KEYS = (
+    "matches",
+    "carry_every",
+    "max_points",
+    "max_error_px",
+    "min_angle_deg",
+    "align",
+)
+
+
+#: refine.tracks -> the track sets (rule refine_tracks' sources), in the order they are
+#: joined (plenocal.calib.refine.track_sources)
+TRACK_SOURCES = {
+    "central": ["central"],
+    "views": ["views"],
+    "both": ["central", "views"],
+}
+
+
+def refine_tracks_inputs(wildcards):
+    """One track set's inputs: the Eq. 6 calibration, the rig, the matches of its source
+    (central: the central views' own, from match_central; views: every view's, from
+    view_matches) and, where the observations are aligned by their patches or carried
+    into the other views by them, the views themselves."""
+    d = wildcards.dataset
+    cfg = stage_config("refine")
+    db = "central.db" if wildcards.source == "central" else "database.db"
+    out = {
+        "eq6": res(d, "calibration", "eq6", "cameras.json"),
+        "rig": res(d, "reg_b", "rig.json"),
+        "database": res(d, "matches", db),
+    }
+    if cfg["align"]["enabled"] or wildcards.source == "central":
+        out["view_sets"] = view_sets(d, cams(d))
     return out
 
 
@@ -652,10 +695,18 @@ def _bytes_of(input, keys):
     return sum(os.path.getsize(f) for f in paths if os.path.exists(f))
 
 
-def refine_mem_mb(wildcards, input):
-    """Rule refine's memory request: it grows with the match databases the job reads
+def refine_tracks_mem_mb(wildcards, input):
+    """Rule refine_tracks' memory request: it grows with the match database the job reads
     (plenocal.job_memory)."""
-    return job_memory.refine_mem_mb(_bytes_of(input, ("database", "view_database")))
+    return job_memory.refine_tracks_mem_mb(_bytes_of(input, ("database",)))
+
+
+def refine_mem_mb(wildcards, input):
+    """Rule refine's memory request: it grows with the track sets the job reads
+    (plenocal.job_memory)."""
+    folders = [f for f in input.get("tracks", []) if os.path.isdir(f)]
+    size = sum(e.stat().st_size for f in folders for e in os.scandir(f) if e.is_file())
+    return job_memory.refine_mem_mb(size)
 
 
 def reprojection_mem_mb(wildcards, input):
@@ -699,6 +750,7 @@ STAGE_RULES = {
     "convert": r"lenslet_frame|convert_setup|convert(_views)?(_\d+){1,2}",
     "reg_a": r"features_a|match_a|map_a|match_central",
     "reg_b": r"rig_b",
+    "refine": r"refine(_tracks)?",
     "depth": r"depth_a(_other)?(_\d+)?|depth_b(_other)?(_\d+){1,2}",
     "verify": (
         r"view_features(_\d+){1,2}|view_matches|reprojection(_calib|_complete)?"

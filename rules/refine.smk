@@ -6,6 +6,34 @@ calibration/ (plenocal.calib.refine). With refine.enabled false, calibration/ ho
 Eq. 6 result as it is."""
 
 
+rule refine_tracks:
+    input:
+        unpack(refine_tracks_inputs),
+    output:
+        tracks=directory("results/{dataset}/refine/tracks/{source}"),
+    log:
+        log_path("refine_tracks", "{dataset}_{source}"),
+    benchmark:
+        bench_path("refine_tracks", "{dataset}_{source}")
+    wildcard_constraints:
+        source="central|views",
+    priority: PRIORITY["calibration"]
+    conda:
+        "../envs/plenocal.yaml"
+    # one job per source: on two cores the central views' set and every view's set are
+    # made side by side, and the adjustments start from both (BENCHMARKS.md, "The refine
+    # job's track sets as jobs of their own")
+    threads: lambda wc: stage_config("refine")["num_threads"]
+    resources:
+        mem_mb=refine_tracks_mem_mb,
+        runtime=30,
+    params:
+        refine=lambda wc: track_config(),
+        sfm=lambda wc: sfm_params(),
+    script:
+        "../scripts/refine_tracks.py"
+
+
 rule refine:
     input:
         unpack(refine_inputs),

@@ -15,9 +15,9 @@ import cv2  # noqa: E402, F401  (before pycolmap: see DESIGN.md on cv2/pycolmap)
 from plenocal.artifacts.cameras import read_cameras, write_cameras  # noqa: E402
 from plenocal.artifacts.rig import RigB, read_rig  # noqa: E402
 from plenocal.artifacts.scale import read_scale  # noqa: E402
+from plenocal.artifacts.tracks import read_tracks  # noqa: E402
 from plenocal.calib.refine import RefineSettings, refine_calibration  # noqa: E402
 from plenocal.calib.reg_b.rig import rig_at_focal  # noqa: E402
-from plenocal.convert.viewset import view_set_files  # noqa: E402
 from plenocal.export.colmap_model import write_colmap  # noqa: E402
 from plenocal.export.mpeg import write_mpeg  # noqa: E402
 from plenocal.io.files import make_temp_dir, write_json  # noqa: E402
@@ -39,14 +39,14 @@ if settings.enabled:
     step_m = (float(scale.array_step["step_m"]) if scale.chosen == "array_step" else None)
     # COLMAP's working files beside the output, removed at the end (and a killed job's by
     # the next run: make_temp_dir)
+    # the track sets of rule refine_tracks, one job per source (made side by side)
+    stored = [read_tracks(folder) for folder in sm.input.tracks]
     work = make_temp_dir(Path(sm.output.info).parent, ".refine.")
     try:
         result = refine_calibration(
-            eq6, rig, sm.input.database, settings, hold_shot=sm.params.hold_shot,
+            eq6, rig, None, settings, hold_shot=sm.params.hold_shot,
             rig_at_focal=lambda f: RigB(rig_at_focal(rig.doc, f)), work_dir=work,
-            images=view_set_files(sm.input.view_sets) if "view_sets" in sm.input.keys()
-            else None, align_threads=int(sm.threads), step_m=step_m,
-            view_database=sm.input.get("view_database"))
+            step_m=step_m, track_sets={t.source: (t.tracks, t.alignment) for t in stored})
     finally:
         shutil.rmtree(work, ignore_errors=True)
     cams, info = result.cameras, {"enabled": True, **result.report}

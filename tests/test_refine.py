@@ -477,3 +477,40 @@ def test_the_final_pass_stops_at_its_own_cap_and_ends_lower_than_from_bs_cameras
                                    hold_shot="x00_y00").report["passes"]["final"]
     assert final["initial_cost"] < before["initial_cost"]
     assert final["final_cost"] < before["final_cost"]
+
+
+def test_track_sets_written_and_read_back_give_the_same_bytes(capture, tmp_path):
+    """Rule refine_tracks makes each track set in a job of its own (plenocal.artifacts.
+    tracks), rule refine adjusts them: the cameras and the report are the same bytes as
+    the refinement that makes its track set in one process, and a damaged folder is
+    refused with the rule to rerun."""
+    import json  # noqa: PLC0415
+
+    from plenocal.artifacts import tracks as at  # noqa: PLC0415
+    from plenocal.io.files import dumps_json  # noqa: PLC0415
+
+    views, rig, db = capture
+    images = {name: db.parent / f"{name}.png" for name in views}
+    eq6 = eq6_of(views, rig)
+    s = settings()
+    whole = rf.refine_calibration(eq6, rig, db, s, hold_shot="x00_y00", images=images)
+    ts, align, _ = rf.make_track_set("views", eq6, rig, db, s, images)
+    at.write_tracks(tmp_path / "views", "views", ts, align)
+    stored = at.read_tracks(tmp_path / "views")
+    # refine.json's statistics: the alignment's as written there (dumps_json's digits)
+    assert stored.source == "views" and stored.alignment == json.loads(dumps_json(align))
+    assert list(stored.tracks.points) == list(ts.points)
+    assert list(stored.tracks.keypoints) == list(ts.keypoints)
+    split = rf.refine_calibration(eq6, rig, None, s, hold_shot="x00_y00",
+                                  track_sets={"views": (stored.tracks, stored.alignment)})
+    assert sorted(split.cameras) == sorted(whole.cameras)
+    for key, cam in whole.cameras.items():
+        assert cam.K.tobytes() == split.cameras[key].K.tobytes(), key
+        assert cam.cam_to_world.tobytes() == split.cameras[key].cam_to_world.tobytes(), key
+    assert dumps_json(split.report) == dumps_json(whole.report)  # refine.json's bytes
+    with pytest.raises(ValueError, match="needs the track sets of central, views"):
+        rf.refine_calibration(eq6, rig, None, settings(tracks="both"), hold_shot="x00_y00",
+                              track_sets={"views": (stored.tracks, stored.alignment)})
+    (tmp_path / "views" / "elements.npy").unlink()
+    with pytest.raises(ValueError, match="elements.npy.*rerun rule refine_tracks"):
+        at.read_tracks(tmp_path / "views")

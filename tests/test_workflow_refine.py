@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -166,23 +167,33 @@ def _mem_mb(out: str, rule: str) -> int:
 
 def test_the_memory_requests_grow_with_the_match_databases(tiny_complete_run: Path,
                                                             tmp_path: Path):
-    """SLURM kills a job past its request: rule refine's and Table I's triangulations' grow
-    with the databases they read (plenocal.job_memory), from the fixed requests that every
-    measured geometry fits under."""
+    """SLURM kills a job past its request: the refinement's track sets' and Table I's
+    triangulations' grow with the databases they read, rule refine's with the track sets
+    (plenocal.job_memory), from the fixed requests that every measured geometry fits
+    under."""
     work = clone(tiny_complete_run, tmp_path / "run")
     target = "results/tiny/eval/reprojection/complete.json"
-    proc = snakemake(work, "-n", "--forcerun", "refine", target)
+    proc = snakemake(work, "-n", target, "--forcerun", "refine_tracks")
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     out = proc.stdout + proc.stderr
-    # the tiny capture's databases are small
-    assert (_mem_mb(out, "refine"), _mem_mb(out, "reprojection_complete")) == (3000, 1500)
+    # the tiny capture's databases and track sets are small
+    assert (_mem_mb(out, "refine_tracks"), _mem_mb(out, "refine"),
+            _mem_mb(out, "reprojection_complete")) == (3000, 3000, 1500)
     matches = work / "results" / "tiny" / "matches"
     os.truncate(matches / "database.db", 400 * 10**6)  # a larger array's, as a sparse file
     view_db = (matches / "database.db").stat().st_size
-    both = view_db + (matches / "central.db").stat().st_size
-    proc = snakemake(work, "-n", "--forcerun", "refine", target)
+    tracks = work / "results" / "tiny" / "refine" / "tracks" / "views" / "elements.npy"
+    with open(tracks, "r+b") as fh:  # a larger array's track set (the dry run reads none)
+        fh.truncate(100 * 10**6)
+    proc = snakemake(work, "-n", target, "--forcerun", "refine_tracks")
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     out = proc.stdout + proc.stderr
-    assert _mem_mb(out, "refine") == job_memory.refine_mem_mb(both) > 4500
+    requests = {int(m) for m in re.findall(
+        r"rule refine_tracks:[^\n]*\n(?:    [^\n]*\n)*?    resources:[^\n]*\bmem_mb=(\d+)",
+        out)}
+    assert requests == {3000, job_memory.refine_tracks_mem_mb(view_db)}
+    assert job_memory.refine_tracks_mem_mb(view_db) == 4500
+    assert _mem_mb(out, "refine") == job_memory.refine_mem_mb(
+        sum(f.stat().st_size for f in tracks.parent.parent.glob("*/*"))) >= 3500
     assert _mem_mb(out, "reprojection_complete") == job_memory.reprojection_mem_mb(
         view_db) == 2600

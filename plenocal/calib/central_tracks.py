@@ -41,12 +41,12 @@ import shutil
 import sqlite3
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from plenocal.artifacts.tracks import TrackSet
 from plenocal.calib import track_alignment as ta
 from plenocal.calib.view_greys import grey_of
 from plenocal.camera import PinholeCamera, invert_pose, k_to_colmap
@@ -56,19 +56,6 @@ if TYPE_CHECKING:
     from plenocal.calib.refine import RefineSettings
 
 log = logging.getLogger(__name__)
-
-
-@dataclass
-class TrackSet:
-    """Tracks over the views: ``names`` image id -> ``"<shot>/<view>.png"``; ``keypoints``
-    image name -> (m, 2) COLMAP's convention; ``points`` point id -> (X (3,), its track's
-    (image id, keypoint index) pairs); ``triangulated`` the points before any was left
-    out."""
-
-    names: dict[int, str]
-    keypoints: dict[str, np.ndarray]
-    points: dict[int, tuple[np.ndarray, list[tuple[int, int]]]]
-    triangulated: int
 
 
 def joined(a: TrackSet, b: TrackSet) -> TrackSet:
@@ -244,13 +231,13 @@ def aligned_track_set(ts: TrackSet, lead: Mapping[str, int],
         cams[i] = (k_to_colmap(cam.K), T[:3, :3], T[:3, 3])
     by_id = {i: ts.keypoints[n] for i, n in ts.names.items()}
     lead_of = {i: lead[n] for i, n in ts.names.items()}
+    lead_by_id = np.zeros(max(ts.names) + 1, int)
+    lead_by_id[list(lead_of)] = list(lead_of.values())
     obs, rows = ta.track_observations(ts.points, cams, by_id,
-                                      may_reference=lambda i, j: j < lead_of[i])
+                                      may_reference=lambda i, j: j < lead_by_id[i])
     uv, aligned, stats = ta.align_observations(obs, lambda i: load(ts.names[i][:-4]),
                                                settings, num_threads)
     rows = np.asarray(rows, int).reshape(-1, 2)
-    lead_by_id = np.zeros(max(ts.names) + 1, int)
-    lead_by_id[list(lead_of)] = list(lead_of.values())
     projected = rows[:, 1] >= lead_by_id[rows[:, 0]]
     drop = projected & ~aligned
     keypoints = {n: kp.copy() for n, kp in ts.keypoints.items()}

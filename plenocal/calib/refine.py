@@ -539,10 +539,12 @@ def point_shots(rec, model: RigModel) -> list[frozenset[str]]:
     """The shots that see each of the adjustment's points (those seen by two or more: the
     points that tie shots together)."""
     shot_of_frame = {fid: shot for shot, fid in model.frame_of_shot.items()}
+    # each image's shot looked up once, not once per observation (1.2 million on the
+    # default data: 2.6 -> 1.2 s, the same sets)
+    shot_of_image = {i: shot_of_frame[rec.image(i).frame_id] for i in rec.images}
     out = []
     for pid in rec.point3D_ids():
-        seen = frozenset(shot_of_frame[rec.image(el.image_id).frame_id]
-                         for el in rec.point3D(pid).track.elements)
+        seen = frozenset(shot_of_image[el.image_id] for el in rec.point3D(pid).track.elements)
         if len(seen) > 1:
             out.append(seen)
     return out
@@ -725,14 +727,16 @@ def _stats(e: np.ndarray) -> dict:
     return {"n": int(e.size), "mean_px": float(e.mean()), "median_px": float(np.median(e))}
 
 
-def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: str | Path,
+def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: str | Path | None,
                        settings: RefineSettings, *, hold_shot: str,
                        rig_at_focal: Callable[[float], RigB] | None = None,
                        work_dir: str | Path | None = None,
                        images: Mapping[str, str | Path] | None = None,
                        align_threads: int | None = None,
                        step_m: float | None = None,
-                       view_database: str | Path | None = None) -> Refinement:
+                       view_database: str | Path | None = None,
+                       track_sets: Mapping[str, tuple[TrackSet, dict]] | None = None
+                       ) -> Refinement:
     """Refine the Eq. 6 calibration ``eq6`` (every view of every shot, metres) under the rig
     ``rig`` on the verified matches of ``database``: the central views' (rule
     ``match_central``) with ``settings.tracks`` central or both, every view's (rule
@@ -747,7 +751,9 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
     number). ``step_m``: the stage's step (metres) where the merge took its scale from it
     (``scale.json``'s ``chosen``: ``array_step``), None otherwise; with ``refine.scale:
     auto`` the result's scale is that step fitted to the refined array shots
-    (:func:`refined_step_scale`)."""
+    (:func:`refined_step_scale`). ``track_sets``: source (:func:`track_sources`) -> the
+    track set and its alignment's statistics, made beforehand (rule ``refine_tracks``:
+    :func:`make_track_set`); the databases and images are then not read."""
     t0 = time.perf_counter()
     views = rig.view_poses()
     shots = sorted({split_key(k)[0] for k in eq6})
@@ -757,16 +763,17 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
                          f"({', '.join(missing[:5])}...): rerun rule merge")
     if hold_shot not in shots:
         raise ValueError(f"refinement: the held shot {hold_shot} is not calibrated")
-    central = [v for v in views if np.allclose(views[v][1], np.eye(4), atol=1e-12)][0]
+    central = central_view(views)
     shot_poses = {s: eq6[f"{s}/{central}"].cam_to_world for s in shots}
     # the track sets' plain data go out of scope here, before the adjustments: on a 9 x 3
     # array with both track sets (dense-s34) the job's peak 2.32 -> 1.90 GB, the same
     # cameras
     rec, model, n_tri, n_used, align, t_tri = _tracks_rig(
         eq6, views, central, shot_poses, rig, database, view_database, settings, images,
-        align_threads, work_dir)
-    log.info("rig reconstruction: %d shots x %d views, %d of %d points (%.1f s triangulation)",
-             len(shots), len(views), n_used, n_tri, t_tri)
+        align_threads, work_dir, track_sets)
+    log.info("rig reconstruction: %d shots x %d views, %d of %d points (%s)", len(shots),
+             len(views), n_used, n_tri, "track sets made beforehand" if track_sets is not None
+             else f"{t_tri:.1f} s triangulation")
     return _adjusted(rec, model, eq6, rig, views, shots, central, shot_poses, settings,
                      hold_shot=hold_shot, rig_at_focal=rig_at_focal, step_m=step_m,
                      points={"triangulated": n_tri, "used": n_used}, align=align, t0=t0,
@@ -777,10 +784,24 @@ def _tracks_rig(eq6: Mapping[str, PinholeCamera], views: Mapping[str, tuple], ce
                 shot_poses: Mapping[str, np.ndarray], rig: RigB, database: str | Path,
                 view_database: str | Path | None, settings: RefineSettings,
                 images: Mapping[str, str | Path] | None, align_threads: int | None,
-                work_dir: str | Path | None) -> tuple:
+                work_dir: str | Path | None,
+                track_sets: Mapping[str, tuple[TrackSet, dict]] | None = None) -> tuple:
     """The rig reconstruction on the tracks ``settings.tracks`` names (module docstring):
     (reconstruction, :class:`RigModel`, points triangulated, points used, the alignment's
-    statistics, the triangulation's seconds)."""
+    statistics, the triangulation's seconds). ``track_sets``: the sets made beforehand
+    (:func:`refine_calibration`), joined as they would be here."""
+    if track_sets is not None:
+        sources = track_sources(settings)
+        missing = [s for s in sources if s not in track_sets]
+        if missing:
+            raise ValueError(f"refine.tracks {settings.tracks} needs the track sets of "
+                             f"{', '.join(sources)}: {', '.join(missing)} not given (rule "
+                             "refine_tracks makes them)")
+        ts, align = track_sets[sources[0]]
+        if len(sources) == 2:
+            ts = joined(ts, track_sets[sources[1]][0])
+            align = {"enabled": True, "central": align, "views": track_sets[sources[1]][1]}
+        return _rig_of_tracks(ts, views, shot_poses, rig, settings) + (align, 0.0)
     if settings.tracks == "both" and view_database is None:
         raise ValueError("refine.tracks both adds the matches of every view to the central "
                          "views': the view database (rule view_matches) is needed")
@@ -799,12 +820,55 @@ def _tracks_rig(eq6: Mapping[str, PinholeCamera], views: Mapping[str, tuple], ce
                                                       align_threads, work_dir)
         ts, t_tri = joined(ts, ts_views), t_tri + t_views
         align = {"enabled": True, "central": align, "views": align_views}
+    return _rig_of_tracks(ts, views, shot_poses, rig, settings) + (align, t_tri)
+
+
+def _rig_of_tracks(ts: TrackSet, views: Mapping[str, tuple], shot_poses: Mapping[str, np.ndarray],
+                   rig: RigB, settings: RefineSettings) -> tuple:
+    """(the rig reconstruction of ``ts``, its :class:`RigModel`, the points triangulated,
+    the points used)."""
     if len(ts.points) < 100:
         raise ValueError(f"refinement: only {len(ts.points)} points seen in three or more "
                          f"views ({_TOO_FEW[settings.tracks]}), or set refine.enabled: false")
     rec, model = rig_reconstruction_of(ts.names, ts.points, ts.keypoints, views, shot_poses,
                                        rig.width, rig.height)
-    return rec, model, ts.triangulated, len(ts.points), align, t_tri
+    return rec, model, ts.triangulated, len(ts.points)
+
+
+def track_sources(settings: RefineSettings) -> tuple[str, ...]:
+    """The track sets ``settings.tracks`` adjusts, in the order they are joined: the
+    central views' matches carried into every view (``central``), every view's own matches
+    (``views``), or both."""
+    return {"central": ("central",), "views": ("views",),
+            "both": ("central", "views")}[settings.tracks]
+
+
+def central_view(views: Mapping[str, tuple[np.ndarray, np.ndarray]]) -> str:
+    """The rig's view at the identity pose (``views``: :meth:`RigB.view_poses`)."""
+    central = [v for v in views if np.allclose(views[v][1], np.eye(4), atol=1e-12)]
+    if len(central) != 1:
+        raise ValueError("the rig has no view at the identity pose (its central view): "
+                         "rerun rule rig_b")
+    return central[0]
+
+
+def make_track_set(source: str, eq6: Mapping[str, PinholeCamera], rig: RigB,
+                   database: str | Path, settings: RefineSettings,
+                   images: Mapping[str, str | Path] | None,
+                   align_threads: int | None = None,
+                   work_dir: str | Path | None = None) -> tuple[TrackSet, dict, float]:
+    """One track set of the refinement (rule ``refine_tracks``), as
+    :func:`refine_calibration` makes it for ``source``: ``central`` the central views'
+    matches (``database``: rule match_central's) carried into every view, ``views`` every
+    view's matches (rule view_matches'); triangulated with the Eq. 6 cameras ``eq6`` and
+    aligned by the views' patches (``images``). Returns the set, its alignment's
+    statistics and the seconds taken."""
+    if source == "views":
+        return _view_tracks(eq6, database, settings, images, align_threads, work_dir)
+    if source == "central":
+        return _central_tracks(eq6, central_view(rig.view_poses()), database, settings,
+                               images, align_threads, work_dir)
+    raise ValueError(f"track set source {source!r}: use central or views")
 
 
 #: the remedy where a track source gives too few points
