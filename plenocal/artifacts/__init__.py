@@ -10,6 +10,8 @@ them without pulling in OpenCV or COLMAP.
   the ground truth (merge, baseline_sfm, ground_truth -> depth maps, synthesis, Table I,
   gt_errors, the report)
 * :mod:`.scale` - ``merge/scale.json`` (scale, Eq. 5 -> merge, Eq. 6, and gt_errors)
+* :mod:`.tracks` - ``refine/tracks/<source>/`` (refine_tracks -> refine: one track set of
+  the joint refinement, its points and their aligned observations)
 * :mod:`.stage_warnings` - the ``warnings`` list of a stage's output (convert set-up,
   ``disparity.json``, ``features.json`` -> the report's first screen): one shape
 * :mod:`.results` - the evaluation results that the report reads: ``eval/reprojection.json``
