@@ -39,10 +39,11 @@ class GrowingRequest:
 refine_tracks_mem_mb = GrowingRequest("refine_tracks_mem_mb", 500, 10.0, 3000)
 
 #: Rule refine (the adjustments on the track sets): its peak over the size of the track
-#: sets' folders it reads. The default data: 43 MB -> 1,417 MB (the rig reconstruction and
-#: COLMAP's bundle adjustment of 1.23 million observations), 22x; asked 30x and the fixed
-#: part, never less than the 3 GB the rule asked for before (dense-s34, the largest capture
-#: measured, peaked at 1.9 GB with its databases' 234 MB).
+#: sets' folders it reads. The default data: 43 MB -> 1,212 MB (the rig reconstruction and
+#: COLMAP's bundle adjustment of 1.23 million observations; the sets are read where the
+#: reconstruction is built and released before the adjustments), 17x beyond the fixed
+#: part; asked 30x, never less than the 3 GB the rule asked for before (dense-s34, the
+#: largest capture measured, peaked at 1.9 GB with its databases' 234 MB).
 refine_mem_mb = GrowingRequest("refine_mem_mb", 500, 30.0, 3000)
 
 #: Rules reprojection_calib and reprojection_complete (Table I's triangulations): peak RSS

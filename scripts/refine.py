@@ -8,6 +8,7 @@ from plenocal.library_threads import pin_library_threads
 pin_library_threads()
 
 import shutil  # noqa: E402
+from functools import partial  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import cv2  # noqa: E402, F401  (before pycolmap: see DESIGN.md on cv2/pycolmap)
@@ -15,13 +16,20 @@ import cv2  # noqa: E402, F401  (before pycolmap: see DESIGN.md on cv2/pycolmap)
 from plenocal.artifacts.cameras import read_cameras, write_cameras  # noqa: E402
 from plenocal.artifacts.rig import RigB, read_rig  # noqa: E402
 from plenocal.artifacts.scale import read_scale  # noqa: E402
-from plenocal.artifacts.tracks import read_tracks  # noqa: E402
+from plenocal.artifacts.tracks import read_tracks, track_source  # noqa: E402
 from plenocal.calib.refine import RefineSettings, refine_calibration  # noqa: E402
 from plenocal.calib.reg_b.rig import rig_at_focal  # noqa: E402
 from plenocal.export.colmap_model import write_colmap  # noqa: E402
 from plenocal.export.mpeg import write_mpeg  # noqa: E402
 from plenocal.io.files import make_temp_dir, write_json  # noqa: E402
 from plenocal.rulelog import rule_logger  # noqa: E402
+
+
+def _tracks_of(folder: str) -> tuple:
+    """The track set in ``folder`` and its alignment's statistics."""
+    stored = read_tracks(folder)
+    return stored.tracks, stored.alignment
+
 
 snakemake = globals()["snakemake"]
 log = rule_logger(snakemake, "refine")
@@ -37,16 +45,18 @@ if settings.enabled:
     # to the refined array shots)
     scale = read_scale(sm.input.scale)
     step_m = (float(scale.array_step["step_m"]) if scale.chosen == "array_step" else None)
+    # the track sets of rule refine_tracks, one job per source (made side by side), read
+    # where the rig reconstruction is built and released with its plain data, before the
+    # adjustments
+    sources = {track_source(folder): partial(_tracks_of, folder) for folder in sm.input.tracks}
     # COLMAP's working files beside the output, removed at the end (and a killed job's by
     # the next run: make_temp_dir)
-    # the track sets of rule refine_tracks, one job per source (made side by side)
-    stored = [read_tracks(folder) for folder in sm.input.tracks]
     work = make_temp_dir(Path(sm.output.info).parent, ".refine.")
     try:
         result = refine_calibration(
             eq6, rig, None, settings, hold_shot=sm.params.hold_shot,
             rig_at_focal=lambda f: RigB(rig_at_focal(rig.doc, f)), work_dir=work,
-            step_m=step_m, track_sets={t.source: (t.tracks, t.alignment) for t in stored})
+            step_m=step_m, track_sets=sources)
     finally:
         shutil.rmtree(work, ignore_errors=True)
     cams, info = result.cameras, {"enabled": True, **result.report}

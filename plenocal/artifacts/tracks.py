@@ -92,6 +92,13 @@ def write_tracks(folder: str | Path, source: str, tracks: TrackSet,
     atomic_write_dir(folder, write)
 
 
+def track_source(folder: str | Path) -> str:
+    """The source of the track set in ``folder`` (``tracks.json`` alone: this version
+    only)."""
+    return decode(Path(folder) / "tracks.json", FORMAT, VERSION, "track set", _REMEDY,
+                  lambda doc: str(doc["source"]))
+
+
 def read_tracks(folder: str | Path) -> StoredTracks:
     """The track set in ``folder`` (this version only), as :func:`write_tracks` wrote it."""
     folder = Path(folder)

@@ -735,7 +735,7 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
                        align_threads: int | None = None,
                        step_m: float | None = None,
                        view_database: str | Path | None = None,
-                       track_sets: Mapping[str, tuple[TrackSet, dict]] | None = None
+                       track_sets: Mapping[str, TrackSource] | None = None
                        ) -> Refinement:
     """Refine the Eq. 6 calibration ``eq6`` (every view of every shot, metres) under the rig
     ``rig`` on the verified matches of ``database``: the central views' (rule
@@ -753,7 +753,8 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
     auto`` the result's scale is that step fitted to the refined array shots
     (:func:`refined_step_scale`). ``track_sets``: source (:func:`track_sources`) -> the
     track set and its alignment's statistics, made beforehand (rule ``refine_tracks``:
-    :func:`make_track_set`); the databases and images are then not read."""
+    :func:`make_track_set`), or a function that reads them (rule ``refine``: then no
+    reference outlives the rig reconstruction); the databases and images are not read."""
     t0 = time.perf_counter()
     views = rig.view_poses()
     shots = sorted({split_key(k)[0] for k in eq6})
@@ -785,7 +786,7 @@ def _tracks_rig(eq6: Mapping[str, PinholeCamera], views: Mapping[str, tuple], ce
                 view_database: str | Path | None, settings: RefineSettings,
                 images: Mapping[str, str | Path] | None, align_threads: int | None,
                 work_dir: str | Path | None,
-                track_sets: Mapping[str, tuple[TrackSet, dict]] | None = None) -> tuple:
+                track_sets: Mapping[str, TrackSource] | None = None) -> tuple:
     """The rig reconstruction on the tracks ``settings.tracks`` names (module docstring):
     (reconstruction, :class:`RigModel`, points triangulated, points used, the alignment's
     statistics, the triangulation's seconds). ``track_sets``: the sets made beforehand
@@ -797,10 +798,12 @@ def _tracks_rig(eq6: Mapping[str, PinholeCamera], views: Mapping[str, tuple], ce
             raise ValueError(f"refine.tracks {settings.tracks} needs the track sets of "
                              f"{', '.join(sources)}: {', '.join(missing)} not given (rule "
                              "refine_tracks makes them)")
-        ts, align = track_sets[sources[0]]
-        if len(sources) == 2:
-            ts = joined(ts, track_sets[sources[1]][0])
-            align = {"enabled": True, "central": align, "views": track_sets[sources[1]][1]}
+        sets = [t() if callable(t) else t for t in (track_sets[s] for s in sources)]
+        ts, align = sets[0]
+        if len(sets) == 2:
+            ts = joined(ts, sets[1][0])
+            align = {"enabled": True, "central": align, "views": sets[1][1]}
+        del sets
         return _rig_of_tracks(ts, views, shot_poses, rig, settings) + (align, 0.0)
     if settings.tracks == "both" and view_database is None:
         raise ValueError("refine.tracks both adds the matches of every view to the central "
@@ -870,6 +873,10 @@ def make_track_set(source: str, eq6: Mapping[str, PinholeCamera], rig: RigB,
                                images, align_threads, work_dir)
     raise ValueError(f"track set source {source!r}: use central or views")
 
+
+#: a track set made beforehand and its alignment's statistics, or a function that reads
+#: them (:func:`refine_calibration`'s ``track_sets``)
+TrackSource = tuple[TrackSet, dict] | Callable[[], tuple[TrackSet, dict]]
 
 #: the remedy where a track source gives too few points
 _TOO_FEW = {
