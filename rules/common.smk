@@ -630,7 +630,7 @@ def refine_inputs(wildcards):
     # --forcerun refine, the stage's name, makes its track sets again too (as stage_outputs
     # does for a stage of several rules: evaluated before Snakemake decides what runs)
     dag = workflow.dag
-    if any(rl.name == "refine" for rl in dag.forcerules):
+    if dag is not None and any(rl.name == "refine" for rl in dag.forcerules):
         dag.forcerules.update(stage_rules("refine"))
     if refine_enabled():
         out["tracks"] = [

@@ -4,18 +4,19 @@
 A track set is the refinement's points with their observations: the central views'
 matches carried into every view (``central``) or every view's own matches (``views``),
 triangulated with the Eq. 6 cameras and their observations aligned by their patches
-(:class:`plenocal.calib.central_tracks.TrackSet`). Each source is made by a job of its own,
+(:class:`TrackSet`; :mod:`plenocal.calib.central_tracks` and :mod:`plenocal.calib.refine`
+make them). Each source is made by a job of its own,
 so that on two cores the two sets are made side by side, and the adjustments start from
 them (BENCHMARKS.md, "The refine job's track sets as jobs of their own").
 
 The folder holds ``tracks.json`` (format name and version, the images by id in the set's
-order, the points' count, the alignment's statistics) and five ``.npy`` arrays: every
+order, the points' count, the alignment's statistics) and six ``.npy`` arrays: every
 image's keypoints one after another (``keypoints.npy``, float64 (n, 2), COLMAP's
 convention; ``keypoint_counts.npy``), and the points in the set's order (``point_ids.npy``,
 ``xyz.npy`` float64 (p, 3), ``track_lengths.npy``, ``elements.npy`` int64 (e, 2): each
-track's (image id, keypoint index) pairs, one track after another). Read back, the set is
-the one written, to the bit and in its order: the adjustments see the same data as when
-the job made them in one process.
+track's (image id, keypoint index) pairs, one track after another). Read back, the set
+holds the values written, to the bit and in their order (keypoints as float64): the
+adjustments see the same data as when one job made the sets and adjusted them.
 """
 
 from __future__ import annotations
