@@ -10,6 +10,7 @@ from plenocal.config import ConfigError, canonicalize, validate_config
 from plenocal.calib.reg_b.datasheet import DatasheetError, load_datasheet
 from plenocal.io.lenslet import CaptureError, VideoShot, scan_lenslet_folder
 from plenocal import job_memory, names
+from plenocal.artifacts import tracks as tracks_artifact
 from plenocal.names import central_view, view_names
 
 # COLMAP's logging (glog) to standard error alone, which every job's script sends to its
@@ -635,7 +636,7 @@ def refine_inputs(wildcards):
     if refine_enabled():
         out["tracks"] = [
             res(d, "refine", "tracks", s)
-            for s in TRACK_SOURCES[stage_config("refine")["tracks"]]
+            for s in tracks_artifact.SOURCES_OF[stage_config("refine")["tracks"]]
         ]
         # the merge's scale source and the stage's step (refine.scale: auto)
         out["scale"] = res(d, "merge", "scale.json")
@@ -659,15 +660,6 @@ TRACK_KEYS = (
     "min_angle_deg",
     "align",
 )
-
-
-#: refine.tracks -> the track sets (rule refine_tracks' sources), in the order they are
-#: joined (plenocal.calib.refine.track_sources)
-TRACK_SOURCES = {
-    "central": ["central"],
-    "views": ["views"],
-    "both": ["central", "views"],
-}
 
 
 def refine_tracks_inputs(wildcards):

@@ -8,6 +8,7 @@ from plenocal.library_threads import pin_library_threads
 pin_library_threads()
 
 import shutil  # noqa: E402
+import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import cv2  # noqa: E402, F401  (before pycolmap: see DESIGN.md on cv2/pycolmap)
@@ -32,8 +33,9 @@ out.parent.mkdir(parents=True, exist_ok=True)
 # COLMAP's working files beside the output, removed at the end (and a killed job's by the
 # next run: make_temp_dir)
 work = make_temp_dir(out.parent, f".{source}.work.")
+t0 = time.perf_counter()
 try:
-    tracks, alignment, seconds = make_track_set(
+    tracks, alignment, _ = make_track_set(
         source, read_cameras(sm.input.eq6), read_rig(sm.input.rig), sm.input.database,
         settings, view_set_files(sm.input.view_sets) if "view_sets" in sm.input.keys()
         else None, align_threads=int(sm.threads),
@@ -42,4 +44,4 @@ finally:
     shutil.rmtree(work, ignore_errors=True)
 write_tracks(out, source, tracks, alignment)
 log.info("wrote %s: %d points, %d images (%.1f s)", out, len(tracks.points),
-         len(tracks.names), seconds)
+         len(tracks.names), time.perf_counter() - t0)

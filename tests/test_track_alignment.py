@@ -152,3 +152,32 @@ def test_settings_are_checked():
         ta.AlignSettings(max_shift_px=0)
     with pytest.raises(ValueError, match="min_zncc"):
         ta.AlignSettings(min_zncc=2.0)
+
+
+def test_every_tracks_reference_is_reference_indexs_choice():
+    """track_observations takes every track's reference at once: the observation that
+    reference_index picks for the track alone (the first of a tie), and with
+    may_reference, the nearest of those that may (any where none may)."""
+    K = np.array([[100.0, 0, 50], [0, 100.0, 40], [0, 0, 1]])
+    centres = {1: (0.0, 0, 0), 2: (1.0, 0, 0), 3: (2.0, 0, 0), 4: (-1.0, 0, 0)}
+    cameras = {i: (K, np.eye(3), -np.asarray(c)) for i, c in centres.items()}
+    keypoints = {i: np.array([[10.0 + i, 20.0], [30.0, 5.0 * i]]) for i in centres}
+    points = {7: (np.array([0.0, 0, 5]), [(2, 0), (1, 1), (3, 0)]),  # mean at camera 2
+              3: (np.array([0.5, 0, 5]), [(4, 1), (2, 1)]),  # a tie: the first
+              9: (np.array([1.0, 0, 5]), [(1, 0), (2, 0), (3, 1)])}
+    obs, rows = ta.track_observations(points, cameras, keypoints)
+    at = 0  # the rows: the points in id order, each track but its reference in its order
+    for pid in sorted(points):
+        track = points[pid][1]
+        ref = track[ta.reference_index(np.array([centres[i] for i, _ in track]))]
+        mine = slice(at, at + len(track) - 1)
+        at = mine.stop
+        assert [tuple(r) for r in rows[mine].tolist()] == [el for el in track if el != ref]
+        assert set(obs.ref_image[mine].tolist()) == {ref[0]}, pid
+    assert at == len(rows)
+    # only keypoint 0 of an image may be a reference: point 7's nearest is then camera 2
+    # again, point 9's camera 2 too (keypoint 0 there), point 3's (no keypoint 0) any:
+    # camera 4, the first of its tie
+    obs, _ = ta.track_observations(points, cameras, keypoints,
+                                   may_reference=lambda i, j: j == 0)
+    assert obs.ref_image.tolist() == [4, 2, 2, 2, 2]

@@ -33,6 +33,10 @@ from plenocal.io.files import atomic_write_dir, dumps_json, write_npy
 FORMAT = "plenocal.tracks"
 VERSION = 1
 SOURCES = ("central", "views")
+#: ``refine.tracks`` -> the track sets it adjusts, in the order they are joined: the
+#: central views' matches carried into every view, every view's own matches, or both
+#: (rule refine's inputs, :func:`plenocal.calib.refine.track_sources`)
+SOURCES_OF = {"central": ("central",), "views": ("views",), "both": ("central", "views")}
 _ARRAYS = ("keypoints", "keypoint_counts", "point_ids", "xyz", "track_lengths", "elements")
 _REMEDY = "rerun rule refine_tracks"
 

@@ -95,6 +95,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocal.artifacts.rig import RigB
+from plenocal.artifacts.tracks import SOURCES_OF
 from plenocal.calib.central_tracks import TrackSet, joined
 from plenocal.calib.groups import Groups
 from plenocal.calib.reg_a import colmap as cm
@@ -314,11 +315,7 @@ def rig_reconstruction_of(image_names: Mapping[int, str],
     import pycolmap  # noqa: PLC0415
 
     names = sorted(views)
-    central = [v for v in names if np.allclose(views[v][1], np.eye(4), atol=1e-12)]
-    if len(central) != 1:
-        raise ValueError("the rig has no view at the identity pose (its central view): "
-                         "rerun rule rig_b")
-    central = central[0]
+    central = identity_view(views)
     rec = pycolmap.Reconstruction()
     cam_of = {v: i + 1 for i, v in enumerate(names)}
     for v in names:
@@ -764,7 +761,7 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
                          f"({', '.join(missing[:5])}...): rerun rule merge")
     if hold_shot not in shots:
         raise ValueError(f"refinement: the held shot {hold_shot} is not calibrated")
-    central = central_view(views)
+    central = identity_view(views)
     shot_poses = {s: eq6[f"{s}/{central}"].cam_to_world for s in shots}
     # the track sets' plain data go out of scope here, before the adjustments: on a 9 x 3
     # array with both track sets (dense-s34) the job's peak 2.32 -> 1.90 GB, the same
@@ -839,15 +836,15 @@ def _rig_of_tracks(ts: TrackSet, views: Mapping[str, tuple], shot_poses: Mapping
 
 
 def track_sources(settings: RefineSettings) -> tuple[str, ...]:
-    """The track sets ``settings.tracks`` adjusts, in the order they are joined: the
-    central views' matches carried into every view (``central``), every view's own matches
-    (``views``), or both."""
-    return {"central": ("central",), "views": ("views",),
-            "both": ("central", "views")}[settings.tracks]
+    """The track sets ``settings.tracks`` adjusts, in the order they are joined
+    (:data:`plenocal.artifacts.tracks.SOURCES_OF`)."""
+    return SOURCES_OF[settings.tracks]
 
 
-def central_view(views: Mapping[str, tuple[np.ndarray, np.ndarray]]) -> str:
-    """The rig's view at the identity pose (``views``: :meth:`RigB.view_poses`)."""
+def identity_view(views: Mapping[str, tuple[np.ndarray, np.ndarray]]) -> str:
+    """The rig's view at the identity pose, its central view (``views``:
+    :meth:`RigB.view_poses`; by pose, where :func:`plenocal.names.central_view` names it by
+    the grid's size)."""
     central = [v for v in views if np.allclose(views[v][1], np.eye(4), atol=1e-12)]
     if len(central) != 1:
         raise ValueError("the rig has no view at the identity pose (its central view): "
@@ -865,11 +862,12 @@ def make_track_set(source: str, eq6: Mapping[str, PinholeCamera], rig: RigB,
     matches (``database``: rule match_central's) carried into every view, ``views`` every
     view's matches (rule view_matches'); triangulated with the Eq. 6 cameras ``eq6`` and
     aligned by the views' patches (``images``). Returns the set, its alignment's
-    statistics and the seconds taken."""
+    statistics and its triangulation's seconds (the central views' set: all its
+    seconds)."""
     if source == "views":
         return _view_tracks(eq6, database, settings, images, align_threads, work_dir)
     if source == "central":
-        return _central_tracks(eq6, central_view(rig.view_poses()), database, settings,
+        return _central_tracks(eq6, identity_view(rig.view_poses()), database, settings,
                                images, align_threads, work_dir)
     raise ValueError(f"track set source {source!r}: use central or views")
 

@@ -389,13 +389,14 @@ def track_observations(points: Mapping[int, tuple[np.ndarray, list[tuple[int, in
     if not keep.any():
         return none
     rows, owner = els[keep], track[keep]
+    refs = els[ref][owner]  # each row's reference (image id, keypoint index)
     cam, ref_cam = cam_of[keep], cam_of[ref][owner]
     flat = [np.asarray(keypoints[i], float).reshape(-1, 2) for i in ids]
     first = np.concatenate([[0], np.cumsum([len(f) for f in flat])[:-1]])
     flat = np.concatenate(flat)
     kp = flat[first[cam] + rows[:, 1]]
-    ref_kp = flat[first[ref_cam] + els[ref][owner][:, 1]]
+    ref_kp = flat[first[ref_cam] + refs[:, 1]]
     xyz = np.stack([np.asarray(points[p][0], float) for p in pids])[owner]
     A = local_affine(KK[ref_cam], RR[ref_cam], TT[ref_cam], KK[cam], RR[cam], TT[cam], xyz,
                      ref_kp, np.linalg.inv(KK)[ref_cam])
-    return Observations(rows[:, 0], kp, els[ref][owner][:, 0], ref_kp, A), rows
+    return Observations(rows[:, 0], kp, refs[:, 0], ref_kp, A), rows
