@@ -652,6 +652,23 @@ def test_views_reaching_the_rim_take_the_wide_blend():
     assert shot.plan_for(2, 2) is shot.plan and {0, 1} <= reaches
 
 
+def test_sparse_sharp_lenses_take_the_wider_blend_everywhere():
+    """focus_reach (hand-computed): a shot whose lenses' mean focus weight is under 2/3
+    (fewer than two of the three nearest lenses sharp) renders every view at the wider
+    blend; one lens type (every weight 1), or two of three types sharp, leaves each view
+    at its own reach."""
+    from plenocal.convert.render import FOCUS_SPARSE, focus_reach
+
+    assert FOCUS_SPARSE == pytest.approx(2 / 3)
+    assert focus_reach(np.ones(90)) == 0
+    assert focus_reach(np.tile([1.0, 1.0, 0.05], 30)) == 0  # mean 0.683
+    assert focus_reach(np.tile([1.0, 0.05, 0.05], 30)) == 2  # mean 0.367: one type sharp
+    assert focus_reach(np.tile([1.0, 0.5, 0.4], 30)) == 2  # mean 0.633
+    assert focus_reach(np.zeros(0)) == 0
+    calib, grid, shot = patch6_shot()  # one lens type: as it was
+    assert shot.least_reach == 0 and shot.plan_for(2, 2) is shot.plan
+
+
 def test_the_blend_weighs_the_lenses_by_their_trust_averaged_over_the_lattice():
     """Every blend weighs each lens by its focus times its trust (reliability) averaged
     over the lattice (convert.blend.trust_passes, 2), the wide ones too; 0 passes give

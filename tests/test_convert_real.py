@@ -14,6 +14,7 @@ import pytest
 
 from plenocal.convert import ConvertSettings, ShotConversion
 from plenocal.convert.compare import compare_to_reference, fine_detail
+from plenocal.convert.errors import ConvertError
 from plenocal.convert.patchsize import detect_mla_kind
 from plenocal.convert.render import blend_disagreement
 from plenocal.grid import MicrolensGrid
@@ -384,3 +385,60 @@ def test_corner_views_blend_does_not_switch_to_one_measured_lens():
     now = _composition_change(shot, shot._lens_weight, r, c)
     assert now[0] < 0.67 * before[0], (before, now)
     assert now[1] < 0.67 * before[1], (before, now)
+
+
+def _one_lens_share(shot: ShotConversion, r: int, c: int) -> float:
+    """Share of view (r, c)'s pixels that take more than 0.9 of their weight from one lens."""
+    from plenocal.convert.render import view_weights  # noqa: PLC0415
+
+    return float(np.mean(view_weights(shot.plan_for(r, c), r, c).max(axis=0) > 0.9))
+
+
+def test_far_content_on_a_multi_focus_mla_takes_the_wider_blend():
+    """R42_klein_crop (Raytrix R42) sees its scene at virtual depth 5.5, in one lens
+    type's range only: the other two types weigh the focus floor, and at the blends of
+    their reach half the corner view's pixels (0.49) and a quarter of the central view's
+    (0.23) took more than 0.9 of their weight from one lens, each sharp lens painting a
+    region about sqrt 3 tiles wide: specks and hexagon fragments along the rod and on the
+    fabric (issue 33). Every view now takes the wider blend (render.focus_reach), and the
+    shares fall to the other Raytrix frames' (0.14-0.19 in their corner views). Fujita2,
+    whose scene two types see sharp, keeps each view's own blend."""
+    from plenocal.convert import convert_files  # noqa: PLC0415
+
+    assert REAL is not None
+    shot = convert_files(REAL / "frames" / "R42_klein_crop.png",
+                         REAL / "frames" / "R42_klein_crop.xml", None, 5,
+                         ConvertSettings(mla="galilean"))
+    assert shot.least_reach == 2
+    assert all(shot._blend_of(r, c) == 2 for r in range(5) for c in range(5))
+    now = _one_lens_share(shot, 0, 0), _one_lens_share(shot, 2, 2)
+    shot._least_reach = 0  # the blends of the views' own reach, as before
+    before = _one_lens_share(shot, 0, 0), _one_lens_share(shot, 2, 2)
+    assert before[0] > 0.4 and before[1] > 0.15, before
+    assert now[0] < 0.2 and now[1] < 0.05, now
+    img, calib = crop("Fujita2", *FUJITA_CROP)
+    fujita = ShotConversion(img, calib, 5, ConvertSettings(mla="galilean"))
+    assert fujita.least_reach == 0 and fujita._blend_of(2, 2) == 0
+    # decided once per camera, as D' and q are: the set-up carries it to every shot
+    fujita = ShotConversion(img, calib, 5, ConvertSettings(mla="galilean"), least_reach=2)
+    assert fujita._blend_of(2, 2) == 2
+
+
+def test_the_camera_setup_decides_the_least_reach_once():
+    """Rule convert_setup decides the least blend reach on its shot and writes it in
+    convert_setup.json (version 4); a shot converted with the set-up takes it whatever its
+    own lenses' focus says (a hand-held shot nearer the scene sees it in other types'
+    ranges: the simulator's Raytrix-like shots read mean focus weights 0.67-0.88)."""
+    from plenocal.convert.setup import ConverterSetup, decide_setup  # noqa: PLC0415
+    from plenocal.convert.shot import load_lenslet  # noqa: PLC0415
+
+    assert REAL is not None
+    img = load_lenslet(REAL / "frames" / "R42_klein_crop.png")
+    calib = read_calib(REAL / "frames" / "R42_klein_crop.xml")
+    setup, shot = decide_setup(img, calib, 5, ConvertSettings(mla="galilean"), source="x")
+    assert setup.least_reach == shot.least_reach == 2
+    again = ConverterSetup.from_dict(setup.to_dict())
+    assert again == setup and again.to_dict()["least_reach"] == 2
+    doc = {**setup.to_dict(), "version": 3}
+    with pytest.raises(ConvertError, match="version 4"):
+        ConverterSetup.from_dict(doc)

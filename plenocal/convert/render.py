@@ -126,6 +126,30 @@ def rim_reach(offset_px: float, patch_px: float, safe_diameter: float) -> int:
     return int(offset_px + patch_px / math.sqrt(2.0) > half)
 
 
+#: mean focus weight of a shot's lenses under which its sharp lenses are too sparse for
+#: the tight and wide blends: fewer than two of the three tiles nearest a pixel weigh
+FOCUS_SPARSE = 2.0 / 3.0
+
+
+def focus_reach(focus: np.ndarray) -> int:
+    """The least :func:`rim_reach` every view of a shot is blended at, from its used
+    lenses' focus weights (:func:`plenocal.convert.patchsize.focus_weights`): 2, the wider
+    blend, where their mean is under :data:`FOCUS_SPARSE`; else 0 (each view by its reach).
+
+    A multi-focus MLA puts each lens type on every third lens, so the three tiles nearest
+    any output pixel hold one lens of each type. Where the scene lies in two or more types'
+    depth ranges, two or three of them weigh; where it lies in one type's range only (far
+    content on a Raytrix camera: R42_klein_crop, virtual depth 5.5 against the ranges 1-3,
+    2.8-4 and 3.8-100), the other two weigh the focus floor, and each pixel takes one lens.
+    Every sharp lens then paints a region about sqrt 3 tiles wide from one micro image, in
+    the off-centre views out to its rim: specks and hexagon fragments at the sub-lattice's
+    pitch (R42's corner and edge views, issue 33). The wider blend (its fade radius 1.6
+    tiles, 7 lenses) holds the nearest sharp lenses of that sub-lattice (the nearest within
+    1 tile of any pixel, the next within 1.73). One type's MLA weighs every lens 1: 0."""
+    f = np.asarray(focus, dtype=np.float64)
+    return 2 if f.size and float(f.mean()) < FOCUS_SPARSE else 0
+
+
 def reaches_rim(offset_px: float, patch_px: float, safe_diameter: float) -> bool:
     """Whether the view's patches reach past the micro image (:func:`rim_reach` >= 1)."""
     return rim_reach(offset_px, patch_px, safe_diameter) >= 1

@@ -41,7 +41,8 @@ from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_json, write_json
 from plenocal.io.raytrix import RayCalib
 
-FORMAT_VERSION = 3  # 2: safe_diameter_px, q_px and the safe-diameter measure; 3: pitch_px
+FORMAT_VERSION = 4  # 2: safe_diameter_px, q_px and the safe-diameter measure; 3: pitch_px;
+#: 4: least_reach
 LATTICE_DIGITS = 8
 log = logging.getLogger("plenocal.convert")
 
@@ -70,6 +71,9 @@ class ConverterSetup:
     safe_diameter_measure: dict | None = None
     # the refined lattice's micro-image pitch (its grid's diameter; None: not refined)
     pitch_px: float | None = None
+    # the least blend reach of every view (plenocal.convert.render.focus_reach: 2 where the
+    # decided shot's sharp lenses are sparse, else 0)
+    least_reach: int = 0
 
     def settings(self, base: ConvertSettings) -> ConvertSettings:
         """``base`` with the decided MLA kind and tile (nothing left ``auto``)."""
@@ -108,7 +112,8 @@ class ConverterSetup:
                    q_px=_float_or_none(d["q_px"]),
                    safe_diameter_measure=(None if d["safe_diameter_measure"] is None
                                           else dict(d["safe_diameter_measure"])),
-                   pitch_px=_float_or_none(d["pitch_px"]))
+                   pitch_px=_float_or_none(d["pitch_px"]),
+                   least_reach=int(d["least_reach"]))
 
 
 def _float_or_none(value) -> float | None:
@@ -262,7 +267,7 @@ def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: Con
         safe_diameter_px=round_floats(float(shot.safe.diameter_px), LATTICE_DIGITS),
         q_px=round_floats(float(shot.layout.q), LATTICE_DIGITS),
         safe_diameter_measure=round_floats(shot.safe.to_dict(), LATTICE_DIGITS),
-        pitch_px=pitch)
+        pitch_px=pitch, least_reach=int(shot.least_reach))
     return setup, shot
 
 

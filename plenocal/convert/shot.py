@@ -54,8 +54,10 @@ from plenocal.convert.patchsize import (
     to_gray,
 )
 from plenocal.convert.render import (
+    FOCUS_SPARSE,
     RenderPlan,
     RenderSettings,
+    focus_reach,
     make_plans,
     reliability_map,
     render_view,
@@ -284,14 +286,17 @@ class ShotConversion:
     for each other (the safe diameter, the MLA check, the vignetting profiles, the patch
     sizes) run side by side on that many threads; the same numbers with any number.
     ``log_bits``: log a 16-bit image's significant bits (off for a recording's frames,
-    whose bit depth the recording's set-up line gives once)."""
+    whose bit depth the recording's set-up line gives once). ``least_reach``: the least
+    blend reach of every view decided for the camera (rule ``convert_setup``:
+    :func:`plenocal.convert.render.focus_reach` on its central shot); None: decided on
+    this image."""
 
     def __init__(self, image: np.ndarray, calib: RayCalib, n_views: int,
                  settings: ConvertSettings | None = None, source: str = "<image>",
                  grid: MicrolensGrid | None = None,
                  analysis: ConvertAnalysis | None = None, check_mla: bool = True,
                  safe_diameter: float | None = None, threads: int = 1,
-                 log_bits: bool = True) -> None:
+                 log_bits: bool = True, least_reach: int | None = None) -> None:
         self.settings = st = settings or ConvertSettings()
         self.grid_check: dict | None = None  # set by whoever checked the grid
         # each MLA kind's mean best ZNCC as measured on this image (read with auto, or
@@ -373,7 +378,16 @@ class ShotConversion:
         # reach farthest); one geometry for all
         self._median_patch = float(np.median(self.used_patch))
         corner = float(np.hypot(*self.layout.offset_image(0, 0)))
-        reaches = range(self._rim_reach(corner) + 1)
+        # a multi-focus MLA whose sharp lenses are too sparse: every view at the wider blend
+        # (decided once per camera where a set-up gives it, as D' and q are)
+        self._least_reach = (focus_reach(self.patch.focus[self.layout.lens_index])
+                             if least_reach is None else int(least_reach))
+        if self._least_reach and least_reach is None:
+            log.info("%s: the lenses' mean focus weight is %.2f (under %.2f: fewer than two "
+                     "of the three nearest lenses see the scene sharp): every view takes "
+                     "the wider blend", source,
+                     float(np.mean(self.patch.focus[self.layout.lens_index])), FOCUS_SPARSE)
+        reaches = range(max(self._rim_reach(corner), self._least_reach) + 1)
         # each lens's blend weight: its focus (multi-focus MLAs) times its reliability
         # (a filled size weighs a tenth of a measured one)
         trust = reliability(self.patch.raw, self.patch.patch, self.patch.confident,
@@ -482,13 +496,20 @@ class ShotConversion:
         profile, row = vignetting if st.devignette else (None, None)
         return ConvertAnalysis(mla, scores, patch, profile, row)
 
+    @property
+    def least_reach(self) -> int:
+        """The least blend reach every view takes (:func:`focus_reach`, or the set-up's)."""
+        return self._least_reach
+
     def _rim_reach(self, offset: float) -> int:
         return rim_reach(offset, self._median_patch, self.safe.diameter_px)
 
     def _blend_of(self, r: int, c: int) -> int:
         """Which blend view (r, c) takes: the tight one, or a wider one where the view's
-        patches reach past the micro image (:func:`rim_reach`, median patch)."""
-        reach = self._rim_reach(float(np.hypot(*self.layout.offset_image(r, c))))
+        patches reach past the micro image (:func:`rim_reach`, median patch) or the shot's
+        sharp lenses are sparse (:func:`focus_reach`)."""
+        reach = max(self._rim_reach(float(np.hypot(*self.layout.offset_image(r, c)))),
+                    self._least_reach)
         return min(reach, len(self._blends) - 1)
 
     def plan_for(self, r: int, c: int) -> RenderPlan:
@@ -708,7 +729,8 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
         shot = ShotConversion(image, calib, n_views, setup.settings(settings),
                               source=str(lenslet), grid=setup.grid(calib, W, H),
                               analysis=analysis, check_mla=False,
-                              safe_diameter=setup.safe_diameter_px, threads=threads)
+                              safe_diameter=setup.safe_diameter_px, threads=threads,
+                              least_reach=setup.least_reach)
         shot.grid_check = setup.grid_check
         return shot
     grid, check = check_and_grid(image, calib, settings.grid)
