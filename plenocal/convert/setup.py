@@ -20,7 +20,11 @@ Decided here, from ``convert`` settings that may say ``auto``:
   ground truth read ``q`` from the shots' ``disparity.json`` and from here;
 * the grid: the calib.xml grid checked against the micro images
   (:func:`plenocal.convert.gridcheck.check_grid`) and refined where ``convert.grid``
-  says so (``refine``, or ``auto`` past the drift bar of :mod:`.gridcheck`).
+  says so (``refine``, or ``auto`` past the drift bar of :mod:`.gridcheck`);
+* ``least_reach``: 2 where the shot's lenses' mean focus weight says a multi-focus MLA
+  sees the scene sharp through one lens type only, and every view then takes the wider
+  blend (:func:`plenocal.convert.render.focus_reach`); 0 otherwise. Per camera, because a
+  hand-held shot nearer the scene reads other types' ranges.
 """
 
 from __future__ import annotations
@@ -41,8 +45,8 @@ from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_json, write_json
 from plenocal.io.raytrix import RayCalib
 
-FORMAT_VERSION = 4  # 2: safe_diameter_px, q_px and the safe-diameter measure; 3: pitch_px;
-#: 4: least_reach
+# 2: safe_diameter_px, q_px and the safe-diameter measure; 3: pitch_px; 4: least_reach
+FORMAT_VERSION = 4
 LATTICE_DIGITS = 8
 log = logging.getLogger("plenocal.convert")
 
