@@ -380,13 +380,14 @@ class ShotConversion:
         corner = float(np.hypot(*self.layout.offset_image(0, 0)))
         # a multi-focus MLA whose sharp lenses are too sparse: every view at the wider blend
         # (decided once per camera where a set-up gives it, as D' and q are)
-        self._least_reach = (focus_reach(self.patch.focus[self.layout.lens_index])
-                             if least_reach is None else int(least_reach))
-        if self._least_reach and least_reach is None:
-            log.info("%s: the lenses' mean focus weight is %.2f (under %.2f: fewer than two "
-                     "of the three nearest lenses see the scene sharp): every view takes "
-                     "the wider blend", source,
-                     float(np.mean(self.patch.focus[self.layout.lens_index])), FOCUS_SPARSE)
+        if least_reach is None:
+            focus = self.patch.focus[self.layout.lens_index]
+            least_reach = focus_reach(focus)
+            if least_reach:
+                log.info("%s: the lenses' mean focus weight is %.2f (under %.2f: fewer than "
+                         "two of the three nearest lenses see the scene sharp): every view "
+                         "takes the wider blend", source, float(focus.mean()), FOCUS_SPARSE)
+        self._least_reach = int(least_reach)
         reaches = range(max(self._rim_reach(corner), self._least_reach) + 1)
         # each lens's blend weight: its focus (multi-focus MLAs) times its reliability
         # (a filled size weighs a tenth of a measured one)
