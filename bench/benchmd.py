@@ -25,16 +25,25 @@ class Lines(list):
 
 
 def update_sections(path: str | Path, sections: dict[str, list[str]]) -> None:
-    """Replace (or append) the ``## heading`` sections of ``path`` with ``sections``."""
+    """Replace (or append) the ``## heading`` sections of ``path`` with ``sections``.
+
+    Every other section is kept where it stands, two of one heading included: a file
+    read into a dict by heading lost the first of two sections that a person had given
+    the same heading (BENCHMARKS.md's hand-kept "Full run: earlier runs"). Where a
+    heading of ``sections`` stands more than once, its first section is replaced and the
+    others are kept."""
     path = Path(path)
     old = path.read_text().split("\n## ") if path.exists() else [TITLE]
-    kept = {}
+    blocks: list[tuple[str, list[str]]] = []
     for block in old[1:]:
         heading, _, body = block.partition("\n")
-        kept[heading.strip()] = body.rstrip("\n").split("\n")
-    for heading, lines in sections.items():
-        kept[heading] = ["", *lines]
+        blocks.append((heading.strip(), body.rstrip("\n").split("\n")))
+    todo = dict(sections)
+    for i, (heading, _) in enumerate(blocks):
+        if heading in todo:
+            blocks[i] = (heading, ["", *todo.pop(heading)])
+    blocks += [(heading, ["", *lines]) for heading, lines in todo.items()]
     out = [TITLE, "", INTRO]
-    for heading, body in kept.items():
+    for heading, body in blocks:
         out += ["", f"## {heading}", *body]
     path.write_text("\n".join(out).rstrip("\n") + "\n")
