@@ -557,12 +557,26 @@ def test_error_size_differs_from_datasheet(shot_files):
                       shot_files / "camera.yaml", 3)
 
 
-def test_error_grid_origin_outside_image(shot_files):
+def test_crop_with_its_offset_moved(shot_files, tmp_path):
+    """A crop whose calib.xml offset moved with it converts on the full image's lattice,
+    though the lens that the offset names (the grid's origin) lies outside the crop."""
     calib = read_calib(shot_files / "calib.xml")
-    far = RayCalib(**{**calib.__dict__, "offset": (900.0, 0.0)})
-    write_calib(far, shot_files / "calib.xml")
-    with pytest.raises(ConvertError, match="outside the 400x300 lenslet image"):
-        convert_files(shot_files / "x00_y00.png", shot_files / "calib.xml", None, 3)
+    img = cv2.imread(str(shot_files / "x00_y00.png"))
+    H, W = img.shape[:2]
+    x0, y0, w, h = 230, 170, 160, 120
+    cv2.imwrite(str(tmp_path / "crop.png"), img[y0:y0 + h, x0:x0 + w])
+    ox = (W - 1) / 2 + calib.offset[0] - x0 - (w - 1) / 2
+    oy = (h - 1) / 2 - ((H - 1) / 2 - calib.offset[1] - y0)
+    assert (w - 1) / 2 + ox < 0 or (h - 1) / 2 - oy < 0  # the origin outside the crop
+    write_calib(replace(calib, offset=(ox, oy)), tmp_path / "crop.xml")
+    shot = convert_files(tmp_path / "crop.png", tmp_path / "crop.xml", None, 3,
+                         ConvertSettings.from_config({"tile_size": 5}))
+    full = MicrolensGrid(calib, W, H)
+    inside = ((full.centres[:, 0] >= x0) & (full.centres[:, 0] <= x0 + w - 1)
+              & (full.centres[:, 1] >= y0) & (full.centres[:, 1] <= y0 + h - 1))
+    np.testing.assert_allclose(shot.grid.centres, full.centres[inside] - [x0, y0], atol=1e-9)
+    np.testing.assert_array_equal(shot.grid.types, full.types[inside])
+    assert abs(np.median(shot.used_patch) - 5.0) < 0.1
 
 
 def test_error_cropped_image(shot_files, tmp_path):

@@ -198,15 +198,22 @@ def load_calib(path: str | Path) -> RayCalib:
 
 
 def build_grid(calib: RayCalib, width: int, height: int) -> MicrolensGrid:
-    """The microlens grid for a ``width`` x ``height`` image, with the size checks."""
+    """The microlens grid for a ``width`` x ``height`` image, with the size checks.
+
+    The file's offset places one lens (the grid's origin) against the image centre; the
+    lattice extends from it over the whole image, so the origin may lie outside the image:
+    a crop of a lenslet image whose calib.xml offset was moved with the crop (the lens
+    that the offset names then lies outside the crop). Logged, not refused: a Raytrix
+    file's offset for the full sensor is a lens or so from the centre, and a crop that
+    kept it is judged by the grid check
+    (:func:`plenocal.convert.gridcheck.check_grid`), as any other grid is."""
     src = calib.source
     ox = (width - 1) / 2 + calib.offset[0]
     oy = (height - 1) / 2 - calib.offset[1]
     if not (0 <= ox <= width - 1 and 0 <= oy <= height - 1):
-        raise ConvertError(
-            f"{src}: the grid origin (image centre + offset) lands at ({ox:.1f}, {oy:.1f}), "
-            f"outside the {width}x{height} lenslet image: calib.xml belongs to a larger "
-            "sensor (or another camera); convert the full sensor image with its own calib.xml")
+        log.info("%s: the grid origin (image centre + offset) lies at (%.1f, %.1f), outside "
+                 "the %dx%d lenslet image: read as a crop whose offset moved with it",
+                 src, ox, oy, width, height)
     if calib.diameter > min(width, height) / 2:
         raise ConvertError(f"{src}: micro-image diameter {calib.diameter:.1f} px is more than "
                            f"half the {width}x{height} image: wrong calib.xml for this image?")
