@@ -208,19 +208,19 @@ def build_grid(calib: RayCalib, width: int, height: int) -> MicrolensGrid:
     kept it is judged by the grid check
     (:func:`plenocal.convert.gridcheck.check_grid`), as any other grid is."""
     src = calib.source
-    ox = (width - 1) / 2 + calib.offset[0]
-    oy = (height - 1) / 2 - calib.offset[1]
-    if not (0 <= ox <= width - 1 and 0 <= oy <= height - 1):
-        log.info("%s: the grid origin (image centre + offset) lies at (%.1f, %.1f), outside "
-                 "the %dx%d lenslet image: read as a crop whose offset moved with it",
-                 src, ox, oy, width, height)
     if calib.diameter > min(width, height) / 2:
         raise ConvertError(f"{src}: micro-image diameter {calib.diameter:.1f} px is more than "
                            f"half the {width}x{height} image: wrong calib.xml for this image?")
     try:
-        return MicrolensGrid(calib, width, height)
+        grid = MicrolensGrid(calib, width, height)
     except CalibError as exc:
         raise ConvertError(str(exc)) from None
+    ox, oy = grid.origin
+    if not (0 <= ox <= width - 1 and 0 <= oy <= height - 1):
+        log.info("%s: the grid origin (image centre + offset) lies at (%.1f, %.1f), outside "
+                 "the %dx%d lenslet image: read as a crop whose offset moved with it",
+                 src, ox, oy, width, height)
+    return grid
 
 
 # ---------------------------------------------------------------------------
