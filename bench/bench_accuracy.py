@@ -104,6 +104,16 @@ GEOMETRIES["small"] = {
     "main_lens": {"focus_distance_m": 0.5},
     "scene": {"near_m": 0.4, "far_m": 0.62},
 }
+# the small capture with four more hand-held shots: the same scene, array and first four
+# hand-held poses (the hand-held poses are drawn in order from their own generator) and
+# the same first four hand-held images; the array shots' sensor noise is drawn anew (each
+# shot's noise is seeded by its place among the sorted shot names). How much of the small
+# geometry's focal error more turned shots take away: a capture guideline
+GEOMETRIES["small-8hand"] = {**GEOMETRIES["small"],
+                             "handheld": {**GEOMETRIES["small"]["handheld"], "count": 8}}
+# and with two more (six): between the two
+GEOMETRIES["small-6hand"] = {**GEOMETRIES["small"],
+                             "handheld": {**GEOMETRIES["small"]["handheld"], "count": 6}}
 GEOMETRIES["square-galilean"] = {
     "array": {"cols": 4, "rows": 4, "step_m": 0.01},
     "handheld": {"count": 5, "max_rotation_deg": 9},

@@ -97,3 +97,24 @@ def test_every_geometry_gives_a_config_the_schema_takes(geometry):
     assert sim["seed"] == 38
     for key, value in ba.GEOMETRIES[geometry].get("array", {}).items():
         assert sim["array"][key] == value
+
+
+@pytest.mark.parametrize(("geometry", "added"), [("small-6hand", 2), ("small-8hand", 4)])
+def test_small_with_hand_held_shots_added(geometry, added):
+    """``small-6hand`` and ``small-8hand`` pair with ``small`` (BENCHMARKS.md, "The small
+    geometry with more hand-held shots"): the same seed gives the same array and first
+    four hand-held poses, and two or four more (the same scene too; the array shots' noise
+    is drawn anew)."""
+    import numpy as np  # noqa: PLC0415
+
+    from plenocal.config import validate_config  # noqa: PLC0415
+    from plenocal.simulate.dataset import make_shots  # noqa: PLC0415
+
+    def shots(geometry):
+        cfg = validate_config(ba.capture_config(geometry, 49))
+        return make_shots(cfg["datasets"][ba.DATASET]["simulate"], np.array([0.01, 0.0, 0.5]))
+
+    small, more = shots("small"), shots(geometry)
+    assert len(more) == len(small) + added
+    for name, pose in small.items():
+        np.testing.assert_array_equal(more[name], pose)
