@@ -202,6 +202,25 @@ def test_focal_length_kpi_gives_registration_a_deviation(tmp_path, std):
         assert "&plusmn; 0.50 %" in kpi
 
 
+@pytest.mark.parametrize(("std_px", "weak"), [(0.361, False), (0.903, True)])
+def test_focal_length_kpi_advises_more_hand_held_shots_over_half_a_percent(tmp_path, std_px,
+                                                                          weak):
+    """Registration A's deviation over WEAK_FOCAL_SD_PCT (0.30 % and 0.75 % here): the
+    summary says the capture fixes the focal length weakly and what to add."""
+    res = make_results(tmp_path)
+    cams = {c: PinholeCamera(intrinsics(120.3, W, H), np.eye(4), W, H) for c in CAMS}
+    write_reg_a(res / "reg_a" / "reg_a.json", RegistrationA(
+        focal_px=120.3, width=W, height=H, mapper="global", cameras=cams,
+        stats={"focal_std_px": std_px}))
+    write_json(res / "calibration" / "refine.json", {"enabled": False})
+    # up to the card's source link (the advice is a span of its own inside the card)
+    kpi = re.search(r'<span class="kpi" id="kpi-focal">(.*?)\[source\]', build(res),
+                    re.S).group(1)
+    assert ("&plusmn; 0.75 %" if weak else "&plusmn; 0.30 %") in kpi
+    assert ("fixes the focal length weakly" in kpi) is weak
+    assert ("more hand-held shots, turned farther" in kpi) is weak
+
+
 def test_table1_rows_pair_measurements_with_the_paper():
     table = typed.ReprojectionTable({
         "reg_a": stats(0.61, 0.48, 10, array=6, hand=4),
