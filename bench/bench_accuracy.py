@@ -114,6 +114,11 @@ GEOMETRIES["small-8hand"] = {**GEOMETRIES["small"],
 # and with two more (six): between the two
 GEOMETRIES["small-6hand"] = {**GEOMETRIES["small"],
                              "handheld": {**GEOMETRIES["small"]["handheld"], "count": 6}}
+# and its four hand-held shots turned twice as far (the same axes, offsets and draws: a
+# shot's turn is max_rotation_deg times a drawn factor), the array shots' images the same
+GEOMETRIES["small-turned"] = {**GEOMETRIES["small"], "handheld": {
+    **GEOMETRIES["small"]["handheld"],
+    "max_rotation_deg": 2 * GEOMETRIES["small"]["handheld"]["max_rotation_deg"]}}
 GEOMETRIES["square-galilean"] = {
     "array": {"cols": 4, "rows": 4, "step_m": 0.01},
     "handheld": {"count": 5, "max_rotation_deg": 9},

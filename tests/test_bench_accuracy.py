@@ -99,6 +99,17 @@ def test_every_geometry_gives_a_config_the_schema_takes(geometry):
         assert sim["array"][key] == value
 
 
+def _shots(geometry: str) -> dict:
+    """The simulated shots' poses of ``geometry`` at seed 49 (a scene centre given)."""
+    import numpy as np  # noqa: PLC0415
+
+    from plenocal.config import validate_config  # noqa: PLC0415
+    from plenocal.simulate.dataset import make_shots  # noqa: PLC0415
+
+    cfg = validate_config(ba.capture_config(geometry, 49))
+    return make_shots(cfg["datasets"][ba.DATASET]["simulate"], np.array([0.01, 0.0, 0.5]))
+
+
 @pytest.mark.parametrize(("geometry", "added"), [("small-6hand", 2), ("small-8hand", 4)])
 def test_small_with_hand_held_shots_added(geometry, added):
     """``small-6hand`` and ``small-8hand`` pair with ``small`` (BENCHMARKS.md, "The small
@@ -107,14 +118,28 @@ def test_small_with_hand_held_shots_added(geometry, added):
     is drawn anew)."""
     import numpy as np  # noqa: PLC0415
 
-    from plenocal.config import validate_config  # noqa: PLC0415
-    from plenocal.simulate.dataset import make_shots  # noqa: PLC0415
-
-    def shots(geometry):
-        cfg = validate_config(ba.capture_config(geometry, 49))
-        return make_shots(cfg["datasets"][ba.DATASET]["simulate"], np.array([0.01, 0.0, 0.5]))
-
-    small, more = shots("small"), shots(geometry)
+    small, more = _shots("small"), _shots(geometry)
     assert len(more) == len(small) + added
     for name, pose in small.items():
         np.testing.assert_array_equal(more[name], pose)
+
+
+def test_small_turned_is_small_with_each_turn_doubled():
+    """``small-turned`` pairs with ``small``: each hand-held shot turned about the same
+    axis by twice the angle, from the same offset; the array shots the same."""
+    import numpy as np  # noqa: PLC0415
+
+    def turn(R):
+        angle = np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))
+        axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+        return angle, axis / np.linalg.norm(axis)
+
+    small, turned = _shots("small"), _shots("small-turned")
+    assert small.keys() == turned.keys()
+    for name, pose in small.items():
+        if not name.startswith("hand"):
+            np.testing.assert_array_equal(turned[name], pose)
+            continue
+        (a, u), (b, v) = turn(pose[:3, :3]), turn(turned[name][:3, :3])
+        assert b == pytest.approx(2 * a, rel=1e-9)
+        np.testing.assert_allclose(v, u, atol=1e-9)
