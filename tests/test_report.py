@@ -218,7 +218,7 @@ def test_focal_length_kpi_advises_more_hand_held_shots_over_half_a_percent(tmp_p
                     re.S).group(1)
     assert ("&plusmn; 0.75 %" if weak else "&plusmn; 0.30 %") in kpi
     assert ("fixes the focal length weakly" in kpi) is weak
-    assert ("more hand-held shots, turned farther" in kpi) is weak
+    assert ("more hand-held shots fixed it better" in kpi) is weak
 
 
 def test_table1_rows_pair_measurements_with_the_paper():
