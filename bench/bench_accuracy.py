@@ -109,16 +109,14 @@ GEOMETRIES["small"] = {
 # the same first four hand-held images; the array shots' sensor noise is drawn anew (each
 # shot's noise is seeded by its place among the sorted shot names). How much of the small
 # geometry's focal error more turned shots take away: a capture guideline
-GEOMETRIES["small-8hand"] = {**GEOMETRIES["small"],
-                             "handheld": {**GEOMETRIES["small"]["handheld"], "count": 8}}
+_SMALL_HAND = GEOMETRIES["small"]["handheld"]
+GEOMETRIES["small-8hand"] = {**GEOMETRIES["small"], "handheld": {**_SMALL_HAND, "count": 8}}
 # and with two more (six): between the two
-GEOMETRIES["small-6hand"] = {**GEOMETRIES["small"],
-                             "handheld": {**GEOMETRIES["small"]["handheld"], "count": 6}}
+GEOMETRIES["small-6hand"] = {**GEOMETRIES["small"], "handheld": {**_SMALL_HAND, "count": 6}}
 # and its four hand-held shots turned twice as far (the same axes, offsets and draws: a
 # shot's turn is max_rotation_deg times a drawn factor), the array shots' images the same
 GEOMETRIES["small-turned"] = {**GEOMETRIES["small"], "handheld": {
-    **GEOMETRIES["small"]["handheld"],
-    "max_rotation_deg": 2 * GEOMETRIES["small"]["handheld"]["max_rotation_deg"]}}
+    **_SMALL_HAND, "max_rotation_deg": 2 * _SMALL_HAND["max_rotation_deg"]}}
 GEOMETRIES["square-galilean"] = {
     "array": {"cols": 4, "rows": 4, "step_m": 0.01},
     "handheld": {"count": 5, "max_rotation_deg": 9},

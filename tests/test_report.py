@@ -182,19 +182,26 @@ def build(res: Path) -> str:
 # ---------------------------------------------------------------------------
 
 
+def focal_card(tmp_path, std_px: float | None) -> str:
+    """The report's focal-length card, up to its source link, for registration A at
+    120.3 px with deviation ``std_px`` (None: not estimated) and no refinement."""
+    res = make_results(tmp_path)
+    cams = {c: PinholeCamera(intrinsics(120.3, W, H), np.eye(4), W, H) for c in CAMS}
+    stats = {} if std_px is None else {"focal_std_px": std_px}
+    write_reg_a(res / "reg_a" / "reg_a.json", RegistrationA(
+        focal_px=120.3, width=W, height=H, mapper="global", cameras=cams, stats=stats))
+    write_json(res / "calibration" / "refine.json", {"enabled": False})
+    # up to the card's source link (the advice is a span of its own inside the card)
+    return re.search(r'<span class="kpi" id="kpi-focal">(.*?)\[source\]', build(res),
+                     re.S).group(1)
+
+
 @pytest.mark.parametrize("std", [0.6015, None])
 def test_focal_length_kpi_gives_registration_a_deviation(tmp_path, std):
     """The summary's focal length: registration A's with its deviation where reg_a.json
     has one (real captures too), else says it was not estimated; the refinement's
     focal length where it ran."""
-    res = make_results(tmp_path)
-    cams = {c: PinholeCamera(intrinsics(120.3, W, H), np.eye(4), W, H) for c in CAMS}
-    stats = {} if std is None else {"focal_std_px": std}
-    write_reg_a(res / "reg_a" / "reg_a.json", RegistrationA(
-        focal_px=120.3, width=W, height=H, mapper="global", cameras=cams, stats=stats))
-    write_json(res / "calibration" / "refine.json", {"enabled": False})
-    html = build(res)
-    kpi = re.search(r'<span class="kpi" id="kpi-focal">(.*?)</span>', html, re.S).group(1)
+    kpi = focal_card(tmp_path, std)
     assert "<b>120.30 px</b>as registration A's 120.30 px" in kpi
     if std is None:
         assert "not estimated" in kpi
@@ -207,15 +214,7 @@ def test_focal_length_kpi_advises_more_hand_held_shots_over_half_a_percent(tmp_p
                                                                           weak):
     """Registration A's deviation over WEAK_FOCAL_SD_PCT (0.30 % and 0.75 % here): the
     summary says the capture fixes the focal length weakly and what to add."""
-    res = make_results(tmp_path)
-    cams = {c: PinholeCamera(intrinsics(120.3, W, H), np.eye(4), W, H) for c in CAMS}
-    write_reg_a(res / "reg_a" / "reg_a.json", RegistrationA(
-        focal_px=120.3, width=W, height=H, mapper="global", cameras=cams,
-        stats={"focal_std_px": std_px}))
-    write_json(res / "calibration" / "refine.json", {"enabled": False})
-    # up to the card's source link (the advice is a span of its own inside the card)
-    kpi = re.search(r'<span class="kpi" id="kpi-focal">(.*?)\[source\]', build(res),
-                    re.S).group(1)
+    kpi = focal_card(tmp_path, std_px)
     assert ("&plusmn; 0.75 %" if weak else "&plusmn; 0.30 %") in kpi
     assert ("fixes the focal length weakly" in kpi) is weak
     assert ("more hand-held shots fixed it better" in kpi) is weak
