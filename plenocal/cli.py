@@ -283,6 +283,7 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     import cv2  # noqa: F401, PLC0415  (cv2 before anything that may import pycolmap)
 
     from plenocal.convert import ConvertSettings, convert_files  # noqa: PLC0415
+    from plenocal.convert.setup import grid_words  # noqa: PLC0415
     from plenocal.convert.threads import Inline  # noqa: PLC0415
     from plenocal.io.files import write_image, write_images, write_json, write_npy  # noqa: PLC0415
 
@@ -317,8 +318,7 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
         raise
     log.info("%s: %dx%d, %s: D = %.2f px; grid: %s (convert.grid %s)", args.lenslet,
              shot.grid.width, shot.grid.height, args.calib, shot.calib.diameter,
-             "refined from the image" if shot.grid_check["refined"] else "calib.xml's",
-             settings.grid)
+             grid_words(shot.grid_check), settings.grid)
     stats = shot.disparity()
     log.info("patch sizes %.2f..%.2f px (median %.2f, %.0f%% confident); views %dx%d; "
              "%.2f s", stats["patch_size_px"]["min"], stats["patch_size_px"]["max"],

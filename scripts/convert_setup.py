@@ -4,7 +4,7 @@ made once on the central array shot and shared by every shot (plenocal.convert.s
 import cv2
 
 from plenocal.convert import ConvertSettings
-from plenocal.convert.setup import decide_setup, write_setup
+from plenocal.convert.setup import decide_setup, grid_words, write_setup
 from plenocal.convert.shot import load_calib, load_lenslet, read_sensor_size
 from plenocal.convert.video import video_settings
 from plenocal.rulelog import rule_logger
@@ -23,7 +23,7 @@ setup, _ = decide_setup(image, calib, int(snakemake.params.views), settings,
                         grid_foreign=snakemake.params.convert["grid_foreign"])
 log.info("MLA %s (%s), tile %d px per lens pitch (%s), grid %s (convert.grid %s)",
          setup.mla, setup.mla_source, setup.tile, setup.tile_source,
-         "refined from the image" if setup.refined else "calib.xml's", setup.grid_mode)
+         grid_words(setup.grid_check), setup.grid_mode)
 for note in setup.warnings:
     log.warning("%s", note)
 write_setup(snakemake.output.setup, setup)

@@ -100,10 +100,13 @@ offsets are the files', not the method's. (The grey-level phase says the same in
   0.61-0.62, R42_klein_crop 0.10-0.17, the other real frames 0.22 or more (Fujita2_f150
   0.22-0.23, whose share of all its lenses measured was 0.21).
   A far-off grid (another camera's pitch) ends here, and so does R42_klein_crop, whose file
-  is right: 16 % of its lenses measured, and the lattice it fits (18 px off the file's at
-  the centre) is wrong - the views made on the file's grid are clean, those made with the
-  fitted offset a mosaic. Its micro images (strongly textured, crossed by the sharp rim
-  of a blue object) defeat the measurement; an unverified check is no verdict on the file.
+  is nearly right: 16 % of its lenses measured, and the lattice it fits (18 px off the
+  file's at the centre) is wrong - the views made on the file's grid are whole, those made
+  with the fitted offset a mosaic. Its micro images (strongly textured, crossed by the
+  sharp rim of a blue object, no vignetted rim) defeat the measurement; an unverified
+  check is no verdict on the file. Its corner views are: they agree best with the file's
+  lattice moved by (+3.25, +2.25) px, and ``auto`` then takes that
+  (:mod:`plenocal.convert.centring`, :func:`plenocal.convert.setup.centring_for`).
 """
 
 from __future__ import annotations
@@ -201,6 +204,9 @@ class GridCheck:
     seconds: float = 0.0
     mode: str = ""  # convert.grid, where grid_for_mode chose
     refined: bool = False  # the conversion used the refined grid
+    # where the check could not confirm the grid: the file's lattice moved onto the centres
+    # the corner views agree on (plenocal.convert.centring.CentringFit.to_dict), or None
+    centring: dict | None = None
 
     def to_dict(self) -> dict:
         """For disparity.json (plain floats and lists; without the time it took, which would
@@ -213,6 +219,8 @@ class GridCheck:
                              decimals=True)
              for k, v in asdict(self).items()}
         del d["seconds"]
+        if d["centring"] is None:  # not searched: the record as before the search existed
+            del d["centring"]
         d["rule"] = (f"convert.grid auto refines when the drift at the judged lens (the worst "
                      f"one; the worst lit one where fewer than {PARTIAL_LIT:g} of the lenses "
                      f"are lit) is > {AUTO_DRIFT_PX} px and > {AUTO_DRIFT_SIGMAS:g} x its "
@@ -237,6 +245,9 @@ class GridCheck:
 
 
 _DRIFT_HEAD = "grid check: the calib.xml grid drifts up to "
+#: what an unverified check's warning says is used (plenocal.convert.setup.centred_where_
+#: unverified replaces it where the file's lattice is moved onto the micro images)
+UNVERIFIED_USE = "the file's grid is used"
 
 
 def _drift_head(drift_px: float) -> str:
@@ -585,7 +596,7 @@ def check_grid(image: np.ndarray, grid: MicrolensGrid) -> GridCheck:
             f"grid check: only {100 * lit_share:.0f}% of the {n_lit} lit lenses measured: the "
             "check cannot confirm the calib.xml grid on this frame and its figures are "
             "unreliable (fitted "
-            f"drift {dn.max():.1f} px); the file's grid is used. Either calib.xml is for "
+            f"drift {dn.max():.1f} px); {UNVERIFIED_USE}. Either calib.xml is for "
             "another camera or sensor crop, or the frame's micro images are too dark, flat or "
             "repetitive for the check")
     elif foreign:

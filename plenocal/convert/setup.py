@@ -38,8 +38,15 @@ import numpy as np
 
 from plenocal.artifacts.stage_warnings import WARNINGS_KEY, warning_list, warnings_of
 from plenocal.config import stage_defaults
+from plenocal.convert.centring import CentringFit, measure_centring, shifted_grid
 from plenocal.convert.errors import ConvertError
-from plenocal.convert.gridcheck import GRID_MODES, GridCheck, grid_for_mode, round_floats
+from plenocal.convert.gridcheck import (
+    GRID_MODES,
+    UNVERIFIED_USE,
+    GridCheck,
+    grid_for_mode,
+    round_floats,
+)
 from plenocal.convert.shot import ConvertSettings, ShotConversion, build_grid
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_json, write_json
@@ -147,6 +154,51 @@ def check_and_grid(image: np.ndarray, calib: RayCalib, mode: str
         raise ConvertError(f"convert.grid: {mode!r} is not one of {', '.join(GRID_MODES)}")
     H, W = image.shape[:2]
     return grid_for_mode(image, build_grid(calib, W, H), mode)
+
+
+def centring_for(check: GridCheck, mode: str, shot: ShotConversion, source: str
+                 ) -> CentringFit | None:
+    """Where ``convert.grid`` = ``mode`` is ``auto`` and the check could not confirm the
+    file's grid (not verified, not foreign, not refined), the lattice shift that the corner
+    views of ``shot`` (converted on the file's grid) agree on best
+    (:func:`plenocal.convert.centring.measure_centring`), recorded in ``check.centring``;
+    where it is applied, the check's warning says so instead of "the file's grid is used".
+    None where no search is made (every frame whose grid the check confirms)."""
+    if mode != "auto" or check.verified or check.foreign or check.refined:
+        return None
+    fit = measure_centring(shot)
+    check.centring = fit.to_dict()
+    dx, dy = fit.offset_px
+    what = (f"the corner views agree best with the file's lattice moved by ({dx:+.2f}, "
+            f"{dy:+.2f}) px (their blend disagreement {fit.disagreement_file:.3f} -> "
+            f"{fit.disagreement_fit:.3f} grey levels, {100 * fit.gain:.0f} % less)")
+    if fit.applied:
+        use = f"{what}: the views use it (plenocal.convert.centring)"
+        check.warnings = [w.replace(UNVERIFIED_USE, use) for w in check.warnings]
+    log.info("%s: %s%s", source, what, "; applied" if fit.applied else
+             "; not applied (too short, or too little gain)")
+    return fit
+
+
+def centred_lattice(grid: MicrolensGrid, fit: CentringFit):
+    """The lattice (origin, A columns) of ``grid`` moved by ``fit``, rounded as a refined
+    set-up's lattice is (:data:`LATTICE_DIGITS`)."""
+    moved = shifted_grid(grid, fit.offset_px)
+    return round_floats((tuple(float(x) for x in moved.origin),
+                         tuple(tuple(float(x) for x in row) for row in moved.A)),
+                        LATTICE_DIGITS)
+
+
+def grid_words(check: dict) -> str:
+    """Which grid the views were cut on, from a shot's ``grid_check`` record."""
+    if check.get("refined"):
+        return "refined from the image"
+    centring = check.get("centring") or {}
+    if centring.get("applied"):
+        dx, dy = centring["offset_px"]
+        return (f"calib.xml's, moved by ({dx:+.2f}, {dy:+.2f}) px onto the micro-image "
+                "centres the corner views agree on")
+    return "calib.xml's"
 
 
 #: convert.grid_foreign: stop at a foreign grid, or convert on it with a warning
@@ -259,10 +311,15 @@ def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: Con
                                   grid_foreign)
     if error is not None:
         raise ConvertError(error)
+    fit = centring_for(check, settings.grid, shot, source)
+    if fit is not None and fit.applied:  # measured again on the moved lattice, as written
+        lattice = centred_lattice(grid, fit)
+        grid = lattice_grid(calib, grid.width, grid.height, lattice)
+        shot = ShotConversion(image, calib, n_views, settings, source=source, grid=grid)
     warnings = [f"{source}: {w}" for w in check.warnings] + shot.warnings
     setup = ConverterSetup(
         mla=shot.mla, tile=int(shot.layout.tile), grid_mode=settings.grid,
-        refined=bool(check.refined), lattice=lattice, decided_on=source,
+        refined=lattice is not None, lattice=lattice, decided_on=source,
         mla_source="image" if shot.mla_scores is not None else "setting",
         tile_source="auto" if settings.tile_size == "auto" else "setting",
         mla_match_scores=shot.mla_scores, grid_check=check.to_dict(),

@@ -412,11 +412,20 @@ class ShotConversion:
                                          out_of_range(self.patch)[self.layout.lens_index])
         self._gray = None  # the analysis's; made again if asked for (125 MB at 31 MP)
 
-    def plans_for_rows(self, rows: slice = slice(None)) -> list[RenderPlan]:
+    def plans_for_rows(self, rows: slice = slice(None), layout: ViewLayout | None = None
+                       ) -> list[RenderPlan]:
         """The render plans (one per blend, :func:`plenocal.convert.render.make_plans`)
-        of output ``rows``."""
-        return make_plans(self.layout, self.used_patch, self.safe.diameter_px, self._blends,
-                          self._lens_weight, self.profile, self._profile_row, rows=rows)
+        of output ``rows``; ``layout``: another layout of the same lenses (the micro-image
+        centres moved: :mod:`plenocal.convert.centring`), None for the shot's."""
+        return make_plans(layout or self.layout, self.used_patch, self.safe.diameter_px,
+                          self._blends, self._lens_weight, self.profile, self._profile_row,
+                          rows=rows)
+
+    @property
+    def render_source(self) -> tuple[np.ndarray, float]:
+        """What the views sample (the frame's integers, prefiltered where
+        ``convert.blend.prefilter`` is set) and the unit that brings it to [0, 1]."""
+        return self._render_source, self._render_scale
 
     @property
     def plan(self) -> RenderPlan:
@@ -511,6 +520,10 @@ class ShotConversion:
 
     def _rim_reach(self, offset: float) -> int:
         return rim_reach(offset, self._median_patch, self.safe.diameter_px)
+
+    def blend_of(self, r: int, c: int) -> int:
+        """Which of :meth:`plans_for_rows`' plans view (r, c) is rendered with."""
+        return self._blend_of(r, c)
 
     def _blend_of(self, r: int, c: int) -> int:
         """Which blend view (r, c) takes: the tight one, or a wider one where the view's
@@ -721,8 +734,11 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
     ``analysis``: the shot's measurements made before (:mod:`plenocal.convert.analysis`;
     rule ``convert_views``). ``threads``: see :class:`ShotConversion`."""
     from plenocal.convert.setup import (  # noqa: PLC0415
+        centred_lattice,
+        centring_for,
         check_and_grid,
         foreign_grid_error,
+        lattice_grid,
         read_setup,
         unmatched_frame_error,
     )
@@ -746,14 +762,19 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
     error = foreign_grid_error(check, calib.source, str(lenslet), grid_foreign)
     if error is not None:
         raise ConvertError(error)
-    for note in check.warnings:
-        log.warning("%s: %s", lenslet, note)
     shot = ShotConversion(image, calib, n_views, settings, source=str(lenslet), grid=grid,
                           analysis=analysis, threads=threads)
     error = unmatched_frame_error(check, shot.match_scores, calib.source, str(lenslet),
                                   grid_foreign)
     if error is not None:
         raise ConvertError(error)
+    fit = centring_for(check, settings.grid, shot, str(lenslet))
+    if fit is not None and fit.applied:  # measured again on the moved lattice
+        grid = lattice_grid(calib, W, H, centred_lattice(grid, fit))
+        shot = ShotConversion(image, calib, n_views, settings, source=str(lenslet), grid=grid,
+                              threads=threads)
+    for note in check.warnings:  # after the centring, which may change what they say
+        log.warning("%s: %s", lenslet, note)
     shot.grid_check = check.to_dict()
     shot.warnings = [f"{lenslet}: {w}" for w in check.warnings] + shot.warnings
     return shot
