@@ -60,8 +60,10 @@ log = logging.getLogger("plenocal.convert")
 
 @dataclass(frozen=True)
 class ConverterSetup:
-    """The per-camera decisions (see the module docstring); ``lattice`` is the refined
-    grid's (origin (2,), A (2, 2) columns) where ``refined``, else None.
+    """The per-camera decisions (see the module docstring); ``lattice`` is the grid's
+    (origin (2,), A (2, 2) columns) where ``refined`` (the lattice fitted to the image, or
+    the file's moved onto the centres the corner views agree on: ``grid_check`` says which,
+    :func:`centring_for`), else None.
     ``safe_diameter_px`` / ``q_px``: ``D'`` and the view spacing every shot is cut with
     (None: per the settings, as without a set-up); ``safe_diameter_measure``: how ``D'`` was
     found (:meth:`plenocal.convert.safediameter.SafeDiameter.to_dict`)."""
