@@ -156,7 +156,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="microlens grid (convert.grid): file (calib.xml as it is), refine "
                         "(fit the lattice to the micro-image centres in the image), auto "
                         "(refine when the file's grid drifts more than 1 px from the micro "
-                        "images, see plenocal.convert.gridcheck). The check always runs and "
+                        "images, see plenocal.convert.gridcheck; where the check cannot "
+                        "measure them, move the file's lattice onto the centres the corner "
+                        "views agree on, plenocal.convert.centring). The check always runs and "
                         "lands in disparity.json. Default: auto")
     _auto_or_int(c, "--bit-depth",
                  "significant bits of a 16-bit image (convert.bit_depth): auto (10, 12 or "
