@@ -91,6 +91,7 @@ from plenocal.cli import command_line_block  # noqa: E402
 from plenocal.convert import ConvertSettings, ShotConversion  # noqa: E402
 from plenocal.convert.gridcheck import grid_for_mode, refine_grid  # noqa: E402
 from plenocal.convert.localcheck import local_compare  # noqa: E402
+from plenocal.convert.setup import centred_lattice, centring_for, lattice_grid  # noqa: E402
 from plenocal.convert.shot import build_grid, load_calib, load_lenslet  # noqa: E402
 from plenocal.io.files import read_image, write_image  # noqa: E402
 from plenocal.names import central_view  # noqa: E402
@@ -112,6 +113,18 @@ SPEED_HEADING = "Speed against TLCT (issue 35)"
 LATER = "_f150"  # later frames of a sequence: <seq>_f150.png, read with <seq>.xml
 #: our view, TLCT's view of the same position (shared/real/reference/<frame>/)
 LOCAL_VIEWS = (("centre", "centre"), ("first corner", "v000"), ("last corner", "v024"))
+
+
+def grid_cell(refined: bool, check) -> str:
+    """The table's grid column: refined (the lattice fitted to the image), centred (the
+    file's moved onto the centres the corner views agree on), or the file's."""
+    if refined:
+        return "yes"
+    centring = check.centring or {}
+    if centring.get("applied"):
+        dx, dy = centring["offset_px"]
+        return f"centred ({dx:+.2f}, {dy:+.2f})"
+    return "no"
 
 
 def sequence(name: str) -> str:
@@ -186,6 +199,12 @@ def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
     corners = tspc_corners(sequence(name), file_grid, check)
     t1 = time.perf_counter()
     shot = ShotConversion(image, calib, views, settings, source=str(lenslet), grid=grid)
+    # as the command line: an unverified grid moved onto the centres the corner views agree
+    # on (plenocal.convert.centring), the frame measured again on it
+    fit = centring_for(check, grid_mode, shot, name)
+    if fit is not None and fit.applied:
+        grid = lattice_grid(calib, W, H, centred_lattice(grid, fit))
+        shot = ShotConversion(image, calib, views, settings, source=str(lenslet), grid=grid)
     t_prep = time.perf_counter() - t1
     t2 = time.perf_counter()
     centre_name = central_view(views)
@@ -475,7 +494,8 @@ def main() -> None:
     out.say(f"{args.views} x {args.views} views per frame, one thread, `convert.grid: "
             f"{args.grid}`, the schema's convert defaults otherwise (as `plenocal convert`); "
             f"MLA kind: {kinds}. Times without PNG encoding: grid check, preparation (patch "
-            "sizes, layout, plan), all views.")
+            "sizes, layout, plan; on a grid the check cannot confirm, the corner views' "
+            "centring and the frame measured again), all views.")
     load0 = os.getloadavg()[0]
     out.say(f"Machine: {os.cpu_count()} cores, load average {load0:.1f} at the start (other "
             "jobs share the cores: times above ~1 per core are inflated accordingly).")
@@ -487,8 +507,8 @@ def main() -> None:
         out.say("(plenocal.convert.compare not present: no comparison with the reference)")
     out.say("")
     out.head("frame", "size", "MLA", "check s", "prepare s", "views s", "total s", "s / 4 MP",
-             "view", "ref. view", "confident", "grid drift max / rms px", "refined", "SSIM",
-             "sharpness")
+             "view", "ref. view", "confident", "grid drift max / rms px",
+             "grid refined / centred", "SSIM", "sharpness")
     rows = []
     for name in frames:
         r = bench_frame(name, args.views, args.grid, pictures, compare, args.mla, args.grid_ab)
@@ -504,7 +524,7 @@ def main() -> None:
         out.say(f"| {name} | {r['size']} | {r['mla']} | {r['t_check']:.2f} | {r['t_prep']:.2f} "
                 f"| {r['t_views']:.2f} | {r['t_total']:.2f} | {r['t_total'] * 4 / r['mp']:.2f} "
                 f"| {r['view'][0]}x{r['view'][1]} | {ref_size} | {100 * r['confident']:.0f}% "
-                f"| {drift} | {'yes' if r['refined'] else 'no'} | {ssim} | {sharp} |")
+                f"| {drift} | {grid_cell(r['refined'], ck)} | {ssim} | {sharp} |")
     out.say("")
     out.say("Grid check per frame (fitted lattice minus the file's grid at the lens nearest each "
             "corner and the centre, px; lenses measured; fitted pitch and rotation against "

@@ -309,6 +309,11 @@ def remembered_slots(max_bytes: int = SLOT_MEMO_BYTES) -> Iterator[None]:
         _slot_memo = None
 
 
+def slots_remembered() -> bool:
+    """Whether a :func:`remembered_slots` block is open."""
+    return _slot_memo is not None
+
+
 def _slot_key(layout: ViewLayout, keep: int, k: int, rows: slice) -> tuple:
     """What :func:`nearest_slots`' tables depend on: the layout's size, tile, lattice
     basis and tile centres (a digest), the counts and the band's rows."""

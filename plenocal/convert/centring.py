@@ -38,6 +38,7 @@ figure), stay the same bytes.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 from dataclasses import dataclass
@@ -47,6 +48,7 @@ import numpy as np
 
 from plenocal.convert.render import RenderPlan, view_weights
 from plenocal.grid import MicrolensGrid
+from plenocal.viewgeom import remembered_slots, slots_remembered
 
 #: a shift shorter than this is not applied: a centre error ``e`` moves a lens's tile by
 #: ``e T / P`` output pixels, and half a pixel is the grid check's own bar
@@ -114,19 +116,22 @@ def _plan_disagreement(plan: RenderPlan, grey: np.ndarray, r: int, c: int
     same values on every machine)."""
     o = plan.layout.offset_image(r, c)
     w = view_weights(plan, r, c)
-    blended = np.zeros(w.shape[1:], np.float64)
+    blended = np.zeros(w.shape[1:], np.float32)
     samples = []
     for k in range(w.shape[0]):
         xy, frac = cv2.convertMaps(plan.map_x[k] + np.float32(o[0]),
                                    plan.map_y[k] + np.float32(o[1]), cv2.CV_16SC2)
         s = cv2.remap(grey, xy, frac, cv2.INTER_LINEAR,
-                      borderMode=cv2.BORDER_REPLICATE).astype(np.float64)
+                      borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
         samples.append(s)
         blended += w[k] * s
     dev = np.zeros_like(blended)
     for k, s in enumerate(samples):
-        dev += w[k] * np.abs(s - blended)
-    return float(dev.sum()), int(dev.size)
+        s -= blended
+        np.abs(s, out=s)
+        s *= w[k]
+        dev += s
+    return float(dev.sum(dtype=np.float64)), int(dev.size)
 
 
 def corner_disagreement(shot, offset_px: tuple[float, float], grey: np.ndarray,
@@ -164,6 +169,13 @@ def measure_centring(shot) -> CentringFit:
     only where it is lower by more than one part in 10^9."""
     if shot.n_views < 3:
         return CentringFit((0.0, 0.0), 0.0, 0.0, 0, False)
+    with contextlib.nullcontext() if slots_remembered() else remembered_slots():
+        return _search(shot)
+
+
+def _search(shot) -> CentringFit:
+    """:func:`measure_centring`'s search (the nearest-lens tables, which the moved
+    lattices share, made once: :func:`plenocal.viewgeom.remembered_slots`)."""
     grey = grey_source(shot)
     bands = _bands(shot.layout.height, int(shot.layout.tile))
     reach = MAX_SHIFT_LENSES * float(shot.grid.diameter)
