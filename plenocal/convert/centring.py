@@ -61,9 +61,14 @@ MIN_GAIN = 0.05
 MAX_SHIFT_LENSES = 0.25
 #: the search's steps (px), each searched until no neighbour of the best is better
 STEPS_PX = (2.0, 1.0, 0.5, 0.25)
-#: output rows a band; at most :data:`MAX_BANDS` bands spread over the view are measured
+#: output rows a band; at most :data:`MAX_BANDS` bands spread over the view are measured,
+#: and no more than hold :data:`MAX_PIXELS` output pixels (at least :data:`MIN_BANDS`): the
+#: shift is one for the whole frame, and three crops of R42_klein_crop of 232-345 lit lenses
+#: each found the whole crop's (BENCHMARKS.md)
 BAND_ROWS = 32
 MAX_BANDS = 8
+MIN_BANDS = 3
+MAX_PIXELS = 8 * BAND_ROWS * 1024
 
 
 @dataclass(frozen=True)
@@ -94,13 +99,16 @@ class CentringFit:
                          "(plenocal.convert.centring)")}
 
 
-def _bands(height: int, margin: int) -> list[slice]:
-    """Up to :data:`MAX_BANDS` bands of :data:`BAND_ROWS` rows spread evenly over the
-    view's rows ``margin .. height - margin`` (all of them on a small view)."""
+def _bands(height: int, width: int, margin: int) -> list[slice]:
+    """Bands of :data:`BAND_ROWS` rows spread evenly over the view's rows ``margin ..
+    height - margin`` (all of them on a small view): at most :data:`MAX_BANDS`, and no
+    more than :data:`MAX_PIXELS` output pixels in all unless that is under
+    :data:`MIN_BANDS` bands."""
     lo, hi = margin, max(margin + 1, height - margin)
     starts = list(range(lo, hi, BAND_ROWS))
-    if len(starts) > MAX_BANDS:
-        pick = np.linspace(0, len(starts) - 1, MAX_BANDS).round().astype(int)
+    most = max(MIN_BANDS, min(MAX_BANDS, MAX_PIXELS // (BAND_ROWS * max(width, 1))))
+    if len(starts) > most:
+        pick = np.linspace(0, len(starts) - 1, most).round().astype(int)
         starts = [starts[i] for i in pick]
     return [slice(s, min(s + BAND_ROWS, hi)) for s in starts]
 
@@ -142,10 +150,12 @@ def corner_disagreement(shot, offset_px: tuple[float, float], grey: np.ndarray,
     layout = dataclasses.replace(
         shot.layout, lens_centres=shot.layout.lens_centres + np.asarray(offset_px, float))
     n = shot.n_views - 1
+    corners = ((0, 0), (0, n), (n, 0), (n, n))
     total, count = 0.0, 0
     for rows in bands:
-        plans = shot.plans_for_rows(rows, layout=layout)
-        for r, c in ((0, 0), (0, n), (n, 0), (n, n)):
+        plans = {b: shot.blend_plan(rows, b, layout)
+                 for b in sorted({shot.blend_of(r, c) for r, c in corners})}
+        for r, c in corners:
             s, m = _plan_disagreement(plans[shot.blend_of(r, c)], grey, r, c)
             total += s
             count += m
@@ -177,7 +187,7 @@ def _search(shot) -> CentringFit:
     """:func:`measure_centring`'s search (the nearest-lens tables, which the moved
     lattices share, made once: :func:`plenocal.viewgeom.remembered_slots`)."""
     grey = grey_source(shot)
-    bands = _bands(shot.layout.height, int(shot.layout.tile))
+    bands = _bands(shot.layout.height, shot.layout.width, int(shot.layout.tile))
     reach = MAX_SHIFT_LENSES * float(shot.grid.diameter)
     memo: dict[tuple[float, float], float] = {}
 

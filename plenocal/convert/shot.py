@@ -421,6 +421,14 @@ class ShotConversion:
                           self._blends, self._lens_weight, self.profile, self._profile_row,
                           rows=rows)
 
+    def blend_plan(self, rows: slice, blend: int, layout: ViewLayout | None = None
+                   ) -> RenderPlan:
+        """The plan of blend ``blend`` (:meth:`blend_of`) alone over output ``rows``: the
+        same numbers as that entry of :meth:`plans_for_rows`, without the others' weights."""
+        return make_plans(layout or self.layout, self.used_patch, self.safe.diameter_px,
+                          [self._blends[blend]], self._lens_weight, self.profile,
+                          self._profile_row, rows=rows)[0]
+
     @property
     def render_source(self) -> tuple[np.ndarray, float]:
         """What the views sample (the frame's integers, prefiltered where
