@@ -18,14 +18,16 @@ the lenses' weighted mean absolute deviation from their blend, grey levels), is 
 where ``delta`` puts the lattice on the micro images.
 
 Measured (:func:`measure_centring` forced on every frame of ``shared/real/frames``, on
-the grid each converts with): the ten frames whose grids the check confirms find their
+the grid each converts with; BENCHMARKS.md, "R42's grid moved onto its micro images by
+the corner views' agreement"): the ten frames whose grids the check confirms find their
 least disagreement within 0.25-2 px of that grid and 0.1-0.9 % below it (the TSPC frames'
-70-px micro images the flattest); R42_klein_crop finds (+3.25, +2.25) px, 25.7 % below
-the file's grid, and the crescents of its view 0_0 fade (issue 33). Synthetic frames with
-soft micro-image rims and a grid moved 1.5-2.5 px are found within 0.25 px
-(``tests/test_centring.py``).
+70-px micro images the flattest), four of the simulator's shots 0.0-0.1 %, subjects on
+black at most 1.2 %; R42_klein_crop finds (+3.25, +2.25) px, 25.7 % below the file's grid
+(the same on three crops of it, after a YUV 4:2:0 round trip, darker and noisier), and the
+crescents of its view 0_0 fade (issue 33). Synthetic frames with soft micro-image rims and
+a grid moved 1.5-2.5 px are found within 0.25 px (``tests/test_centring.py``).
 
-Use (:func:`centre_where_unverified`): where ``convert.grid`` is ``auto`` and the check
+Use (:func:`plenocal.convert.setup.centring_for`): where ``convert.grid`` is ``auto`` and the check
 could not confirm the file's grid (not foreign, not refined), the file's lattice is moved
 by the ``delta`` a pattern search finds (steps of 2, 1, 0.5 and 0.25 px from the file's
 grid, at most :data:`MAX_SHIFT_LENSES` of a lens) when it is at least
@@ -42,6 +44,7 @@ import contextlib
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -50,11 +53,16 @@ from plenocal.convert.render import RenderPlan, view_weights
 from plenocal.grid import MicrolensGrid
 from plenocal.viewgeom import remembered_slots, slots_remembered
 
+if TYPE_CHECKING:
+    from plenocal.convert.shot import ShotConversion
+
 #: a shift shorter than this is not applied: a centre error ``e`` moves a lens's tile by
 #: ``e T / P`` output pixels, and half a pixel is the grid check's own bar
 #: (:mod:`plenocal.convert.gridcheck`, "Why 1 px")
 MIN_SHIFT_PX = 0.5
-#: the least relative fall of the corner views' disagreement for a shift to be applied
+#: the least relative fall of the corner views' disagreement for a shift to be applied:
+#: between what right grids show when the search is forced on them (at most 1.2 %) and what
+#: R42's file grid shows (25.7 %), far from both
 MIN_GAIN = 0.05
 #: the search reaches at most this share of the lens pitch from the file's grid (a grid
 #: further off is a mosaic the check would see, or another camera's file)
@@ -142,7 +150,7 @@ def _plan_disagreement(plan: RenderPlan, grey: np.ndarray, r: int, c: int
     return float(dev.sum(dtype=np.float64)), int(dev.size)
 
 
-def corner_disagreement(shot, offset_px: tuple[float, float], grey: np.ndarray,
+def corner_disagreement(shot: ShotConversion, offset_px: tuple[float, float], grey: np.ndarray,
                         bands: list[slice]) -> float:
     """The four corner views' mean disagreement (grey levels of ``grey``) over output
     ``bands`` with the shot's micro-image centres moved by ``offset_px``. ``shot``: a
@@ -162,7 +170,7 @@ def corner_disagreement(shot, offset_px: tuple[float, float], grey: np.ndarray,
     return total / max(count, 1)
 
 
-def grey_source(shot) -> np.ndarray:
+def grey_source(shot: ShotConversion) -> np.ndarray:
     """The shot's render source in grey, integers (OpenCV's fixed-point conversion)."""
     src, _ = shot.render_source
     if src.ndim == 2 or src.shape[2] == 1:
@@ -170,7 +178,7 @@ def grey_source(shot) -> np.ndarray:
     return cv2.cvtColor(src, cv2.COLOR_RGB2GRAY)
 
 
-def measure_centring(shot) -> CentringFit:
+def measure_centring(shot: ShotConversion) -> CentringFit:
     """The lattice shift (px) that the four corner views of ``shot`` agree on best
     (:func:`corner_disagreement`), by a pattern search from the file's grid over
     :data:`STEPS_PX`, at most :data:`MAX_SHIFT_LENSES` of the pitch away; ``applied`` per
@@ -183,7 +191,7 @@ def measure_centring(shot) -> CentringFit:
         return _search(shot)
 
 
-def _search(shot) -> CentringFit:
+def _search(shot: ShotConversion) -> CentringFit:
     """:func:`measure_centring`'s search (the nearest-lens tables, which the moved
     lattices share, made once: :func:`plenocal.viewgeom.remembered_slots`)."""
     grey = grey_source(shot)
