@@ -317,6 +317,7 @@ def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: Con
     if fit is not None and fit.applied:  # measured again on the moved lattice, as written
         lattice = centred_lattice(grid, fit)
         grid = lattice_grid(calib, grid.width, grid.height, lattice)
+        del shot  # not held beside its successor
         shot = ShotConversion(image, calib, n_views, settings, source=source, grid=grid)
     warnings = [f"{source}: {w}" for w in check.warnings] + shot.warnings
     setup = ConverterSetup(
