@@ -91,7 +91,7 @@ from plenocal.cli import command_line_block  # noqa: E402
 from plenocal.convert import ConvertSettings, ShotConversion  # noqa: E402
 from plenocal.convert.gridcheck import grid_for_mode, refine_grid  # noqa: E402
 from plenocal.convert.localcheck import local_compare  # noqa: E402
-from plenocal.convert.setup import centred_lattice, centring_for, lattice_grid  # noqa: E402
+from plenocal.convert.setup import centred_where_unverified  # noqa: E402
 from plenocal.convert.shot import build_grid, load_calib, load_lenslet  # noqa: E402
 from plenocal.io.files import read_image, write_image  # noqa: E402
 from plenocal.names import central_view  # noqa: E402
@@ -189,7 +189,8 @@ def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
     image = load_lenslet(lenslet)
     H, W = image.shape[:2]
     seq = sequence(name)
-    cfg = command_line_block({"mla": MLA[seq]} if seq in MLA and mla_mode == "table" else {})
+    cfg = command_line_block({"grid": grid_mode, **({"mla": MLA[seq]} if seq in MLA
+                                                     and mla_mode == "table" else {})})
     settings = ConvertSettings.from_config(cfg)
     t0 = time.perf_counter()
     file_grid = build_grid(calib, W, H)
@@ -201,10 +202,8 @@ def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
     shot = ShotConversion(image, calib, views, settings, source=str(lenslet), grid=grid)
     # as the command line: an unverified grid moved onto the centres the corner views agree
     # on (plenocal.convert.centring), the frame measured again on it
-    fit = centring_for(check, grid_mode, shot, name)
-    if fit is not None and fit.applied:
-        grid = lattice_grid(calib, W, H, centred_lattice(grid, fit))
-        shot = ShotConversion(image, calib, views, settings, source=str(lenslet), grid=grid)
+    grid, shot, _ = centred_where_unverified(image, calib, views, settings, str(lenslet), grid,
+                                             check, shot)
     t_prep = time.perf_counter() - t1
     t2 = time.perf_counter()
     centre_name = central_view(views)

@@ -245,8 +245,8 @@ class GridCheck:
 
 
 _DRIFT_HEAD = "grid check: the calib.xml grid drifts up to "
-#: what an unverified check's warning says is used (plenocal.convert.setup.centred_where_
-#: unverified replaces it where the file's lattice is moved onto the micro images)
+#: what an unverified check's warning says is used (plenocal.convert.setup.centring_for
+#: replaces it where the file's lattice is moved onto the micro images)
 UNVERIFIED_USE = "the file's grid is used"
 
 

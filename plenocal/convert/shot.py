@@ -412,19 +412,18 @@ class ShotConversion:
                                          out_of_range(self.patch)[self.layout.lens_index])
         self._gray = None  # the analysis's; made again if asked for (125 MB at 31 MP)
 
-    def plans_for_rows(self, rows: slice = slice(None), layout: ViewLayout | None = None
-                       ) -> list[RenderPlan]:
+    def plans_for_rows(self, rows: slice = slice(None)) -> list[RenderPlan]:
         """The render plans (one per blend, :func:`plenocal.convert.render.make_plans`)
-        of output ``rows``; ``layout``: another layout of the same lenses (the micro-image
-        centres moved: :mod:`plenocal.convert.centring`), None for the shot's."""
-        return make_plans(layout or self.layout, self.used_patch, self.safe.diameter_px,
-                          self._blends, self._lens_weight, self.profile, self._profile_row,
-                          rows=rows)
+        of output ``rows``."""
+        return make_plans(self.layout, self.used_patch, self.safe.diameter_px, self._blends,
+                          self._lens_weight, self.profile, self._profile_row, rows=rows)
 
     def blend_plan(self, rows: slice, blend: int, layout: ViewLayout | None = None
                    ) -> RenderPlan:
         """The plan of blend ``blend`` (:meth:`blend_of`) alone over output ``rows``: the
-        same numbers as that entry of :meth:`plans_for_rows`, without the others' weights."""
+        same numbers as that entry of :meth:`plans_for_rows`, without the others' weights;
+        ``layout``: another layout of the same lenses (the micro-image centres moved:
+        :mod:`plenocal.convert.centring`), None for the shot's."""
         return make_plans(layout or self.layout, self.used_patch, self.safe.diameter_px,
                           [self._blends[blend]], self._lens_weight, self.profile,
                           self._profile_row, rows=rows)[0]
@@ -742,11 +741,9 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
     ``analysis``: the shot's measurements made before (:mod:`plenocal.convert.analysis`;
     rule ``convert_views``). ``threads``: see :class:`ShotConversion`."""
     from plenocal.convert.setup import (  # noqa: PLC0415
-        centred_lattice,
-        centring_for,
+        centred_where_unverified,
         check_and_grid,
         foreign_grid_error,
-        lattice_grid,
         read_setup,
         unmatched_frame_error,
     )
@@ -776,12 +773,8 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
                                   grid_foreign)
     if error is not None:
         raise ConvertError(error)
-    fit = centring_for(check, settings.grid, shot, str(lenslet))
-    if fit is not None and fit.applied:  # measured again on the moved lattice
-        grid = lattice_grid(calib, W, H, centred_lattice(grid, fit))
-        del shot  # not held beside its successor (its prefiltered frame: 93 MB at 31 MP)
-        shot = ShotConversion(image, calib, n_views, settings, source=str(lenslet), grid=grid,
-                              threads=threads)
+    grid, shot, _ = centred_where_unverified(image, calib, n_views, settings, str(lenslet),
+                                             grid, check, shot, threads)
     for note in check.warnings:  # after the centring, which may change what they say
         log.warning("%s: %s", lenslet, note)
     shot.grid_check = check.to_dict()
