@@ -208,8 +208,12 @@ LINKED = ("data", f"results/{DATASET}/views")
 def clone_capture(src: Path, dest: Path) -> None:
     """A copy of a capture's folder with its files' times (Snakemake then reruns only what
     the new config changes: the refinement and what reads the calibration), the folders of
-    :data:`LINKED` hard-linked."""
+    :data:`LINKED` hard-linked. Made in a hidden sibling folder and renamed to ``dest``
+    when whole: a clone that fails part way (a full disk, an interrupt) leaves nothing, so
+    the next run clones again instead of running Snakemake in half a capture (which would
+    make the missing part again, from the conversion on)."""
     linked = [src / d for d in LINKED]
+    part = dest.with_name(f".{dest.name}.partial")
 
     def copy(a: str, b: str) -> None:
         if any(Path(a).is_relative_to(d) for d in linked):
@@ -217,13 +221,19 @@ def clone_capture(src: Path, dest: Path) -> None:
         else:
             shutil.copy2(a, b)
 
-    shutil.copytree(src, dest, symlinks=True, copy_function=copy)
-    for p in src.rglob("*"):
-        q = dest / p.relative_to(src)
-        if q.is_dir() and not q.is_symlink():
-            st = p.stat()
-            os.utime(q, ns=(st.st_atime_ns, st.st_mtime_ns))
-    shutil.rmtree(dest / ".snakemake" / "locks", ignore_errors=True)
+    shutil.rmtree(part, ignore_errors=True)  # a clone an earlier run left half made
+    try:
+        shutil.copytree(src, part, symlinks=True, copy_function=copy)
+        for p in src.rglob("*"):
+            q = part / p.relative_to(src)
+            if q.is_dir() and not q.is_symlink():
+                st = p.stat()
+                os.utime(q, ns=(st.st_atime_ns, st.st_mtime_ns))
+        shutil.rmtree(part / ".snakemake" / "locks", ignore_errors=True)
+        part.rename(dest)
+    except BaseException:
+        shutil.rmtree(part, ignore_errors=True)
+        raise
 
 
 def run_capture(work: Path, cfg: dict, forcerun: list[str], jobs: int,

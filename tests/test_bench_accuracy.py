@@ -55,6 +55,29 @@ def test_a_clone_links_the_images_and_copies_the_rest_with_their_times(tmp_path)
     assert not (dest / ".snakemake" / "locks").exists()
 
 
+def test_a_clone_that_fails_part_way_leaves_nothing(tmp_path, monkeypatch):
+    src, dest = tmp_path / "cap", tmp_path / "cap-x"
+    for i, f in enumerate(["results/a.json", "results/b.json", "results/c.json"]):
+        (src / f).parent.mkdir(parents=True, exist_ok=True)
+        (src / f).write_text(f"{i}")
+    copy2, calls = ba.shutil.copy2, []
+
+    def full_disk(a, b):
+        calls.append(a)
+        if len(calls) == 2:
+            raise OSError(28, "No space left on device")
+        return copy2(a, b)
+
+    monkeypatch.setattr(ba.shutil, "copy2", full_disk)
+    with pytest.raises(OSError):  # copytree copies the rest, then raises shutil.Error
+        ba.clone_capture(src, dest)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cap"]  # no clone, whole or half
+    monkeypatch.setattr(ba.shutil, "copy2", copy2)
+    ba.clone_capture(src, dest)  # the next run clones it whole
+    assert (dest / "results" / "c.json").read_text() == "2"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cap", "cap-x"]
+
+
 def test_paired_rows_put_each_capture_beside_its_clone_with_the_worst_in_size():
     def cap(f, c, job=None):
         return {"focal_signed_pct": f, "focal_pct": abs(f), "centre_mm": c, "rot_deg": 0.01,
