@@ -91,7 +91,7 @@ from plenocal.cli import command_line_block  # noqa: E402
 from plenocal.convert import ConvertSettings, ShotConversion  # noqa: E402
 from plenocal.convert.gridcheck import grid_for_mode, refine_grid  # noqa: E402
 from plenocal.convert.localcheck import local_compare  # noqa: E402
-from plenocal.convert.setup import centred_where_unverified  # noqa: E402
+from plenocal.convert.setup import centred_where_unverified, centring_shift  # noqa: E402
 from plenocal.convert.shot import build_grid, load_calib, load_lenslet  # noqa: E402
 from plenocal.io.files import read_image, write_image  # noqa: E402
 from plenocal.names import central_view  # noqa: E402
@@ -120,11 +120,8 @@ def grid_cell(refined: bool, check) -> str:
     file's moved onto the centres the corner views agree on), or the file's."""
     if refined:
         return "yes"
-    centring = check.centring or {}
-    if centring.get("applied"):
-        dx, dy = centring["offset_px"]
-        return f"centred ({dx:+.2f}, {dy:+.2f})"
-    return "no"
+    shift = centring_shift(check.centring)
+    return "no" if shift is None else f"centred ({shift[0]:+.2f}, {shift[1]:+.2f})"
 
 
 def sequence(name: str) -> str:

@@ -349,7 +349,7 @@ def _composition_change(shot, weights: np.ndarray, r: int, c: int) -> tuple[floa
 
     blends = shot._blends
     plan = make_plans(shot.layout, shot.used_patch, shot.safe.diameter_px, blends, weights,
-                      shot.profile, shot._profile_row)[shot._blend_of(r, c)]
+                      shot.profile, shot._profile_row)[shot.blend_of(r, c)]
     ids, _ = nearest_slots(shot.layout, keep=max(b.slots for b in blends),
                            k=candidates_within(max(b.fade_radius for b in blends)))
     support = np.empty(plan.map_x.shape[1:], np.float32)
@@ -377,7 +377,7 @@ def test_corner_views_blend_does_not_switch_to_one_measured_lens():
     shot = convert_files(REAL / "frames" / "HandTools_f150.png",
                          REAL / "frames" / "HandTools.xml", None, 5)
     r, c = 4, 4
-    assert shot._blend_of(r, c) == 2  # the wider blend
+    assert shot.blend_of(r, c) == 2  # the wider blend
     p = shot.patch
     own = (p.focus * reliability(p.raw, p.patch, p.confident, shot.settings.patch.step_px)
            )[shot.layout.lens_index]
@@ -410,7 +410,7 @@ def test_far_content_on_a_multi_focus_mla_takes_the_wider_blend():
                          REAL / "frames" / "R42_klein_crop.xml", None, 5,
                          ConvertSettings(mla="galilean"))
     assert shot.least_reach == 2
-    assert all(shot._blend_of(r, c) == 2 for r in range(5) for c in range(5))
+    assert all(shot.blend_of(r, c) == 2 for r in range(5) for c in range(5))
     now = _one_lens_share(shot, 0, 0), _one_lens_share(shot, 2, 2)
     shot._least_reach = 0  # the blends of the views' own reach, as before
     before = _one_lens_share(shot, 0, 0), _one_lens_share(shot, 2, 2)
@@ -418,10 +418,10 @@ def test_far_content_on_a_multi_focus_mla_takes_the_wider_blend():
     assert now[0] < 0.2 and now[1] < 0.05, now
     img, calib = crop("Fujita2", *FUJITA_CROP)
     fujita = ShotConversion(img, calib, 5, ConvertSettings(mla="galilean"))
-    assert fujita.least_reach == 0 and fujita._blend_of(2, 2) == 0
+    assert fujita.least_reach == 0 and fujita.blend_of(2, 2) == 0
     # decided once per camera, as D' and q are: the set-up carries it to every shot
     fujita = ShotConversion(img, calib, 5, ConvertSettings(mla="galilean"), least_reach=2)
-    assert fujita._blend_of(2, 2) == 2
+    assert fujita.blend_of(2, 2) == 2
 
 
 def test_the_camera_setup_decides_the_least_reach_once():

@@ -93,7 +93,7 @@ def test_support_is_the_weight_of_the_samples_inside_the_rim():
     o = shot.layout.offset_image(0, 0)
     support = np.empty(plan.map_x.shape[1:], np.float32)
     view_weights(plan, 0, 0, support=support)
-    s = shot.settings.render.for_reach(shot._blend_of(0, 0))
+    s = shot.settings.render.for_reach(shot.blend_of(0, 0))
     half = shot.safe.diameter_px / 2.0
     rim = half - s.rim_px
     rho = np.hypot(plan.off_x + o[0], plan.off_y + o[1])

@@ -49,7 +49,7 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from plenocal.convert.render import RenderPlan, view_weights
+from plenocal.convert.render import RenderPlan, slot_samples, view_weights
 from plenocal.grid import MicrolensGrid
 from plenocal.viewgeom import remembered_slots, slots_remembered
 
@@ -128,17 +128,14 @@ def _plan_disagreement(plan: RenderPlan, grey: np.ndarray, r: int, c: int
     not devignetted: the profiles were measured around the centres under test, and
     divided out they bent the measure (synthetic micro images with soft rims, the grid
     moved 1-2.5 px: found 1-2 px off with the profiles, within 0.25 px without). They are
-    read through fixed-point maps from the integer ``grey`` (integer interpolation: the
-    same values on every machine)."""
+    read as the views read them (:func:`plenocal.convert.render.slot_samples`) from the
+    integer ``grey`` (integer interpolation: the same values on every machine)."""
     o = plan.layout.offset_image(r, c)
     w = view_weights(plan, r, c)
     blended = np.zeros(w.shape[1:], np.float32)
     samples = []
     for k in range(w.shape[0]):
-        xy, frac = cv2.convertMaps(plan.map_x[k] + np.float32(o[0]),
-                                   plan.map_y[k] + np.float32(o[1]), cv2.CV_16SC2)
-        s = cv2.remap(grey, xy, frac, cv2.INTER_LINEAR,
-                      borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
+        s = slot_samples(plan, grey, k, o).astype(np.float32)
         samples.append(s)
         blended += w[k] * s
     dev = np.zeros_like(blended)

@@ -334,6 +334,17 @@ def view_weights(plan: RenderPlan, r: int, c: int, with_gain: bool = False,
     return w
 
 
+def slot_samples(plan: RenderPlan, source: np.ndarray, k: int, offset: np.ndarray,
+                 rows: slice = slice(None)) -> np.ndarray:
+    """Slot ``k``'s samples of ``source`` over the plan's ``rows`` for a view whose offset
+    from the micro-image centres is ``offset`` (x, y) px (:meth:`ViewLayout.offset_image`):
+    bilinear, at positions rounded to 1/32 px (OpenCV's fixed-point maps: the module
+    docstring), the border replicated; ``source``'s type."""
+    xy, frac = cv2.convertMaps(plan.map_x[k, rows] + np.float32(offset[0]),
+                               plan.map_y[k, rows] + np.float32(offset[1]), cv2.CV_16SC2)
+    return cv2.remap(source, xy, frac, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
 def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int,
                 unit: float = 1.0, support: np.ndarray | None = None) -> np.ndarray:
     """View (r, c) over the plan's rows as float32 (h, W, C): ``unit`` times the units of
@@ -351,7 +362,6 @@ def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int,
     ch = 1 if source.ndim == 2 else source.shape[2]
     H, W = plan.map_x.shape[1:]
     out = np.zeros((H, W) + ((ch,) if ch > 1 else ()), dtype=np.float32)
-    ox, oy = np.float32(o[0]), np.float32(o[1])
     convert = source.dtype != np.float32
     for y0 in range(0, H, BAND_ROWS):
         rows = slice(y0, min(y0 + BAND_ROWS, H))
@@ -359,9 +369,7 @@ def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int,
                          support=None if support is None else support[rows])
         band = out[rows]
         for k in range(w.shape[0]):
-            xy, frac = cv2.convertMaps(plan.map_x[k, rows] + ox, plan.map_y[k, rows] + oy,
-                                       cv2.CV_16SC2)
-            s = cv2.remap(source, xy, frac, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            s = slot_samples(plan, source, k, o, rows)
             if convert:
                 s = s.astype(np.float32)
             # band += s * w_k in one pass (numpy's broadcast over channels takes 3x as long)

@@ -191,15 +191,23 @@ def centred_lattice(grid: MicrolensGrid, fit: CentringFit):
                         LATTICE_DIGITS)
 
 
+def centring_shift(centring: dict | None) -> tuple[float, float] | None:
+    """The shift (px) a grid check's ``centring`` record moved the file's lattice by, None
+    where none was applied (or no search made)."""
+    if not centring or not centring.get("applied"):
+        return None
+    dx, dy = centring["offset_px"]
+    return float(dx), float(dy)
+
+
 def grid_words(check: dict) -> str:
     """Which grid the views were cut on, from a shot's ``grid_check`` record."""
     if check.get("refined"):
         return "refined from the image"
-    centring = check.get("centring") or {}
-    if centring.get("applied"):
-        dx, dy = centring["offset_px"]
-        return (f"calib.xml's, moved by ({dx:+.2f}, {dy:+.2f}) px onto the micro-image "
-                "centres the corner views agree on")
+    shift = centring_shift(check.get("centring"))
+    if shift is not None:
+        return (f"calib.xml's, moved by ({shift[0]:+.2f}, {shift[1]:+.2f}) px onto the "
+                "micro-image centres the corner views agree on")
     return "calib.xml's"
 
 

@@ -529,20 +529,17 @@ class ShotConversion:
         return rim_reach(offset, self._median_patch, self.safe.diameter_px)
 
     def blend_of(self, r: int, c: int) -> int:
-        """Which of :meth:`plans_for_rows`' plans view (r, c) is rendered with."""
-        return self._blend_of(r, c)
-
-    def _blend_of(self, r: int, c: int) -> int:
-        """Which blend view (r, c) takes: the tight one, or a wider one where the view's
-        patches reach past the micro image (:func:`rim_reach`, median patch) or the shot's
-        sharp lenses are sparse (:func:`focus_reach`)."""
+        """Which of :meth:`plans_for_rows`' plans view (r, c) is rendered with: the tight
+        one, or a wider one where the view's patches reach past the micro image
+        (:func:`rim_reach`, median patch) or the shot's sharp lenses are sparse
+        (:func:`focus_reach`)."""
         reach = max(self._rim_reach(float(np.hypot(*self.layout.offset_image(r, c)))),
                     self._least_reach)
         return min(reach, len(self._blends) - 1)
 
     def plan_for(self, r: int, c: int) -> RenderPlan:
-        """The whole view's render plan of view (r, c) (:meth:`_blend_of`)."""
-        return self._whole_plans()[self._blend_of(r, c)]
+        """The whole view's render plan of view (r, c) (:meth:`blend_of`)."""
+        return self._whole_plans()[self.blend_of(r, c)]
 
     def render_views(self, names: Sequence[str], dtype: type = np.uint8, threads: int = 1
                      ) -> dict[str, np.ndarray]:
@@ -572,7 +569,7 @@ class ShotConversion:
             plans = self.plans_for_rows(rows)
             support = np.empty((rows.stop - rows.start, W), np.float32)
             for name, r, c in todo:
-                v = render_view(plans[self._blend_of(r, c)], self._render_source, r, c,
+                v = render_view(plans[self.blend_of(r, c)], self._render_source, r, c,
                                 self._render_scale, support=support)
                 out[name][rows] = _round_to(v, top, dtype)
                 box = weak_box(support)
