@@ -364,6 +364,32 @@ def test_the_refined_cameras_are_the_same_bytes_on_one_and_two_threads(capture):
             assert cam.cam_to_world.tobytes() == out.cameras[key].cam_to_world.tobytes(), key
 
 
+def test_the_focal_lengths_deviation_leaves_the_cameras_alone_and_grows_with_fewer_points(
+        capture):
+    """refine.focal_sd: the focal pass's covariance gives each sensor's focal length a
+    standard deviation (the rig ties them: one value to 1 %), the same bytes of cameras as
+    without it, and a larger deviation from a third of the points (``max_points`` 500 of
+    the 1,401 used: about sqrt(3) = 1.7x for independent observations; 1.84x, 0.27 ->
+    0.50 %, when written)."""
+    views, rig, db = capture
+    eq6 = eq6_of(views, rig)
+    plain = rf.refine_calibration(eq6, rig, db, settings(), hold_shot="x00_y00")
+    assert "std" not in plain.report["focal_px"]
+    out = rf.refine_calibration(eq6, rig, db, settings(focal_sd=True), hold_shot="x00_y00")
+    for key, cam in plain.cameras.items():
+        assert cam.K.tobytes() == out.cameras[key].K.tobytes(), key
+        assert cam.cam_to_world.tobytes() == out.cameras[key].cam_to_world.tobytes(), key
+    std = out.report["focal_px"]["std"]
+    assert std["sensors"] == 9 and 0 < std["std_pct"] < 1.0
+    lo, hi = std["sensors_range_pct"]
+    assert hi < 1.01 * lo
+    assert std["std_pct"] == pytest.approx(std["per_px_noise_pct"] * std["sigma_px"])
+    few = rf.refine_calibration(eq6, rig, db, settings(focal_sd=True, max_points=500),
+                                hold_shot="x00_y00")
+    ratio = few.report["focal_px"]["std"]["std_pct"] / std["std_pct"]
+    assert 1.3 < ratio < 2.6, ratio
+
+
 def test_a_principal_point_shift_is_the_turn_that_moves_the_image_centre_as_far():
     """Hand-computed: f = 500 px, a shift of (+2, -1) px puts the optical axis's point at
     x = 2 / 500, y = -1 / 500 in normalised coordinates, by a rotation."""

@@ -6,6 +6,7 @@ deterministic; and a headless Chromium renders it with every image decoded."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -25,6 +26,7 @@ from plenocal.artifacts.disparity import VERSION as DISPARITY_VERSION
 from plenocal.artifacts.reg_a import RegistrationA, write_reg_a
 from plenocal.artifacts.rig import write_rig
 from plenocal.artifacts.scale import ScaleResult, write_scale
+from plenocal.calib.refine import RefineSettings
 from plenocal.camera import PinholeCamera, intrinsics, pose
 from plenocal.convert.quality import summarise
 from plenocal.io.files import write_image, write_json
@@ -182,15 +184,16 @@ def build(res: Path) -> str:
 # ---------------------------------------------------------------------------
 
 
-def focal_card(tmp_path, std_px: float | None) -> str:
+def focal_card(tmp_path, std_px: float | None, refine: dict | None = None) -> str:
     """The report's focal-length card, up to its source link, for registration A at
-    120.3 px with deviation ``std_px`` (None: not estimated) and no refinement."""
+    120.3 px with deviation ``std_px`` (None: not estimated) and ``refine`` as refine.json
+    (None: no refinement)."""
     res = make_results(tmp_path)
     cams = {c: PinholeCamera(intrinsics(120.3, W, H), np.eye(4), W, H) for c in CAMS}
     stats = {} if std_px is None else {"focal_std_px": std_px}
     write_reg_a(res / "reg_a" / "reg_a.json", RegistrationA(
         focal_px=120.3, width=W, height=H, mapper="global", cameras=cams, stats=stats))
-    write_json(res / "calibration" / "refine.json", {"enabled": False})
+    write_json(res / "calibration" / "refine.json", refine or {"enabled": False})
     # up to the card's source link (the advice is a span of its own inside the card)
     return re.search(r'<span class="kpi" id="kpi-focal">(.*?)\[source\]', build(res),
                      re.S).group(1)
@@ -218,6 +221,22 @@ def test_focal_length_kpi_advises_more_hand_held_shots_over_half_a_percent(tmp_p
     assert ("&plusmn; 0.75 %" if weak else "&plusmn; 0.30 %") in kpi
     assert ("fixes the focal length weakly" in kpi) is weak
     assert ("more hand-held shots fixed it better" in kpi) is weak
+
+
+@pytest.mark.parametrize("std", [{"std_pct": 0.1093, "sigma_px": 0.28}, None])
+def test_focal_length_kpi_gives_the_refinements_own_deviation_where_asked(tmp_path, std):
+    """refine.focal_sd: the refined focal length with its own standard deviation
+    (refine.json's focal_px.std) beside registration A's; without it, none."""
+    focal = {"registration_a": 120.3, "refined": 120.42, "change_pct": 0.0998,
+             **({} if std is None else {"std": std})}
+    refine = {"enabled": True, "focal_px": focal, "scale_vs_eq5": {"rig": 1.0001},
+              "settings": dataclasses.asdict(RefineSettings(focal_sd=True)),
+              "scale_source": "Eq. 5", "points": {"used": 900},
+              "observations": {"before": {"mean_px": 0.3}, "after": {"mean_px": 0.2, "n": 9}}}
+    kpi = focal_card(tmp_path, 0.6015, refine)
+    assert "<b>120.42 px</b>" in kpi and "moved it +0.100 % from" in kpi
+    assert ("&plusmn; 0.109 % (1 sd, the refinement" in kpi) is (std is not None)
+    assert "&plusmn; 0.50 %" in kpi  # registration A's, as before
 
 
 def test_table1_rows_pair_measurements_with_the_paper():

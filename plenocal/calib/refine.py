@@ -187,6 +187,7 @@ class RefineSettings:
     max_shift_pct: float = _REFINE["max_shift_pct"]
     min_tie_points: int = _REFINE["min_tie_points"]
     min_gain_pct: float = _REFINE["min_gain_pct"]
+    focal_sd: bool = _REFINE["focal_sd"]
     align: AlignSettings = AlignSettings()
     seed: int = _SFM["seed"]
     num_threads: int = _REFINE["num_threads"]
@@ -441,6 +442,72 @@ def _loss(name: str):
     return getattr(pycolmap.LossFunctionType, name.upper())
 
 
+def _adjustment_setup(rec, model: RigModel, settings: RefineSettings, *, refine_focal: bool,
+                      refine_rig: bool, hold_frame: str, loss_scale_px: float,
+                      refine_pp: bool = False) -> tuple:
+    """The options and the configuration (``pycolmap.BundleAdjustmentOptions``,
+    ``pycolmap.BundleAdjustmentConfig``) of :func:`bundle_adjust`'s problem, but for the
+    solver's own settings: what is held and what moves, and the loss."""
+    import pycolmap  # noqa: PLC0415
+
+    cfg = pycolmap.BundleAdjustmentConfig()
+    for image_id in sorted(rec.images):
+        cfg.add_image(image_id)
+    for shot in held_shots(model, settings, hold_frame):
+        cfg.set_constant_rig_from_world_pose(model.frame_of_shot[shot])
+    if refine_pp and not refine_focal:
+        cfg.set_constant_cam_intrinsics(model.camera_of_view[model.central])
+    o = pycolmap.BundleAdjustmentOptions()
+    o.refine_focal_length = refine_focal
+    o.refine_principal_point = refine_pp
+    o.refine_extra_params = False
+    o.refine_sensor_from_rig = refine_rig
+    o.refine_rig_from_world = True
+    o.ceres.loss_function_type = _loss(settings.loss)
+    o.ceres.loss_function_scale = float(loss_scale_px)
+    return o, cfg
+
+
+def held_shots(model: RigModel, settings: RefineSettings, hold_frame: str) -> list[str]:
+    """The shots whose poses the adjustments hold: every one where ``refine.frames`` is
+    hold, else ``hold_frame`` (the gauge)."""
+    return sorted(model.frame_of_shot) if settings.frames == "hold" else [hold_frame]
+
+
+def focal_pass_std(rec, model: RigModel, settings: RefineSettings, *, refine_rig: bool,
+                   hold_frame: str, loss_scale_px: float,
+                   work_dir: str | Path | None = None) -> dict:
+    """The focal length's standard deviation at the end of the focal pass (config
+    ``refine.focal_sd``; :mod:`plenocal.calib.refine_uncertainty`), its problem set up as
+    the pass's (:func:`_adjustment_setup`). Reads ``rec``, changes nothing."""
+    import pycolmap  # noqa: PLC0415
+
+    from plenocal.calib.refine_uncertainty import sensor_focal_std_pct  # noqa: PLC0415
+
+    o, cfg = _adjustment_setup(rec, model, settings, refine_focal=True, refine_rig=refine_rig,
+                               hold_frame=hold_frame, loss_scale_px=loss_scale_px,
+                               refine_pp=True)
+    # setting the problem up rewrites the frames' poses in their last bits (their
+    # parametrisation): kept and put back, so that the refinement's result is the same
+    # bytes with and without this estimate
+    poses = {f: np.array(rec.frames[f].rig_from_world.params) for f in rec.frames}
+    try:
+        adjuster = pycolmap.create_default_ceres_bundle_adjuster(o, cfg, rec)
+        held = {model.frame_of_shot[s] for s in held_shots(model, settings, hold_frame)}
+        frames = [f for f in sorted(model.frame_of_shot.values()) if f not in held]
+        out = sensor_focal_std_pct(rec, sorted(set(model.camera_of_view.values())), frames,
+                                   errors_px=observation_errors(rec, work_dir),
+                                   bundle_adjuster=adjuster)
+        del adjuster
+    finally:
+        for f, params in poses.items():
+            rec.frames[f].rig_from_world.params[:] = params
+    log.info("the focal length's standard deviation (the focal pass's covariance): %s "
+             "(%.1f s)", "not estimated" if out["std_pct"] is None
+             else f"{out['std_pct']:.3f} %", out["seconds"])
+    return out
+
+
 def bundle_adjust(rec, model: RigModel, settings: RefineSettings, *, refine_focal: bool,
                   refine_rig: bool, hold_frame: str, loss_scale_px: float,
                   refine_pp: bool = False, max_iterations: int | None = None) -> dict:
@@ -453,22 +520,9 @@ def bundle_adjust(rec, model: RigModel, settings: RefineSettings, *, refine_foca
     summary."""
     import pycolmap  # noqa: PLC0415
 
-    cfg = pycolmap.BundleAdjustmentConfig()
-    for image_id in sorted(rec.images):
-        cfg.add_image(image_id)
-    held = (sorted(model.frame_of_shot) if settings.frames == "hold" else [hold_frame])
-    for shot in held:
-        cfg.set_constant_rig_from_world_pose(model.frame_of_shot[shot])
-    if refine_pp and not refine_focal:
-        cfg.set_constant_cam_intrinsics(model.camera_of_view[model.central])
-    o = pycolmap.BundleAdjustmentOptions()
-    o.refine_focal_length = refine_focal
-    o.refine_principal_point = refine_pp
-    o.refine_extra_params = False
-    o.refine_sensor_from_rig = refine_rig
-    o.refine_rig_from_world = True
-    o.ceres.loss_function_type = _loss(settings.loss)
-    o.ceres.loss_function_scale = float(loss_scale_px)
+    o, cfg = _adjustment_setup(rec, model, settings, refine_focal=refine_focal,
+                               refine_rig=refine_rig, hold_frame=hold_frame,
+                               loss_scale_px=loss_scale_px, refine_pp=refine_pp)
     s = o.ceres.solver_options
     s.max_num_iterations = int(settings.max_iterations if max_iterations is None
                                else max_iterations)
@@ -1003,6 +1057,7 @@ def _adjusted(rec, model: RigModel, eq6, rig: RigB, views, shots, central, shot_
     passes = {}
     free_rig = settings.rig == "free"
     focal, per_sensor, rig_views = focal_a, {}, views
+    focal_sd = None
     if settings.focal == "refine":
         # each sensor's focal length and principal point freed; the shared focal length
         # their weighted mean, the principal points B's again (module docstring)
@@ -1010,6 +1065,10 @@ def _adjusted(rec, model: RigModel, eq6, rig: RigB, views, shots, central, shot_
                                         refine_rig=free_rig, hold_frame=hold_shot,
                                         refine_pp=True, loss_scale_px=loss_scale)
         focal, per_sensor = shared_focal(rec, model)
+        if settings.focal_sd:
+            focal_sd = focal_pass_std(rec, model, settings, refine_rig=free_rig,
+                                      hold_frame=hold_shot, loss_scale_px=loss_scale,
+                                      work_dir=work_dir)
         rig_views = (rig_at_focal(focal).view_poses() if rig_at_focal is not None
                      else {v: (_with_focal(K, focal), M) for v, (K, M) in views.items()})
         passes["focal"]["turn_deg"] = warm_start(rec, model, rig_views, settings, focal,
@@ -1056,7 +1115,8 @@ def _adjusted(rec, model: RigModel, eq6, rig: RigB, views, shots, central, shot_
         "alignment": align,
         "focal_px": {"registration_a": focal_a, "refined": focal,
                      "change_pct": 100.0 * (focal / focal_a - 1.0),
-                     "per_sensor": per_sensor},
+                     "per_sensor": per_sensor,
+                     **({} if focal_sd is None else {"std": focal_sd})},
         "scale_vs_eq5": {
             "rig": scale_rig,
             "result": spread(frame_centres(rec, model)) / size_eq6,

@@ -717,6 +717,12 @@ def focal_kpi(page: Page, reg_a: RegistrationA | None, rf: dict | None) -> None:
     f = rf["focal_px"]["refined"] if refined else reg_a.focal_px
     what = (f"the joint refinement moved it {rf['focal_px']['change_pct']:+.3f} % from "
             if refined else "as ")
+    # its own standard deviation where refine.focal_sd asked for it
+    # (plenocal.calib.refine_uncertainty)
+    std = (rf["focal_px"].get("std") or {}).get("std_pct") if refined else None
+    if std is not None:
+        what = (f"&plusmn; {std:.3f} % (1 sd, the refinement's covariance: "
+                f"refine.focal_sd); {what}")
     page.add(f'<span class="kpi" id="kpi-focal">focal length<b>{f:.2f} px</b>{what}'
              f"registration A's {reg_a.focal_px:.2f} px {sd} "
              f"{page.link(src.SOURCES['reg_a'][0], '[source]')}</span>")
