@@ -390,6 +390,23 @@ def test_the_focal_lengths_deviation_leaves_the_cameras_alone_and_grows_with_few
     assert 1.3 < ratio < 2.6, ratio
 
 
+def test_a_covariance_colmap_refuses_leaves_the_refinement_and_says_why(capture, monkeypatch):
+    """refine.focal_sd rests on an option COLMAP marks experimental: where its estimator
+    raises, the refinement is kept as it is and refine.json says why."""
+    import pycolmap
+
+    def refuse(*args, **kwargs):
+        raise ValueError("Check failed: image.IsRefInFrame()")
+
+    views, rig, db = capture
+    eq6 = eq6_of(views, rig)
+    monkeypatch.setattr(pycolmap, "estimate_ba_covariance", refuse)
+    out = rf.refine_calibration(eq6, rig, db, settings(focal_sd=True), hold_shot="x00_y00")
+    std = out.report["focal_px"]["std"]
+    assert std["std_pct"] is None and "IsRefInFrame" in std["why"]
+    assert sorted(out.cameras) == sorted(eq6)
+
+
 def test_a_principal_point_shift_is_the_turn_that_moves_the_image_centre_as_far():
     """Hand-computed: f = 500 px, a shift of (+2, -1) px puts the optical axis's point at
     x = 2 / 500, y = -1 / 500 in normalised coordinates, by a rotation."""

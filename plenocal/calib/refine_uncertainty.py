@@ -57,7 +57,13 @@ def sensor_focal_std_pct(rec, camera_ids: list[int], pose_frames: list[int], *,
         pose.cam_from_world = rec.frames[frame_id].rig_from_world.params[:4]
         poses.append(pose)
     options.experimental_custom_poses = poses
-    cov = pycolmap.estimate_ba_covariance(options, rec, bundle_adjuster)
+    try:
+        cov = pycolmap.estimate_ba_covariance(options, rec, bundle_adjuster)
+    except (ValueError, RuntimeError) as err:
+        # an estimate, not the calibration: a COLMAP that refuses it (the custom poses are
+        # marked experimental) leaves the refinement as it is
+        return {"std_pct": None, "why": f"COLMAP's covariance estimator: {err}",
+                "seconds": time.perf_counter() - t0}
     e = np.asarray(errors_px, dtype=float)
     sigma = float(np.sqrt(np.mean(np.square(e)) / 2.0)) if e.size else math.nan
     unit = []
