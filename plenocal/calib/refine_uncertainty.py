@@ -11,9 +11,10 @@ residual coordinate and is scaled here by the residuals' own spread,
     sd(f) = sqrt(C_ff) * sigma,    sigma = sqrt(mean(e_i^2) / 2),
 
 ``e_i`` each observation's reprojection error (px), as registration A's estimate scales
-its own. The sensors' focal lengths are tied by the rig (they agree to 0.001-0.002 %,
-BENCHMARKS.md "The focal length from every view"), so each one's standard deviation is the
-shared one's; the median over the sensors is reported.
+its own (:func:`plenocal.calib.reg_a.uncertainty.noise_per_coordinate_px`). The sensors'
+focal lengths are tied by the rig (they agree to 0.001-0.002 %, BENCHMARKS.md "The focal
+length from every view"), so each one's standard deviation is the shared one's; the
+median over the sensors is reported.
 
 COLMAP 4.2's estimator takes an image's pose as the pose block by default and refuses a
 rig's non-reference sensors (``image.IsRefInFrame()``); the frames' ``rig_from_world``
@@ -33,6 +34,8 @@ import math
 import time
 
 import numpy as np
+
+from plenocal.calib.reg_a.uncertainty import noise_per_coordinate_px
 
 
 def sensor_focal_std_pct(rec, camera_ids: list[int], pose_frames: list[int], *,
@@ -64,15 +67,15 @@ def sensor_focal_std_pct(rec, camera_ids: list[int], pose_frames: list[int], *,
         # marked experimental) leaves the refinement as it is
         return {"std_pct": None, "why": f"COLMAP's covariance estimator: {err}",
                 "seconds": time.perf_counter() - t0}
-    e = np.asarray(errors_px, dtype=float)
-    sigma = float(np.sqrt(np.mean(np.square(e)) / 2.0)) if e.size else math.nan
+    sigma = noise_per_coordinate_px(errors_px)
     unit = []
     if cov is not None:
         for cid in camera_ids:
             params = rec.cameras[cid].params
             c = cov.get_other_params_cov(params)
-            if c is not None and float(np.asarray(c)[0, 0]) > 0:
-                unit.append(100.0 * math.sqrt(float(np.asarray(c)[0, 0])) / float(params[0]))
+            var = float(np.asarray(c)[0, 0]) if c is not None else 0.0
+            if var > 0:
+                unit.append(100.0 * math.sqrt(var) / float(params[0]))
     seconds = time.perf_counter() - t0
     if not unit or not math.isfinite(sigma):
         return {"std_pct": None, "why": "COLMAP could not estimate the covariance",

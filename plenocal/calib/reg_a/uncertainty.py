@@ -54,6 +54,14 @@ def reconstruction_focal_std_px(rec) -> float | None:
     errors = [rec.point3D(pid).error for pid in rec.point3D_ids()]
     if not errors:
         return None
-    sigma = float(np.sqrt(np.mean(np.square(errors)) / 2.0))
+    sigma = noise_per_coordinate_px(errors)
     var = float(np.asarray(c)[0, 0])
     return math.sqrt(var) * sigma if var > 0 else None
+
+
+def noise_per_coordinate_px(errors_px) -> float:
+    """The residuals' noise per image coordinate (px) that scales a covariance for unit
+    noise: ``sqrt(mean(e^2) / 2)`` over reprojection errors ``e`` (each the length of a
+    2-D residual); NaN for none."""
+    e = np.asarray(errors_px, dtype=float)
+    return float(np.sqrt(np.mean(np.square(e)) / 2.0)) if e.size else math.nan
