@@ -24,12 +24,14 @@ lattice shifted by its ``offset``.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from plenocal.io.raytrix import CalibError, RayCalib
 
+SENSOR_BORDERS = ("top", "bottom", "left", "right")
 HEX_STEPS = np.array([(1, 0), (0, 1), (-1, 1), (-1, 0), (0, -1), (1, -1)], dtype=np.int64)
 
 
@@ -182,6 +184,26 @@ class MicrolensGrid:
         x, y = self.centres[:, 0], self.centres[:, 1]
         return (x - r >= -0.5) & (x + r <= self.width - 0.5) & (y - r >= -0.5) & (
             y + r <= self.height - 0.5)
+
+    def border_distance(self, border: str) -> np.ndarray:
+        """(n,) each micro-image centre's distance (pixels) from the sensor's ``border``:
+        ``top``, ``bottom``, ``left`` or ``right`` (to the outermost pixel centres)."""
+        x, y = self.centres[:, 0], self.centres[:, 1]
+        if border not in SENSOR_BORDERS:
+            raise ValueError(f"border must be one of {', '.join(SENSOR_BORDERS)} "
+                             f"(got {border!r})")
+        return {"top": y, "bottom": self.height - 1 - y, "left": x,
+                "right": self.width - 1 - x}[border]
+
+    def lit(self, insets_px: Mapping[str, float] | None = None) -> np.ndarray:
+        """(n,) bool: the lenses at least ``insets_px[border]`` from each border named
+        (all of them without insets): the lenses whose micro images the main lens does
+        not cut (:mod:`plenocal.convert.bordercut`)."""
+        keep = np.ones(len(self), bool)
+        for border, inset in (insets_px or {}).items():
+            if inset > 0:
+                keep &= self.border_distance(border) >= inset
+        return keep
 
     def lattice_to_image(self, vec: np.ndarray) -> np.ndarray:
         """Vectors in the lattice frame (pixels along e1, e2) to image-space vectors."""

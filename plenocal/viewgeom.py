@@ -5,8 +5,9 @@ the ground truth (it traces the chief rays it selects) and registration B's exac
 model (which follows from it). It depends on the grid and the convert settings
 only, never on image content: the per-lens patch size enters as an argument.
 
-Layout. Every lens whose whole micro image lies on the sensor ("used" lens) owns a
-tile of ``T x T`` output pixels (the tile size) centred at::
+Layout. Every lens whose whole micro image lies on the sensor and is not cut by the main
+lens (:mod:`plenocal.convert.bordercut`) ("used" lens) owns a tile of ``T x T`` output
+pixels (the tile size) centred at::
 
     o_i = (m_i - c_s) * T / D + ((W_v - 1) / 2, (H_v - 1) / 2)
 
@@ -54,7 +55,7 @@ import contextlib
 import hashlib
 import math
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -120,9 +121,13 @@ class ViewLayout:
 
 
 def make_layout(grid: MicrolensGrid, n_views: int, tile: int, q: float | None = None,
-                margin: float = 0.0, mla: str = "keplerian", even: bool = False) -> ViewLayout:
+                margin: float = 0.0, mla: str = "keplerian", even: bool = False,
+                insets_px: Mapping[str, float] | None = None) -> ViewLayout:
     """Build the output layout of the N x N views of one lenslet image (image axes; see
-    the module docstring). ``even``: crop the last column / row where the size is odd."""
+    the module docstring). ``even``: crop the last column / row where the size is odd.
+    ``insets_px``: per sensor border, the distance under which lenses are left out (their
+    micro images cut by the main lens: :mod:`plenocal.convert.bordercut`); the size stays
+    symmetric about the axis, so the opposite border loses as many rows."""
     mla_sign(mla)
     if n_views < 1 or n_views % 2 == 0:
         raise ValueError(f"the number of views per side must be odd (got {n_views})")
@@ -130,7 +135,7 @@ def make_layout(grid: MicrolensGrid, n_views: int, tile: int, q: float | None = 
         raise ValueError(f"tile size must be >= 1 (got {tile})")
     if q is None:
         q = view_spacing(grid.calib.safe_diameter, n_views)
-    used = np.flatnonzero(grid.inside(margin))
+    used = np.flatnonzero(grid.inside(margin) & grid.lit(insets_px))
     if len(used) < 4:
         raise ValueError("fewer than 4 microlenses lie wholly on the sensor: does calib.xml "
                          "belong to this lenslet image?")

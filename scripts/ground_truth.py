@@ -14,4 +14,5 @@ conv = snakemake.params.convert
 setup = read_setup(snakemake.input.setup)  # the tile and q every shot is cut with
 ground_truth_cameras(Path(snakemake.input.calib).parent, list(snakemake.params.cams),
                      int(snakemake.params.views), setup.tile, setup.q_px, snakemake.output[0],
-                     log=log.info, even=bool(conv["even_size"]))
+                     log=log.info, even=bool(conv["even_size"]),
+                     insets_px=setup.border_cut.insets_px)

@@ -270,7 +270,36 @@ def boys2_views():
            for k in ("centre", "v000")}
     return {"centre": (now.view(2, 2), now.layout.basis), "corner": (now.view(0, 0),
             now.layout.basis), "corner_before": (before.view(0, 0), before.layout.basis),
-            "ref": ref, "q": (now.layout.q, before.layout.q)}
+            "ref": ref, "q": (now.layout.q, before.layout.q), "shot": now}
+
+
+def _row_detail(view: np.ndarray) -> np.ndarray:
+    """Each row's band-pass detail (difference of Gaussian blurs of 2 and 6 px) over the
+    view's median row: a flat band along an edge reads 0.1-0.2, the scene 0.8-1.1."""
+    g = cv2.cvtColor(view, cv2.COLOR_RGB2GRAY).astype(np.float32)
+    bp = np.abs(cv2.GaussianBlur(g, (0, 0), 2) - cv2.GaussianBlur(g, (0, 0), 6)).mean(axis=1)
+    return bp / np.median(bp)
+
+
+def test_boys2_cut_border_lenses_are_left_out(boys2_views):
+    """Issue 33: Boys2's top lens rows carry a flat, clipped cap over the lower part of
+    their micro images (the main lens cuts them). Kept, every view below row 0 shows a
+    flat band along its top (38 px in row 4); left out (and as many rows at the bottom),
+    the top rows of every view carry the scene."""
+    import dataclasses  # noqa: PLC0415
+
+    from plenocal.convert.shot import load_lenslet  # noqa: PLC0415
+
+    now = boys2_views["shot"]
+    assert now.border_cut.bands == {"top": 3, "bottom": 0, "left": 0, "right": 0}
+    assert now.border_cut.level["top"] > 0.85
+    kept = ShotConversion(load_lenslet(REAL / "frames" / "Boys2.png"), now.calib, 5,
+                          dataclasses.replace(now.settings, border_cut="off"), grid=now.grid,
+                          analysis=now.analysis, safe_diameter=now.safe.diameter_px)
+    assert now.layout.height < kept.layout.height and now.layout.width == kept.layout.width
+    assert _row_detail(kept.view(4, 4))[2:40].min() < 0.3
+    for r, c in ((4, 4), (4, 0), (2, 2), (0, 0)):
+        assert _row_detail(now.view(r, c))[2:40].min() > 0.5, (r, c)
 
 
 def test_lattice_trace_fails_the_paper_spacing_corner_view_and_passes_the_measured(boys2_views):

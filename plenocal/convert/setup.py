@@ -21,6 +21,9 @@ Decided here, from ``convert`` settings that may say ``auto``:
 * the grid: the calib.xml grid checked against the micro images
   (:func:`plenocal.convert.gridcheck.check_grid`) and refined where ``convert.grid``
   says so (``refine``, or ``auto`` past the drift bar of :mod:`.gridcheck`);
+* ``border_cut``: the border lens rows whose micro images the main lens cuts, left out
+  of every shot's views where ``border_cut`` is ``auto``
+  (:mod:`plenocal.convert.bordercut`);
 * ``least_reach``: 2 where the shot's lenses' mean focus weight says a multi-focus MLA
   sees the scene sharp through one lens type only, and every view then takes the wider
   blend (:func:`plenocal.convert.render.focus_reach`); 0 otherwise. Per camera, because a
@@ -38,6 +41,7 @@ import numpy as np
 
 from plenocal.artifacts.stage_warnings import WARNINGS_KEY, warning_list, warnings_of
 from plenocal.config import stage_defaults
+from plenocal.convert.bordercut import BorderCut
 from plenocal.convert.centring import CentringFit, measure_centring, shifted_grid
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.gridcheck import (
@@ -52,8 +56,9 @@ from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_json, write_json
 from plenocal.io.raytrix import RayCalib
 
-# 2: safe_diameter_px, q_px and the safe-diameter measure; 3: pitch_px; 4: least_reach
-FORMAT_VERSION = 4
+# 2: safe_diameter_px, q_px and the safe-diameter measure; 3: pitch_px; 4: least_reach;
+# 5: border_cut
+FORMAT_VERSION = 5
 LATTICE_DIGITS = 8
 log = logging.getLogger("plenocal.convert")
 
@@ -87,6 +92,9 @@ class ConverterSetup:
     # the least blend reach of every view (plenocal.convert.render.focus_reach: 2 where the
     # decided shot's sharp lenses are sparse, else 0)
     least_reach: int = 0
+    # the border lenses the main lens cuts, left out of every shot's views
+    # (plenocal.convert.bordercut; none where convert.border_cut is off)
+    border_cut: BorderCut = dataclasses.field(default_factory=BorderCut)
 
     def settings(self, base: ConvertSettings) -> ConvertSettings:
         """``base`` with the decided MLA kind and tile (nothing left ``auto``)."""
@@ -101,6 +109,7 @@ class ConverterSetup:
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
+        d["border_cut"] = self.border_cut.to_dict()
         d[WARNINGS_KEY] = warning_list(self.warnings)
         d["lattice"] = None if self.lattice is None else {
             "origin_px": list(self.lattice[0]), "A_columns_px": [list(r) for r in self.lattice[1]]}
@@ -126,7 +135,8 @@ class ConverterSetup:
                    safe_diameter_measure=(None if d["safe_diameter_measure"] is None
                                           else dict(d["safe_diameter_measure"])),
                    pitch_px=_float_or_none(d["pitch_px"]),
-                   least_reach=int(d["least_reach"]))
+                   least_reach=int(d["least_reach"]),
+                   border_cut=BorderCut.from_dict(d["border_cut"]))
 
 
 def _float_or_none(value) -> float | None:
@@ -354,7 +364,7 @@ def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: Con
         safe_diameter_px=round_floats(float(shot.safe.diameter_px), LATTICE_DIGITS),
         q_px=round_floats(float(shot.layout.q), LATTICE_DIGITS),
         safe_diameter_measure=round_floats(shot.safe.to_dict(), LATTICE_DIGITS),
-        pitch_px=pitch, least_reach=int(shot.least_reach))
+        pitch_px=pitch, least_reach=int(shot.least_reach), border_cut=shot.border_cut)
     return setup, shot
 
 

@@ -40,6 +40,7 @@ import yaml
 from plenocal.artifacts.disparity import disparity_record
 from plenocal.config import settings_from, stage_defaults, with_defaults
 from plenocal.convert.analysis import ConvertAnalysis
+from plenocal.convert.bordercut import BorderCut, measure_border_cut
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.holes import fill_unsupported, weak_box
 from plenocal.convert.levels import render_source, significant_bits, to_unit_float
@@ -107,6 +108,7 @@ class ConvertSettings:
     bit_depth: int | str = _CONVERT["bit_depth"]
     devignette: bool = _CONVERT["devignette"]
     grid: str = _CONVERT["grid"]  # file | refine | auto (plenocal.convert.gridcheck)
+    border_cut: str = _CONVERT["border_cut"]  # auto | off (plenocal.convert.bordercut)
     patch: PatchSizeSettings = field(default_factory=PatchSizeSettings)
     render: RenderSettings = field(default_factory=RenderSettings)
 
@@ -124,6 +126,8 @@ class ConvertSettings:
                                           and not isinstance(d, bool) and d > 0)):
             raise ConvertError(f"convert.safe_diameter: 'auto', 'file' or a number of pixels "
                                f"> 0, not {d!r}")
+        if self.border_cut not in ("auto", "off"):
+            raise ConvertError(f"convert.border_cut: 'auto' or 'off', not {self.border_cut!r}")
         b = self.bit_depth
         if not (b == "auto" or (isinstance(b, int) and 8 <= b <= 16)):
             raise ConvertError(f"convert.bit_depth: 'auto' or 8..16, not {b!r}")
@@ -146,6 +150,8 @@ class ConvertSettings:
             bit_depth=bits if isinstance(bits, str) else int(bits),
             devignette=bool(cfg["devignette"]),
             grid=str(cfg["grid"]),
+            # YAML 1.1 reads a bare ``off`` as false
+            border_cut="off" if cfg["border_cut"] is False else str(cfg["border_cut"]),
             patch=settings_from(PatchSizeSettings, cfg["patch_size"]),
             render=settings_from(RenderSettings, cfg["blend"]),
         )
@@ -296,14 +302,17 @@ class ShotConversion:
     whose bit depth the recording's set-up line gives once). ``least_reach``: the least
     blend reach of every view decided for the camera (rule ``convert_setup``:
     :func:`plenocal.convert.render.focus_reach` on its central shot); None: decided on
-    this image."""
+    this image. ``border_cut``: the border lenses the main lens cuts, decided for the
+    camera (rule ``convert_setup``); None: per ``settings.border_cut`` (``auto``:
+    measured on this image, :mod:`plenocal.convert.bordercut`)."""
 
     def __init__(self, image: np.ndarray, calib: RayCalib, n_views: int,
                  settings: ConvertSettings | None = None, source: str = "<image>",
                  grid: MicrolensGrid | None = None,
                  analysis: ConvertAnalysis | None = None, check_mla: bool = True,
                  safe_diameter: float | None = None, threads: int = 1,
-                 log_bits: bool = True, least_reach: int | None = None) -> None:
+                 log_bits: bool = True, least_reach: int | None = None,
+                 border_cut: BorderCut | None = None) -> None:
         self.settings = st = settings or ConvertSettings()
         self.grid_check: dict | None = None  # set by whoever checked the grid
         # each MLA kind's mean best ZNCC as measured on this image (read with auto, or
@@ -333,7 +342,8 @@ class ShotConversion:
         self._gray: np.ndarray | None = None
         self._threads = threads
         given = analysis is not None
-        if not given or (safe_diameter is None and st.safe_diameter == "auto"):
+        if not given or (safe_diameter is None and st.safe_diameter == "auto") or (
+                border_cut is None and st.border_cut == "auto"):
             self.gray  # noqa: B018  (made once, here, before the threads read it)
         pool = ThreadPoolExecutor(max_workers=threads - 1) if threads > 1 else Inline()
         try:
@@ -344,6 +354,7 @@ class ShotConversion:
         finally:
             pool.shutdown()
         d_safe = self.safe.diameter_px
+        self.border_cut: BorderCut = self._border_cut(border_cut, source)
         q = st.view_spacing_px if st.view_spacing_px is not None else view_spacing(
             d_safe, n_views)
         max_q = math.hypot(1, 1) * (n_views - 1) / 2 * q
@@ -374,7 +385,8 @@ class ShotConversion:
                             self.patch.confident[inside], st.upsample)
         try:
             self.layout: ViewLayout = make_layout(self.grid, n_views, tile, q, mla=self.mla,
-                                                  even=st.even_size)
+                                                  even=st.even_size,
+                                                  insets_px=self.border_cut.insets_px)
         except ValueError as exc:
             raise ConvertError(f"{source} with {calib.source}: {exc}") from None
         self.used_patch = self.patch.patch[self.layout.lens_index]
@@ -479,6 +491,18 @@ class ShotConversion:
                  "%s", source, safe.diameter_px, safe.source, file_d,
                  f": {safe.note}" if safe.note else "")
         return safe
+
+    def _border_cut(self, decided: BorderCut | None, source: str) -> BorderCut:
+        """The border lenses left out: ``decided`` (the camera's), or per
+        ``convert.border_cut`` (``auto``: measured in the safe disc of this image)."""
+        if decided is not None:
+            return decided
+        if self.settings.border_cut == "off":
+            return BorderCut()
+        cut = measure_border_cut(self.gray, self.grid, self.safe.diameter_px)
+        if cut.any:
+            log.info("%s: %s", source, cut.summary())
+        return cut
 
     def _measure(self, source: str, check_mla: bool, pool=None) -> ConvertAnalysis:
         """The image's MLA kind (where ``auto``; where set, checked with ``check_mla``),
@@ -621,6 +645,7 @@ class ShotConversion:
                                 self.settings.percentiles, self.warnings,
                                 safe_diameter=self.safe.diameter_px)
         out["safe_diameter"] = self.safe.to_dict()
+        out["border_cut"] = self.border_cut.to_dict()
         out["mla_source"] = "image" if self.mla_scores is not None else "setting"
         if self.mla_scores is not None:
             out["mla_match_scores"] = dict(self.mla_scores)
@@ -756,7 +781,7 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
                               source=str(lenslet), grid=setup.grid(calib, W, H),
                               analysis=analysis, check_mla=False,
                               safe_diameter=setup.safe_diameter_px, threads=threads,
-                              least_reach=setup.least_reach)
+                              least_reach=setup.least_reach, border_cut=setup.border_cut)
         shot.grid_check = setup.grid_check
         return shot
     grid, check = check_and_grid(image, calib, settings.grid)

@@ -263,7 +263,8 @@ class VideoConverter:
         shot = ShotConversion(image, self.calib, self.n_views, st, source=source,
                               grid=self._grid, analysis=analysis, check_mla=False,
                               safe_diameter=setup.safe_diameter_px, threads=self.threads,
-                              log_bits=False, least_reach=setup.least_reach)
+                              log_bits=False, least_reach=setup.least_reach,
+                              border_cut=setup.border_cut)
         shot.grid_check = setup.grid_check
         return shot
 

@@ -13,6 +13,7 @@ every view has the main lens's orientation, its centre lies on the main-lens pla
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -99,14 +100,17 @@ def shot_cameras(optics: PlenopticOptics, grid: MicrolensGrid, layout: ViewLayou
 
 def ground_truth_cameras(data_dir: str | Path, shots: list[str], n_views: int, tile: int,
                          q: float | None, out_json: str | Path, log=print,
-                         even: bool = True) -> None:
+                         even: bool = True,
+                         insets_px: Mapping[str, float] | None = None) -> None:
     """Write the cameras of every view of every shot of ``shots`` (plain format; one job
     for all shots: each takes a fraction of a second, less than a job's start-up).
-    ``even``: the converter's ``convert.even_size`` (the views' size must match)."""
+    ``even``: the converter's ``convert.even_size``; ``insets_px``: the border lenses the
+    views leave out (the set-up's :class:`plenocal.convert.bordercut.BorderCut`): the
+    views' size must match."""
     data_dir = Path(data_dir)
     optics = optics_from_truth(data_dir / "truth" / "optics.json")
     grid = MicrolensGrid(read_calib(data_dir / "calib.xml"), optics.width, optics.height)
-    layout = make_layout(grid, n_views, tile, q, even=even)
+    layout = make_layout(grid, n_views, tile, q, even=even, insets_px=insets_px)
     truth = read_json(data_dir / "truth" / "shots.json")
     cameras, worst = {}, 0.0
     for cam in shots:

@@ -1,0 +1,196 @@
+"""Micro images the main lens cuts at the sensor's borders, and the lenses the views leave out.
+
+A main lens whose aperture clips the bundles of its outermost rays (cat's-eye vignetting)
+leaves part of the border lenses' micro images without scene light. The part is the same
+in every frame: a region on one side of each micro image, with an edge that moves across
+the micro image lens row by lens row (on Boys2, the TSPC test frames: 7.8 px per lens
+row over the top four rows, nearly constant along the row). Unlit, it reads black; in a
+frame flat-fielded against a white image with the same clipping it reads bright and flat
+(Boys2: grey 0.90, where its interior averages 0.36). Views that sample it there show a
+flat band along the border, growing with the view's offset towards the cut (Boys2: 6 px
+in view row 1, 38 px in row 4); no other lens sees the scene points it hides, so no
+blend can fill it. The views leave those lenses out, as they leave out the lenses whose
+micro image is not wholly on the sensor (:func:`plenocal.viewgeom.make_layout`: the
+views' size stays symmetric about the optical axis, so the crop is the same on the
+opposite border and the principal point stays at the views' centre).
+
+Measure (:func:`measure_border_cut`). Per border, the lenses are grouped in bands one
+lens row wide (the lattice's spacing along the border's normal), from the border in.
+Within the safe disc (``D'``, where the views sample) a position is *flat* where its
+grey value varies across the band's lenses by less than :data:`FLAT_SPREAD` of the
+interior lenses' spread there (the scene varies from lens to lens; a cut does not). A
+band is cut where the flat positions lie on one side of the micro image: the flat share
+of the half facing one way exceeds that of the half facing the other by
+:data:`ONE_SIDED` or more. A flat scene (a black backdrop, a dark floor, a sky) fills
+both halves and is not a cut. The border's first band must be cut, at a level that is
+unlit or clipped (:data:`DARK`, :data:`CLIPPED`: a scene's flat part along one border
+at a middle grey is not a vignetting), and every following band whose flat part is at
+that level (within :data:`SAME_LEVEL`) and one-sided is cut too; the first that is not
+ends the border's cut. The lenses of the cut bands are left out.
+
+Decided once per camera, on the central array shot, with the safe diameter (rule
+``convert_setup``; ``convert.border_cut``), so every shot's views have one size.
+Measured on the eleven frames of ``shared/real`` and eight of the simulator's: Boys2 and
+Boys2_f150 cut three bands at the top (one-sided excess 0.46-0.69, 0.26-0.27 in the third,
+flat at grey 0.92; the fourth band 0.04): their views 1440 x 988 instead of 1064 high,
+and the flat band of the lower views (up to 38 px) gone. Nothing else cuts: Fujita2's
+black top and Boxer's dark floor are flat on both halves; Fujita2_f150's black backdrop
+is flat on one half of the left border's first band (excess 0.57) at grey 0.085, over
+:data:`DARK` (a darker backdrop there would cost the views one lens column a side); the
+simulator's first bands read at most 0.006.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from plenocal.grid import SENSOR_BORDERS, MicrolensGrid
+
+BORDERS = SENSOR_BORDERS
+FLAT_SPREAD = 0.25  # a flat position's spread across a band, of the interior's
+ONE_SIDED = 0.1  # a cut band's excess of flat share on one half over the other
+DARK = 0.05  # grey (0..1) at or under which a flat part is unlit
+CLIPPED = 0.8  # grey at or over which a flat part is clipped (flat-fielded)
+SAME_LEVEL = 0.1  # the next bands' flat level, within this of the first band's
+MAX_BANDS = 10  # bands looked at from each border
+MIN_BAND_LENSES = 8  # fewer lenses in a band: the spread says nothing
+REFERENCE_BANDS = 6  # bands past MAX_BANDS whose variation is the reference
+
+
+@dataclass(frozen=True)
+class BorderCut:
+    """Per border (:data:`BORDERS`): ``insets_px``, the distance from that border (sensor
+    pixels, to a lens centre) under which lenses are left out (0: none); ``bands``, the
+    cut bands; ``level``, the grey of the cut part (None where none); ``excess``, each
+    band's one-sided flat-share excess as measured (for the record)."""
+
+    insets_px: dict[str, float] = field(default_factory=lambda: dict.fromkeys(BORDERS, 0.0))
+    bands: dict[str, int] = field(default_factory=lambda: dict.fromkeys(BORDERS, 0))
+    level: dict[str, float | None] = field(default_factory=lambda: dict.fromkeys(BORDERS))
+    excess: dict[str, list[float]] = field(default_factory=dict)
+
+    @property
+    def any(self) -> bool:
+        return any(self.bands.values())
+
+    def summary(self) -> str:
+        cut = [f"{b} {n} lens row{'s' if n > 1 else ''} ({self.insets_px[b]:.0f} px, grey "
+               f"{self.level[b]:.2f})" for b, n in self.bands.items() if n]
+        return ("the main lens cuts the micro images along the sensor's borders: "
+                + ", ".join(cut) + "; the views leave those lenses out (and as many on the "
+                "opposite side: the views stay centred on the optical axis)") if cut else (
+            "no border micro images cut by the main lens")
+
+    def to_dict(self) -> dict:
+        return {"insets_px": dict(self.insets_px), "bands": dict(self.bands),
+                "level": dict(self.level), "excess": {b: list(v) for b, v in
+                                                      self.excess.items()}}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> BorderCut:
+        return cls(insets_px={b: float(d["insets_px"][b]) for b in BORDERS},
+                   bands={b: int(d["bands"][b]) for b in BORDERS},
+                   level={b: (None if d["level"][b] is None else float(d["level"][b]))
+                          for b in BORDERS},
+                   excess={b: [float(x) for x in v] for b, v in d.get("excess", {}).items()})
+
+
+def band_spacing(grid: MicrolensGrid, border: str) -> float:
+    """The lens rows' spacing along ``border``'s normal: the least normal component of
+    the lattice's three neighbour directions that is over a quarter pitch (rows of a
+    hexagonal lattice are ``D sqrt(3) / 2`` or ``D / 2`` apart, as it is turned)."""
+    axis = 1 if border in ("top", "bottom") else 0
+    a, b = grid.A[:, 0], grid.A[:, 1]
+    comp = np.abs(np.array([a[axis], b[axis], a[axis] - b[axis]]))
+    return float(comp[comp > grid.diameter / 4].min())
+
+
+def _micro_images(gray: np.ndarray, centres: np.ndarray, xs: np.ndarray, ys: np.ndarray
+                  ) -> np.ndarray:
+    """(m, h, w) the square around each centre, bilinear."""
+    return np.stack([cv2.remap(gray, xs + np.float32(x), ys + np.float32(y), cv2.INTER_LINEAR)
+                     for x, y in centres]) if len(centres) else np.zeros((0, *xs.shape),
+                                                                         np.float32)
+
+
+def _band_lenses(whole: np.ndarray, dist: np.ndarray, along: np.ndarray, lo: float,
+                 spacing: float) -> np.ndarray:
+    """Indices of the whole lenses whose distance lies in ``[lo, lo + spacing)``, in
+    order along the border."""
+    band = np.flatnonzero(whole & (dist >= lo) & (dist < lo + spacing))
+    return band[np.argsort(along[band], kind="stable")]
+
+
+def _variation(gray: np.ndarray, centres: np.ndarray, xs: np.ndarray, ys: np.ndarray
+               ) -> np.ndarray:
+    """(h, w) how much each micro-image position changes from one lens of a band to the
+    next along it: the median of the absolute differences. A slow drift along the border
+    (a flat-fielded cut dims towards one end) leaves it near zero; the scene does not."""
+    stack = _micro_images(gray, centres, xs, ys)
+    return np.median(np.abs(np.diff(stack, axis=0)), axis=0), stack
+
+
+def measure_border_cut(gray: np.ndarray, grid: MicrolensGrid, safe_diameter_px: float
+                       ) -> BorderCut:
+    """Which border bands' micro images the main lens cuts (module docstring).
+
+    ``gray``: the frame, float32 0..1 (:func:`plenocal.convert.shot.frame_gray`)."""
+    r = safe_diameter_px / 2
+    R = math.ceil(r)
+    ys, xs = np.mgrid[-R:R + 1, -R:R + 1].astype(np.float32)
+    disc = xs * xs + ys * ys <= r * r
+    whole = grid.inside(0.0)
+    cut = BorderCut()
+    if whole.sum() < MIN_BAND_LENSES:
+        return cut
+    for b in BORDERS:
+        dist = grid.border_distance(b)
+        along = grid.centres[:, 0 if b in ("top", "bottom") else 1]
+        spacing = band_spacing(grid, b)
+        first = float(dist[whole].min())
+
+        def band_at(k: int, dist=dist, along=along, spacing=spacing, first=first):
+            return _band_lenses(whole, dist, along, first + (k - 0.5) * spacing, spacing)
+
+        # the reference: the same variation on bands past those looked at
+        refs = [float(np.median(_variation(gray, grid.centres[band], xs, ys)[0][disc]))
+                for k in range(MAX_BANDS + 1, MAX_BANDS + 1 + REFERENCE_BANDS)
+                if len(band := band_at(k)) >= MIN_BAND_LENSES]
+        ref = float(np.median(refs)) if refs else 0.0
+        if ref <= 0:
+            continue
+        outward = (-ys if b == "top" else ys if b == "bottom" else -xs if b == "left" else xs)
+        halves = (disc & (outward < -0.5), disc & (outward > 0.5))  # inward, outward
+        excess, level0, n = [], None, 0
+        for k in range(MAX_BANDS):
+            band = band_at(k)
+            if len(band) < MIN_BAND_LENSES:
+                break
+            var, stack = _variation(gray, grid.centres[band], xs, ys)
+            flat = var < FLAT_SPREAD * ref
+            shares = [float(flat[h].mean()) for h in halves]
+            side = halves[int(np.argmax(shares))]
+            ex = abs(shares[0] - shares[1])
+            excess.append(round(ex, 4))
+            if ex < ONE_SIDED or not (flat & side).any():
+                break
+            level = float(np.median(stack, axis=0)[flat & side].mean())
+            if level0 is None:
+                if not (level <= DARK or level >= CLIPPED):
+                    break
+                level0 = level
+            elif abs(level - level0) > SAME_LEVEL:
+                break
+            n = k + 1
+        cut.excess[b] = excess
+        if n:
+            cut.bands[b] = n
+            cut.level[b] = round(level0, 4)
+            # half a band past the last cut band's centre: its lenses out, the next in
+            cut.insets_px[b] = round(first + (n - 0.5) * spacing, 4)
+    return cut

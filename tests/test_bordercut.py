@@ -1,0 +1,148 @@
+"""Border micro images cut by the main lens (issue 33: Boys2's flat band): measured on a
+synthetic frame with a painted cut, left out of the views, decided once per camera."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from synth.lenslets import calib_for_optics, lenslet_from_patch_size, random_texture
+from test_convert import small_optics
+
+from plenocal.config import ConfigError, validate_config
+from plenocal.convert import ConvertError, ConvertSettings, ShotConversion
+from plenocal.convert.bordercut import BORDERS, BorderCut, band_spacing, measure_border_cut
+from plenocal.convert.setup import ConverterSetup, decide_setup
+from plenocal.convert.shot import frame_gray
+from plenocal.grid import MicrolensGrid
+from plenocal.viewgeom import make_layout
+
+ROOT = Path(__file__).resolve().parents[1]
+W, H = 480, 360
+CAP = (235, 250, 250)  # a flat-fielded cut: clipped, light cyan (Boys2's)
+EDGES = (-2.0, 2.0, 5.0)  # the cut's edge below each cut band's micro-image centre (px)
+
+
+def frame(seed: int = 4):
+    calib = calib_for_optics(small_optics(W, H))
+    grid = MicrolensGrid(calib, W, H)
+    return calib, grid, lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, seed))
+
+
+def paint(img: np.ndarray, grid: MicrolensGrid, value, edges=EDGES, whole: bool = False
+          ) -> np.ndarray:
+    """``img`` with the part of each top-band micro image below ``edges[k]`` (all of it
+    where ``whole``) set to ``value``: band ``k`` counted from the top as the measure
+    counts it."""
+    out = img.copy()
+    dist = grid.border_distance("top")
+    inside = grid.inside(0.0)
+    s = band_spacing(grid, "top")
+    first = dist[inside].min()
+    yy, xx = np.mgrid[0:H, 0:W]
+    for i in np.flatnonzero(inside):
+        k = int(np.floor((dist[i] - first) / s + 0.5))
+        if k >= len(edges):
+            continue
+        mx, my = grid.centres[i]
+        disc = (xx - mx) ** 2 + (yy - my) ** 2 <= (grid.diameter / 2) ** 2
+        part = disc if whole else disc & (yy - my > edges[k])
+        out[part] = value
+    return out
+
+
+def cut_of(img: np.ndarray, grid: MicrolensGrid, calib) -> BorderCut:
+    return measure_border_cut(frame_gray(img, 8), grid, calib.safe_diameter)
+
+
+def test_a_painted_cut_is_found_band_by_band():
+    calib, grid, img = frame()
+    assert not cut_of(img, grid, calib).any
+    cut = cut_of(paint(img, grid, CAP), grid, calib)
+    assert cut.bands == {"top": 3, "bottom": 0, "left": 0, "right": 0}, cut
+    assert cut.level["top"] == pytest.approx(np.mean(CAP) / 255, abs=0.02)
+    d = grid.border_distance("top")
+    s = band_spacing(grid, "top")
+    first = d[grid.inside(0.0)].min()
+    assert cut.insets_px["top"] == pytest.approx(first + 2.5 * s)
+    # unlit (a frame that is not flat-fielded) is a cut too
+    assert cut_of(paint(img, grid, (0, 0, 0)), grid, calib).bands["top"] == 3
+
+
+@pytest.mark.parametrize(("value", "whole", "why"), [
+    ((5, 5, 5), True, "a flat dark scene along the border fills both halves"),
+    ((250, 250, 250), True, "an overexposed sky fills both halves"),
+    ((128, 128, 128), False, "a one-sided flat part at a middle grey is the scene's"),
+])
+def test_flat_scenes_along_a_border_are_not_a_cut(value, whole, why):
+    calib, grid, img = frame()
+    assert not cut_of(paint(img, grid, value, whole=whole), grid, calib).any, why
+
+
+def test_views_leave_the_cut_lenses_out_symmetrically_and_show_no_cap():
+    calib, grid, img = frame()
+    img = paint(img, grid, CAP)
+    st = ConvertSettings(tile_size=6, even_size=False)
+    off = ShotConversion(img, calib, 5, ConvertSettings(tile_size=6, even_size=False,
+                                                        border_cut="off"))
+    on = ShotConversion(img, calib, 5, st)
+    assert on.border_cut.bands["top"] == 3 and not off.border_cut.any
+    assert on.layout.width == off.layout.width
+    assert on.layout.height < off.layout.height
+    # the views stay centred on the axis: the used lenses' tile centres span the view
+    # symmetrically (both borders lose rows)
+    for L in (on.layout, off.layout):
+        y = L.tile_centres[:, 1]
+        assert y.min() <= 0.5 and y.max() >= L.height - 1.5
+
+    def cap_share(view: np.ndarray) -> float:
+        return float((np.abs(view.astype(int) - CAP).max(axis=-1) <= 3).mean())
+
+    # the lower views sample the cut (below the micro images' centres) without it
+    assert cap_share(off.view(4, 4)) > 0.01
+    for r, c in ((4, 4), (4, 0), (2, 2), (0, 0)):
+        assert cap_share(on.view(r, c)) == 0.0, (r, c)
+
+
+def test_the_camera_setup_decides_the_cut_once():
+    """Decided on the shot the set-up is made on (the central array shot), and applied
+    to a shot that shows no cut (a hand-held shot of a flat wall): one view size."""
+    calib, grid, img = frame()
+    st = ConvertSettings(tile_size=6, even_size=False)
+    setup, shot = decide_setup(paint(img, grid, CAP), calib, 5, st, "centre.png")
+    assert setup.border_cut.bands["top"] == 3
+    again = ConverterSetup.from_dict(setup.to_dict())
+    assert again.border_cut == setup.border_cut
+    other = frame(seed=7)[2]
+    plain = ShotConversion(other, calib, 5, again.settings(st), grid=again.grid(calib, W, H),
+                           border_cut=again.border_cut,
+                           safe_diameter=again.safe_diameter_px)
+    assert (plain.layout.width, plain.layout.height) == (shot.layout.width,
+                                                         shot.layout.height)
+    assert ShotConversion(other, calib, 5, st).layout.height > plain.layout.height
+    assert plain.disparity()["border_cut"]["bands"]["top"] == 3
+
+
+def test_layout_insets_and_settings():
+    calib, grid, _ = frame()
+    full = make_layout(grid, 5, 6)
+    d = grid.border_distance("left")
+    inset = float(np.sort(np.unique(np.round(d[grid.inside(0.0)])))[2]) - 0.5
+    cut = make_layout(grid, 5, 6, insets_px={"left": inset})
+    assert cut.height == full.height and cut.width < full.width
+    assert (grid.border_distance("left")[cut.lens_index] >= inset).all()
+    assert set(BORDERS) == {"top", "bottom", "left", "right"}
+    with pytest.raises(ValueError, match="border must be one of"):
+        grid.border_distance("up")
+    with pytest.raises(ConvertError, match="convert.border_cut"):
+        ConvertSettings(border_cut="maybe")
+    # YAML reads a bare off as false
+    assert ConvertSettings.from_config({"border_cut": False}).border_cut == "off"
+    cfg = yaml.safe_load((ROOT / "config.yaml").read_text())
+    cfg["convert"] = {**(cfg.get("convert") or {}), **yaml.safe_load("border_cut: off")}
+    assert validate_config(cfg)["convert"]["border_cut"] is False
+    cfg["convert"]["border_cut"] = "sometimes"
+    with pytest.raises(ConfigError, match="border_cut"):
+        validate_config(cfg)
