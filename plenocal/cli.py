@@ -326,6 +326,8 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
              "%.2f s", stats["patch_size_px"]["min"], stats["patch_size_px"]["max"],
              stats["patch_size_px"]["median"], 100 * stats["patch_size_px"]["confident_share"],
              stats["width"], stats["height"], time.perf_counter() - t0)
+    if shot.border_cut.any:
+        log.info("%s", shot.border_cut.summary())
     write_npy(out / "patch_size.npy", shot.used_patch)
     n = args.views * args.views
     t1, done = time.perf_counter(), 0

@@ -24,6 +24,7 @@ setup, _ = decide_setup(image, calib, int(snakemake.params.views), settings,
 log.info("MLA %s (%s), tile %d px per lens pitch (%s), grid %s (convert.grid %s)",
          setup.mla, setup.mla_source, setup.tile, setup.tile_source,
          grid_words(setup.grid_check), setup.grid_mode)
+log.info("%s", setup.border_cut.summary())
 for note in setup.warnings:
     log.warning("%s", note)
 write_setup(snakemake.output.setup, setup)

@@ -146,3 +146,35 @@ def test_layout_insets_and_settings():
     cfg["convert"]["border_cut"] = "sometimes"
     with pytest.raises(ConfigError, match="border_cut"):
         validate_config(cfg)
+
+
+def test_a_recording_decides_the_cut_once(tmp_path):
+    """A clip whose first frame shows the cut: the set-up holds it, every frame's views
+    leave the cut lenses out (one size), and the log says so."""
+    import json  # noqa: PLC0415
+    import subprocess  # noqa: PLC0415
+    import sys  # noqa: PLC0415
+
+    from plenocal.io.raytrix import write_calib  # noqa: PLC0415
+    from plenocal.io.yuv import YuvFormat, rgb_to_yuv, write_frame  # noqa: PLC0415
+
+    calib, grid, a = frame()
+    b = frame(seed=7)[2]
+    clip = tmp_path / f"clip_{W}x{H}_8bit.yuv"
+    with open(clip, "wb") as fh:
+        for img in (paint(a, grid, CAP), paint(b, grid, CAP)):
+            write_frame(fh, rgb_to_yuv(img.astype(np.float32) / 255.0, 8), YuvFormat(W, H, 8))
+    xml = tmp_path / "calib.xml"
+    write_calib(calib, xml)
+    out = tmp_path / "video"
+    r = subprocess.run([sys.executable, "-m", "plenocal.cli", "convert", str(clip), str(xml),
+                        "-o", str(out), "--format", "yuv", "--tile-size", "6"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "top 3 lens rows" in r.stderr
+    setup = json.loads((out / "convert_setup.json").read_text())
+    assert setup["border_cut"]["bands"]["top"] == 3
+    plain = ShotConversion(a, calib, 5, ConvertSettings(tile_size=6, even_size=True,
+                                                        border_cut="off"))
+    views = json.loads((out / "video.json").read_text())["views"]
+    assert views["height"] < plain.layout.height and views["width"] == plain.layout.width

@@ -468,8 +468,8 @@ def test_the_camera_setup_decides_the_least_reach_once():
     assert setup.least_reach == shot.least_reach == 2
     again = ConverterSetup.from_dict(setup.to_dict())
     assert again == setup and again.to_dict()["least_reach"] == 2
-    doc = {**setup.to_dict(), "version": 3}
-    with pytest.raises(ConvertError, match="version 4"):
+    doc = {**setup.to_dict(), "version": 4}
+    with pytest.raises(ConvertError, match="version 5"):
         ConverterSetup.from_dict(doc)
 
 

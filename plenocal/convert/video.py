@@ -400,6 +400,8 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
                  "%.2f px); %.2f s", path.name, k, conv.setup.mla, conv.setup.tile,
                  conv.setup.safe_diameter_px or float("nan"), time.perf_counter() - t0)
     assert conv.setup is not None
+    if conv.setup.border_cut.any:
+        log.info("%s: %s", path.name, conv.setup.border_cut.summary())
     out.mkdir(parents=True, exist_ok=True)
     write_setup(out / "convert_setup.json", conv.setup)
     names = view_names(n_views)
