@@ -71,6 +71,17 @@ def test_a_painted_cut_is_found_band_by_band():
     assert cut_of(paint(img, grid, (0, 0, 0)), grid, calib).bands["top"] == 3
 
 
+def test_a_cut_beside_a_black_scene_is_found():
+    """A figure on black (a TSPC test sequence): the outermost lens rows see only the
+    black backdrop, flat on both halves of their micro images; the clipped cap over one
+    half is a cut all the same."""
+    calib, grid, img = frame()
+    black = paint(img, grid, (3, 3, 3), whole=True)
+    assert not cut_of(black, grid, calib).any
+    cut = cut_of(paint(black, grid, CAP), grid, calib)
+    assert cut.bands["top"] == 3, cut
+
+
 @pytest.mark.parametrize(("value", "whole", "why"), [
     ((5, 5, 5), True, "a flat dark scene along the border fills both halves"),
     ((250, 250, 250), True, "an overexposed sky fills both halves"),

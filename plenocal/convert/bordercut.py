@@ -17,16 +17,17 @@ opposite border and the principal point stays at the views' centre).
 Measure (:func:`measure_border_cut`). Per border, the lenses are grouped in bands one
 lens row wide (the lattice's spacing along the border's normal), from the border in.
 Within the safe disc (``D'``, where the views sample) a position is *flat* where its
-grey value varies across the band's lenses by less than :data:`FLAT_SPREAD` of the
-interior lenses' spread there (the scene varies from lens to lens; a cut does not). A
-band is cut where the flat positions lie on one side of the micro image: the flat share
-of the half facing one way exceeds that of the half facing the other by
-:data:`ONE_SIDED` or more. A flat scene (a black backdrop, a dark floor, a sky) fills
-both halves and is not a cut. The border's first band must be cut, at a level that is
-unlit or clipped (:data:`DARK`, :data:`CLIPPED`: a scene's flat part along one border
-at a middle grey is not a vignetting), and every following band whose flat part is at
-that level (within :data:`SAME_LEVEL`) and one-sided is cut too; the first that is not
-ends the border's cut. The lenses of the cut bands are left out.
+grey value changes from one lens of the band to the next along it by less than
+:data:`FLAT_SPREAD` of what it does in bands further in (the median absolute difference:
+the scene changes from lens to lens; a cut does not, even where a flat-fielded cut dims
+slowly along the border), and it is *clipped* or *unlit* where the band's median there is
+at least :data:`CLIPPED` or at most :data:`DARK`. A band is cut where its flat clipped
+(or flat unlit) positions lie on one side of the micro image: their share of the half
+facing one way exceeds that of the half facing the other by :data:`ONE_SIDED` or more.
+A flat scene along a border (a black backdrop, a dark floor, an overexposed sky) fills
+both halves, and a flat part at a middle grey is the scene's. The border's first band
+must be cut; every following band cut the same way (clipped, or unlit) is cut too, and
+the first that is not ends the border's cut. The lenses of the cut bands are left out.
 
 Decided once per camera, on the central array shot, with the safe diameter (rule
 ``convert_setup``; ``convert.border_cut``), so every shot's views have one size.
@@ -56,7 +57,6 @@ FLAT_SPREAD = 0.25  # a flat position's spread across a band, of the interior's
 ONE_SIDED = 0.1  # a cut band's excess of flat share on one half over the other
 DARK = 0.05  # grey (0..1) at or under which a flat part is unlit
 CLIPPED = 0.8  # grey at or over which a flat part is clipped (flat-fielded)
-SAME_LEVEL = 0.1  # the next bands' flat level, within this of the first band's
 MAX_BANDS = 10  # bands looked at from each border
 MIN_BAND_LENSES = 8  # fewer lenses in a band: the spread says nothing
 REFERENCE_BANDS = 6  # bands past MAX_BANDS whose variation is the reference
@@ -166,26 +166,32 @@ def measure_border_cut(gray: np.ndarray, grid: MicrolensGrid, safe_diameter_px: 
             continue
         outward = (-ys if b == "top" else ys if b == "bottom" else -xs if b == "left" else xs)
         halves = (disc & (outward < -0.5), disc & (outward > 0.5))  # inward, outward
-        excess, level0, n = [], None, 0
+        excess, kind, level0, n = [], None, None, 0
         for k in range(MAX_BANDS):
             band = band_at(k)
             if len(band) < MIN_BAND_LENSES:
                 break
             var, stack = _variation(gray, grid.centres[band], xs, ys)
+            value = np.median(stack, axis=0)
             flat = var < FLAT_SPREAD * ref
-            shares = [float(flat[h].mean()) for h in halves]
-            side = halves[int(np.argmax(shares))]
-            ex = abs(shares[0] - shares[1])
+            # each extreme level on its own: a clipped cap beside a black scene (a figure
+            # on black) is one-sided as a clipped part, though flat on both halves
+            best = None
+            for name, part in (("clipped", flat & (value >= CLIPPED)),
+                               ("unlit", flat & (value <= DARK))):
+                if kind is not None and name != kind:
+                    continue  # the next bands continue the first band's cut
+                shares = [float(part[h].mean()) for h in halves]
+                ex = abs(shares[0] - shares[1])
+                if best is None or ex > best[1]:
+                    best = (name, ex, part & halves[int(np.argmax(shares))])
+            name, ex, part = best
             excess.append(round(ex, 4))
-            if ex < ONE_SIDED or not (flat & side).any():
+            if ex < ONE_SIDED:
                 break
-            level = float(np.median(stack, axis=0)[flat & side].mean())
+            kind = name
             if level0 is None:
-                if not (level <= DARK or level >= CLIPPED):
-                    break
-                level0 = level
-            elif abs(level - level0) > SAME_LEVEL:
-                break
+                level0 = float(value[part].mean())
             n = k + 1
         cut.excess[b] = excess
         if n:
