@@ -128,6 +128,33 @@ def test_ground_truth_structure_by_hand():
                                        [(c - 2) * shift, (r - 2) * shift], atol=1e-6)
 
 
+def test_views_without_cut_border_lenses_keep_their_cameras_centred():
+    """Border lenses left out (their micro images cut by the main lens,
+    plenocal.convert.bordercut): the views are smaller, symmetric about the axis, and
+    every view's camera is the uncut view's moved by the crop: the same focal length,
+    rotation and centre, the principal point moved by half the rows removed, so the
+    central view's stays at the image centre (registration A's and B's assumption)."""
+    sim = small_sim()
+    optics = optics_of(sim)
+    grid = MicrolensGrid(make_calib(sim, optics), optics.width, optics.height)
+    full = make_layout(grid, 5, 6)
+    d = grid.border_distance("top")
+    inset = float(np.unique(np.round(d[grid.inside(0.0)], 1))[2])  # two lens rows out
+    cut = make_layout(grid, 5, 6, insets_px={"top": inset})
+    assert cut.width == full.width and cut.height < full.height
+    rows = (full.height - cut.height) / 2
+    a, _ = shot_cameras(optics, grid, full, np.eye(4))
+    b, _ = shot_cameras(optics, grid, cut, np.eye(4))
+    np.testing.assert_allclose(b["2_2"].K[:2, 2], [(cut.width - 1) / 2, (cut.height - 1) / 2],
+                               atol=1e-6)
+    for name in a:
+        assert b[name].K[0, 0] == pytest.approx(a[name].K[0, 0], rel=1e-9)
+        np.testing.assert_allclose(b[name].K[:2, 2], a[name].K[:2, 2] - [0.0, rows],
+                                   atol=1e-6)
+        np.testing.assert_allclose(b[name].R, a[name].R, atol=1e-9)
+        np.testing.assert_allclose(b[name].centre, a[name].centre, atol=1e-9)
+
+
 def _bilinear(img: np.ndarray, xy: np.ndarray) -> np.ndarray:
     import cv2
 
