@@ -31,14 +31,14 @@ the first that is not ends the border's cut. The lenses of the cut bands are lef
 
 Decided once per camera, on the central array shot, with the safe diameter (rule
 ``convert_setup``; ``convert.border_cut``), so every shot's views have one size.
-Measured on the eleven frames of ``shared/real`` and eight of the simulator's: Boys2 and
-Boys2_f150 cut three bands at the top (one-sided excess 0.46-0.69, 0.26-0.27 in the third,
-flat at grey 0.92; the fourth band 0.04): their views 1440 x 988 instead of 1064 high,
-and the flat band of the lower views (up to 38 px) gone. Nothing else cuts: Fujita2's
-black top and Boxer's dark floor are flat on both halves; Fujita2_f150's black backdrop
-is flat on one half of the left border's first band (excess 0.57) at grey 0.085, over
-:data:`DARK` (a darker backdrop there would cost the views one lens column a side); the
-simulator's first bands read at most 0.006.
+Measured on the eleven frames of ``shared/real`` and the 220 lenslet frames of twelve
+simulated captures (seeds 59-64, four geometries): Boys2 and Boys2_f150 cut three bands at
+the top (one-sided excess 0.46-0.69, 0.26-0.27 in the third, clipped at grey 0.92; the
+fourth band 0.04): their views 1440 x 988 instead of 1064 high, and the flat band of the
+lower views (up to 38 px) gone. Nothing else cuts: every other real frame's first bands
+read 0 (Fujita2's black backdrop, grey 0.085-0.09, and Boxer's dark floor are flat, but
+neither clipped nor unlit, and on both halves where they fill the band), the simulator's
+at most 0.011.
 """
 
 from __future__ import annotations
