@@ -124,6 +124,7 @@ def test_the_camera_setup_decides_the_cut_once():
     st = ConvertSettings(tile_size=6, even_size=False)
     setup, shot = decide_setup(paint(img, grid, CAP), calib, 5, st, "centre.png")
     assert setup.border_cut.bands["top"] == 3
+    assert any("top 3 lens rows" in w and "views" in w for w in setup.warnings)
     again = ConverterSetup.from_dict(setup.to_dict())
     assert again.border_cut == setup.border_cut
     other = frame(seed=7)[2]

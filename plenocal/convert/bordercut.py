@@ -79,8 +79,9 @@ class BorderCut:
         return any(self.bands.values())
 
     def summary(self) -> str:
-        cut = [f"{b} {n} lens row{'s' if n > 1 else ''} ({self.insets_px[b]:.0f} px, grey "
-               f"{self.level[b]:.2f})" for b, n in self.bands.items() if n]
+        cut = [f"{b} {n} lens row{'s' if n > 1 else ''} (within {self.insets_px[b]:.0f} px "
+               f"of the edge, flat at grey {self.level[b]:.2f})"
+               for b, n in self.bands.items() if n]
         return ("the main lens cuts the micro images along the sensor's borders: "
                 + ", ".join(cut) + "; the views leave those lenses out (and as many on the "
                 "opposite side: the views stay centred on the optical axis)") if cut else (

@@ -353,6 +353,9 @@ def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: Con
                                                    grid, check, shot)
     lattice = centred or lattice
     warnings = [f"{source}: {w}" for w in check.warnings] + shot.warnings
+    if shot.border_cut.any:  # the views are smaller than the sensor's lenses allow: said
+        warnings.append(f"{source}: {shot.border_cut.summary()} ({shot.layout.width}x"
+                        f"{shot.layout.height} views; convert.border_cut: off keeps them)")
     setup = ConverterSetup(
         mla=shot.mla, tile=int(shot.layout.tile), grid_mode=settings.grid,
         refined=lattice is not None, lattice=lattice, decided_on=source,
