@@ -31,15 +31,15 @@ def frame(seed: int = 4):
     return calib, grid, lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, seed))
 
 
-def paint(img: np.ndarray, grid: MicrolensGrid, value, edges=EDGES, whole: bool = False
-          ) -> np.ndarray:
-    """``img`` with the part of each top-band micro image below ``edges[k]`` (all of it
-    where ``whole``) set to ``value``: band ``k`` counted from the top as the measure
-    counts it."""
+def paint(img: np.ndarray, grid: MicrolensGrid, value, edges=EDGES, whole: bool = False,
+          border: str = "top") -> np.ndarray:
+    """``img`` with the part of each micro image of ``border``'s first bands beyond
+    ``edges[k]`` from its centre towards the sensor's middle (all of it where ``whole``)
+    set to ``value``: band ``k`` counted from the border as the measure counts it."""
     out = img.copy()
-    dist = grid.border_distance("top")
+    dist = grid.border_distance(border)
     inside = grid.inside(0.0)
-    s = band_spacing(grid, "top")
+    s = band_spacing(grid, border)
     first = dist[inside].min()
     yy, xx = np.mgrid[0:H, 0:W]
     for i in np.flatnonzero(inside):
@@ -48,7 +48,8 @@ def paint(img: np.ndarray, grid: MicrolensGrid, value, edges=EDGES, whole: bool 
             continue
         mx, my = grid.centres[i]
         disc = (xx - mx) ** 2 + (yy - my) ** 2 <= (grid.diameter / 2) ** 2
-        part = disc if whole else disc & (yy - my > edges[k])
+        inward = {"top": yy - my, "bottom": my - yy, "left": xx - mx, "right": mx - xx}[border]
+        part = disc if whole else disc & (inward > edges[k])
         out[part] = value
     return out
 
@@ -69,6 +70,21 @@ def test_a_painted_cut_is_found_band_by_band():
     assert cut.insets_px["top"] == pytest.approx(first + 2.5 * s)
     # unlit (a frame that is not flat-fielded) is a cut too
     assert cut_of(paint(img, grid, (0, 0, 0)), grid, calib).bands["top"] == 3
+
+
+@pytest.mark.parametrize("border", ["bottom", "left", "right"])
+def test_a_cut_is_found_on_any_border(border):
+    calib, grid, img = frame()
+    cut = cut_of(paint(img, grid, CAP, border=border), grid, calib)
+    assert cut.bands == {b: 3 if b == border else 0 for b in BORDERS}, cut
+    axis = 0 if border in ("left", "right") else 1
+    shot = ShotConversion(paint(img, grid, CAP, border=border), calib, 5,
+                          ConvertSettings(tile_size=6, even_size=False))
+    full = ShotConversion(img, calib, 5, ConvertSettings(tile_size=6, even_size=False))
+    assert (shot.layout.width, shot.layout.height)[axis] < (full.layout.width,
+                                                            full.layout.height)[axis]
+    assert (shot.layout.width, shot.layout.height)[1 - axis] == (full.layout.width,
+                                                                 full.layout.height)[1 - axis]
 
 
 def test_a_cut_beside_a_black_scene_is_found():
