@@ -6,7 +6,7 @@ in every frame: a region on one side of each micro image, with an edge that move
 the micro image lens row by lens row (on Boys2, the TSPC test frames: 7.8 px per lens
 row over the top four rows, nearly constant along the row). Unlit, it reads black; in a
 frame flat-fielded against a white image with the same clipping it reads bright and flat
-(Boys2: grey 0.90, where its interior averages 0.36). Views that sample it there show a
+(Boys2: grey 0.92, where its interior averages 0.36). Views that sample it there show a
 flat band along the border, growing with the view's offset towards the cut (Boys2: 6 px
 in view row 1, 38 px in row 4); no other lens sees the scene points it hides, so no
 blend can fill it. The views leave those lenses out, as they leave out the lenses whose
@@ -53,7 +53,7 @@ import numpy as np
 from plenocal.grid import SENSOR_BORDERS, MicrolensGrid
 
 BORDERS = SENSOR_BORDERS
-FLAT_SPREAD = 0.25  # a flat position's spread across a band, of the interior's
+FLAT_SPREAD = 0.25  # a flat position's lens-to-lens change, of the reference bands'
 ONE_SIDED = 0.1  # a cut band's excess of flat share on one half over the other
 DARK = 0.05  # grey (0..1) at or under which a flat part is unlit
 CLIPPED = 0.8  # grey at or over which a flat part is clipped (flat-fielded)
@@ -128,10 +128,11 @@ def _band_lenses(whole: np.ndarray, dist: np.ndarray, along: np.ndarray, lo: flo
 
 
 def _variation(gray: np.ndarray, centres: np.ndarray, xs: np.ndarray, ys: np.ndarray
-               ) -> np.ndarray:
-    """(h, w) how much each micro-image position changes from one lens of a band to the
-    next along it: the median of the absolute differences. A slow drift along the border
-    (a flat-fielded cut dims towards one end) leaves it near zero; the scene does not."""
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """((h, w), (m, h, w)): how much each micro-image position changes from one lens of a
+    band to the next along it (the median of the absolute differences: a slow drift along
+    the border, as a flat-fielded cut dims towards one end, leaves it near zero; the scene
+    does not), and the band's micro images."""
     stack = _micro_images(gray, centres, xs, ys)
     return np.median(np.abs(np.diff(stack, axis=0)), axis=0), stack
 
@@ -146,9 +147,11 @@ def measure_border_cut(gray: np.ndarray, grid: MicrolensGrid, safe_diameter_px: 
     ys, xs = np.mgrid[-R:R + 1, -R:R + 1].astype(np.float32)
     disc = xs * xs + ys * ys <= r * r
     whole = grid.inside(0.0)
-    cut = BorderCut()
+    insets, bands = dict.fromkeys(BORDERS, 0.0), dict.fromkeys(BORDERS, 0)
+    levels: dict[str, float | None] = dict.fromkeys(BORDERS)
+    excesses: dict[str, list[float]] = {}
     if whole.sum() < MIN_BAND_LENSES:
-        return cut
+        return BorderCut()
     for b in BORDERS:
         dist = grid.border_distance(b)
         along = grid.centres[:, 0 if b in ("top", "bottom") else 1]
@@ -194,10 +197,10 @@ def measure_border_cut(gray: np.ndarray, grid: MicrolensGrid, safe_diameter_px: 
             if level0 is None:
                 level0 = float(value[part].mean())
             n = k + 1
-        cut.excess[b] = excess
+        excesses[b] = excess
         if n:
-            cut.bands[b] = n
-            cut.level[b] = round(level0, 4)
+            bands[b] = n
+            levels[b] = round(level0, 4)
             # half a band past the last cut band's centre: its lenses out, the next in
-            cut.insets_px[b] = round(first + (n - 0.5) * spacing, 4)
-    return cut
+            insets[b] = round(first + (n - 0.5) * spacing, 4)
+    return BorderCut(insets_px=insets, bands=bands, level=levels, excess=excesses)
