@@ -221,7 +221,7 @@ def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
         "median_patch": stats["patch_size_px"]["median"], "check": check, "refined": refined,
         "cmp": None, "corners": corners, "local": {},
         "safe": shot.safe, "q": shot.layout.q,
-        "filled": stats["patch_size_px"]["filled_share"],
+        "filled": stats["patch_size_px"]["filled_share"], "cut": shot.border_cut,
     }
     for key, ref_name in LOCAL_VIEWS:
         ref_view = REAL / "reference" / name / f"{ref_name}.png"
@@ -553,11 +553,13 @@ def main() -> None:
             "view within about 2 of its floor shows no lattice the measure can see. D' the "
             "safe diameter the views were cut with "
             "(measured, or calib.xml's D - 2), q the view spacing; filled: the share of "
-            "lenses whose patch size was filled, not measured.")
+            "lenses whose patch size was filled, not measured; cut: the border lens rows the "
+            "views leave out, their micro images cut by the main lens "
+            "(plenocal.convert.bordercut).")
     out.say("")
-    out.say("| frame | D' px (file) | q px | filled | " + " | ".join(
+    out.say("| frame | D' px (file) | q px | filled | cut | " + " | ".join(
         f"{k}: worst tile | {k}: lattice dB" for k, _ in LOCAL_VIEWS) + " |")
-    out.say("|---|---|---|---|" + "---|---|" * len(LOCAL_VIEWS))
+    out.say("|---|---|---|---|---|" + "---|---|" * len(LOCAL_VIEWS))
     for r in rows:
         cells = []
         for key, _ in LOCAL_VIEWS:
@@ -572,8 +574,9 @@ def main() -> None:
                           f"{lc['lattice_db']:.1f} / {lc['ref_lattice_db']:.1f}{flag}; "
                           f"z {lc['lattice_z']:+.1f} / {lc['ref_lattice_z']:+.1f}"]
         safe = r["safe"]
+        cut = ", ".join(f"{b} {n}" for b, n in r["cut"].bands.items() if n) or "-"
         out.say(f"| {r['name']} | {safe.diameter_px:.1f} ({safe.file_px:.1f}) | {r['q']:.2f} "
-                f"| {100 * r['filled']:.0f}% | " + " | ".join(cells) + " |")
+                f"| {100 * r['filled']:.0f}% | {cut} | " + " | ".join(cells) + " |")
     ab = [r for r in rows if "file_grid" in r]
     if ab:
         out.say("")
