@@ -120,7 +120,9 @@ class ConverterSetup:
         if d.get("format") != "plenocal.convert_setup" or d.get("version") != FORMAT_VERSION:
             raise ConvertError(f"{source}: not a convert_setup.json of version "
                                f"{FORMAT_VERSION} (format {d.get('format')!r}, version "
-                               f"{d.get('version')!r}); rerun rule convert_setup")
+                               f"{d.get('version')!r}); rerun rule convert_setup, or make a "
+                               "recording's set-up again (plenocal convert RECORDING.yuv "
+                               "writes one)")
         lat = d["lattice"]
         lattice = None if lat is None else (
             tuple(float(x) for x in lat["origin_px"]),
