@@ -35,6 +35,7 @@ from plenocal.convert import ShotConversion  # noqa: E402
 from plenocal.grid import MicrolensGrid  # noqa: E402
 from plenocal.io.files import read_image  # noqa: E402
 from plenocal.io.raytrix import read_calib  # noqa: E402
+from plenocal.malloc import no_huge_pages  # noqa: E402
 
 FIXTURES = Path("/work/shared/fixtures/raytrix-calib")
 
@@ -61,6 +62,7 @@ def synthetic_image(calib, size: int) -> tuple[np.ndarray, MicrolensGrid, np.nda
 
 
 def main() -> None:
+    no_huge_pages()  # as the command line: its timings are those a user sees
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=None, help="also write the figures into this BENCHMARKS.md")
     ap.add_argument("--calib", default=str(FIXTURES / "Fujita2.xml"))

@@ -94,6 +94,7 @@ from plenocal.convert.localcheck import local_compare  # noqa: E402
 from plenocal.convert.setup import centred_where_unverified, centring_shift  # noqa: E402
 from plenocal.convert.shot import build_grid, load_calib, load_lenslet  # noqa: E402
 from plenocal.io.files import read_image, write_image  # noqa: E402
+from plenocal.malloc import no_huge_pages  # noqa: E402
 from plenocal.names import central_view  # noqa: E402
 
 REAL = ROOT.parent / "shared" / "real"
@@ -453,6 +454,7 @@ def speed_main(args: argparse.Namespace, frames: list[str]) -> None:
 
 
 def main() -> None:
+    no_huge_pages()  # as the command line: its timings are those a user sees
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=None, help="also write the figures into this BENCHMARKS.md")
     ap.add_argument("--frames", nargs="*", default=None, help="frame names (default: all)")

@@ -384,6 +384,9 @@ def main(argv: list[str] | None = None) -> int:
                         format="plenocal: %(message)s", force=True)
     log = logging.getLogger("plenocal.cli")
     from plenocal.config import ConfigError  # noqa: PLC0415
+    from plenocal.malloc import no_huge_pages  # noqa: PLC0415
+
+    no_huge_pages()  # the frame's measures and views: 15-30 % of the time (plenocal.malloc)
     from plenocal.io.raytrix import CalibError  # noqa: PLC0415
 
     try:

@@ -9,6 +9,16 @@ zeroed pages for every view: on the default data rule ``view_features`` spent 1.
 3.3 s a shot (25 views) in the kernel. With the heap kept (:func:`keep_freed_memory`) it
 is 0.1 s, and the jobs take 0.7 of their time (BENCHMARKS.md, "The allocator in the SIFT
 jobs"). The numbers computed do not change: only where the buffers lie.
+
+numpy asks the kernel for transparent huge pages (``madvise(MADV_HUGEPAGE)``) on every
+array of 4 MB or more. Where the kernel serves such requests only (``madvise`` in
+``/sys/kernel/mm/transparent_hugepage/enabled`` and ``defrag``: Ubuntu's defaults), each
+first touch of a 2 MB page waits for the kernel to find, compact and zero one. The
+converter's measurements make arrays of hundreds of MB and free them: on this project's
+2-core VMs one call of the safe diameter's measure spent 1.8 s in the kernel for 0.1 s of
+work, and ``plenocal convert`` on a 12-MP frame 2.3-3.7 s of 5.7-7.0 s
+(:func:`no_huge_pages`; BENCHMARKS.md, "numpy's huge pages"). Ordinary 4 kB pages fault
+in more often and cost a few microseconds each.
 """
 
 from __future__ import annotations
@@ -25,6 +35,24 @@ M_MMAP_THRESHOLD = -3
 MMAP_THRESHOLD_BYTES = 32 << 20
 #: this much free memory at the heap's top is kept for the next request, not given back
 TRIM_THRESHOLD_BYTES = 256 << 20
+
+
+def no_huge_pages() -> bool:
+    """Stop numpy asking for transparent huge pages for the arrays it allocates from now
+    on in this process (the module docstring): what ``NUMPY_MADVISE_HUGEPAGE=0`` does when
+    numpy is imported. Every rule's script (:func:`plenocal.rulelog.log_to_file`) and the
+    command line start with it. The numbers do not change. Returns whether numpy took the
+    setting: False where this numpy has no such switch (nothing changes)."""
+    import numpy as np  # noqa: PLC0415
+
+    for module in ("_core", "core"):  # numpy 2, numpy 1
+        switch = getattr(getattr(np, module, None), "multiarray", None)
+        setter = getattr(switch, "_set_madvise_hugepage", None)
+        if setter is not None:
+            setter(False)
+            log.debug("numpy: no transparent huge pages for new arrays")
+            return True
+    return False
 
 
 def keep_freed_memory(mmap_threshold: int = MMAP_THRESHOLD_BYTES,
