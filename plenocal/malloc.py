@@ -41,9 +41,16 @@ def no_huge_pages() -> bool:
     """Stop numpy asking for transparent huge pages for the arrays it allocates from now
     on in this process (the module docstring): what ``NUMPY_MADVISE_HUGEPAGE=0`` does when
     numpy is imported. Every rule's script (:func:`plenocal.rulelog.log_to_file`) and the
-    command line start with it. The numbers do not change. Returns whether numpy took the
-    setting: False where this numpy has no such switch (nothing changes)."""
+    command line start with it. The numbers do not change. A ``NUMPY_MADVISE_HUGEPAGE``
+    in the environment is the user's choice and is left as numpy took it. Returns whether
+    the setting was made: False where the environment chose, or where this numpy has no
+    such switch (nothing changes)."""
+    import os  # noqa: PLC0415
+
     import numpy as np  # noqa: PLC0415
+
+    if os.environ.get("NUMPY_MADVISE_HUGEPAGE") is not None:
+        return False
 
     for module in ("_core", "core"):  # numpy 2, numpy 1
         switch = getattr(getattr(np, module, None), "multiarray", None)

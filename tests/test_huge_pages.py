@@ -34,16 +34,16 @@ with open(result, "w") as f:  # a rule job's stdout goes to its log
 """
 
 
-def _run(tmp: Path, *args: str, env_off: bool = False) -> dict:
+def _run(tmp: Path, *args: str, env: str | None = None) -> dict:
     import os  # noqa: PLC0415
 
-    env = dict(os.environ)
-    env.pop("NUMPY_MADVISE_HUGEPAGE", None)
-    if env_off:
-        env["NUMPY_MADVISE_HUGEPAGE"] = "0"
-    result = tmp / f"result_{args[0]}_{int(env_off)}.json"
+    environ = dict(os.environ)
+    environ.pop("NUMPY_MADVISE_HUGEPAGE", None)
+    if env is not None:
+        environ["NUMPY_MADVISE_HUGEPAGE"] = env
+    result = tmp / f"result_{args[0]}_{env}.json"
     subprocess.run([sys.executable, "-c", PROBE, args[0], str(result), *args[1:]],
-                   capture_output=True, text=True, check=True, env=env, cwd=tmp)
+                   capture_output=True, text=True, check=True, env=environ, cwd=tmp)
     return json.loads(result.read_text())
 
 
@@ -52,9 +52,15 @@ def test_the_switch_turns_numpys_huge_pages_off_and_changes_no_number(tmp_path):
     the same numbers as with ``NUMPY_MADVISE_HUGEPAGE=0`` from the start."""
     switched = _run(tmp_path, "switch")
     assert switched["taken"] is True and switched["after"] is False
-    off = _run(tmp_path, "switch", env_off=True)
-    assert off["before"] is False
+    off = _run(tmp_path, "switch", env="0")
+    assert off["before"] is False and off["taken"] is False  # the environment chose
     assert switched["digest"] == off["digest"]
+
+
+def test_a_users_numpy_madvise_hugepage_is_left_as_numpy_took_it(tmp_path):
+    """``NUMPY_MADVISE_HUGEPAGE=1`` in the environment: huge pages stay on."""
+    on = _run(tmp_path, "switch", env="1")
+    assert on["before"] is True and on["taken"] is False and on["after"] is True
 
 
 def test_every_rule_job_and_the_command_line_start_without_huge_pages(tmp_path):
