@@ -52,14 +52,12 @@ def no_huge_pages() -> bool:
     if os.environ.get("NUMPY_MADVISE_HUGEPAGE") is not None:
         return False
 
-    for module in ("_core", "core"):  # numpy 2, numpy 1
-        switch = getattr(getattr(np, module, None), "multiarray", None)
-        setter = getattr(switch, "_set_madvise_hugepage", None)
-        if setter is not None:
-            setter(False)
-            log.debug("numpy: no transparent huge pages for new arrays")
-            return True
-    return False
+    setter = getattr(np._core.multiarray, "_set_madvise_hugepage", None)  # numpy 2
+    if setter is None:
+        return False
+    setter(False)
+    log.debug("numpy: no transparent huge pages for new arrays")
+    return True
 
 
 def keep_freed_memory(mmap_threshold: int = MMAP_THRESHOLD_BYTES,

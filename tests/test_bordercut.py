@@ -13,9 +13,10 @@ from test_convert import small_optics
 
 from plenocal.config import ConfigError, validate_config
 from plenocal.convert import ConvertError, ConvertSettings, ShotConversion
-from plenocal.convert.bordercut import BORDERS, BorderCut, band_spacing, measure_border_cut
+from plenocal.convert.bordercut import BorderCut, band_spacing, measure_border_cut
 from plenocal.convert.setup import ConverterSetup, decide_setup
 from plenocal.convert.shot import frame_gray
+from plenocal.grid import SENSOR_BORDERS as BORDERS
 from plenocal.grid import MicrolensGrid
 from plenocal.viewgeom import make_layout
 

@@ -53,7 +53,6 @@ import numpy as np
 from plenocal.convert.exact import remap
 from plenocal.grid import SENSOR_BORDERS, MicrolensGrid
 
-BORDERS = SENSOR_BORDERS
 FLAT_SPREAD = 0.25  # a flat position's lens-to-lens change, of the reference bands'
 ONE_SIDED = 0.1  # a cut band's excess of flat share on one half over the other
 DARK = 0.05  # grey (0..1) at or under which a flat part is unlit
@@ -65,14 +64,15 @@ REFERENCE_BANDS = 6  # bands past MAX_BANDS whose variation is the reference
 
 @dataclass(frozen=True)
 class BorderCut:
-    """Per border (:data:`BORDERS`): ``insets_px``, the distance from that border (sensor
-    pixels, to a lens centre) under which lenses are left out (0: none); ``bands``, the
-    cut bands; ``level``, the grey of the cut part (None where none); ``excess``, each
-    band's one-sided flat-share excess as measured (for the record)."""
+    """Per border (:data:`plenocal.grid.SENSOR_BORDERS`): ``insets_px``, the distance from
+    that border (sensor pixels, to a lens centre) under which lenses are left out (0:
+    none); ``bands``, the cut bands; ``level``, the grey of the cut part (None where
+    none); ``excess``, each band's one-sided flat-share excess as measured (for the
+    record)."""
 
-    insets_px: dict[str, float] = field(default_factory=lambda: dict.fromkeys(BORDERS, 0.0))
-    bands: dict[str, int] = field(default_factory=lambda: dict.fromkeys(BORDERS, 0))
-    level: dict[str, float | None] = field(default_factory=lambda: dict.fromkeys(BORDERS))
+    insets_px: dict[str, float] = field(default_factory=lambda: dict.fromkeys(SENSOR_BORDERS, 0.0))
+    bands: dict[str, int] = field(default_factory=lambda: dict.fromkeys(SENSOR_BORDERS, 0))
+    level: dict[str, float | None] = field(default_factory=lambda: dict.fromkeys(SENSOR_BORDERS))
     excess: dict[str, list[float]] = field(default_factory=dict)
 
     @property
@@ -95,10 +95,10 @@ class BorderCut:
 
     @classmethod
     def from_dict(cls, d: Mapping) -> BorderCut:
-        return cls(insets_px={b: float(d["insets_px"][b]) for b in BORDERS},
-                   bands={b: int(d["bands"][b]) for b in BORDERS},
+        return cls(insets_px={b: float(d["insets_px"][b]) for b in SENSOR_BORDERS},
+                   bands={b: int(d["bands"][b]) for b in SENSOR_BORDERS},
                    level={b: (None if d["level"][b] is None else float(d["level"][b]))
-                          for b in BORDERS},
+                          for b in SENSOR_BORDERS},
                    excess={b: [float(x) for x in v] for b, v in d.get("excess", {}).items()})
 
 
@@ -149,12 +149,12 @@ def measure_border_cut(gray: np.ndarray, grid: MicrolensGrid, safe_diameter_px: 
     ys, xs = np.mgrid[-R:R + 1, -R:R + 1].astype(np.float32)
     disc = xs * xs + ys * ys <= r * r
     whole = grid.inside(0.0)
-    insets, bands = dict.fromkeys(BORDERS, 0.0), dict.fromkeys(BORDERS, 0)
-    levels: dict[str, float | None] = dict.fromkeys(BORDERS)
+    insets, bands = dict.fromkeys(SENSOR_BORDERS, 0.0), dict.fromkeys(SENSOR_BORDERS, 0)
+    levels: dict[str, float | None] = dict.fromkeys(SENSOR_BORDERS)
     excesses: dict[str, list[float]] = {}
     if whole.sum() < MIN_BAND_LENSES:
         return BorderCut()
-    for b in BORDERS:
+    for b in SENSOR_BORDERS:
         dist = grid.border_distance(b)
         along = grid.centres[:, 0 if b in ("top", "bottom") else 1]
         spacing = band_spacing(grid, b)
