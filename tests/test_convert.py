@@ -414,6 +414,20 @@ def test_every_fixture_converts(path):
     assert d["patch_size_px"]["confident_share"] > 0.3
     pic = shot.patch_picture()
     assert pic.shape[0] == shot.layout.height and pic.dtype == np.uint8
+    # each pixel its nearest lens's colour (filled lenses darker), black where no lens
+    # lies within reach: by hand, with a mask
+    from plenocal.convert.shot import colour_range
+    from plenocal.viewgeom import nearest_slots
+
+    idx = nearest_slots(shot.layout, keep=1)[0][0]
+    lo, hi = colour_range(shot.used_patch)
+    level = np.clip(np.rint((shot.used_patch - lo) / max(hi - lo, 1e-6) * 255), 0, 255)
+    lut = cv2.applyColorMap(np.arange(256, dtype=np.uint8)[:, None], cv2.COLORMAP_VIRIDIS)
+    rgb = lut[:, 0][level.astype(np.uint8)][:, ::-1].astype(np.float32)
+    rgb[~shot.patch.confident[shot.layout.lens_index]] *= 0.55
+    want = np.zeros(idx.shape + (3,), np.uint8)
+    want[idx >= 0] = rgb[idx[idx >= 0]].astype(np.uint8)
+    assert np.array_equal(pic[:, :shot.layout.width], want)
 
 
 def test_patch_picture_colours_are_not_squeezed_by_an_outlier():

@@ -727,9 +727,10 @@ def patch_size_picture(layout: ViewLayout, patch: np.ndarray, confident: np.ndar
     lut = cv2.applyColorMap(np.arange(256, dtype=np.uint8)[:, None], cv2.COLORMAP_VIRIDIS)[:, 0]
     rgb_lens = lut[level][:, ::-1].astype(np.float32)
     rgb_lens[~confident] *= 0.55
-    img = np.zeros((layout.height, layout.width, 3), dtype=np.uint8)
-    ok = idx >= 0
-    img[ok] = rgb_lens[idx[ok]].astype(np.uint8)
+    # each lens's colour, then black as the last entry: a pixel without a lens (-1) takes
+    # it, as take reads -1 (one gather for the whole view, not a masked one)
+    palette = np.concatenate([rgb_lens.astype(np.uint8), np.zeros((1, 3), np.uint8)])
+    img = palette.take(idx, axis=0)
     # colour bar on the right
     h = img.shape[0]
     bar_w, pad, text_w = 16, 8, 70
