@@ -5,6 +5,7 @@ for a process's life)."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -35,8 +36,6 @@ with open(result, "w") as f:  # a rule job's stdout goes to its log
 
 
 def _run(tmp: Path, *args: str, env: str | None = None) -> dict:
-    import os  # noqa: PLC0415
-
     environ = dict(os.environ)
     environ.pop("NUMPY_MADVISE_HUGEPAGE", None)
     if env is not None:
