@@ -209,3 +209,19 @@ def test_snakemake_report_attaches_every_caption(complete_run: Path, tmp_path: P
     proc = snakemake(work, "--report", "report.zip")
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     assert (work / "report.zip").stat().st_size > 10_000
+
+
+def test_snakemake_report_with_the_workflow_profile_warns_nothing(complete_run: Path,
+                                                                  tmp_path: Path):
+    """``snakemake --report`` as a user types it (the workflow's profile, picked up by
+    itself) prints no RuntimeWarning: Snakemake's default disk_mb, which its report
+    evaluates as a coroutine it never awaits (snakemake issue 4280), is a constant in
+    profiles/default."""
+    work = clone(complete_run, tmp_path / "w")
+    proc = subprocess.run([sys.executable, "-m", "snakemake", "--report", "report.zip"],
+                          cwd=work, capture_output=True, text=True, timeout=600)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 0, out[-3000:]
+    assert "profiles/default" in out  # the workflow's own profile was read
+    assert (work / "report.zip").stat().st_size > 10_000
+    assert "RuntimeWarning" not in out, out[-3000:]
