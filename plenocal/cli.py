@@ -27,6 +27,7 @@ import dataclasses
 import logging
 import os
 import sys
+import tempfile
 import time
 from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor
@@ -135,7 +136,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "diameter, grid offset and rotation, lens types)")
     c.add_argument("-o", "--out", required=True, metavar="DIR",
                    help="output folder (created; files in it with the same names are "
-                        "replaced)")
+                        "replaced when the run succeeds: the outputs are made in a hidden "
+                        "folder inside it and moved into place at the end, so a run that "
+                        "fails or is stopped leaves the folder as it was)")
     c.add_argument("--views", type=int, default=stage_defaults("dataset")["views"], metavar="N",
                    help="N x N views (default %(default)s, a dataset's in config.schema.yaml, "
                         "as TLCT); N odd (the centre is a view), N >= 1")
@@ -285,9 +288,6 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     import cv2  # noqa: F401, PLC0415  (cv2 before anything that may import pycolmap)
 
     from plenocal.convert import ConvertSettings, convert_files  # noqa: PLC0415
-    from plenocal.convert.setup import grid_words  # noqa: PLC0415
-    from plenocal.convert.threads import Inline  # noqa: PLC0415
-    from plenocal.io.files import write_image, write_images, write_json, write_npy  # noqa: PLC0415
 
     t0 = time.perf_counter()
     if args.views < 1 or args.views % 2 == 0:
@@ -299,6 +299,14 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
                        (args.setup, "convert_setup.json")):
         if path is not None and not Path(path).is_file():
             raise ConvertError(f"{path}: {what} not found")
+    video = Path(args.lenslet).suffix.lower() == ".yuv"
+    if not video:
+        given = [flag for flag, value in (("--size", args.size), ("--frames", args.frames),
+                                          ("--setup-frame", args.setup_frame))
+                 if value is not None] + (["--format yuv"] if args.out_format == "yuv" else [])
+        if given:
+            raise ConvertError(f"{' and '.join(given)}: for a raw YUV recording (LENSLET "
+                               f"ending in .yuv); {args.lenslet} is one image")
     out = Path(args.out)
     made = not out.exists()
     try:  # before the work: a folder that cannot be made fails now, not after the analysis
@@ -306,18 +314,43 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     except OSError as exc:
         raise ConvertError(f"{out}: cannot make the output folder ({exc.strerror or exc})"
                            ) from None
+    try:  # nor one this user cannot write to
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as exc:
+        raise ConvertError(f"{out}: cannot write to the output folder ({exc.strerror or exc}):"
+                           " choose another with -o") from None
     try:
-        if Path(args.lenslet).suffix.lower() == ".yuv":
+        if video:
             run_convert_video(args, settings, block, log)
             return
         threads = args.threads or default_threads()
         shot = convert_files(args.lenslet, args.calib, None, args.views, settings,
                              setup_json=args.setup, threads=threads,
                              grid_foreign=block["grid_foreign"])
+        _write_conversion(args, shot, out, threads, settings, log, t0)
     except BaseException:
         if made and not any(out.iterdir()):
             out.rmdir()  # an input the conversion refused leaves no empty folder behind
         raise
+
+
+def _write_conversion(args: argparse.Namespace, shot, out: Path, threads: int, settings,
+                      log: logging.Logger, t0: float) -> None:
+    """The views, patch sizes and disparity.json of one converted image, made in a staging
+    folder and moved into ``out`` at the end, disparity.json last
+    (:func:`plenocal.io.files.staged_outputs`): a rerun that fails leaves the previous
+    run's files as they were, not half of them replaced."""
+    from plenocal.convert.setup import grid_words  # noqa: PLC0415
+    from plenocal.convert.threads import Inline  # noqa: PLC0415
+    from plenocal.io.files import (  # noqa: PLC0415
+        staged_outputs,
+        write_image,
+        write_images,
+        write_json,
+        write_npy,
+    )
+
     log.info("%s: %dx%d, %s: D = %.2f px; grid: %s (convert.grid %s)", args.lenslet,
              shot.grid.width, shot.grid.height, args.calib, shot.calib.diameter,
              grid_words(shot.grid_check), settings.grid)
@@ -328,24 +361,28 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
              stats["width"], stats["height"], time.perf_counter() - t0)
     if shot.border_cut.any:
         log.info("%s", shot.border_cut.summary())
-    write_npy(out / "patch_size.npy", shot.used_patch)
     n = args.views * args.views
-    t1, done = time.perf_counter(), 0
-    # the patch-size picture beside the views where there are threads (their bands leave
-    # the cores gaps: two threads render 1.5x as fast as one), before them on one
-    side = ThreadPoolExecutor(max_workers=1) if threads > 1 else Inline()
-    try:
-        picture = side.submit(lambda: write_image(out / "patch_size.png", shot.patch_picture()))
-        for views in shot.view_groups(threads=threads):
-            write_images(((out / f"{name}.png", img) for name, img in views.items()), threads)
-            done += len(views)
-            views.clear()  # before the next group is rendered
-            log.info("%d/%d views of %dx%d rendered and written on %d thread(s); %.2f s", done,
-                     n, stats["width"], stats["height"], threads, time.perf_counter() - t1)
-        picture.result()
-    finally:
-        side.shutdown()
-    write_json(out / "disparity.json", stats)
+    with staged_outputs(out, last=("disparity.json",)) as stage:
+        write_npy(stage / "patch_size.npy", shot.used_patch)
+        t1, done = time.perf_counter(), 0
+        # the patch-size picture beside the views where there are threads (their bands
+        # leave the cores gaps: two threads render 1.5x as fast as one), before them on one
+        side = ThreadPoolExecutor(max_workers=1) if threads > 1 else Inline()
+        try:
+            picture = side.submit(lambda: write_image(stage / "patch_size.png",
+                                                      shot.patch_picture()))
+            for views in shot.view_groups(threads=threads):
+                write_images(((stage / f"{name}.png", img) for name, img in views.items()),
+                             threads)
+                done += len(views)
+                views.clear()  # before the next group is rendered
+                log.info("%d/%d views of %dx%d rendered and written on %d thread(s); %.2f s",
+                         done, n, stats["width"], stats["height"], threads,
+                         time.perf_counter() - t1)
+            picture.result()
+        finally:
+            side.shutdown()
+        write_json(stage / "disparity.json", stats)
     log.info("%s: %d views, disparity.json, patch_size.npy/.png; %.2f s in all", out, n,
              time.perf_counter() - t0)
 
@@ -394,7 +431,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "convert":
             run_convert(args, log)
-    except (ConvertError, CalibError, ConfigError, OSError) as exc:
+    except (ConvertError, CalibError, ConfigError, YuvError, OSError) as exc:
         print(f"plenocal {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     return 0

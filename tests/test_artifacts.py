@@ -135,6 +135,35 @@ def test_warnings_of_another_shape_are_refused_with_file_key_and_remedy(tmp_path
         read_warnings(tmp_path / "absent.json", "features.json", "rerun rule features_a")
 
 
+def test_a_setup_file_that_is_not_one_is_named_with_its_key(tmp_path):
+    """``plenocal convert --setup FILE`` (and the workflow's readers) on a file that is not
+    a convert_setup.json: one ConvertError naming the file, the key where one is missing
+    or wrong, and the remedy; no JSON, Unicode, key or type error escapes."""
+    from plenocal.convert.errors import ConvertError  # noqa: PLC0415
+
+    good = _setup(()).to_dict()
+    cases = {
+        "truncated.json": ('{"format": "x"', r"not JSON"),
+        "binary.json": (b"\x89PNG\r\n\x1a\n\xff\xfe\x00", r"not JSON"),
+        "list.json": ("[1, 2]", r"a JSON list, not an object"),
+        "no_key.json": ({k: v for k, v in good.items() if k != "tile"}, r"key 'tile'"),
+        "wrong_kind.json": ({**good, "tile": "ten"}, r"not of its kind.*'ten'"),
+        "no_lattice_dict.json": ({**good, "lattice": 3}, r"not of its kind"),
+    }
+    for name, (content, why) in cases.items():
+        path = tmp_path / name
+        if isinstance(content, bytes):
+            path.write_bytes(content)
+        elif isinstance(content, str):
+            path.write_text(content)
+        else:
+            write_json(path, content)
+        with pytest.raises(ConvertError, match=rf"{name}: .*{why}.*leave --setup out"):
+            read_setup(path)
+    write_json(tmp_path / "ok.json", good)
+    assert read_setup(tmp_path / "ok.json") == _setup(())
+
+
 def test_scale_round_trip_and_estimator(tmp_path):
     from plenocal.artifacts.scale import ScaleResult, read_scale, write_scale
 

@@ -209,6 +209,57 @@ def test_output_folder_that_cannot_be_made_fails_before_the_work(tmp_path, shot)
     assert "grid check" not in r.stderr  # stopped before the frame was read
 
 
+def test_output_folder_that_cannot_be_written_fails_before_the_work(tmp_path, shot):
+    """A folder that exists but takes no file (``/sys`` refuses even root, whom permission
+    bits do not stop): stopped before the frame is read, naming the folder."""
+    lenslet, calib = shot
+    sysfs = Path("/sys")
+    if not sysfs.is_dir():
+        pytest.skip("no /sys: not Linux")
+    r = _cli("convert", str(lenslet), str(calib), "-o", str(sysfs))
+    assert r.returncode == 2
+    assert "/sys: cannot write to the output folder" in r.stderr and "-o" in r.stderr
+    assert "grid check" not in r.stderr
+
+
+def test_recording_options_on_one_image_are_refused(tmp_path, shot):
+    """``--size``, ``--frames``, ``--setup-frame`` and ``--format yuv`` are for a raw YUV
+    recording: on a PNG they would be ignored, so they stop the command instead."""
+    lenslet, calib = shot
+    out = tmp_path / "o"
+    r = _cli("convert", str(lenslet), str(calib), "-o", str(out), "--frames", "0:2",
+             "--format", "yuv")
+    assert r.returncode == 2
+    assert "--frames and --format yuv: for a raw YUV recording" in r.stderr
+    assert "lenslet.png is one image" in r.stderr and not out.exists()
+    r = _cli("convert", str(lenslet), str(calib), "-o", str(out), "--size", "480x400",
+             "--setup-frame", "0")
+    assert r.returncode == 2 and "--size and --setup-frame" in r.stderr
+
+
+def test_a_rerun_that_fails_leaves_the_previous_views(tmp_path, shot, monkeypatch):
+    """A second conversion into the same folder that fails after writing views (here:
+    disparity.json, written last, made to fail) leaves every file of the first run as it
+    was and no staging folder: not half the views replaced by another setting's."""
+    import plenocal.io.files as files_mod  # noqa: PLC0415
+
+    lenslet, calib = shot
+    out = tmp_path / "views"
+    args = ["convert", str(lenslet), str(calib), "-o", str(out), "--views", "3", "--mla",
+            "keplerian", "-q"]
+    assert main([*args, "--tile-size", "6"]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert len(before) == 9 + 3
+
+    def fail(path, obj):
+        raise OSError(28, "No space left on device", str(path))
+
+    monkeypatch.setattr(files_mod, "write_json", fail)
+    assert main([*args, "--tile-size", "5"]) == 2  # another view size: every file differs
+    monkeypatch.undo()
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
 FRAMES = Path(__file__).resolve().parents[2] / "shared" / "real" / "frames"
 
 

@@ -118,6 +118,66 @@ def test_format_errors_name_the_file_and_the_remedy(tmp_path):
     assert r.returncode == 2 and "recording.yuv" in r.stderr and "--size" in r.stderr
 
 
+def test_a_name_and_options_that_disagree_are_refused(tmp_path):
+    """``--size`` or ``--bit-depth`` against what the file's name states: an error naming
+    both, not a silent choice (a 10-bit file read as 8-bit gave views of noise)."""
+    named = tmp_path / "x_64x48_10bit.yuv"
+    named.write_bytes(bytes(64 * 48 * 3 * 2))
+    assert resolve_format(named, (64, 48), 10) == YuvFormat(64, 48, 10)  # agreeing: fine
+    with pytest.raises(YuvError, match=r"x_64x48_10bit\.yuv: its name states 64x48, --size "
+                                       r"says 48x64: leave --size out"):
+        resolve_format(named, (48, 64))
+    with pytest.raises(YuvError, match=r"its name states 10 bits, --bit-depth says 8"):
+        resolve_format(named, None, 8)
+    r = _cli("convert", str(named), str(named), "-o", str(tmp_path / "o"), "--bit-depth", "8")
+    assert r.returncode == 2 and "states 10 bits" in r.stderr, r.stderr
+
+
+def test_samples_that_cannot_be_of_the_depth_are_refused(tmp_path):
+    """A frame whose samples do not fit the bit depth it is read with: 8-bit bytes read as
+    10-bit words (values up to 65535), 10-bit words read as 8-bit bytes (every second luma
+    byte 0..3). A dark 8-bit frame and a true 10-bit one read as they are."""
+    rng = np.random.default_rng(0)
+    w, h = 64, 48
+    f10, f8 = YuvFormat(w, h, 10), YuvFormat(w, h, 8)
+    planes10 = (rng.integers(64, 940, (h, w)), rng.integers(64, 960, (h // 2, w // 2)),
+                rng.integers(64, 960, (h // 2, w // 2)))
+    ten = tmp_path / "ten.yuv"
+    with open(ten, "wb") as fh:
+        write_frame(fh, planes10, f10)
+    assert np.array_equal(read_frame(ten, f10, 0)[0], planes10[0])
+    with pytest.raises(YuvError, match=r"ten\.yuv: frame 1 reads as 16-bit little-endian "
+                                       r"words.*--bit-depth"):
+        read_frame(ten, f8, 1)
+    eight = tmp_path / "eight.yuv"
+    planes8 = tuple(rng.integers(16, 236, p.shape) for p in planes10)
+    with open(eight, "wb") as fh:
+        for _ in range(2):
+            write_frame(fh, planes8, f8)
+    assert np.array_equal(read_frame(eight, f8, 1)[0], planes8[0])
+    with pytest.raises(YuvError, match=r"eight\.yuv: frame 0 holds samples up to \d+, which "
+                                       r"do not fit 10 bits"):
+        read_frame(eight, f10, 0)
+    black = tmp_path / "black.yuv"  # full-range black: every byte 0, no 16-bit pattern
+    black.write_bytes(bytes(f8.frame_bytes))
+    assert read_frame(black, f8, 0)[0].max() == 0
+
+
+def test_odd_sizes_written_by_ffmpeg_are_named(tmp_path):
+    """FFmpeg rounds an odd size's chroma planes up, RVS (and this reader) down: such a
+    file is refused with what it is and how to crop it, not 'wrong size or bit depth'
+    alone."""
+    w, h = 63, 47
+    ff = tmp_path / f"odd_{w}x{h}_8bit.yuv"
+    ff.write_bytes(bytes((w * h + 2 * 32 * 24) * 3))  # three frames, chroma 32 x 24
+    with pytest.raises(YuvError, match=r"a whole number \(3\) of frames whose chroma planes "
+                                       r"are rounded up.*crop"):
+        resolve_format(ff)
+    rvs = tmp_path / f"rvs_{w}x{h}_8bit.yuv"
+    rvs.write_bytes(bytes((w * h + 2 * 31 * 23) * 3))
+    assert resolve_format(rvs) == YuvFormat(w, h, 8)
+
+
 def test_frames_are_python_slices():
     assert list(parse_frames("2:5", 10)) == [2, 3, 4]
     assert list(parse_frames(":2", 10)) == [0, 1]
@@ -128,6 +188,9 @@ def test_frames_are_python_slices():
     for bad in ("a:b", "12:20", "1:2:3:4"):
         with pytest.raises(Exception, match="--frames"):
             parse_frames(bad, 10)
+    with pytest.raises(Exception, match=r"'5:2': selects none of the file's 10 frames "
+                                        r"\(0\.\.9; A:B is A up to B, B excluded"):
+        parse_frames("5:2", 10)
 
 
 def test_yuv_round_trip_and_rvs_layout(tmp_path):
@@ -239,6 +302,92 @@ def test_8bit_clip_to_8bit_view_videos_are_the_frames_png_views(tmp_path):
             want = rgb_to_yuv(read_image(ref / f"{name}.png").astype(np.float32) / 255.0, 8)
             for g, w in zip(got, want, strict=True):
                 assert np.array_equal(g, w), (k, name)
+
+
+def test_view_videos_hold_no_file_open(tmp_path):
+    """33 x 33 views (1,089 files) under a limit of 256 open files: each frame is appended
+    by opening its view's file for that write alone (every view's file held open at once
+    failed past the system's limit, 1,024 on Linux by default)."""
+    import resource  # noqa: PLC0415
+
+    from plenocal.convert.video import ViewVideos  # noqa: PLC0415
+
+    fmt = YuvFormat(4, 2, 8)
+    names = view_names(33)
+    planes = (np.full((2, 4), 7, np.uint8), np.full((1, 2), 8, np.uint8),
+              np.full((1, 2), 9, np.uint8))
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    resource.setrlimit(resource.RLIMIT_NOFILE, (min(256, soft), hard))
+    try:
+        videos = ViewVideos(tmp_path, names, fmt)
+        for _ in range(2):
+            for name in names:
+                videos.write(name, planes)
+    finally:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
+    files = sorted(tmp_path.iterdir())
+    assert len(files) == 33 * 33
+    assert {f.read_bytes() for f in files} == {(bytes([7] * 8) + bytes([8, 8, 9, 9])) * 2}
+
+
+def test_a_setup_frame_beside_a_setup_file_is_refused(tmp_path):
+    """``--setup-frame`` with ``--setup``: the set-up is read, not decided, so the frame
+    would be ignored; refused before any frame is read."""
+    from plenocal.convert.errors import ConvertError  # noqa: PLC0415
+    from plenocal.convert.setup import ConverterSetup  # noqa: PLC0415
+    from plenocal.convert.video import convert_recording  # noqa: PLC0415
+    from plenocal.io.raytrix import LensType, RayCalib  # noqa: PLC0415
+
+    clip = tmp_path / "c_64x48_8bit.yuv"
+    clip.write_bytes(bytes(YuvFormat(64, 48, 8).frame_bytes * 2))
+    calib = RayCalib(diameter=10.0, offset=(0.0, 0.0), rotation=0.0, lens_border=1.0,
+                     lens_base_x=(1.0, 0.0), lens_base_y=(0.5, 0.866),
+                     lens_types=(LensType(0, (0.0, 0.0), 1.0, 100.0),), source="c.xml")
+    setup = ConverterSetup(mla="keplerian", tile=6, grid_mode="file", refined=False,
+                           lattice=None, decided_on="x", mla_source="setting",
+                           tile_source="setting", mla_match_scores=None, grid_check={},
+                           warnings=())
+    with pytest.raises(ConvertError, match=r"--setup-frame 1 with --setup: .*give one"):
+        convert_recording(clip, calib, tmp_path / "o", 5, ConvertSettings(), setup=setup,
+                          setup_frame=1)
+    assert not (tmp_path / "o").exists()
+
+
+@needs_real
+def test_a_recording_that_fails_leaves_the_previous_run_as_it_was(tmp_path, monkeypatch):
+    """A rerun into the same folder that stops at its second frame (here: made to fail)
+    leaves every file of the first run as it was, the set-up included, and no staging
+    folder; the same with per-view videos. A negative --setup-frame counts from the end."""
+    import plenocal.convert.video as video_mod  # noqa: PLC0415
+
+    a, b, calib = _frames()
+    clip = _clip(tmp_path, [a, b, a], 8)
+    xml = tmp_path / "calib.xml"
+    write_calib(calib, xml)
+    for fmt in ("png", "yuv"):
+        out = tmp_path / fmt
+        video_mod.convert_recording(clip, calib, out, 3, ConvertSettings(mla="galilean"),
+                                    out_format=fmt, setup_frame=-1)
+        before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+        assert json.loads((out / "convert_setup.json").read_text())["decided_on"].endswith(
+            "[2]")
+        calls = []
+        convert = video_mod.VideoConverter.convert
+
+        def failing(self, image, source, _convert=convert, _calls=calls):
+            _calls.append(source)
+            if len(_calls) == 2:
+                raise RuntimeError("stopped")
+            return _convert(self, image, source)
+
+        monkeypatch.setattr(video_mod.VideoConverter, "convert", failing)
+        with pytest.raises(RuntimeError, match="stopped"):
+            video_mod.convert_recording(clip, calib, out, 3,
+                                        ConvertSettings(mla="keplerian"), out_format=fmt)
+        monkeypatch.undo()
+        after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+        assert after == before, fmt
+        assert not [p for p in out.iterdir() if p.name.startswith(".")], fmt
 
 
 @needs_real

@@ -108,6 +108,17 @@ def test_malformed_files_name_file_and_key(tmp_path: Path, mutate, key):
     assert key in str(exc.value)
 
 
+def test_tspc_corner_file_points_at_the_calibration(tmp_path: Path):
+    """The MPEG TSPC sequences ship two XML files; the corner measurements given as
+    CALIB.xml are refused with the file to pass instead."""
+    p = tmp_path / "Boys2_TSPC_corners_calib.xml"
+    p.write_text('<TSPCCalibData><diameter unit="pix">70</diameter></TSPCCalibData>')
+    with pytest.raises(CalibError, match=r"Boys2_TSPC_corners_calib\.xml: <root>: expected "
+                                         r"<RayCalibData>, found <TSPCCalibData>: this is the "
+                                         r"TSPC tools' corner measurements.*RayCalibData file"):
+        read_calib(p)
+
+
 @pytest.mark.parametrize("text", ["inf", "yes", "2", "1e400", "nan"])
 def test_bad_is_real_names_file_and_key(tmp_path: Path, text: str):
     """Issue 34: <isReal>inf</isReal> gave a bare OverflowError, <isReal>yes</isReal> a

@@ -378,8 +378,27 @@ def write_setup(path: str | Path, setup: ConverterSetup) -> None:
 
 
 def read_setup(path: str | Path) -> ConverterSetup:
+    """The set-up in ``path`` (a convert_setup.json); errors name the file, the key where
+    one is missing or wrong, and the remedy."""
+    remedy = ("pass the convert_setup.json that rule convert_setup or plenocal convert "
+              "wrote, or leave --setup out to decide the set-up on the frame")
     try:
         doc = read_json(path)
     except FileNotFoundError:
         raise ConvertError(f"{path}: no convert_setup.json; run rule convert_setup") from None
-    return ConverterSetup.from_dict(doc, source=str(path))
+    except ValueError as exc:  # not JSON, or not text (UnicodeDecodeError is a ValueError)
+        raise ConvertError(f"{path}: not a convert_setup.json (not JSON: {exc}); {remedy}"
+                           ) from None
+    if not isinstance(doc, dict):
+        raise ConvertError(f"{path}: not a convert_setup.json (a JSON "
+                           f"{type(doc).__name__}, not an object); {remedy}")
+    try:
+        return ConverterSetup.from_dict(doc, source=str(path))
+    except KeyError as exc:
+        raise ConvertError(f"{path}: convert_setup.json without its key {exc.args[0]!r}; "
+                           f"{remedy}") from None
+    except (TypeError, ValueError, AttributeError) as exc:
+        if str(path) in str(exc):  # its own checks (format, version, warnings) name the file
+            raise
+        raise ConvertError(f"{path}: a value in convert_setup.json is not of its kind ({exc}); "
+                           f"{remedy}") from None

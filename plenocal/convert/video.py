@@ -54,7 +54,7 @@ from plenocal.convert.shot import ConvertSettings, ShotConversion, frame_gray
 from plenocal.convert.threads import map_threads
 from plenocal.convert.vignetting import lens_type_profiles
 from plenocal.grid import MicrolensGrid
-from plenocal.io.files import write_images, write_json
+from plenocal.io.files import staged_outputs, write_images, write_json
 from plenocal.io.raytrix import RayCalib
 from plenocal.io.yuv import (
     DEFAULT_MATRIX,
@@ -332,32 +332,28 @@ def parse_frames(text: str | None, count: int, source: str = "--frames") -> rang
         raise ConvertError(f"{source} {text!r}: expected A:B (Python slice, end excluded), "
                            "A:B:STEP or one frame number") from None
     if len(chosen) == 0:
-        raise ConvertError(f"{source} {text!r}: no frame of the {count} in the file")
+        raise ConvertError(f"{source} {text!r}: selects none of the file's {count} frames "
+                           f"(0..{count - 1}; A:B is A up to B, B excluded, so B must come "
+                           "after A)")
     return chosen
 
 
 class ViewVideos:
-    """One YUV 4:2:0 file per view in ``folder`` (:func:`plenocal.io.yuv.mpeg_name`),
-    written as ``.part`` files and renamed when :meth:`close` is called after the last
-    frame (a run that fails leaves no file that looks complete)."""
+    """One YUV 4:2:0 file per view in ``folder`` (:func:`plenocal.io.yuv.mpeg_name`), each
+    frame appended by opening the view's file for that write alone: any number of views
+    within the system's limit on open files (1,024 by default on Linux, where 33 x 33 views
+    held open at once failed). :func:`convert_recording` writes them in a staging folder
+    (:func:`plenocal.io.files.staged_outputs`), so a failed run leaves none behind."""
 
     def __init__(self, folder: Path, names: list[str], fmt: YuvFormat) -> None:
         self.fmt = fmt
         self.paths = {n: folder / mpeg_name(f"v_{n}", fmt) for n in names}
-        self._files = {n: open(p.with_name(p.name + ".part"), "wb")  # noqa: SIM115
-                       for n, p in self.paths.items()}
+        for path in self.paths.values():
+            path.write_bytes(b"")  # every view's file, empty, before the first frame
 
     def write(self, name: str, planes: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
-        write_frame(self._files[name], planes, self.fmt)
-
-    def close(self, complete: bool = True) -> None:
-        for n, fh in self._files.items():
-            fh.close()
-            part = self.paths[n].with_name(self.paths[n].name + ".part")
-            if complete:
-                part.replace(self.paths[n])
-            else:
-                part.unlink(missing_ok=True)
+        with open(self.paths[name], "ab") as fh:
+            write_frame(fh, planes, self.fmt)
 
 
 def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_views: int,
@@ -372,7 +368,10 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
     (``v_<r>_<c>_<W>x<H>_<b>bit_<pix_fmt>.yuv``), or ``png``, a folder ``frame_<k>`` per frame
     (``k``: the frame's index in the file, 5 digits) with the views and ``disparity.json``.
     The set-up (``setup``, or decided on frame ``setup_frame``, default the first converted
-    one) is written to ``out/convert_setup.json``, what was done to ``out/video.json``.
+    one; negative: from the end) is written to ``out/convert_setup.json``, what was done to
+    ``out/video.json``. All of it is made in a staging folder inside ``out`` and moved into
+    place at the end, video.json last (:func:`plenocal.io.files.staged_outputs`): a run
+    that fails leaves ``out`` as it was.
     Progress per frame on the ``plenocal.convert`` logger; ``threads``: the views of a frame
     are rendered on that many threads (the same bytes with any number). Returns the
     video.json record."""
@@ -388,11 +387,16 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
     count = frame_count(path, fmt)
     chosen = parse_frames(frames, count)
     log.info("%s: %s", path.name, _depth_note(fmt.bits))
+    if setup is not None and setup_frame is not None:
+        raise ConvertError(f"--setup-frame {setup_frame} with --setup: the set-up is read from "
+                           "the file, not decided on a frame; give one of the two")
     conv = VideoConverter(calib, n_views, settings, video, setup, grid_foreign, threads)
     if setup is None:
         k = chosen[0] if setup_frame is None else setup_frame
-        if not 0 <= k < count:
-            raise ConvertError(f"--setup-frame {k}: the file holds frames 0..{count - 1}")
+        if not -count <= k < count:
+            raise ConvertError(f"--setup-frame {k}: the file holds frames 0..{count - 1} "
+                               "(negative numbers count from the end, as in --frames)")
+        k %= count
         t0 = time.perf_counter()
         conv.decide(lenslet_frame(read_frame(path, fmt, k), fmt.bits, video.matrix,
                                   video.range), f"{path.name}[{k}]")
@@ -403,6 +407,18 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
     if conv.setup.border_cut.any:
         log.info("%s: %s", path.name, conv.setup.border_cut.summary())
     out.mkdir(parents=True, exist_ok=True)
+    # everything is made in a staging folder and moved into ``out`` at the end, video.json
+    # last: a run that fails or is stopped leaves the previous run's files as they were
+    with staged_outputs(out, last=("video.json",)) as stage:
+        return _convert_frames(path, fmt, count, chosen, conv, stage, n_views, video,
+                               out_format, threads)
+
+
+def _convert_frames(path: Path, fmt: YuvFormat, count: int, chosen: range,
+                    conv: VideoConverter, out: Path, n_views: int, video: VideoSettings,
+                    out_format: str, threads: int) -> dict:
+    """:func:`convert_recording`'s frames, written to ``out`` (its staging folder)."""
+    assert conv.setup is not None
     write_setup(out / "convert_setup.json", conv.setup)
     names = view_names(n_views)
     writer: ViewVideos | None = None
@@ -429,7 +445,7 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
                                    f"video's are {view_fmt.width}x{view_fmt.height}")
             folder = out / f"frame_{k:05d}"
             if out_format == "png":
-                folder.mkdir(exist_ok=True)
+                folder.mkdir()
             # views in groups within the converter's memory budget: 16-bit for YUV videos
             # of more than 8 bits (rounded again to the input's depth there), 8-bit for
             # PNGs and for 8-bit videos, whose frames are 8-bit RGB (lenslet_frame): twice
@@ -464,14 +480,8 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
                      "" if conv.held_share is None
                      else f", {100 * conv.held_share:.0f}% held from the previous frame",
                      rec["seconds"])
-    except BaseException:
-        if writer is not None:
-            writer.close(complete=False)
-        raise
     finally:
         slots.close()
-    if writer is not None:
-        writer.close()
     assert view_fmt is not None
     doc = {"format": "plenocal.video", "version": 1, "input": str(path),
            "input_format": {"width": fmt.width, "height": fmt.height, "bits": fmt.bits,

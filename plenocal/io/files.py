@@ -13,7 +13,8 @@ import io
 import json
 import os
 import tempfile
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -94,6 +95,38 @@ def atomic_write_dir(folder: str | Path, write: Callable[[Path], None]) -> None:
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+#: the prefix of :func:`staged_outputs`' temporary folder inside the output folder
+STAGE_PREFIX = ".staged."
+
+
+@contextmanager
+def staged_outputs(folder: str | Path, last: Sequence[str] = ()) -> Iterator[Path]:
+    """A run's outputs made in a temporary folder inside ``folder`` (the block writes to
+    the path it is given) and moved into ``folder`` when the block ends without an error,
+    each file or folder replacing its namesake there, those named in ``last`` after the
+    others (the run's record, which says the rest is there). On an error the temporary
+    folder is removed and ``folder`` keeps what it held: a rerun that fails neither leaves
+    half its outputs nor mixes them with the previous run's. A killed run's temporary
+    folder is removed by the next one (:func:`make_temp_dir`). The moves are renames in
+    one file system: no copy, no extra space."""
+    import shutil  # noqa: PLC0415
+
+    folder = Path(folder)
+    stage = make_temp_dir(folder, STAGE_PREFIX)
+    try:
+        yield stage
+        names = sorted(p.name for p in stage.iterdir())
+        for name in [n for n in names if n not in last] + [n for n in last if n in names]:
+            src, dst = stage / name, folder / name
+            if dst.is_dir() and not dst.is_symlink():
+                shutil.rmtree(dst)
+            elif src.is_dir() and (dst.exists() or dst.is_symlink()):
+                dst.unlink()
+            os.replace(src, dst)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:

@@ -125,7 +125,10 @@ def parse_calib(text: str | bytes, source: str = "<string>") -> RayCalib:
     except SafeET.ParseError as exc:
         raise _err(source, "<document>", f"malformed XML: {exc}") from None
     if root.tag != "RayCalibData":
-        raise _err(source, "<root>", f"expected <RayCalibData>, found <{root.tag}>")
+        hint = (": this is the TSPC tools' corner measurements, not the camera's calibration; "
+                "pass the sequence's RayCalibData file (e.g. Boys2.xml beside "
+                "Boys2_TSPC_corners_calib.xml)" if root.tag == "TSPCCalibData" else "")
+        raise _err(source, "<root>", f"expected <RayCalibData>, found <{root.tag}>{hint}")
 
     diameter = _number(root, "diameter", source)
     assert diameter is not None

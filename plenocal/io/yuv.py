@@ -105,6 +105,12 @@ def resolve_format(path: str | Path, size: tuple[int, int] | None = None,
     whole number of frames of that format."""
     path = Path(path)
     named_size, named_bits = parse_name(path)
+    if size is not None and named_size is not None and tuple(size) != named_size:
+        raise YuvError(f"{path}: its name states {named_size[0]}x{named_size[1]}, --size says "
+                       f"{size[0]}x{size[1]}: leave --size out, or rename the file")
+    if bits is not None and named_bits is not None and bits != named_bits:
+        raise YuvError(f"{path}: its name states {named_bits} bits, --bit-depth says {bits}: "
+                       "leave --bit-depth out, or rename the file")
     size = size or named_size
     bits = bits or named_bits
     missing = [what for what, v in (("size (--size WxH)", size), ("bit depth (--bit-depth 8 "
@@ -117,10 +123,20 @@ def resolve_format(path: str | Path, size: tuple[int, int] | None = None,
     fmt = YuvFormat(int(size[0]), int(size[1]), int(bits))  # type: ignore[index]
     nbytes = path.stat().st_size
     if nbytes == 0 or nbytes % fmt.frame_bytes:
+        odd = ""
+        if fmt.width % 2 or fmt.height % 2:
+            ceil_bytes = (fmt.width * fmt.height + 2 * (-(-fmt.width // 2)) * (-(-fmt.height // 2))
+                          ) * fmt.dtype.itemsize
+            if nbytes and nbytes % ceil_bytes == 0:
+                odd = (f" It is a whole number ({nbytes // ceil_bytes}) of frames whose chroma "
+                       "planes are rounded up, as FFmpeg writes odd sizes; this reader takes "
+                       "RVS's layout (rounded down): crop the video to an even size first "
+                       "(e.g. ffmpeg -vf crop=trunc(iw/2)*2:trunc(ih/2)*2).")
         raise YuvError(f"{path}: {nbytes} bytes is not a whole number of {fmt.width}x"
                        f"{fmt.height} {fmt.bits}-bit YUV 4:2:0 frames ({fmt.frame_bytes} bytes "
                        f"each, {nbytes / fmt.frame_bytes:.3f} frames): wrong size or bit depth? "
-                       "Check --size and --bit-depth (or the WxH and bit depth in the name)")
+                       "Check --size and --bit-depth (or the WxH and bit depth in the name)."
+                       + odd)
     return fmt
 
 
@@ -138,10 +154,32 @@ def read_frame(path: str | Path, fmt: YuvFormat, index: int
         fh.seek(index * fmt.frame_bytes)
         data = fh.read(fmt.frame_bytes)
     a = np.frombuffer(data, dtype=fmt.dtype).astype(fmt.dtype.newbyteorder("="), copy=False)
+    check_depth(path, fmt, index, a)
     cw, ch = fmt.chroma_size
     ny, nc = fmt.width * fmt.height, cw * ch
     return (a[:ny].reshape(fmt.height, fmt.width), a[ny:ny + nc].reshape(ch, cw),
             a[ny + nc:].reshape(ch, cw))
+
+
+def check_depth(path: str | Path, fmt: YuvFormat, index: int, samples: np.ndarray) -> None:
+    """Raise :class:`YuvError` where frame ``index``'s ``samples`` (the whole frame as
+    read) cannot be of ``fmt``'s bit depth: 9-15-bit samples at or over ``2^bits`` (8-bit
+    data, or big-endian words, read as ``yuv420p<b>le``), or an 8-bit frame whose every
+    second luma byte is at most 3 while others are not (little-endian 10-16-bit words read
+    as bytes: no picture's luma is that dark in every other column)."""
+    if 8 < fmt.bits < 16:
+        top = int(samples.max())
+        if top >= 1 << fmt.bits:
+            raise YuvError(f"{path}: frame {index} holds samples up to {top}, which do not fit "
+                           f"{fmt.bits} bits: is the file 8-bit, or big-endian? Check "
+                           "--bit-depth (or the bit depth in the name)")
+    elif fmt.bits == 8:
+        luma = samples[:fmt.width * fmt.height]
+        high, low = luma[1::2], luma[0::2]
+        if high.size and int(high.max()) <= 3 < int(low.max()):
+            raise YuvError(f"{path}: frame {index} reads as 16-bit little-endian words (every "
+                           "second byte is 0..3), not as 8-bit samples: is the file 10-bit? "
+                           "Check --bit-depth (or the bit depth in the name)")
 
 
 def write_frame(fh: BinaryIO, planes: tuple[np.ndarray, np.ndarray, np.ndarray],
