@@ -231,7 +231,9 @@ def _reason(error: jsonschema.ValidationError) -> str:
     if v in ("minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum"):
         word = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=",
                 "exclusiveMaximum": "<"}[v]
-        why = error.schema.get("x-why") if isinstance(error.schema, dict) else None
+        # x-why: the reason for the lower bound (views: N >= 3), not for an upper one
+        why = (error.schema.get("x-why") if isinstance(error.schema, dict)
+               and v in ("minimum", "exclusiveMinimum") else None)
         return f"must be {word} {error.validator_value}" + (f": {why}" if why else "")
     if v == "enum":
         return f"must be one of {', '.join(map(str, error.validator_value))}"

@@ -8,7 +8,13 @@ from pathlib import Path
 
 from plenocal.config import ConfigError, canonicalize, validate_config
 from plenocal.calib.reg_b.datasheet import DatasheetError, load_datasheet
-from plenocal.io.lenslet import CaptureError, VideoShot, scan_lenslet_folder
+from plenocal.io.lenslet import (
+    CaptureError,
+    VideoShot,
+    check_capture,
+    scan_lenslet_folder,
+)
+from plenocal.io.raytrix import CalibError, read_calib
 from plenocal import job_memory, names
 from plenocal.artifacts import tracks as tracks_artifact
 from plenocal.names import central_view, view_names
@@ -130,9 +136,9 @@ def lenslet_image(dataset, cam):
 
 
 def check_real_dataset(dataset):
-    """A real capture's files, checked before any job: the lenslet folder (and its
-    recordings against config datasets.<d>.video), calib.xml, and camera.yaml against its
-    schema (plenocal.calib.reg_b.datasheet), which gives the size of a recording's
+    """A real capture's files, checked before any job: the lenslet folder (its shots, and
+    its recordings against config datasets.<d>.video), calib.xml (parsed), and camera.yaml
+    against its schema (plenocal.calib.reg_b.datasheet), which gives the size of a recording's
     frames."""
     _scan_lenslet(dataset)
     calib = Path("data") / dataset / "calib.xml"
@@ -141,12 +147,21 @@ def check_real_dataset(dataset):
             f"dataset {dataset!r}: {calib} does not exist; put the capture's Raytrix "
             "RayCalibData file there (README, 'Bringing a real capture')"
         )
+    try:  # a few kB: a malformed or foreign file stops here, not in the first job
+        read_calib(calib)
+    except CalibError as err:
+        raise ValueError(f"dataset {dataset!r}: {err}") from None
     try:
         sheet = load_datasheet(Path("data") / dataset / "camera.yaml")
     except (DatasheetError, FileNotFoundError) as err:
         raise ValueError(f"dataset {dataset!r}: {err}") from None
     sensor = (sheet["sensor_width_px"], sheet["sensor_height_px"])
-    _LENSLET_SOURCES[dataset] = _scan_lenslet(dataset, sensor)
+    sources = _scan_lenslet(dataset, sensor)
+    try:
+        check_capture(sources, dataset, Path("data") / dataset / "lenslet", sensor)
+    except CaptureError as err:
+        raise ValueError(str(err)) from None
+    _LENSLET_SOURCES[dataset] = sources
 
 
 for _d in DATASETS:

@@ -64,6 +64,16 @@ def test_bad_values_name_key_and_reason(path, value, key, why):
     assert key in msg and why in msg, msg
 
 
+def test_an_upper_bound_does_not_give_the_lower_ones_reason():
+    """``views: 21`` said "must be <= 15: one view per shot has no baseline ...", the
+    reason for the minimum."""
+    c = _cfg()
+    c["datasets"]["synthetic"]["views"] = 21
+    with pytest.raises(ConfigError) as exc:
+        validate_config(c)
+    assert str(exc.value).endswith("datasets.synthetic.views = 21: must be <= 15")
+
+
 @pytest.mark.parametrize("path, value", [
     # issue 34: the probes that ran (NaN: every comparison is false, so no range refused it)
     (("datasets", "synthetic", "simulate", "array", "step_m"), math.nan),

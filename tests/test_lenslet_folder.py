@@ -15,7 +15,9 @@ from plenocal.convert.video import lenslet_frame
 from plenocal.io.lenslet import (
     CaptureError,
     VideoShot,
+    check_capture,
     extract_frame,
+    png_size,
     scan_lenslet_folder,
     video_shot_from_params,
 )
@@ -179,3 +181,55 @@ def test_no_video_block_for_a_synthetic_dataset():
 def test_colour_defaults_are_the_command_lines():
     video = video_block(frame=0)
     assert (video["matrix"], video["range"]) == (DEFAULT_MATRIX, DEFAULT_RANGE)
+
+
+def _pngs(d: Path, names: list[str], size=(W, H)) -> dict:
+    """Real PNG headers (blank images of ``size``) for ``names``: {shot: path}."""
+    from plenocal.io.files import write_image  # noqa: PLC0415
+
+    d.mkdir(exist_ok=True)
+    for n in names:
+        write_image(d / f"{n}.png", np.zeros((size[1], size[0]), np.uint8))
+    return {n: d / f"{n}.png" for n in names}
+
+
+def test_a_capture_needs_the_whole_grid_and_hand_held_shots(tmp_path: Path):
+    """The array's layout is read from the shots' numbers: a grid with a hole, or one
+    numbered from 1, would make the synthesis experiments name shots that do not exist
+    (Snakemake's MissingInputException, naming none of them); no array shot gave an
+    IndexError, no hand-held shot was refused only by registration A after every
+    conversion. Each is now refused before any job, naming what is missing."""
+    d = tmp_path / "lenslet"
+    grid = ["x00_y00", "x01_y00", "x00_y01", "x01_y01"]
+    check_capture(_pngs(d, [*grid, "hand00"]), "d", d, (W, H))
+    cases = [
+        (["x01_y01", "x02_y01", "x01_y02", "x02_y02", "hand00"],
+         r"do not fill a 3 x 3 grid from x00_y00: x00_y00, x01_y00, x02_y00, x00_y01, "
+         r"x00_y02 missing\. Number the columns and rows from 00"),
+        (["x00_y00", "x01_y00", "x00_y01", "hand00"], r"2 x 2 grid from x00_y00: x01_y01 missing"),
+        (["hand00", "hand01"], r"holds no array shot"),
+        (grid, r"holds no hand-held shot \(hand00\.png, \.\.\.\): registration A"),
+    ]
+    for k, (names, why) in enumerate(cases):
+        dk = tmp_path / f"case{k}"
+        with pytest.raises(CaptureError, match=rf"dataset 'd': .*{why}"):
+            check_capture(_pngs(dk, names), "d", dk, (W, H))
+
+
+def test_each_png_is_read_as_far_as_its_header(tmp_path: Path):
+    """An empty or mislabelled PNG, and a PNG of another size than camera.yaml's sensor,
+    are named before any job (the conversion found them, one job later, after other
+    shots' work)."""
+    d = tmp_path / "lenslet"
+    shots = _pngs(d, ["x00_y00", "hand00"])
+    assert png_size(shots["x00_y00"]) == (W, H)
+    check_capture(shots, "d", d, (W, H))
+    with pytest.raises(CaptureError, match=r"x00_y00\.png: the image is 24x16 pixels but "
+                                           r"camera\.yaml says the sensor is 30x16.*crop"):
+        check_capture(shots, "d", d, (30, H))
+    shots["hand00"].write_bytes(b"")
+    with pytest.raises(CaptureError, match=r"hand00\.png: not a PNG image"):
+        check_capture(shots, "d", d, (W, H))
+    shots["hand00"].write_bytes(b"\xff\xd8\xff\xe0" + bytes(40))  # a JPEG renamed
+    with pytest.raises(CaptureError, match=r"hand00\.png: not a PNG image"):
+        check_capture(shots, "d", d, (W, H))

@@ -156,6 +156,20 @@ def test_bad_input_stops_before_any_job(real_run: Path, tmp_path: Path):
     out, _ = _bad(real_run, tmp_path / "e", digits)
     assert "move or rename x\u0660\u0660_y\u0660\u0660.png" in out, out[-2000:]
 
+    # a corner shot missing: Snakemake's MissingInputException for depth_view named none
+    def corner(d: Path):
+        (d / "lenslet" / "x00_y00.png").unlink()
+
+    out, _ = _bad(real_run, tmp_path / "f", corner)
+    assert "grid from x00_y00: x00_y00 missing" in out, out[-2000:]
+
+    # a calib.xml cut short: found by the first job before, as a traceback
+    def calib(d: Path):
+        (d / "calib.xml").write_text((d / "calib.xml").read_text()[:200])
+
+    out, _ = _bad(real_run, tmp_path / "g", calib)
+    assert "calib.xml: <document>: malformed XML" in out, out[-2000:]
+
 
 # --- shots given as videos (README, "Bringing a real capture") ------------------------
 

@@ -192,7 +192,9 @@ def load_lenslet(path: str | Path, sensor_size: tuple[int, int] | None = None) -
     if sensor_size is not None and (img.shape[1], img.shape[0]) != tuple(sensor_size):
         raise ConvertError(f"{path}: image is {img.shape[1]}x{img.shape[0]} pixels but "
                            f"camera.yaml says the sensor is {sensor_size[0]}x{sensor_size[1]}; "
-                           "the image must be the full, uncropped sensor readout")
+                           "every shot is one sensor readout of that size (for a crop, give "
+                           "camera.yaml's sensor_width_px / sensor_height_px the crop's size "
+                           "and calib.xml its offset moved with the crop)")
     return img
 
 

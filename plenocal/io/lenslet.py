@@ -14,8 +14,9 @@ from the file's name (MPEG style, :func:`plenocal.io.yuv.parse_name`) or from
 
 :func:`scan_lenslet_folder` reads the folder and checks it before any job (file names,
 one file a shot, the recordings' sizes, the frame index, the frame's size against the
-datasheet's sensor), stat only: a :class:`CaptureError` names the file, the config key
-and the remedy.
+datasheet's sensor), stat only; :func:`check_capture` then what the workflow needs of the
+shots (the array's grid, the hand-held shots, each PNG's header and size), from their
+first bytes: a :class:`CaptureError` names the file, the config key and the remedy.
 """
 
 from __future__ import annotations
@@ -146,6 +147,73 @@ def _frame_index(shot: str, path: Path, video: dict, key: str, shots: list[str])
                 f"every shot given as a video ({', '.join(shots)}), or one number for all")
         return int(frame[shot])
     return int(frame)
+
+
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def png_size(path: str | Path) -> tuple[int, int]:
+    """(width, height) of a PNG from its IHDR chunk (the file's first 24 bytes), without
+    decoding it. Raises :class:`CaptureError` naming the file where it is no PNG (an
+    empty file, a copy cut short, another format named .png)."""
+    with open(path, "rb") as fh:
+        head = fh.read(24)
+    if len(head) < 24 or head[:8] != _PNG_SIGNATURE or head[12:16] != b"IHDR":
+        raise CaptureError(f"{path}: not a PNG image (its first bytes are not a PNG's "
+                           "signature and header; an empty file, a copy cut short, or another "
+                           "format renamed): put the lenslet image there as a PNG")
+    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+
+
+def check_capture_shots(shots: list[str], dataset: str, folder: str | Path) -> None:
+    """The shots a capture needs (before any job runs): array shots ``x<col>_y<row>``
+    forming the whole grid from ``x00_y00`` (the array's layout is read from their numbers:
+    the synthesis experiments take its corners and middle shot, and the rig its columns
+    and rows), and hand-held shots, without which registration A cannot fix the focal
+    length (Section II-B). Raises :class:`CaptureError` naming what is missing."""
+    folder = Path(folder)
+    pos = {names.array_position(s) for s in shots if names.is_array_shot(s)}
+    if not pos:
+        raise CaptureError(
+            f"dataset {dataset!r}: {folder}/ holds no array shot: name the array's lenslet "
+            "images x<col>_y<row>.png from x00_y00 (README, 'Bringing a real capture')")
+    cols = max(c for c, _ in pos) + 1
+    rows = max(r for _, r in pos) + 1
+    missing = [names.array_shot(c, r) for r in range(rows) for c in range(cols)
+               if (c, r) not in pos]
+    if missing:
+        shown = ", ".join(missing[:8]) + (f" and {len(missing) - 8} more"
+                                          if len(missing) > 8 else "")
+        raise CaptureError(
+            f"dataset {dataset!r}: the array shots in {folder}/ do not fill a {cols} x {rows} "
+            f"grid from x00_y00: {shown} missing. Number the columns and rows from 00 "
+            "without gaps (x<col>_y<row>: the array's layout is read from the numbers)")
+    if not any(names.is_handheld_shot(s) for s in shots):
+        raise CaptureError(
+            f"dataset {dataset!r}: {folder}/ holds no hand-held shot (hand00.png, ...): "
+            "registration A needs a few shots taken by hand with rotations of several "
+            "degrees, as with the parallel array alone the focal length trades off against "
+            "depth (Section II-B of the paper; README, 'Bringing a real capture')")
+
+
+def check_capture(sources: dict[str, Path | VideoShot], dataset: str, folder: str | Path,
+                  sensor_size: tuple[int, int]) -> None:
+    """What the workflow needs of a capture's shots (:func:`scan_lenslet_folder`'s
+    ``sources``), checked before any job: the shots (:func:`check_capture_shots`), and
+    every PNG a PNG (its header read) of camera.yaml's sensor size ``(width, height)``, as
+    the recordings' frames are. Raises :class:`CaptureError` naming the file."""
+    check_capture_shots(list(sources), dataset, folder)
+    for path in sources.values():
+        if isinstance(path, VideoShot):
+            continue
+        size = png_size(path)
+        if size != tuple(sensor_size):
+            raise CaptureError(
+                f"{path}: the image is {size[0]}x{size[1]} pixels but camera.yaml says the "
+                f"sensor is {sensor_size[0]}x{sensor_size[1]}: every shot is one sensor "
+                "readout of that size (for a crop, give camera.yaml's sensor_width_px / "
+                "sensor_height_px the crop's size and calib.xml its offset moved with the "
+                "crop)")
 
 
 def scan_lenslet_folder(folder: str | Path, dataset: str, video: dict | None,
