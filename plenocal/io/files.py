@@ -110,7 +110,8 @@ def staged_outputs(folder: str | Path, last: Sequence[str] = ()) -> Iterator[Pat
     folder is removed and ``folder`` keeps what it held: a rerun that fails neither leaves
     half its outputs nor mixes them with the previous run's. A killed run's temporary
     folder is removed by the next one (:func:`make_temp_dir`). The moves are renames in
-    one file system: no copy, no extra space."""
+    one file system, no copies; until they are made the previous outputs and the new ones
+    take space side by side."""
     import shutil  # noqa: PLC0415
 
     folder = Path(folder)
