@@ -70,6 +70,7 @@ from plenocal.convert.threads import Inline, opencv_threads, run_all
 from plenocal.convert.vignetting import lens_type_profiles
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_image
+from plenocal.io.lenslet import sensor_mismatch
 from plenocal.io.raytrix import CalibError, RayCalib, read_calib
 from plenocal.names import parse_view, view_names
 from plenocal.optics import view_spacing
@@ -190,11 +191,7 @@ def load_lenslet(path: str | Path, sensor_size: tuple[int, int] | None = None) -
         raise ConvertError(f"{path}: not a usable lenslet image (shape {img.shape}, "
                            f"{img.dtype}); need an 8- or 16-bit grey or RGB PNG")
     if sensor_size is not None and (img.shape[1], img.shape[0]) != tuple(sensor_size):
-        raise ConvertError(f"{path}: image is {img.shape[1]}x{img.shape[0]} pixels but "
-                           f"camera.yaml says the sensor is {sensor_size[0]}x{sensor_size[1]}; "
-                           "every shot is one sensor readout of that size (for a crop, give "
-                           "camera.yaml's sensor_width_px / sensor_height_px the crop's size "
-                           "and calib.xml its offset moved with the crop)")
+        raise ConvertError(sensor_mismatch(path, (img.shape[1], img.shape[0]), sensor_size))
     return img
 
 

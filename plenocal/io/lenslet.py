@@ -151,6 +151,24 @@ def _frame_index(shot: str, path: Path, video: dict, key: str, shots: list[str])
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
+#: why a capture needs hand-held shots, said by the workflow's check before any job
+#: (:func:`check_capture_shots`) and by registration A
+#: (:func:`plenocal.calib.reg_a.sfm.check_shots`)
+HANDHELD_WHY = ("the focal length is undetermined - it trades off against depth at a tiny "
+                "reprojection error (Section II-B of the paper). Add a few shots taken by "
+                "hand with rotations of several degrees")
+
+
+def sensor_mismatch(path: str | Path, size: tuple[int, int],
+                    sensor_size: tuple[int, int]) -> str:
+    """The message for a shot of ``size`` (width, height) where camera.yaml's sensor is
+    ``sensor_size``: said before any job (:func:`check_capture`) and by the conversion
+    (:func:`plenocal.convert.shot.load_lenslet`)."""
+    return (f"{path}: the image is {size[0]}x{size[1]} pixels but camera.yaml says the "
+            f"sensor is {sensor_size[0]}x{sensor_size[1]}: every shot is one sensor readout "
+            "of that size (for a crop, give camera.yaml's sensor_width_px / sensor_height_px "
+            "the crop's size and calib.xml its offset moved with the crop)")
+
 
 def png_size(path: str | Path) -> tuple[int, int]:
     """(width, height) of a PNG from its IHDR chunk (the file's first 24 bytes), without
@@ -191,9 +209,8 @@ def check_capture_shots(shots: list[str], dataset: str, folder: str | Path) -> N
     if not any(names.is_handheld_shot(s) for s in shots):
         raise CaptureError(
             f"dataset {dataset!r}: {folder}/ holds no hand-held shot (hand00.png, ...): "
-            "registration A needs a few shots taken by hand with rotations of several "
-            "degrees, as with the parallel array alone the focal length trades off against "
-            "depth (Section II-B of the paper; README, 'Bringing a real capture')")
+            f"registration A needs them, as with the parallel array alone {HANDHELD_WHY} "
+            "(README, 'Bringing a real capture')")
 
 
 def check_capture(sources: dict[str, Path | VideoShot], dataset: str, folder: str | Path,
@@ -208,12 +225,7 @@ def check_capture(sources: dict[str, Path | VideoShot], dataset: str, folder: st
             continue
         size = png_size(path)
         if size != tuple(sensor_size):
-            raise CaptureError(
-                f"{path}: the image is {size[0]}x{size[1]} pixels but camera.yaml says the "
-                f"sensor is {sensor_size[0]}x{sensor_size[1]}: every shot is one sensor "
-                "readout of that size (for a crop, give camera.yaml's sensor_width_px / "
-                "sensor_height_px the crop's size and calib.xml its offset moved with the "
-                "crop)")
+            raise CaptureError(sensor_mismatch(path, size, sensor_size))
 
 
 def scan_lenslet_folder(folder: str | Path, dataset: str, video: dict | None,

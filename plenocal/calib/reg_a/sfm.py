@@ -36,6 +36,7 @@ from plenocal.artifacts.stage_warnings import WARNINGS_KEY, warning_list
 from plenocal.calib.reg_a import colmap as cm
 from plenocal.calib.reg_a.uncertainty import reconstruction_focal_std_px
 from plenocal.io.files import atomic_write_dir, make_temp_dir
+from plenocal.io.lenslet import HANDHELD_WHY
 from plenocal.names import is_handheld_shot
 
 log = logging.getLogger(__name__)
@@ -52,9 +53,7 @@ def check_shots(cams: list[str]) -> None:
     if not hand:
         raise RegistrationError(
             "registration A needs hand-held shots (hand00.png, ...): with the parallel "
-            f"array alone ({len(array)} shots) the focal length is undetermined - it trades "
-            "off against depth at a tiny reprojection error (Section II-B of the paper). "
-            "Add a few shots taken by hand with rotations of several degrees.")
+            f"array alone ({len(array)} shots) {HANDHELD_WHY}.")
     if len(cams) < 3:
         raise RegistrationError(f"registration A needs at least 3 shots, got {cams}")
 
