@@ -189,12 +189,14 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--setup-frame", type=int, default=None, metavar="K",
                    help="the frame (index in the file) the set-up is decided on. Default: "
                         "the first converted frame")
-    v.add_argument("--yuv-matrix", choices=tuple(MATRICES), default=DEFAULT_MATRIX,
-                   help="YCbCr colour matrix of the input and the output (default "
-                        "%(default)s, MPEG's usual for these sequences)")
-    v.add_argument("--yuv-range", choices=RANGES, default=DEFAULT_RANGE,
-                   help="YCbCr range: limited (16-235 luma at 8 bit; the default) or full")
-    v.add_argument("--temporal", choices=TEMPORAL_MODES, default="hold",
+    # these three default to None so that one given with a PNG is refused, not ignored
+    v.add_argument("--yuv-matrix", choices=tuple(MATRICES), default=None,
+                   help=f"YCbCr colour matrix of the input and the output (default "
+                        f"{DEFAULT_MATRIX}, MPEG's usual for these sequences)")
+    v.add_argument("--yuv-range", choices=RANGES, default=None,
+                   help=f"YCbCr range: limited (16-235 luma at 8 bit) or full (default "
+                        f"{DEFAULT_RANGE})")
+    v.add_argument("--temporal", choices=TEMPORAL_MODES, default=None,
                    help="hold (default): a lens keeps the previous frame's patch size where "
                         "it still matches nearly as well (no flicker on static scenes); "
                         "off: every frame converted alone, as its PNG")
@@ -302,7 +304,10 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     video = Path(args.lenslet).suffix.lower() == ".yuv"
     if not video:
         given = [flag for flag, value in (("--size", args.size), ("--frames", args.frames),
-                                          ("--setup-frame", args.setup_frame))
+                                          ("--setup-frame", args.setup_frame),
+                                          ("--yuv-matrix", args.yuv_matrix),
+                                          ("--yuv-range", args.yuv_range),
+                                          ("--temporal", args.temporal))
                  if value is not None] + (["--format yuv"] if args.out_format == "yuv" else [])
         if given:
             raise ConvertError(f"{' and '.join(given)}: for a raw YUV recording (LENSLET "
@@ -404,7 +409,9 @@ def run_convert_video(args: argparse.Namespace, settings, block: dict,
     doc = convert_recording(
         args.lenslet, load_calib(args.calib), args.out, args.views,
         dataclasses.replace(settings, bit_depth="auto"),
-        VideoSettings(matrix=args.yuv_matrix, range=args.yuv_range, temporal=args.temporal),
+        VideoSettings(**{key: value for key, value in (
+            ("matrix", args.yuv_matrix), ("range", args.yuv_range),
+            ("temporal", args.temporal)) if value is not None}),
         size=args.size, bits=bits, frames=args.frames, out_format=args.out_format,
         setup_frame=args.setup_frame,
         setup=None if args.setup is None else read_setup(args.setup),

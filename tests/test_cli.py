@@ -223,8 +223,9 @@ def test_output_folder_that_cannot_be_written_fails_before_the_work(tmp_path, sh
 
 
 def test_recording_options_on_one_image_are_refused(tmp_path, shot):
-    """``--size``, ``--frames``, ``--setup-frame`` and ``--format yuv`` are for a raw YUV
-    recording: on a PNG they would be ignored, so they stop the command instead."""
+    """``--size``, ``--frames``, ``--setup-frame``, ``--format yuv``, ``--yuv-matrix``,
+    ``--yuv-range`` and ``--temporal`` are for a raw YUV recording: on a PNG they would be
+    ignored, so they stop the command instead."""
     lenslet, calib = shot
     out = tmp_path / "o"
     r = _cli("convert", str(lenslet), str(calib), "-o", str(out), "--frames", "0:2",
@@ -235,6 +236,10 @@ def test_recording_options_on_one_image_are_refused(tmp_path, shot):
     r = _cli("convert", str(lenslet), str(calib), "-o", str(out), "--size", "480x400",
              "--setup-frame", "0")
     assert r.returncode == 2 and "--size and --setup-frame" in r.stderr
+    r = _cli("convert", str(lenslet), str(calib), "-o", str(out), "--yuv-matrix", "bt709",
+             "--yuv-range", "full", "--temporal", "off")
+    assert r.returncode == 2 and not out.exists()
+    assert "--yuv-matrix and --yuv-range and --temporal: for a raw YUV recording" in r.stderr
 
 
 def test_a_rerun_that_fails_leaves_the_previous_views(tmp_path, shot, monkeypatch):
