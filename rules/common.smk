@@ -7,7 +7,11 @@ import re
 from pathlib import Path
 
 from plenocal.config import ConfigError, canonicalize, validate_config
-from plenocal.calib.reg_b.datasheet import DatasheetError, load_datasheet
+from plenocal.calib.reg_b.datasheet import (
+    DatasheetError,
+    check_micro_image_pitch,
+    load_datasheet,
+)
 from plenocal.io.lenslet import (
     CaptureError,
     VideoShot,
@@ -139,7 +143,7 @@ def check_real_dataset(dataset):
     """A real capture's files, checked before any job: the lenslet folder (its shots, and
     its recordings against config datasets.<d>.video), calib.xml (parsed), and camera.yaml
     against its schema (plenocal.calib.reg_b.datasheet), which gives the size of a recording's
-    frames."""
+    frames, and against calib.xml's micro-image pitch (check_micro_image_pitch)."""
     _scan_lenslet(dataset)
     calib = Path("data") / dataset / "calib.xml"
     if not calib.is_file():
@@ -148,11 +152,13 @@ def check_real_dataset(dataset):
             "RayCalibData file there (README, 'Bringing a real capture')"
         )
     try:  # a few kB: a malformed or foreign file stops here, not in the first job
-        read_calib(calib)
+        diameter = read_calib(calib).diameter
     except CalibError as err:
         raise ValueError(f"dataset {dataset!r}: {err}") from None
+    sheet_path = Path("data") / dataset / "camera.yaml"
     try:
-        sheet = load_datasheet(Path("data") / dataset / "camera.yaml")
+        sheet = load_datasheet(sheet_path)
+        check_micro_image_pitch(sheet, diameter, sheet_path, calib)
     except (DatasheetError, FileNotFoundError) as err:
         raise ValueError(f"dataset {dataset!r}: {err}") from None
     sensor = (sheet["sensor_width_px"], sheet["sensor_height_px"])

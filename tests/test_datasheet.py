@@ -14,6 +14,7 @@ import yaml
 from plenocal.calib.reg_b.datasheet import (
     DatasheetError,
     check_datasheet,
+    check_micro_image_pitch,
     load_datasheet,
     read_datasheet,
 )
@@ -178,3 +179,32 @@ def test_unit_in_a_string_gets_the_value_to_write(text: str, want: str):
         check_datasheet(_with("pixel_size_mm", text))
     assert f"write {want} for pixel_size_mm" in str(exc.value)
     check_datasheet(_with("pixel_size_mm", float(want)))
+
+
+def test_micro_image_pitch_against_calib_xml():
+    """calib.xml's diameter against camera.yaml's pitch and pixel size: the micro images lie
+    D (L + s) / (L p) px apart, here 0.13 / 0.0055 x (L + 0.455) / L with L = F + e + t
+    (the optics' own figure, 23.912 px: the default camera's calib.xml), 5 % either way
+    taken; without the focal length D / p = 23.636 px to 10 % more."""
+    doc = check_datasheet(copy.deepcopy(GOOD))
+    for d in (23.912, 0.951 * 23.912, 1.049 * 23.912):
+        check_micro_image_pitch(doc, d)
+    with pytest.raises(DatasheetError) as err:
+        check_micro_image_pitch(doc, 1.06 * 23.912, "data/c/camera.yaml", "data/c/calib.xml")
+    msg = str(err.value)
+    for part in ("data/c/camera.yaml: mla.pitch_mm = 0.13", "23.91 px apart",
+                 "data/c/calib.xml gives a diameter of 25.35 px (+6.0 %", "units"):
+        assert part in msg, msg
+    # the pitch in the wrong unit that the plausible range lets through: 13 um as 0.013 mm
+    slip = copy.deepcopy(doc)
+    slip["mla"]["pitch_mm"] = 0.013
+    with pytest.raises(DatasheetError, match=r"mla.pitch_mm = 0.013: .* 2.37 px apart"):
+        check_micro_image_pitch(slip, 23.912)
+    no_f = copy.deepcopy(doc)
+    del no_f["main_lens"]["focal_length_mm"]
+    lo, hi = 0.13 / 0.0055, 1.1 * 0.13 / 0.0055
+    for d in (0.951 * lo, lo, hi, 1.049 * hi):
+        check_micro_image_pitch(no_f, d)
+    for d in (0.949 * lo, 1.051 * hi):
+        with pytest.raises(DatasheetError, match="23.64 to 26.00 px apart"):
+            check_micro_image_pitch(no_f, d)

@@ -139,6 +139,15 @@ def test_bad_input_stops_before_any_job(real_run: Path, tmp_path: Path):
     out, _ = _bad(real_run, tmp_path / "c", micrometres)
     assert "mla.pitch_mm" in out and "micrometres" in out, out[-2000:]
 
+    def other_sensor(d: Path):  # a plausible pixel size, but not this camera's
+        doc = yaml.safe_load((d / "camera.yaml").read_text())
+        doc["pixel_size_mm"] = 0.00345
+        (d / "camera.yaml").write_text(yaml.safe_dump(doc))
+
+    out, _ = _bad(real_run, tmp_path / "c2", other_sensor)
+    assert "camera.yaml: mla.pitch_mm = 0.13: with pixel_size_mm = 0.00345" in out, out[-2000:]
+    assert f"data/{NAME}/calib.xml gives a diameter of" in out, out[-2000:]
+
     # issue 34: a typo in camera.yaml hid the Eqs. 2-3 check (and the report's warning)
     def typo(d: Path):
         doc = yaml.safe_load((d / "camera.yaml").read_text())

@@ -341,6 +341,48 @@ def check_datasheet(doc: Any, source: str | Path = "camera.yaml") -> dict:
     return dict(doc)
 
 
+#: calib.xml's micro-image pitch may differ this much (relative) from the one camera.yaml's
+#: optics give (:func:`check_micro_image_pitch`)
+MICRO_IMAGE_PITCH_TOLERANCE = 0.05
+#: without main_lens.focal_length_mm the micro images' spread (L + s) / L is unknown: up to
+#: this much more is taken (s / L: a 1 mm MLA-sensor distance behind a 10 mm lens)
+MICRO_IMAGE_SPREAD_MAX = 0.10
+
+
+def check_micro_image_pitch(doc: Mapping, diameter_px: float,
+                            source: str | Path = "camera.yaml",
+                            calib_source: str | Path = "calib.xml") -> None:
+    """camera.yaml's microlens pitch and pixel size against calib.xml's micro-image pitch
+    ``diameter_px`` (a checked datasheet, :func:`check_datasheet`). The micro images lie
+    ``D (L + s) / (L p)`` pixels apart
+    (:attr:`plenocal.optics.PlenopticOptics.micro_image_pitch_px`); where the main lens's
+    focal length is not given, ``D / p`` to :data:`MICRO_IMAGE_SPREAD_MAX` more.
+    :data:`MICRO_IMAGE_PITCH_TOLERANCE` either way is taken.
+    Registration B builds the rig from ``mla.pitch_mm`` and the converter reads the
+    diameter from calib.xml, so a pitch in the wrong unit that the plausible range lets
+    through (0.013 for 13 um against 0.13 mm) or another camera's calib.xml would give a rig
+    of the wrong size without a word. Raises :class:`DatasheetError` naming both files."""
+    D, p = doc["mla"]["pitch_mm"], doc["pixel_size_mm"]
+    if doc["main_lens"].get("focal_length_mm") is not None:
+        lo = hi = _optics(doc).micro_image_pitch_px
+        how = "D (L + s) / (L p)"
+    else:
+        lo, hi = D / p, (1.0 + MICRO_IMAGE_SPREAD_MAX) * D / p
+        how = (f"D / p, or up to {100 * MICRO_IMAGE_SPREAD_MAX:.0f} % more "
+               "(main_lens.focal_length_mm not given)")
+    tol = MICRO_IMAGE_PITCH_TOLERANCE
+    if (1.0 - tol) * lo <= diameter_px <= (1.0 + tol) * hi:
+        return
+    expected = lo if diameter_px < lo else hi
+    apart = f"{lo:.2f}" if lo == hi else f"{lo:.2f} to {hi:.2f}"
+    raise _fail(source, "mla.pitch_mm", D,
+                f"with pixel_size_mm = {p:g} it puts the micro images {apart} px apart "
+                f"({how}), but {calib_source} gives a diameter of {diameter_px:.2f} px "
+                f"({100 * (diameter_px / expected - 1):+.1f} %, more than "
+                f"{100 * tol:.0f} %): check both keys' units (millimetres), and that "
+                f"{calib_source} is this camera's")
+
+
 #: the smallest patch (micro-image pitch / virtual depth) a view can be rendered from
 MIN_PATCH_PX = 1.0
 
