@@ -351,7 +351,7 @@ def test_every_section_is_shown_from_the_typed_files(tmp_path):
     assert [k for k in by if k != "sources"] == list(SECTIONS)
     for key in SECTIONS[:-1]:  # (one depth preview is absent on purpose)
         assert 'class="missing"' not in by[key], (key, by[key][:500])
-    assert 'id="table1"' in by["table1"] and "<td>0.702</td>" in by["table1"]
+    assert 'id="table1-rows"' in by["table1"] and "<td>0.702</td>" in by["table1"]
     assert by["gt"].count('<tr id="gt-') == 11  # one row per target (gt_errors.TARGETS)
     assert "0.0201</b>Eq. 5 mean 0.0201" in by["summary"] and "exact model" in by["summary"]
     for key, names in (("exp1", ["complete", "ground_truth"]), ("exp2", ["complete/x01_y01"]),
@@ -611,3 +611,33 @@ def test_the_shot_means_are_laid_out_as_the_array():
     assert rows[1] == "<th class=l>y00</th><td>30.00</td><td>31.00</td>"
     assert rows[2] == "<th class=l>y01</th><td>29.50</td><td></td>"  # no x01_y01
     assert "hand-held" in rows[3] and "hand00 28.25" in rows[3]
+
+
+def test_exp3_stride_and_identical_syntheses_are_said(tmp_path):
+    """Exp. 3 on every 2nd view row and column: the views it did not synthesise are blank
+    in its heat maps, not hatched as its inputs are, and the caption and the mean say so;
+    two syntheses of the same bytes (for the central view Exp. 3's central inputs are Exp.
+    1's) are shown once in Fig. 10, labelled by both; each heat map's hatch pattern has an
+    id of its own."""
+    res = make_results(tmp_path)
+    path = res / "eval" / "synthesis_exp3.json"
+    doc = typed.read_synthesis(path)
+    odd = ("0_1", "1_0", "1_2", "2_1")  # the views a stride of 2 leaves out of a 3 x 3 set
+    sparse = tuple(dataclasses.replace(t, psnr_db={k: v for k, v in t.psnr_db.items()
+                                                   if not k.endswith(odd)})
+                   for t in doc.tables)
+    typed.write_synthesis(path, dataclasses.replace(
+        doc, tables=sparse, setup=dataclasses.replace(doc.setup, view_stride=2)))
+    e1 = typed.read_synthesis(res / "eval" / "synthesis_exp1.json")
+    central = next(i for i in doc.images if i.run == "central")
+    (res / "eval" / central.path).write_bytes((res / "eval" / e1.images[0].path).read_bytes())
+    html = build(res)
+    by = sections(html)
+    assert "blank: views not synthesised (every 2nd view row and column" in by["exp3"]
+    assert "(every 2nd view row and column)" in by["exp3"]  # the means' cards
+    assert 'fill="#fafafa"' in by["exp3"] and 'fill="url(#hatch-exp3-complete-central)"' in by[
+        "exp3"]
+    ids = re.findall(r'id="([^"]+)"', html)
+    assert len(ids) == len(set(ids)), sorted(i for i in ids if ids.count(i) > 1)
+    assert 'alt="Exp. 1 (checks A) = Exp. 3 (checks A+B), central inputs"' in by["fig10"]
+    assert 'alt="Exp. 3 (checks A+B), central inputs"' not in by["fig10"]

@@ -108,18 +108,25 @@ def svg_data_uri(svg: str) -> str:
 # ---------------------------------------------------------------------------
 
 
+#: the fill of an empty cell that is not marked (a view no experiment targeted)
+_BLANK = "#fafafa"
+
+
 def heatmap_svg(values: np.ndarray, vmin: float, vmax: float, *,
                 labels: np.ndarray | None = None, titles: np.ndarray | None = None,
                 marks: np.ndarray | None = None, cell: tuple[int, int] = (58, 30),
                 group: tuple[int, int] | None = None, annotate: bool = True,
                 col_labels: Sequence[str] | None = None,
-                row_labels: Sequence[str] | None = None, unit: str = "dB") -> str:
+                row_labels: Sequence[str] | None = None, unit: str = "dB",
+                hatch: str = "hatch") -> str:
     """An SVG heat map of a 2-D grid (row 0 on top), with a colour bar.
 
-    ``values``: NaN cells are drawn empty (hatched grey) and ``marks`` (same shape,
+    ``values``: NaN cells are drawn empty: hatched grey where ``marks`` has a text, else
+    blank; ``marks`` (same shape,
     strings) are written in them, e.g. "input". ``labels`` overrides the printed
     text of a cell; ``titles`` gives each cell's hover text. ``group`` = (rows, cols)
-    draws thicker separators every so many cells (the N x N set of each shot)."""
+    draws thicker separators every so many cells (the N x N set of each shot). ``hatch``:
+    the id of the hatch pattern, which must be unique on a page of several heat maps."""
     values = np.asarray(values, dtype=float)
     rows, cols = values.shape
     cw, ch = cell
@@ -132,7 +139,7 @@ def heatmap_svg(values: np.ndarray, vmin: float, vmax: float, *,
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
              f'viewBox="0 0 {width} {height}" font-family="sans-serif" font-size="12" '
              'role="img">',
-             '<defs><pattern id="hatch" width="6" height="6" patternUnits="userSpaceOnUse" '
+             f'<defs><pattern id="{hatch}" width="6" height="6" patternUnits="userSpaceOnUse" '
              'patternTransform="rotate(45)"><rect width="6" height="6" fill="#e8e8e8"/>'
              '<line x1="0" y1="0" x2="0" y2="6" stroke="#c8c8c8" stroke-width="2"/>'
              '</pattern></defs>']
@@ -146,9 +153,9 @@ def heatmap_svg(values: np.ndarray, vmin: float, vmax: float, *,
                 rgb = colour((v - vmin) / span)
                 fill, tc = hex_colour(rgb), text_colour(rgb)
                 text = labels[i, j] if labels is not None else f"{v:.2f}"
-            else:
-                fill, tc = "url(#hatch)", "#555"
+            else:  # a marked cell (an input view) hatched; an unmarked one left blank
                 text = marks[i, j] if marks is not None else ""
+                fill, tc = (f"url(#{hatch})" if text else _BLANK), "#555"
             parts.append(f'<g><rect x="{x}" y="{y}" width="{cw}" height="{ch}" '
                          f'fill="{fill}" stroke="#fff" stroke-width="1"/>')
             if title:

@@ -14,7 +14,7 @@ iteration).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from html import escape
 from pathlib import Path
 from typing import TypeVar
@@ -213,7 +213,7 @@ def section_table1(page: Page, synthetic: bool) -> None:
                     f"<td>{escape(r.images)}</td><td>{_fmt(r.observations)}</td>"
                     f"<td>{_fmt(r.paper_mean_px)}</td><td>{_fmt(r.paper_images)}</td>"
                     f"<td class=l>{escape(r.note)}</td></tr>")
-    page.add(f'<table id="table1">{head}{"".join(body)}</table>')
+    page.add(f'<table id="table1-rows">{head}{"".join(body)}</table>')
     t = src.table1_target(rows, synthetic)
     if t is not None:
         c, b = src.table1_verdict(rows)
@@ -294,11 +294,11 @@ def section_gt(page: Page, synthetic: bool) -> None:
             ("views compared", str(al["n_views"]))]))
     rf = doc.refinement
     if rf:
-        details.append(("Joint refinement: its scale against Eq. 5 and the truth", [
+        details.append(("Joint refinement: its scale against Eq. 6's r and the truth", [
             ("scale written", escape(str(rf.get("scale_source")))),
-            ("written: vs Eq. 5's r / error vs truth [%]",
+            ("written: vs the r Eq. 6 used / error vs truth [%]",
              f"{rf['result_scale_vs_eq5_pct']:+.4f} / {rf['result_scale_err_pct']:+.4f}"),
-            ("registration B's rig alone: vs Eq. 5's r / error vs truth [%]",
+            ("registration B's rig alone: vs the r Eq. 6 used / error vs truth [%]",
              f"{rf['rig_scale_vs_eq5_pct']:+.4f} / {rf['rig_scale_err_pct']:+.4f}"),
             ("focal length change [%]", f"{rf['focal_change_pct']:+.4f}")]))
     so = doc.sources
@@ -315,7 +315,8 @@ def section_gt(page: Page, synthetic: bool) -> None:
             ("only A's poses estimated: centres [mm] / rotation [deg]",
              f"{so['only']['a_poses']['centre_rmse_mm']:.4f} / "
              f"{so['only']['a_poses']['rotation_max_deg']:.4f}"),
-            ("only Eq. 5's scale estimated ({:+.4f} %): centres [mm]".format(so["scale_pct"]),
+            ("only the scale estimated (the r Eq. 6 used, {:+.4f} %): centres [mm]".format(
+                so["scale_pct"]),
              f"{so['only']['scale']['centre_rmse_mm']:.4f}"),
             ("only the rig estimated: centres [mm] / rotation [deg]",
              f"{so['only']['rig']['centre_rmse_mm']:.4f} / "
@@ -370,6 +371,12 @@ def section_cameras(page: Page) -> None:
         + f"hover a point for its name. Source: {links}</figcaption></figure>")
 
 
+def _ordinal(n: int) -> str:
+    """2 -> "2nd", 3 -> "3rd", 11 -> "11th"."""
+    suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"{n}{suffix}"
+
+
 def _psnr_section(page: Page, key: str, result: SynthesisResult | None, paper: str,
                   n_views: int, cols: int, rows: int) -> None:
     """The body of an experiment's section: the PSNR tables of ``result`` (source ``key``)
@@ -392,6 +399,9 @@ def _psnr_section(page: Page, key: str, result: SynthesisResult | None, paper: s
     lost = {src.table_name(t, result.renderer): (d, n) for t, _, d, n in result.db_lost()}
     surface = {src.table_name(t, result.renderer): (d, n)
                for t, _, d, n in result.surface_db_lost()}
+    stride = result.setup.view_stride
+    every = (f" (every {_ordinal(stride)} view row and column)"
+             if stride is not None and stride > 1 else "")
     kpis = []
     for t, name in zip(tables, names, strict=True):
         extra = ""
@@ -405,6 +415,7 @@ def _psnr_section(page: Page, key: str, result: SynthesisResult | None, paper: s
                       "README 'Ground truth in the synthesis experiments')")
         kpis.append(f'<span class="kpi" id="kpi-{escape(key)}-{escape(name)}">'
                     f"{escape(name)}<b>{t.mean_db:.2f} dB</b>mean over {len(t.psnr_db)} views"
+                    f"{every}"
                     f"{extra}</span>")
     page.add("<div>" + "".join(kpis) + "</div>")
     page.add(f"<p class=note>{escape(paper)} Target: at most 0.5 dB lost to calibration "
@@ -417,8 +428,12 @@ def _psnr_section(page: Page, key: str, result: SynthesisResult | None, paper: s
         svg = fg.heatmap_svg(g.values, vmin, vmax, labels=labels, titles=g.titles,
                              marks=g.marks, group=g.group, annotate=g.annotate,
                              cell=(58, 30) if g.annotate else (16, 16),
-                             col_labels=g.col_labels, row_labels=g.row_labels)
+                             col_labels=g.col_labels, row_labels=g.row_labels,
+                             hatch=f"hatch-{key}-{name}".replace("/", "-"))
         cap = f"{name}: PSNR per synthesised view; hatched: input views"
+        if every:
+            cap += (f"; blank: views not synthesised (every {_ordinal(stride)} view row and "
+                    f"column of each shot is, config verify.exp3_view_stride = {stride})")
         if g.kind == "views":
             cap += f" ({n_views} x {n_views} views per shot, thick lines between shots)"
         page.add(f'<figure class="heatmap" id="hm-{escape(key)}-{escape(name)}">{svg}'
@@ -481,7 +496,30 @@ def _synth_images(page: Page, results: dict[str, SynthesisResult]) -> dict[str, 
                      + (" (ground-truth cameras)" if truth else ""))
             out.setdefault(im.view, []).append(Fig10Image(
                 rel, im.view, label, truth, (truth, res.experiment, variant, rel)))
-    return {k: sorted(v, key=lambda s: s.order) for k, v in out.items()}
+    return {k: _same_images_once(page, sorted(v, key=lambda s: s.order))
+            for k, v in out.items()}
+
+
+def _same_images_once(page: Page, images: list[Fig10Image]) -> list[Fig10Image]:
+    """``images`` with the files of the same bytes shown once, their labels joined with
+    " = ": for the central view, Exp. 3's central inputs are Exp. 1's, and the two
+    syntheses are one image (the figure showed it twice under two names)."""
+    import hashlib  # noqa: PLC0415
+
+    seen: dict[tuple, int] = {}
+    out: list[Fig10Image] = []
+    for im in images:
+        path = page.path(im.rel)
+        digest = (hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file()
+                  else im.rel)
+        at = seen.get((im.truth, digest))
+        if at is None:
+            seen[(im.truth, digest)] = len(out)
+            out.append(im)
+        else:
+            first = out[at]
+            out[at] = replace(first, label=f"{first.label} = {im.label}")
+    return out
 
 
 def _crop_boxes(ref: np.ndarray, others: Sequence[np.ndarray], n: int = 2
@@ -536,8 +574,10 @@ def section_fig10(page: Page, results: dict[str, SynthesisResult], n_views: int,
     want = f"{centre_cam}/{central_view(n_views)}" if centre_cam else None
     keys = sorted(groups, key=lambda k: (k != want, -len(groups[k]), k))
     page.add("<p class=note>As in Fig. 10: the captured view, then the same view "
-             "synthesised in each experiment (Exp. 1 checks registration A, Exp. 2 "
-             "registration B, Exp. 3 the complete calibration), and zoomed details where "
+             "synthesised in each experiment, every one with the written (complete) "
+             "calibration's cameras (Exp. 1 is the experiment that checks registration A, "
+             "Exp. 2 registration B, Exp. 3 both; images of the same bytes are shown once, "
+             "their labels joined by '='), and zoomed details where "
              "the syntheses differ most from the capture and where the texture is "
              "finest (nearest-neighbour magnification: one block = one pixel).</p>")
     for key in keys[:2]:
@@ -646,7 +686,7 @@ def section_summary(page: Page) -> None:
                  f"rig {escape(rf['settings']['rig'])}, shots "
                  f"{escape(rf['settings']['frames'])}, focal "
                  f"{escape(rf['settings']['focal'])}</b>scale {escape(rf['scale_source'])}; "
-                 f"B's rig alone gives {_fmt(sv['rig'], 5)} x Eq. 5's r; observations "
+                 f"B's rig alone gives {_fmt(sv['rig'], 5)} x the r Eq. 6 used; observations "
                  f"{_fmt(rf['observations']['before']['mean_px'], 4)} -> "
                  f"{_fmt(rf['observations']['after']['mean_px'], 4)} px over "
                  f"{_fmt(rf['observations']['after'].get('n'))} observations of "

@@ -58,7 +58,7 @@ TARGETS = {
     "b_baseline_pct": (1.0, "%", "registration B: baseline B error"),
     "b_alpha_pct": (2.0, "%", "registration B: alpha(-equivalent) error"),
     "b_pp_px": (0.5, "px", "registration B: principal-point shift error per step"),
-    "scale_pct": (1.0, "%", "scale r error (Eq. 5)"),
+    "scale_pct": (1.0, "%", "scale r error (the r Eq. 6 used: Eq. 5's or the step's)"),
     "all_focal_pct": (0.1, "%", "complete calibration: largest focal length error"),
     "all_centre_mm": (0.1, "mm", "complete calibration: centre RMSE after rigid alignment"),
     "all_rotation_deg": (0.02, "deg", "complete calibration: largest rotation error"),
@@ -261,7 +261,9 @@ def complete_errors(calib: Mapping[str, PinholeCamera],
 def refine_errors(refine: Mapping, r: float, r_true: float) -> dict:
     """The joint refinement's scales against the truth (``refine``: its ``refine.json``):
     what it wrote, and the scale that registration B's rig gives on its own (the frames
-    adjusted under the rig as it is), each against Eq. 5's r and the true r."""
+    adjusted under the rig as it is), each against the r Eq. 6 used (the merge's: Eq. 5's,
+    or the stage's step's where rule scale chose it; ``*_vs_eq5_pct``, named for Eq. 5 as
+    ``refine.json``'s ``scale_vs_eq5`` is) and the true r."""
     sv = refine["scale_vs_eq5"]
     out = {"scale_source": refine.get("scale_source"),
            "focal_change_pct": refine["focal_px"]["change_pct"]}
