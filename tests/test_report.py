@@ -367,6 +367,9 @@ def test_every_section_is_shown_from_the_typed_files(tmp_path):
         assert f'alt="{label}"' in by["fig10"], label
     assert 'href="../eval/synth/e3/kept5.png"' in by["fig10"]
     assert "<td>33.40</td>" in by["convert"]  # view 1_1: the 5th of each shot
+    # how to read the previews: each depth preview stretched to its own range
+    assert "each preview stretched to its own 1st-99th percentile" in by["depth"]
+    assert "its scale in px on the bar" in by["patch"]
 
 
 def test_a_file_of_another_version_is_named_on_the_page(tmp_path):

@@ -643,12 +643,15 @@ def section_convert_quality(page: Page, synthetic: bool = True) -> None:
 
 
 def section_thumbs(page: Page, anchor: str, title: str, items: Sequence[tuple[str, str]],
-                   rule: str, what: str) -> None:
-    """A grid of small previews (``items``: (path under results/<d>/, caption))."""
+                   rule: str, what: str, note: str = "") -> None:
+    """A grid of small previews (``items``: (path under results/<d>/, caption)), after
+    ``note`` (how to read them) where given."""
     page.section(anchor, title)
     present = [(r, c) for r, c in items if page.has(r)]
     absent = [r for r, _ in items if not page.has(r)]
     if present:
+        if note:
+            page.add(f"<p class=note>{escape(note)}</p>")
         page.add('<div class="thumbs">' + "".join(
             page.image(r, c, max_side=180) for r, c in present) + "</div>")
     if absent:
@@ -875,10 +878,17 @@ def build_report(results: str | Path, out_path: str | Path, dataset: str, *,
     section_convert_quality(page, synthetic)
     section_thumbs(page, "patch", "Patch size per microlens (converter)",
                    [(f"views/{c}/patch_size.png", c) for c in cams], "convert",
-                   "patch-size previews")
+                   "patch-size previews",
+                   note="Each lens's patch size P by colour, with its scale in px on the bar "
+                        "at the right of each picture (readable in the file: click a "
+                        "preview).")
     items = [(f"depth/{reg}/{c}.png", f"{c} ({reg.upper()})") for c in cams for reg in "ab"]
     section_thumbs(page, "depth", "Depth of the central views (registrations A and B)",
-                   items, "depth", "depth previews")
+                   items, "depth", "depth previews",
+                   note="Inverse depth, colour map turbo (red near, blue far), each preview "
+                        "stretched to its own 1st-99th percentile, so the colours compare "
+                        "places within one preview, not between previews; black: no depth. "
+                        "Click a preview for its file.")
     say("previews")
     page.section("sources", "Source files")
     page.add("<ul>" + "".join(f"<li>{page.link(r)}</li>" for r in sorted(page.linked))
