@@ -52,10 +52,14 @@ def ypr_to_matrix(yaw_deg: float, pitch_deg: float, roll_deg: float) -> np.ndarr
 
 
 def matrix_to_ypr(R: np.ndarray) -> tuple[float, float, float]:
-    """Inverse of :func:`ypr_to_matrix` (degrees; pitch in [-90, 90])."""
+    """Inverse of :func:`ypr_to_matrix` (degrees; pitch in [-90, 90]). The pitch by
+    ``atan2(-R20, hypot(R00, R10))``, not ``asin(-R20)``: near a view straight up or down
+    the arcsine loses the angle's last digits (its slope is infinite there), and the
+    matrix read back was 2.5e-9 off at a pitch 1e-6 deg from 90 (a review's find)."""
     R = np.asarray(R, dtype=float)
-    pitch = math.asin(float(np.clip(-R[2, 0], -1.0, 1.0)))
-    if abs(math.cos(pitch)) < 1e-12:  # gimbal lock: put everything into yaw
+    cos_pitch = math.hypot(float(R[0, 0]), float(R[1, 0]))
+    pitch = math.atan2(float(-R[2, 0]), cos_pitch)
+    if cos_pitch < 1e-12:  # gimbal lock: put everything into yaw
         yaw = math.atan2(-R[0, 1], R[1, 1])
         roll = 0.0
     else:
