@@ -4,8 +4,9 @@ the rigs.bin/frames.bin of COLMAP >= 3.12), loadable by ``pycolmap.Reconstructio
 One PINHOLE camera per distinct intrinsics (the views of a set share them across
 shots), each in a trivial rig of its own (25 rigs for 5 x 5 views), and one image
 ``<cam>/<view>.png`` per view in a frame of its own with the pose registered (700 frames
-on the default data): the images of a camera share its rig. COLMAP stores cam_from_world and puts the centre of
-pixel (0, 0) at (0.5, 0.5): the principal point gets +0.5 (:func:`k_to_colmap`).
+on the default data): the images of a camera share its rig. COLMAP stores
+cam_from_world and puts the centre of pixel (0, 0) at (0.5, 0.5): the principal point
+gets +0.5 (:func:`k_to_colmap`).
 No 3-D points are written (the model carries the calibration only).
 
 ``pycolmap`` is imported inside the functions: a process must import cv2 first.
