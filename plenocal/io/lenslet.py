@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from plenocal import names
+from plenocal.io import png
 
 if TYPE_CHECKING:
     import numpy as np
@@ -149,8 +150,6 @@ def _frame_index(shot: str, path: Path, video: dict, key: str, shots: list[str])
     return int(frame)
 
 
-_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-
 #: why a capture needs hand-held shots, said by the workflow's check before any job
 #: (:func:`check_capture_shots`) and by registration A
 #: (:func:`plenocal.calib.reg_a.sfm.check_shots`)
@@ -175,12 +174,12 @@ def png_size(path: str | Path) -> tuple[int, int]:
     decoding it. Raises :class:`CaptureError` naming the file where it is no PNG (an
     empty file, a copy cut short, another format named .png)."""
     with open(path, "rb") as fh:
-        head = fh.read(24)
-    if len(head) < 24 or head[:8] != _PNG_SIGNATURE or head[12:16] != b"IHDR":
+        size = png.header_size(fh.read(png.HEADER_BYTES))
+    if size is None:
         raise CaptureError(f"{path}: not a PNG image (its first bytes are not a PNG's "
                            "signature and header; an empty file, a copy cut short, or another "
                            "format renamed): put the lenslet image there as a PNG")
-    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    return size
 
 
 def check_capture_shots(shots: list[str], dataset: str, folder: str | Path) -> None:

@@ -66,6 +66,19 @@ def filtered_rows(image: np.ndarray, up: bool) -> np.ndarray:
     return rows
 
 
+#: bytes at a PNG file's start that hold its size: the signature, IHDR's length and type,
+#: then its width and height (big-endian)
+HEADER_BYTES = 24
+
+
+def header_size(head: bytes) -> tuple[int, int] | None:
+    """(width, height) from a PNG file's first :data:`HEADER_BYTES` bytes, without decoding
+    it; None where they are not a PNG's (too short, another signature, no IHDR first)."""
+    if len(head) < HEADER_BYTES or head[:8] != SIGNATURE or head[12:16] != b"IHDR":
+        return None
+    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+
+
 def encode_png(image: np.ndarray, level: int = 1) -> bytes:
     """The PNG bytes of ``image`` (grey (H, W) or (H, W, 1), or RGB (H, W, 3); uint8 or
     uint16) at ``level`` (module docstring: 0 stored, 1-3 libdeflate's levels). The deflated
