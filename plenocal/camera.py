@@ -10,6 +10,7 @@ that boundary (:func:`k_to_colmap`, :func:`k_from_colmap`). The plain camera fil
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,6 +63,65 @@ class PinholeCamera:
     def from_dict(cls, d: dict) -> PinholeCamera:
         return cls(np.asarray(d["K"], dtype=float), np.asarray(d["cam_to_world"], dtype=float),
                    int(d["width"]), int(d["height"]))
+
+
+#: How far a camera-to-world rotation may stray from orthonormal (``|R^T R - I|``, any entry)
+#: and still be written: the workflow's composed poses sit within 1e-11 of it
+#: (COLMAP's quaternions, Eq. 6's products); a matrix further off is not a rotation.
+ROTATION_TOLERANCE = 1e-6
+#: The largest skew (``K[0, 1]``, px) taken as none (COLMAP's PINHOLE and MPEG's cameras have
+#: no skew term), and how far the matrices' fixed entries (``K``'s lower triangle and last
+#: row, the pose's last row) may stray from theirs
+SKEW_TOLERANCE = 1e-9
+
+
+def camera_problem(cam: PinholeCamera, skew: bool = False) -> str | None:
+    """What makes ``cam`` no pinhole camera that the exports can write, or None: a 3x3
+    ``K`` of positive, finite focal lengths with no skew (unless ``skew``: the plain
+    camera file holds a whole ``K``) and last row (0, 0, 1); a finite
+    4x4 ``cam_to_world`` with last row (0, 0, 0, 1) whose rotation is proper (orthonormal
+    within :data:`ROTATION_TOLERANCE`, determinant +1: not a reflection); a positive image
+    size. MPEG's (yaw, pitch, roll) and COLMAP's quaternion read a reflection as some
+    other rotation without a word, so a wrong matrix would otherwise reach every export."""
+    K = np.asarray(cam.K, dtype=float)
+    M = np.asarray(cam.cam_to_world, dtype=float)
+    if K.shape != (3, 3) or M.shape != (4, 4):
+        return f"K is {K.shape} and cam_to_world {M.shape}: expected 3x3 and 4x4"
+    if not (np.isfinite(K).all() and np.isfinite(M).all()):
+        return "K or cam_to_world holds a NaN or an infinity"
+    if not (K[0, 0] > 0 and K[1, 1] > 0):
+        return f"focal lengths fx {K[0, 0]:g}, fy {K[1, 1]:g} px: both must be positive"
+    if np.abs(K[[1, 2, 2, 2], [0, 0, 1, 2]] - [0.0, 0.0, 0.0, 1.0]).max() > SKEW_TOLERANCE:
+        return "K's lower triangle is not (0, 0, 0) or its last row not (0, 0, 1)"
+    if not skew and abs(K[0, 1]) > SKEW_TOLERANCE:
+        return (f"skew K[0, 1] = {K[0, 1]:g} px: COLMAP's PINHOLE and MPEG's cameras have no "
+                "skew term")
+    if np.abs(M[3] - [0.0, 0.0, 0.0, 1.0]).max() > SKEW_TOLERANCE:
+        return "cam_to_world's last row is not (0, 0, 0, 1)"
+    R = M[:3, :3]
+    off = float(np.abs(R.T @ R - np.eye(3)).max())
+    if off > ROTATION_TOLERANCE:
+        return (f"cam_to_world's rotation is not orthonormal (|R^T R - I| up to {off:.3g}, "
+                f"tolerance {ROTATION_TOLERANCE:g}): a scale or shear crept into the pose")
+    if np.linalg.det(R) < 0:
+        return ("cam_to_world's rotation has determinant -1: a reflection (a flipped axis), "
+                "not a rotation")
+    if int(cam.width) <= 0 or int(cam.height) <= 0:
+        return f"image size {cam.width} x {cam.height}: both must be positive"
+    return None
+
+
+def check_cameras(cameras: Mapping[str, PinholeCamera], where: str, remedy: str,
+                  skew: bool = False) -> None:
+    """Raise a ValueError naming ``where`` (a file), the first camera of ``cameras``
+    (name -> :class:`PinholeCamera`, in sorted order) that :func:`camera_problem` finds
+    wrong (``skew``: as there), how many are, and ``remedy``."""
+    bad = [(k, p) for k in sorted(cameras)
+           if (p := camera_problem(cameras[k], skew)) is not None]
+    if bad:
+        name, problem = bad[0]
+        more = f" ({len(bad) - 1} more cameras are wrong too)" if len(bad) > 1 else ""
+        raise ValueError(f"{where}: camera {name!r}: {problem}{more}; {remedy}")
 
 
 def intrinsics(f: float, cx: float, cy: float, fy: float | None = None) -> np.ndarray:

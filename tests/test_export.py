@@ -176,6 +176,64 @@ def test_camera_file_of_another_version_or_shape_is_refused(tmp_path):
         read_cameras(tmp_path / "missing" / "cameras.json")
 
 
+def _broken(cam: PinholeCamera, what: str) -> PinholeCamera:
+    """``cam`` with one defect that no export may write."""
+    K, M = cam.K.copy(), cam.cam_to_world.copy()
+    if what == "reflection":
+        M[:3, 0] *= -1.0  # a flipped axis: orthonormal, determinant -1
+    elif what == "scaled":
+        M[:3, :3] *= 1.001
+    elif what == "nan":
+        M[0, 3] = np.nan
+    elif what == "focal":
+        K[0, 0] = -K[0, 0]
+    elif what == "skew":
+        K[0, 1] = 0.5
+    return PinholeCamera(K, M, cam.width, cam.height)
+
+
+@pytest.mark.parametrize("what, match", [("reflection", "determinant -1"),
+                                         ("scaled", "not orthonormal"), ("nan", "NaN"),
+                                         ("focal", "positive")])
+def test_writers_refuse_a_camera_that_is_no_pinhole(tmp_path, what, match):
+    """A reflection (a flipped axis), a scaled rotation, a NaN or a negative focal length
+    reaches no export: each writer names the target, the camera and the defect, and writes
+    nothing; the plain file's reader refuses it too (a file edited by hand)."""
+    cams = cameras()
+    cams["hand01/3_1"] = _broken(cams["hand01/3_1"], what)
+    for write, target in ((lambda p: write_cameras(p, cams), tmp_path / "cameras.json"),
+                          (lambda p: mpeg.write_mpeg(p, cams, (0.3, 2.0)), tmp_path / "m.json"),
+                          (lambda p: colmap_model.write_colmap(p, cams), tmp_path / "colmap")):
+        with pytest.raises(ValueError, match=match) as err:
+            write(target)
+        assert "'hand01/3_1'" in str(err.value) and "nothing was written" in str(err.value)
+        assert not target.exists()
+    good = tmp_path / "good.json"
+    write_cameras(good, cameras())
+    doc = json.loads(good.read_text())
+    bad = _broken(cameras()["hand01/3_1"], what)
+    doc["cameras"]["hand01/3_1"] = {"K": bad.K.tolist(),
+                                     "cam_to_world": bad.cam_to_world.tolist(),
+                                     "width": 301, "height": 225}
+    good.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=match) as err:
+        read_cameras(good)
+    assert str(good) in str(err.value) and "rerun" in str(err.value)
+
+
+def test_skew_is_kept_in_the_plain_file_and_refused_by_the_exports(tmp_path):
+    """The plain camera file holds a whole K (a fitted ground-truth camera may carry skew);
+    COLMAP's PINHOLE and MPEG's cameras have no skew term, so their writers refuse it."""
+    cams = cameras()
+    cams["x00_y00/2_2"] = _broken(cams["x00_y00/2_2"], "skew")
+    write_cameras(tmp_path / "cameras.json", cams)
+    assert read_cameras(tmp_path / "cameras.json")["x00_y00/2_2"].K[0, 1] == 0.5
+    with pytest.raises(ValueError, match="skew"):
+        mpeg.write_mpeg(tmp_path / "m.json", cams, (0.3, 2.0))
+    with pytest.raises(ValueError, match="skew"):
+        colmap_model.write_colmap(tmp_path / "colmap", cams)
+
+
 def test_depth16():
     near, far = 0.4, 0.8
     z = np.array([[0.4, 0.8, 0.0, 0.5333333333333333], [np.nan, 0.3, 2.0, 0.6]])

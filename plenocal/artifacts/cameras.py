@@ -18,7 +18,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from plenocal.artifacts.versioned import decode
-from plenocal.camera import PinholeCamera
+from plenocal.camera import PinholeCamera, check_cameras
 from plenocal.io.files import write_json
 from plenocal.names import split_key
 
@@ -28,6 +28,9 @@ VERSION = 1
 UNITS = ("m", "sfm")
 NAME = "camera file (cameras.json)"
 REMEDY = "rerun the rule that wrote it (merge, baseline_sfm or ground_truth)"
+#: A camera no export can hold, found before anything is written
+WRITE_REMEDY = ("nothing was written: the stage that computed these cameras (named in its "
+                "job's log) gave them; report it with that log")
 _RESERVED = ("format", "version", "units", "cameras")
 
 
@@ -39,6 +42,7 @@ def write_cameras(path: str | Path, cameras: Mapping[str, PinholeCamera], units:
         raise ValueError(f"{path}: units {units!r}: use one of {', '.join(UNITS)}")
     for name in cameras:
         split_key(name)  # "<cam>/<view>" or a ValueError naming it
+    check_cameras(cameras, str(path), WRITE_REMEDY, skew=True)
     clash = sorted(set(extra or ()) & set(_RESERVED))
     if clash:
         raise ValueError(f"{path}: provenance keys {clash} would overwrite the file's own")
@@ -57,7 +61,9 @@ def read_cameras(path: str | Path) -> dict[str, PinholeCamera]:
     """The cameras of a camera file (this version only), by ``"<cam>/<view>"``."""
     def build(doc: dict) -> dict[str, PinholeCamera]:
         _units(doc, path)
-        return {k: PinholeCamera.from_dict(v) for k, v in doc["cameras"].items()}
+        cams = {k: PinholeCamera.from_dict(v) for k, v in doc["cameras"].items()}
+        check_cameras(cams, str(path), REMEDY, skew=True)
+        return cams
 
     return decode(path, FORMAT, VERSION, NAME, REMEDY, build)
 

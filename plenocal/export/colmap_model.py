@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from plenocal.camera import PinholeCamera, invert_pose, k_to_colmap
+from plenocal.camera import PinholeCamera, check_cameras, invert_pose, k_to_colmap
 
 
 def _intrinsics_key(cam: PinholeCamera) -> tuple:
@@ -32,12 +32,13 @@ def build_reconstruction(cameras: Mapping[str, PinholeCamera], image_ext: str = 
     """A ``pycolmap.Reconstruction`` holding every camera with its registered pose."""
     import pycolmap  # noqa: PLC0415
 
+    # skew has no PINHOLE equivalent, and a reflection no quaternion
+    check_cameras(cameras, "COLMAP model", "nothing was written: the stage that computed "
+                  "these cameras gave them")
     rec = pycolmap.Reconstruction()
     cam_ids: dict[tuple, int] = {}
     for image_id, name in enumerate(sorted(cameras), start=1):
         cam = cameras[name]
-        if abs(cam.K[0, 1]) > 1e-9:
-            raise ValueError(f"{name}: skewed intrinsics have no COLMAP PINHOLE equivalent")
         key = _intrinsics_key(cam)
         if key not in cam_ids:
             cam_ids[key] = len(cam_ids) + 1

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from plenocal.camera import PinholeCamera
+from plenocal.camera import PinholeCamera, check_cameras
 from plenocal.io.files import write_json
 
 CV_TO_OMAF = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
@@ -110,6 +110,9 @@ def mpeg_name(key: str) -> str:
 
 def mpeg_document(cameras: Mapping[str, PinholeCamera], depth_range: tuple[float, float],
                   content_name: str = "plenocal", bit_depth_color: int = 8) -> dict:
+    # a reflection would come out as some other (yaw, pitch, roll) without a word
+    check_cameras(cameras, f"MPEG camera parameters of {content_name!r}",
+                  "nothing was written: the stage that computed these cameras gave them")
     names = sorted(cameras)
     return {
         "Version": "4.0",
