@@ -543,10 +543,16 @@ def bundle_adjust(rec, model: RigModel, settings: RefineSettings, *, refine_foca
            "linear_solver": str(ceres["linear_solver_type_used"]).rsplit(".", 1)[-1],
            "threads": int(ceres["num_threads_used"])}
     seconds = time.perf_counter() - t0
-    log.info("bundle adjustment (focal %s, principal points %s, rig %s): %s after %d "
-             "iterations, cost %.6g -> %.6g, %.1f s", "refined" if refine_focal else "held",
-             "refined" if refine_pp else "held",
-             "refined" if refine_rig else "held", out["termination"], out["iterations"],
+    # Ceres calls a pass that used every iteration it was given NO_CONVERGENCE: here the
+    # cap is the design (the passes' iterations are chosen by measurement, INITIAL_TRUST_REGION)
+    capped = (out["termination"] == "NO_CONVERGENCE"
+              and out["iterations"] >= s.max_num_iterations)
+    ending = (f"the iteration cap reached as set ({out['iterations']} iterations; Ceres "
+              "reports NO_CONVERGENCE)" if capped
+              else f"{out['termination']} after {out['iterations']} iterations")
+    log.info("bundle adjustment (focal %s, principal points %s, rig %s): %s, cost %.6g -> "
+             "%.6g, %.1f s", "refined" if refine_focal else "held",
+             "refined" if refine_pp else "held", "refined" if refine_rig else "held", ending,
              out["initial_cost"], out["final_cost"], seconds)
     return out
 
