@@ -644,3 +644,30 @@ def test_exp3_stride_and_identical_syntheses_are_said(tmp_path):
     assert len(ids) == len(set(ids)), sorted(i for i in ids if ids.count(i) > 1)
     assert 'alt="Exp. 1 (checks A) = Exp. 3 (checks A+B), central inputs"' in by["fig10"]
     assert 'alt="Exp. 3 (checks A+B), central inputs"' not in by["fig10"]
+
+
+def test_fig10_zooms_are_the_views_own_pixels(tmp_path):
+    """Fig. 10's zooms are lossless (PNG) crops of the files, shown at an integer
+    magnification: every pixel a block of one size, no JPEG block or ringing to read as
+    detail."""
+    import base64
+
+    res = make_results(tmp_path)
+    fig10 = sections(build(res))["fig10"]
+    zooms = re.findall(r'<div class="crops"><p class=note>zoom x=(\d+), y=(\d+), (\d+) x (\d+) px'
+                       r'</p>(.*?)</div>', fig10, flags=re.S)
+    assert zooms
+    for x, y, w, h, figs in zooms:
+        x, y, w, h = int(x), int(y), int(w), int(h)
+        imgs = re.findall(r'<img class="px" src="data:image/(\w+);base64,([^"]+)" '
+                          r'width="(\d+)" height="(\d+)" alt="([^"]*)"', figs)
+        assert imgs
+        for kind, _data, dw, dh, alt in imgs:
+            assert kind == "png" and (int(dw), int(dh)) == (2 * w, 2 * h), alt
+        kind, data, _, _, alt = imgs[0]
+        assert alt.startswith("captured")
+        shown = cv2.imdecode(np.frombuffer(base64.b64decode(data), np.uint8),
+                             cv2.IMREAD_UNCHANGED)
+        cam_view = re.search(r'href="\.\./(views/[^"]+\.png)"', figs).group(1)
+        src = cv2.imread(str(res / cam_view), cv2.IMREAD_UNCHANGED)
+        np.testing.assert_array_equal(shown, src[y:y + h, x:x + w])

@@ -78,8 +78,11 @@ def to_preview(img: np.ndarray, max_side: int = 360) -> np.ndarray:
 
 
 def image_data_uri(path: str | Path, max_side: int = 360, quality: int = 85,
-                   crop: tuple[int, int, int, int] | None = None) -> tuple[str, int, int]:
-    """A compact JPEG data URI of the image file (and the preview's width, height).
+                   crop: tuple[int, int, int, int] | None = None,
+                   lossless: bool = False) -> tuple[str, int, int]:
+    """A compact JPEG data URI of the image file (and the preview's width, height), or a
+    PNG one where ``lossless`` (a crop to be looked at pixel by pixel: JPEG's 8 x 8 blocks
+    and ringing would read as detail).
 
     ``crop`` = (x, y, w, h) in the file's pixels, applied before downscaling."""
     import cv2  # noqa: PLC0415
@@ -92,10 +95,12 @@ def image_data_uri(path: str | Path, max_side: int = 360, quality: int = 85,
         x, y, w, h = crop
         img = img[y:y + h, x:x + w]
     prev = to_preview(img, max_side)
-    ok, enc = cv2.imencode(".jpg", prev, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    kind, ext, params = (("png", ".png", [cv2.IMWRITE_PNG_COMPRESSION, 9]) if lossless
+                         else ("jpeg", ".jpg", [cv2.IMWRITE_JPEG_QUALITY, int(quality)]))
+    ok, enc = cv2.imencode(ext, prev, params)
     if not ok:
-        raise OSError(f"{path}: JPEG encoding of the preview failed")
-    uri = "data:image/jpeg;base64," + base64.b64encode(enc.tobytes()).decode("ascii")
+        raise OSError(f"{path}: {kind.upper()} encoding of the preview failed")
+    uri = f"data:image/{kind};base64," + base64.b64encode(enc.tobytes()).decode("ascii")
     return uri, int(prev.shape[1]), int(prev.shape[0])
 
 

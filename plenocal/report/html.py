@@ -107,10 +107,12 @@ class Page:
 
     def image(self, rel: str, caption: str, max_side: int = 360,
               crop: tuple[int, int, int, int] | None = None, display_width: int | None = None,
-              pixelated: bool = False) -> str:
-        """A figure with the embedded preview of ``results/<d>/<rel>`` and its link."""
+              pixelated: bool = False, lossless: bool = False) -> str:
+        """A figure with the embedded preview of ``results/<d>/<rel>`` and its link
+        (``lossless``: PNG, not JPEG)."""
         try:
-            uri, w, h = fg.image_data_uri(self.path(rel), max_side=max_side, crop=crop)
+            uri, w, h = fg.image_data_uri(self.path(rel), max_side=max_side, crop=crop,
+                                          lossless=lossless)
         except OSError as err:
             return f'<p class="missing">{escape(str(err))}</p>'
         dw = display_width or w
@@ -556,6 +558,11 @@ def _crop_boxes(ref: np.ndarray, others: Sequence[np.ndarray], n: int = 2
     return boxes
 
 
+#: Fig. 10's zooms: each crop's pixels shown as ZOOM x ZOOM blocks (an integer, so that every
+#: pixel is a block of one size: 1.28x made blocks of one and two screen pixels)
+ZOOM = 2
+
+
 def section_fig10(page: Page, results: dict[str, SynthesisResult], n_views: int,
                   centre_cam: str | None) -> None:
     import cv2  # noqa: PLC0415
@@ -579,7 +586,8 @@ def section_fig10(page: Page, results: dict[str, SynthesisResult], n_views: int,
              "Exp. 2 registration B, Exp. 3 both; images of the same bytes are shown once, "
              "their labels joined by '='), and zoomed details where "
              "the syntheses differ most from the capture and where the texture is "
-             "finest (nearest-neighbour magnification: one block = one pixel).</p>")
+             f"finest (lossless, magnified {ZOOM}x by nearest neighbour: one {ZOOM} x {ZOOM} "
+             "block = one pixel).</p>")
     for key in keys[:2]:
         cam, view = split_key(key)
         cap_rel = f"views/{cam}/{view}.png"
@@ -603,12 +611,12 @@ def section_fig10(page: Page, results: dict[str, SynthesisResult], n_views: int,
             continue
         for box in _crop_boxes(base, imgs):
             crops = []
+            zoom = {"max_side": box[2], "crop": box, "display_width": ZOOM * box[2],
+                    "pixelated": True, "lossless": True}
             if ref is not None:
-                crops.append(page.image(cap_rel, "captured (zoom)", max_side=box[2], crop=box,
-                                        display_width=160, pixelated=True))
+                crops.append(page.image(cap_rel, "captured (zoom)", **zoom))
             for s in shown:
-                crops.append(page.image(s.rel, f"{s.label} (zoom)", max_side=box[2],
-                                        crop=box, display_width=160, pixelated=True))
+                crops.append(page.image(s.rel, f"{s.label} (zoom)", **zoom))
             page.add(f'<div class="crops"><p class=note>zoom x={box[0]}, y={box[1]}, '
                      f"{box[2]} x {box[3]} px</p>" + "".join(crops) + "</div>")
 
