@@ -547,8 +547,8 @@ def bundle_adjust(rec, model: RigModel, settings: RefineSettings, *, refine_foca
     # cap is the design (the passes' iterations are chosen by measurement, INITIAL_TRUST_REGION)
     capped = (out["termination"] == "NO_CONVERGENCE"
               and out["iterations"] >= s.max_num_iterations)
-    ending = (f"the iteration cap reached as set ({out['iterations']} iterations; Ceres "
-              "reports NO_CONVERGENCE)" if capped
+    ending = (f"its cap of {s.max_num_iterations} iterations reached, as set (Ceres reports "
+              "NO_CONVERGENCE)" if capped
               else f"{out['termination']} after {out['iterations']} iterations")
     log.info("bundle adjustment (focal %s, principal points %s, rig %s): %s, cost %.6g -> "
              "%.6g, %.1f s", "refined" if refine_focal else "held",
