@@ -91,7 +91,7 @@ def camera_problem(cam: PinholeCamera, skew: bool = False) -> str | None:
         return "K or cam_to_world holds a NaN or an infinity"
     if not (K[0, 0] > 0 and K[1, 1] > 0):
         return f"focal lengths fx {K[0, 0]:g}, fy {K[1, 1]:g} px: both must be positive"
-    if np.abs(K[[1, 2, 2, 2], [0, 0, 1, 2]] - [0.0, 0.0, 0.0, 1.0]).max() > SKEW_TOLERANCE:
+    if max(abs(K[1, 0]), *np.abs(K[2] - [0.0, 0.0, 1.0])) > SKEW_TOLERANCE:
         return "K's lower triangle is not (0, 0, 0) or its last row not (0, 0, 1)"
     if not skew and abs(K[0, 1]) > SKEW_TOLERANCE:
         return (f"skew K[0, 1] = {K[0, 1]:g} px: COLMAP's PINHOLE and MPEG's cameras have no "
@@ -111,8 +111,13 @@ def camera_problem(cam: PinholeCamera, skew: bool = False) -> str | None:
     return None
 
 
-def check_cameras(cameras: Mapping[str, PinholeCamera], where: str, remedy: str,
-                  skew: bool = False) -> None:
+#: The remedy a writer gives for a camera :func:`camera_problem` refuses
+WRITE_REMEDY = ("nothing was written: the stage that computed these cameras (named in its "
+                "job's log) gave them; report it with that log")
+
+
+def check_cameras(cameras: Mapping[str, PinholeCamera], where: str,
+                  remedy: str = WRITE_REMEDY, skew: bool = False) -> None:
     """Raise a ValueError naming ``where`` (a file), the first camera of ``cameras``
     (name -> :class:`PinholeCamera`, in sorted order) that :func:`camera_problem` finds
     wrong (``skew``: as there), how many are, and ``remedy``."""

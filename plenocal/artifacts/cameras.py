@@ -28,9 +28,6 @@ VERSION = 1
 UNITS = ("m", "sfm")
 NAME = "camera file (cameras.json)"
 REMEDY = "rerun the rule that wrote it (merge, baseline_sfm or ground_truth)"
-#: A camera no export can hold, found before anything is written
-WRITE_REMEDY = ("nothing was written: the stage that computed these cameras (named in its "
-                "job's log) gave them; report it with that log")
 _RESERVED = ("format", "version", "units", "cameras")
 
 
@@ -42,7 +39,7 @@ def write_cameras(path: str | Path, cameras: Mapping[str, PinholeCamera], units:
         raise ValueError(f"{path}: units {units!r}: use one of {', '.join(UNITS)}")
     for name in cameras:
         split_key(name)  # "<cam>/<view>" or a ValueError naming it
-    check_cameras(cameras, str(path), WRITE_REMEDY, skew=True)
+    check_cameras(cameras, str(path), skew=True)
     clash = sorted(set(extra or ()) & set(_RESERVED))
     if clash:
         raise ValueError(f"{path}: provenance keys {clash} would overwrite the file's own")

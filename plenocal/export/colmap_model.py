@@ -33,8 +33,7 @@ def build_reconstruction(cameras: Mapping[str, PinholeCamera], image_ext: str = 
     import pycolmap  # noqa: PLC0415
 
     # skew has no PINHOLE equivalent, and a reflection no quaternion
-    check_cameras(cameras, "COLMAP model", "nothing was written: the stage that computed "
-                  "these cameras gave them")
+    check_cameras(cameras, "COLMAP model")
     rec = pycolmap.Reconstruction()
     cam_ids: dict[tuple, int] = {}
     for image_id, name in enumerate(sorted(cameras), start=1):

@@ -111,8 +111,7 @@ def mpeg_name(key: str) -> str:
 def mpeg_document(cameras: Mapping[str, PinholeCamera], depth_range: tuple[float, float],
                   content_name: str = "plenocal", bit_depth_color: int = 8) -> dict:
     # a reflection would come out as some other (yaw, pitch, roll) without a word
-    check_cameras(cameras, f"MPEG camera parameters of {content_name!r}",
-                  "nothing was written: the stage that computed these cameras gave them")
+    check_cameras(cameras, f"MPEG camera parameters of {content_name!r}")
     names = sorted(cameras)
     return {
         "Version": "4.0",
