@@ -48,6 +48,9 @@ def test_tiny_config_valid():
      "datasets.synthetic.simulate.scene.near_m", "far_m"),
     (("datasets", "synthetic", "simulate", "scene", "near_m"), 0.36,
      "datasets.synthetic.simulate.scene.near_m", "virtual depth"),
+    # simulated for nothing before: registration A refused the capture after the simulation
+    (("datasets", "synthetic", "simulate", "handheld", "count"), 0,
+     "datasets.synthetic.simulate.handheld.count", "needs hand-held shots"),
     (("sfm", "mapper"), "magic", "sfm.mapper", "one of"),
     (("convert", "tile_size"), 1.5, "convert.tile_size", "integer"),
     (("scale", "low_percentile"), 95, "scale.low_percentile", "high_percentile"),
