@@ -388,6 +388,25 @@ def test_a_file_of_another_version_is_named_on_the_page(tmp_path):
     assert "Exp. 2 (checks B)" not in by["fig10"] and "Exp. 3 (checks A+B)" in by["fig10"]
 
 
+def test_registration_a_without_an_array_step_is_given_in_millimetres(tmp_path):
+    """An array of one shot has no step (gt_errors gives None): the section says so, and
+    the check in % of the step reads n/a, where formatting None stopped the report."""
+    res = make_results(tmp_path)
+    rel = res / "eval" / "gt_errors.json"
+    doc = json.loads(rel.read_text())
+    a = doc["registration_a"]
+    a["array_step_m"] = a["centre_rmse_pct_step"] = None
+    a["centre_aligned"]["centre_rmse_pct_step"] = None
+    for c in doc["checks"]:
+        if c["name"] == "a_centre_pct_step":
+            c["value"] = c["pass"] = None
+    write_json(rel, doc)
+    by = sections(build(res))
+    assert "mm (no array step: no two array shots are neighbours)" in by["gt"]
+    row = re.search(r'<tr id="gt-a_centre_pct_step">.*?</tr>', by["gt"]).group(0)
+    assert '<span class="na">n/a</span>' in row
+
+
 def test_absent_sources_are_named_with_their_rules(tmp_path):
     res = tmp_path / "results" / "fake"
     res.mkdir(parents=True)

@@ -172,11 +172,30 @@ def test_missing_stages_leave_checks_open_and_bad_truth_is_named():
     verdict = {c["name"]: c["pass"] for c in res["checks"]}
     assert verdict["a_focal_pct"] is None and verdict["all_centre_mm"] is True
     lonely = {"x00_y00/1_1": truth()["x00_y00/1_1"]}
-    with pytest.raises(ValueError, match="array step"):
-        array_step_m(lonely, N)
+    assert array_step_m(lonely, N) is None
     with pytest.raises(ValueError, match="share 1 views"):
         gt_errors(truth(), calib={"x00_y00/1_1": calib()["x00_y00/1_1"]})
 
+
+
+def test_an_array_of_one_shot_is_measured_in_millimetres():
+    """A capture whose array is one shot (beside the hand-held ones) has no array step:
+    registration A's centres are given in millimetres, their check in % of the step left
+    open (it stopped rule gt_errors, and with it the report, before)."""
+    keep = ("x00_y00", "hand00", "hand01")
+    t = {k: c for k, c in truth().items() if k.split("/")[0] in keep}
+    a0 = reg_a(focal=F * 1.002)
+    a = RegistrationA(focal_px=a0.focal_px, width=W, height=H, mapper="incremental",
+                      cameras={s: c for s, c in a0.cameras.items() if s in keep})
+    res = gt_errors(t, reg_a=a, rig=rig_doc(), r=R_TRUE, calib=calib())
+    ra = res["registration_a"]
+    assert ra["n_shots"] == 3 and ra["array_step_m"] is None
+    assert ra["centre_rmse_pct_step"] is None
+    assert ra["centre_aligned"]["centre_rmse_pct_step"] is None
+    assert ra["centre_rmse_mm"] == pytest.approx(0.0, abs=1e-6)
+    assert ra["focal_err_pct"] == pytest.approx(0.2, abs=1e-9)
+    verdict = {c["name"]: c["pass"] for c in res["checks"]}
+    assert verdict["a_centre_pct_step"] is None and verdict["a_focal_pct"] is True
 
 
 def test_pose_similarity_recovers_a_known_similarity_and_ignores_centre_depth_noise():

@@ -249,9 +249,11 @@ def section_gt(page: Page, synthetic: bool) -> None:
     if a:
         details.append(("Registration A", [
             ("focal length [px] (truth)", f"{a['focal_px']:.3f} ({a['focal_px_truth']:.3f})"),
-            ("centre RMSE after similarity", f"{a['centre_rmse_mm']:.4f} mm = "
-             f"{a['centre_rmse_pct_step']:.3f} % of the {1000 * a['array_step_m']:.2f} mm "
-             "step"),
+            ("centre RMSE after similarity", f"{a['centre_rmse_mm']:.4f} mm" + (
+                " (no array step: no two array shots are neighbours)"
+                if a["array_step_m"] is None else
+                f" = {a['centre_rmse_pct_step']:.3f} % of the "
+                f"{1000 * a['array_step_m']:.2f} mm step")),
             ("rotation error mean / max [deg]", f"{a['rotation_err_deg']['mean']:.4f} / "
              f"{a['rotation_err_deg']['max']:.4f}"),
             ("shots compared", str(a["n_shots"]))]))

@@ -74,8 +74,10 @@ def _stats(values: list[float]) -> dict:
             "rms": float(np.sqrt((v ** 2).mean()))}
 
 
-def array_step_m(truth: Mapping[str, PinholeCamera], n_views: int) -> float:
-    """Median distance between adjacent array shots' central views (x/y neighbours)."""
+def array_step_m(truth: Mapping[str, PinholeCamera], n_views: int) -> float | None:
+    """Median distance between adjacent array shots' central views (x/y neighbours); None
+    where no two array shots are neighbours (an "array" of one shot, beside the hand-held
+    ones: the centres are then given in millimetres only)."""
     c = central_view(n_views)
     pos = {}
     for key, cam in truth.items():
@@ -87,10 +89,7 @@ def array_step_m(truth: Mapping[str, PinholeCamera], n_views: int) -> float:
          if (x + 1, y) in pos]
     d += [float(np.linalg.norm(pos[(x, y + 1)] - p)) for (x, y), p in pos.items()
           if (x, y + 1) in pos]
-    if not d:
-        raise ValueError("ground truth has fewer than two adjacent array shots: "
-                         "cannot measure the array step")
-    return float(np.median(d))
+    return float(np.median(d)) if d else None
 
 
 def n_views_of(truth: Mapping[str, PinholeCamera]) -> int:
@@ -148,6 +147,11 @@ def registration_a_errors(truth: Mapping[str, PinholeCamera], focal_px: float,
                             for k in shots]))
     step = array_step_m(truth, n_views)
     rmse = float(np.sqrt((err ** 2).mean()))
+    rmse_c = float(np.sqrt((err_c ** 2).mean()))
+
+    def pct_step(d: float) -> float | None:
+        return None if step is None else 100.0 * d / step
+
     return {
         "n_shots": len(shots),
         "shots_without_truth": missing,
@@ -157,13 +161,13 @@ def registration_a_errors(truth: Mapping[str, PinholeCamera], focal_px: float,
         "scale_m_per_sfm_unit": float(s),
         "array_step_m": step,
         "centre_rmse_mm": 1000.0 * rmse,
-        "centre_rmse_pct_step": 100.0 * rmse / step,
+        "centre_rmse_pct_step": pct_step(rmse),
         "rotation_err_deg": _stats(rot),
         "alignment": "pose similarity: rotation from the orientations, scale and "
                      "translation from the centres (pose_similarity)",
         "centre_aligned": {
             "what": "similarity from the centres alone (Umeyama)",
-            "centre_rmse_pct_step": 100.0 * float(np.sqrt((err_c ** 2).mean())) / step,
+            "centre_rmse_pct_step": pct_step(rmse_c),
             "rotation_err_deg": _stats([rotation_angle_deg(R_c @ a, b)
                                         for a, b in zip(src_R, dst_R, strict=True)]),
             "rotation_vs_pose_alignment_deg": rotation_angle_deg(R_c, R),
