@@ -407,6 +407,27 @@ def test_registration_a_without_an_array_step_is_given_in_millimetres(tmp_path):
     assert '<span class="na">n/a</span>' in row
 
 
+def test_exp1_without_a_shot_to_synthesise_says_why(tmp_path):
+    """Exp. 1 renders the array shots that are not corners: an array of one shot (or 2 x
+    2) has none, and its empty tables are the array's doing, not a fault."""
+    from plenocal.artifacts.results import read_synthesis
+    from plenocal.report.html import Page, _psnr_section
+
+    res = make_results(tmp_path)
+    rel = res / "eval" / "synthesis_exp1.json"
+    doc = json.loads(rel.read_text())
+    for t in doc["tables"]:
+        t["psnr_db"], t["surface_psnr_db"] = {}, {}
+    write_json(rel, doc)
+    result = read_synthesis(rel)
+    for (cols, rows), said in (((1, 1), "every shot of this 1 x 1 array is a corner"),
+                               ((2, 2), "every shot of this 2 x 2 array is a corner"),
+                               ((3, 2), "holds no per-view PSNR")):
+        page = Page(res, "fake")
+        _psnr_section(page, "exp1", result, "", N, cols, rows)
+        assert said in "".join(page.parts), (cols, rows, page.parts)
+
+
 def test_absent_sources_are_named_with_their_rules(tmp_path):
     res = tmp_path / "results" / "fake"
     res.mkdir(parents=True)

@@ -390,6 +390,12 @@ def _psnr_section(page: Page, key: str, result: SynthesisResult | None, paper: s
             page.missing(key)
         return
     tables = [t for t in result.tables if t.psnr_db]
+    if not tables and result.tables and key == "exp1" and cols < 3 and rows < 3:
+        page.add(f"<p class=note>No view to synthesise: Exp. 1 renders the central views of "
+                 f"the array shots that are not corners, and every shot of this {cols} x "
+                 f"{rows} array is a corner (an input). An array with three shots along a "
+                 "side has one.</p>")
+        return
     if not tables:
         page.add(f'<p class="missing"><code>{escape(src.SOURCES[key][0])}</code> holds '
                  "no per-view PSNR.</p>")
