@@ -177,7 +177,6 @@ def test_missing_stages_leave_checks_open_and_bad_truth_is_named():
         gt_errors(truth(), calib={"x00_y00/1_1": calib()["x00_y00/1_1"]})
 
 
-
 def test_an_array_of_one_shot_is_measured_in_millimetres():
     """A capture whose array is one shot (beside the hand-held ones) has no array step:
     registration A's centres are given in millimetres, their check in % of the step left
