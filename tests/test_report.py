@@ -407,6 +407,18 @@ def test_registration_a_without_an_array_step_is_given_in_millimetres(tmp_path):
     assert '<span class="na">n/a</span>' in row
 
 
+def test_the_scale_of_one_shot_gives_no_spread(tmp_path):
+    """Eq. 5 on an array of one shot: a "relative spread 0.0000 over 1 shots" read as a
+    measured agreement."""
+    res = make_results(tmp_path)
+    write_scale(res / "merge" / "scale.json", ScaleResult(
+        r=0.0201, r_median=0.0201, r_median_of_ratios=0.0201, estimator="mean",
+        spread={"relative": 0.0, "n_shots": 1}))
+    summary = sections(build(res))["summary"]
+    assert "Eq. 5 mean 0.0201, from one shot (no spread over shots to give)" in summary
+    assert "relative spread" not in summary
+
+
 def test_exp1_without_a_shot_to_synthesise_says_why(tmp_path):
     """Exp. 1 renders the array shots that are not corners: an array of one shot (or 2 x
     2) has none, and its empty tables are the array's doing, not a fault."""

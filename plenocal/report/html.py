@@ -685,10 +685,13 @@ def section_summary(page: Page) -> None:
                 f"; the stage's step gives {sc.r_array_step:.6g} "
                 f"({100 * (sc.r_array_step / sc.r_eq5 - 1):+.3f} % from Eq. 5)")
         used = "the stage's step" if sc.chosen == "array_step" else "Eq. 5"
+        n_shots = sc.spread.get("n_shots")
+        spread = ("from one shot (no spread over shots to give)" if n_shots == 1 else
+                  f"relative spread {_fmt(sc.spread.get('relative'), 4)} over "
+                  f"{_fmt(n_shots)} shots")
         page.add(f'<span class="kpi" id="kpi-scale">scale r (from {used})<b>'
-                 f"{sc.r_used:.6g}</b>Eq. 5 {escape(sc.estimator)} {sc.r_eq5:.6g}, relative "
-                 f"spread {_fmt(sc.spread.get('relative'), 4)} over "
-                 f"{_fmt(sc.spread.get('n_shots'))} shots{escape(step)} "
+                 f"{sc.r_used:.6g}</b>Eq. 5 {escape(sc.estimator)} {sc.r_eq5:.6g}, "
+                 f"{spread}{escape(step)} "
                  f"{page.link(src.SOURCES['scale'][0], '[source]')}</span>")
     rig = _read(page, "rig", read_rig)
     if rig is not None:
