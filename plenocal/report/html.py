@@ -37,6 +37,7 @@ from plenocal.io.files import atomic_write_text, read_json
 from plenocal.names import array_position, array_shot, central_view, key_shot, split_key
 from plenocal.report import figures as fg
 from plenocal.report import sources as src
+from plenocal.verify.experiments import ArrayLayout
 
 CSS = """
 body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:0;color:#222;
@@ -390,7 +391,9 @@ def _psnr_section(page: Page, key: str, result: SynthesisResult | None, paper: s
             page.missing(key)
         return
     tables = [t for t in result.tables if t.psnr_db]
-    if not tables and result.tables and key == "exp1" and cols < 3 and rows < 3:
+    layout = ArrayLayout(cols, rows, n_views)
+    if not tables and result.tables and key == "exp1" and set(layout.corners) == set(
+            layout.cams):
         page.add(f"<p class=note>No view to synthesise: Exp. 1 renders the central views of "
                  f"the array shots that are not corners, and every shot of this {cols} x "
                  f"{rows} array is a corner (an input). An array with three shots along a "
