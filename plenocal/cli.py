@@ -37,6 +37,7 @@ import yaml
 
 from plenocal.config import deep_update, stage_defaults
 from plenocal.convert.errors import ConvertError
+from plenocal.convert.outfolder import check_output_folder, still_claims
 from plenocal.convert.prefilter import OPTIMAL_A
 from plenocal.convert.video import TEMPORAL_MODES
 from plenocal.io.yuv import (
@@ -138,7 +139,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="output folder (created; files in it with the same names are "
                         "replaced when the run succeeds: the outputs are made in a hidden "
                         "folder inside it and moved into place at the end, so a run that "
-                        "fails or is stopped leaves the folder as it was)")
+                        "fails or is stopped leaves the folder as it was; a folder holding "
+                        "an earlier conversion's files that this one would not replace, "
+                        "e.g. the views of another --views, is refused before the work)")
     c.add_argument("--views", type=int, default=stage_defaults("dataset")["views"], metavar="N",
                    help="N x N views (default %(default)s, a dataset's in config.schema.yaml, "
                         "as TLCT); N odd (the centre is a view), N >= 1")
@@ -325,6 +328,9 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     except OSError as exc:
         raise ConvertError(f"{out}: cannot write to the output folder ({exc.strerror or exc}):"
                            " choose another with -o") from None
+    if not video:  # a recording's frames are known once the file is (convert_recording)
+        check_output_folder(out, still_claims(args.views),
+                            f"{args.views} x {args.views} views of one image")
     try:
         if video:
             run_convert_video(args, settings, block, log)

@@ -265,6 +265,27 @@ def test_a_rerun_that_fails_leaves_the_previous_views(tmp_path, shot, monkeypatc
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
 
 
+def test_a_folder_of_another_view_set_is_refused_before_the_work(tmp_path, shot):
+    """A 1 x 1 run into the folder of a 3 x 3 run would replace 0_0.png (then a corner
+    view) and leave the other eight beside it: stopped before the frame is read, naming
+    the files, the folder as it was; a 3 x 3 run again, or into a folder holding other
+    files, goes ahead."""
+    lenslet, calib = shot
+    out = tmp_path / "views"
+    args = [str(lenslet), str(calib), "-o", str(out), "--mla", "keplerian"]
+    assert main(["convert", *args, "--views", "3", "-q"]) == 0
+    (out / "notes.txt").write_text("mine")
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    r = _cli("convert", *args, "--views", "1")
+    assert r.returncode == 2
+    assert (f"{out}: holds 0_1.png, 0_2.png, 1_0.png, 1_1.png, ... (8 in all) from an "
+            "earlier conversion, which this one (1 x 1 views of one image)") in r.stderr
+    assert "grid check" not in r.stderr  # stopped before the frame was read
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert main(["convert", *args, "--views", "3", "-q"]) == 0
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
 FRAMES = Path(__file__).resolve().parents[2] / "shared" / "real" / "frames"
 
 

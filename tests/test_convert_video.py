@@ -540,3 +540,33 @@ def test_view_to_yuv_by_rows_is_the_whole_view(monkeypatch):
         banded = video.view_to_yuv(view, 10)
         for a, b in zip(whole, banded, strict=True):
             assert a.dtype == b.dtype and np.array_equal(a, b), (H, W)
+
+
+@needs_real
+def test_a_rerun_replaces_its_views_videos_and_chunks_share_a_folder(tmp_path):
+    """One folder, one conversion (plenocal.convert.outfolder): per-view videos of another
+    view size (another tile) are replaced by the rerun's, not left beside them; PNG frames
+    converted in chunks of frames share a folder, and a chunk of another view set stops
+    before its work."""
+    import plenocal.convert.video as video_mod  # noqa: PLC0415
+
+    a, b, calib = _frames()
+    clip = _clip(tmp_path, [a, b], 8)
+    out = tmp_path / "yuv"
+    sizes = []
+    for tile in (5, 6):
+        doc = video_mod.convert_recording(clip, calib, out, 3,
+                                          ConvertSettings(mla="galilean", tile_size=tile),
+                                          out_format="yuv")
+        sizes.append((doc["views"]["width"], doc["views"]["height"]))
+        assert sorted(p.name for p in out.glob("*.yuv")) == sorted(
+            doc["views"]["files"].values())
+    assert sizes[0] != sizes[1]
+    out = tmp_path / "png"
+    for frames in ("0:1", "1:2"):
+        video_mod.convert_recording(clip, calib, out, 3, ConvertSettings(mla="galilean"),
+                                    frames=frames)
+    assert sorted(p.name for p in out.glob("frame_*")) == ["frame_00000", "frame_00001"]
+    with pytest.raises(video_mod.ConvertError, match=r"frame_00000 \(3 x 3 views\)"):
+        video_mod.convert_recording(clip, calib, out, 5, ConvertSettings(mla="galilean"),
+                                    frames="1:2")

@@ -43,6 +43,7 @@ import numpy as np
 from plenocal.convert.analysis import ConvertAnalysis
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.levels import significant_bits
+from plenocal.convert.outfolder import check_output_folder, recording_claims, stale_view_videos
 from plenocal.convert.patchsize import (
     PatchSizeResult,
     estimate_patch_size,
@@ -386,6 +387,11 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
         raise ConvertError(str(exc)) from None
     count = frame_count(path, fmt)
     chosen = parse_frames(frames, count)
+    # an earlier conversion's files that this one would not replace stop it now, before
+    # the set-up's analysis (plenocal.convert.outfolder)
+    check_output_folder(out, recording_claims(n_views, chosen, out_format),
+                        f"{n_views} x {n_views} views of frames {chosen.start}..{chosen.stop - 1}"
+                        f" as {out_format}", n_views=n_views if out_format == "png" else None)
     log.info("%s: %s", path.name, _depth_note(fmt.bits))
     if setup is not None and setup_frame is not None:
         raise ConvertError(f"--setup-frame {setup_frame} with --setup: the set-up is read from "
@@ -410,8 +416,13 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
     # everything is made in a staging folder and moved into ``out`` at the end, video.json
     # last: a run that fails or is stopped leaves the previous run's files as they were
     with staged_outputs(out, last=("video.json",)) as stage:
-        return _convert_frames(path, fmt, count, chosen, conv, stage, n_views, video,
-                               out_format, threads)
+        doc = _convert_frames(path, fmt, count, chosen, conv, stage, n_views, video,
+                              out_format, threads)
+    if out_format == "yuv":  # this run's views' videos at an earlier run's size replaced
+        for old in stale_view_videos(out, set(doc["views"]["files"].values())):
+            old.unlink()
+            log.info("%s: removed, an earlier run's video of the same view", old.name)
+    return doc
 
 
 def _convert_frames(path: Path, fmt: YuvFormat, count: int, chosen: range,
