@@ -10,7 +10,7 @@ import cv2
 from plenocal.convert import ConvertSettings, convert_files
 from plenocal.convert.analysis import read_analysis
 from plenocal.convert.video import video_settings
-from plenocal.convert.viewset import view_set_path, write_view_set
+from plenocal.convert.viewset import remove_stale_views, view_set_path, write_view_set
 from plenocal.io.files import write_images
 from plenocal.rulelog import rule_logger
 
@@ -45,5 +45,9 @@ for k, (cam, lenslet, analysis) in enumerate(zip(params.cams, inp.lenslet, inp.a
         raise RuntimeError(f"{view_set_path(out_dir)} is not a declared output of "
                            f"{snakemake.rule}")
     write_view_set(out_dir, params.all_names)
+    stale = remove_stale_views(out_dir, params.all_names)
+    if stale:
+        log.info("%s: removed %d views of an earlier views setting (%s ... %s)", cam,
+                 len(stale), stale[0].name, stale[-1].name)
     log.info("%s: %d views in %.2f s (%d of %d)", cam, len(params.names),
              time.perf_counter() - t0, k + 1, len(params.cams))

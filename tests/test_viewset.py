@@ -11,6 +11,7 @@ import pytest
 
 from plenocal.convert.viewset import (
     read_view_set,
+    remove_stale_views,
     view_set_files,
     view_set_path,
     write_view_set,
@@ -80,3 +81,17 @@ def test_reading_names_the_file_and_the_remedy(tmp_path):
         read_view_set(path)
     with pytest.raises(FileNotFoundError, match=r"hand05/views.json: view set not found"):
         read_view_set(tmp_path / "hand05" / "views.json")
+
+
+def test_stale_views_of_another_views_setting_are_removed(tmp_path):
+    d = _shot(tmp_path, "x00_y00")
+    for name in ("0_2.png", "2_2.png", "10_0.png"):
+        (d / name).write_bytes(b"x")
+    (d / "notes_1_1.png").write_bytes(b"x")  # not a view's name
+    write_view_set(d, NAMES)
+    gone = remove_stale_views(d, NAMES)
+    assert [p.name for p in gone] == ["0_2.png", "10_0.png", "2_2.png"]
+    assert sorted(p.name for p in d.iterdir()) == sorted(
+        [f"{n}.png" for n in NAMES] + ["notes_1_1.png", "views.json"])
+    assert read_view_set(view_set_path(d)) == {n: d / f"{n}.png" for n in NAMES}
+    assert remove_stale_views(d, NAMES) == []

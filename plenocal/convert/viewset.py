@@ -19,6 +19,7 @@ The document: ``{"format": "plenocal.view_set", "version": 1, "shot": <shot>,
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -51,6 +52,24 @@ def write_view_set(shot_dir: str | Path, names: Sequence[str]) -> Path:
     path = view_set_path(shot_dir)
     write_json(path, doc)
     return path
+
+
+#: a view's PNG in a shot's folder (plenocal.names.view_name)
+_VIEW_PNG = re.compile(r"\d+_\d+\.png")
+
+
+def remove_stale_views(shot_dir: str | Path, names: Sequence[str]) -> list[Path]:
+    """Remove the view PNGs in ``shot_dir`` that are not among ``names`` (the shot's whole
+    view set), and return them: an earlier run's views of another ``views`` setting
+    (after 5 x 5 views, a 3 x 3 run left 3_3.png ... 4_4.png beside its own, and the
+    folder a user takes to COLMAP or NeRF mixed two view sets; Snakemake removes only the
+    outputs it reruns). Nothing reads them: every consumer reads views.json."""
+    keep = {f"{n}.png" for n in names}
+    stale = sorted(p for p in Path(shot_dir).iterdir()
+                   if _VIEW_PNG.fullmatch(p.name) and p.name not in keep)
+    for p in stale:
+        p.unlink()
+    return stale
 
 
 def read_view_set(path: str | Path) -> dict[str, Path]:
