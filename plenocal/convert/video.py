@@ -390,8 +390,9 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
     # an earlier conversion's files that this one would not replace stop it now, before
     # the set-up's analysis (plenocal.convert.outfolder)
     check_output_folder(out, recording_claims(n_views, chosen, out_format),
-                        f"{n_views} x {n_views} views of frames {chosen.start}..{chosen.stop - 1}"
-                        f" as {out_format}", n_views=n_views if out_format == "png" else None)
+                        f"{n_views} x {n_views} views of frames {chosen[0]}..{chosen[-1]}"
+                        + (f" every {chosen.step}" if chosen.step != 1 else "")
+                        + f" as {out_format}", n_views=n_views if out_format == "png" else None)
     log.info("%s: %s", path.name, _depth_note(fmt.bits))
     if setup is not None and setup_frame is not None:
         raise ConvertError(f"--setup-frame {setup_frame} with --setup: the set-up is read from "
