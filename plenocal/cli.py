@@ -120,11 +120,46 @@ def _int_or_auto(name: str):
     return parse
 
 
+#: the libraries whose versions decide the outputs' bytes (pyproject.toml pins them): what
+#: ``plenocal --version`` names beside its own, for a methods section or a bug report
+VERSIONED = ("numpy", "opencv-python-headless", "pycolmap", "scipy", "numba", "snakemake")
+
+
+def version_text() -> str:
+    """``plenocal <version>`` and the installed versions of :data:`VERSIONED` and Python
+    (read from the installed packages' metadata: nothing is imported)."""
+    from importlib.metadata import PackageNotFoundError, version  # noqa: PLC0415
+
+    def of(name: str) -> str:
+        try:
+            return version(name)
+        except PackageNotFoundError:
+            return "not installed"
+
+    libs = ", ".join(f"{name} {of(name)}" for name in VERSIONED)
+    return f"plenocal {of('plenocal')} ({libs}; Python {sys.version.split()[0]})"
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: :func:`version_text` on one line (argparse's own action wraps it to
+    the terminal), read only when asked for."""
+
+    def __init__(self, option_strings, dest, help=None):  # noqa: A002  (argparse's name)
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(version_text())
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="plenocal",
         description="Calibration of plenoptic 2.0 camera arrays. The workflow runs through "
                     "snakemake; this command converts single lenslet images.")
+    ap.add_argument("--version", action=_VersionAction,
+                    help="plenocal's version and those of the libraries that decide its "
+                         "outputs' bytes, then exit")
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
     c = sub.add_parser("convert", help="lenslet image + calib.xml -> N x N views",
                        description=CONVERT_HELP,

@@ -61,6 +61,18 @@ def test_help_explains_every_option():
         assert action.help, f"{action.dest} has no help"
 
 
+def test_version_names_the_libraries_that_decide_the_bytes():
+    from importlib.metadata import version  # noqa: PLC0415
+
+    r = _cli("--version")
+    assert r.returncode == 0
+    line = r.stdout.strip()
+    assert line.startswith(f"plenocal {version('plenocal')} (numpy {version('numpy')}, ")
+    for name in ("opencv-python-headless", "pycolmap", "scipy", "numba", "snakemake"):
+        assert f"{name} {version(name)}" in line, name
+    assert f"Python {sys.version.split()[0]})" in line
+
+
 def test_missing_file_and_malformed_xml_exit_2(tmp_path, shot):
     lenslet, calib = shot
     r = _cli("convert", str(tmp_path / "none.png"), str(calib), "-o", str(tmp_path / "o"))
