@@ -101,23 +101,21 @@ def _set_key(cfg: dict, dotted: str, value) -> None:
 def _auto_or_int(parser: argparse.ArgumentParser, flag: str, help_text: str) -> None:
     """An option that takes ``auto`` or a whole number, left to the converter's default
     when not given."""
-    parser.add_argument(flag, type=_int_or_auto(flag), default=None, metavar="auto|N",
+    parser.add_argument(flag, type=_int_or_auto, default=None, metavar="auto|N",
                         help=help_text + ". Default: the converter's default")
 
 
-def _int_or_auto(name: str):
-    def parse(text: str):
-        if text == "auto":
-            return "auto"
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name}: 'auto' or a whole number, not "
-                                             f"{text!r}") from None
-        if v < 1:
-            raise argparse.ArgumentTypeError(f"{name}: must be >= 1 (got {v})")
-        return v
-    return parse
+def _int_or_auto(text: str) -> str | int:
+    """``auto`` or a whole number >= 1 (argparse names the option in its message)."""
+    if text == "auto":
+        return "auto"
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'auto' or a whole number, not {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1 (got {v})")
+    return v
 
 
 #: the libraries whose versions decide the outputs' bytes (pyproject.toml pins them): what
@@ -251,7 +249,7 @@ def _threads(text: str) -> int:
     except ValueError:
         n = 0
     if n < 1:
-        raise argparse.ArgumentTypeError(f"--threads: a whole number >= 1, not {text!r}")
+        raise argparse.ArgumentTypeError(f"a whole number >= 1, not {text!r}")
     return n
 
 
@@ -270,7 +268,7 @@ def _size(text: str) -> tuple[int, int]:
     except ValueError:
         size = (0, 0)
     if not sep or min(size) < 2:
-        raise argparse.ArgumentTypeError(f"--size: WIDTHxHEIGHT, e.g. 3976x2956, not {text!r}")
+        raise argparse.ArgumentTypeError(f"WIDTHxHEIGHT, e.g. 3976x2956, not {text!r}")
     return size
 
 
