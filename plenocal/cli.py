@@ -335,6 +335,9 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     settings = ConvertSettings.from_config(block)
     for path, what in ((args.lenslet, "lenslet image"), (args.calib, "calib.xml"),
                        (args.setup, "convert_setup.json")):
+        if path is not None and Path(path).is_dir():
+            raise ConvertError(f"{path}: a folder, where the {what} file is asked for (one "
+                               "file a command: convert a folder's frames one by one)")
         if path is not None and not Path(path).is_file():
             raise ConvertError(f"{path}: {what} not found")
     video = Path(args.lenslet).suffix.lower() == ".yuv"

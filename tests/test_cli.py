@@ -78,6 +78,9 @@ def test_missing_file_and_malformed_xml_exit_2(tmp_path, shot):
     r = _cli("convert", str(tmp_path / "none.png"), str(calib), "-o", str(tmp_path / "o"))
     assert r.returncode == 2
     assert "none.png" in r.stderr and "not found" in r.stderr
+    r = _cli("convert", str(lenslet.parent), str(calib), "-o", str(tmp_path / "o"))
+    assert r.returncode == 2
+    assert f"{lenslet.parent}: a folder, where the lenslet image file is asked for" in r.stderr
     bad = tmp_path / "bad.xml"
     bad.write_text("<RayCalibData><diameter>23")
     r = _cli("convert", str(lenslet), str(bad), "-o", str(tmp_path / "o"))
