@@ -39,6 +39,10 @@ from plenocal.report import figures as fg
 from plenocal.report import sources as src
 from plenocal.verify.experiments import ArrayLayout
 
+#: the narrowest a picture's caption wraps to (px): under it a caption of a few words would run
+#: to many lines beside a small zoom
+CAPTION_MIN_PX = 240
+
 CSS = """
 body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:0;color:#222;
 background:#fff;line-height:1.4}
@@ -119,9 +123,12 @@ class Page:
         dw = display_width or w
         dh = int(round(h * dw / w))
         cls = ' class="px"' if pixelated else ""
+        # the caption wraps within its picture's width (at least CAPTION_MIN_PX), so that a
+        # long caption does not widen its figure and push the row's next picture away
+        cap_w = max(dw, CAPTION_MIN_PX)
         return (f'<figure><img{cls} src="{uri}" width="{dw}" height="{dh}" '
-                f'alt="{escape(caption)}"><figcaption>{escape(caption)} '
-                f"{self.link(rel, '[source]')}</figcaption></figure>")
+                f'alt="{escape(caption)}"><figcaption style="max-width:{cap_w}px">'
+                f"{escape(caption)} {self.link(rel, '[source]')}</figcaption></figure>")
 
     def render(self) -> str:
         nav = " ".join(f'<a href="#{a}">{escape(t)}</a>' for a, t in self.toc)
