@@ -48,6 +48,7 @@ from plenocal.io.yuv import (
     YuvError,
     resolve_format,
 )
+from plenocal.versions import version_text
 
 EXIT_USAGE = 2
 
@@ -116,26 +117,6 @@ def _int_or_auto(text: str) -> str | int:
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1 (got {v})")
     return v
-
-
-#: the libraries whose versions decide the outputs' bytes (pyproject.toml pins them): what
-#: ``plenocal --version`` names beside its own, for a methods section or a bug report
-VERSIONED = ("numpy", "opencv-python-headless", "pycolmap", "scipy", "numba", "snakemake")
-
-
-def version_text() -> str:
-    """``plenocal <version>`` and the installed versions of :data:`VERSIONED` and Python
-    (read from the installed packages' metadata: nothing is imported)."""
-    from importlib.metadata import PackageNotFoundError, version  # noqa: PLC0415
-
-    def of(name: str) -> str:
-        try:
-            return version(name)
-        except PackageNotFoundError:
-            return "not installed"
-
-    libs = ", ".join(f"{name} {of(name)}" for name in VERSIONED)
-    return f"plenocal {of('plenocal')} ({libs}; Python {sys.version.split()[0]})"
 
 
 class _VersionAction(argparse.Action):

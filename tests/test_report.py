@@ -13,6 +13,7 @@ import os
 import re
 import shutil
 import subprocess
+from html import escape
 from pathlib import Path
 
 import cv2
@@ -34,6 +35,7 @@ from plenocal.report.html import _hundredths, build_report, shot_means_table
 from plenocal.report.sources import PAPER_TABLE1, layout, table1_rows, table_name
 from plenocal.verify.gt_errors import gt_errors
 from plenocal.verify.synthesis import psnr_tables
+from plenocal.versions import version_text
 
 N = 3
 COLS, ROWS = 3, 2
@@ -330,6 +332,10 @@ def test_page_content_and_determinism(tmp_path):
     # Fig. 10: captured + 6 syntheses, 2 zooms of captured + 4 calibrated; previews
     assert n_img == 7 + 2 * 5 + len(CAMS) + 2 * len(CAMS) - 1
     assert len(html) < 600_000
+    # the versions that decide the bytes, last on the page (plenocal.versions)
+    assert html.rstrip().endswith(f'<p class="note">Made by {escape(version_text())}.</p>'
+                                  "</main></body></html>")
+    assert "numpy " in version_text() and "pycolmap " in version_text()
     first = (res / "report" / "index.html").read_bytes()
     build(res)
     assert (res / "report" / "index.html").read_bytes() == first

@@ -38,6 +38,7 @@ from plenocal.names import array_position, array_shot, central_view, key_shot, s
 from plenocal.report import figures as fg
 from plenocal.report import sources as src
 from plenocal.verify.experiments import ArrayLayout
+from plenocal.versions import version_text
 
 #: the narrowest a picture's caption wraps to (px): under it a caption of a few words would run
 #: to many lines beside a small zoom
@@ -922,6 +923,8 @@ def build_report(results: str | Path, out_path: str | Path, dataset: str, *,
     page.section("sources", "Source files")
     page.add("<ul>" + "".join(f"<li>{page.link(r)}</li>" for r in sorted(page.linked))
              + "</ul>")
+    # the versions that decide the outputs' bytes, for a methods section or a bug report
+    page.add(f'<p class="note">Made by {escape(version_text())}.</p>')
     html = page.render()
     atomic_write_text(out_path, html)
     return {"sections": [t for _, t in page.toc], "linked": sorted(page.linked),
