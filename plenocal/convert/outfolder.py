@@ -2,14 +2,14 @@
 
 A conversion replaces the files of the same names in its folder. Without a check, an
 earlier conversion's files of other names stayed beside the new ones: a 7 x 7 run's views
-3_3.png ... 6_6.png beside a 3 x 3 run's 0_0.png ... 2_2.png (another view set, 0_0 then
-a corner at another offset), or a recording's frames beside a still's views, and the folder
-handed to COLMAP, TMIV or NeRF mixed two conversions. :func:`check_output_folder` stops
-such a run before its work, naming the files; nothing is removed that the user did not ask
-to replace (a rerun's per-view videos replace their views' videos of another size,
-:func:`stale_view_videos`). What is allowed to stay: files the conversion does not write
-(the user's own), and a recording's frame folders of the same view set (a recording
-converted in chunks of ``--frames`` into one folder).
+0_3.png ... 6_6.png (forty views) beside a 3 x 3 run's 0_0.png ... 2_2.png (another view
+set, 0_0 then a corner at another offset), or a recording's frames beside a still's views,
+and the folder handed to COLMAP, TMIV or NeRF mixed two conversions.
+:func:`check_output_folder` stops such a run before its work, naming the files; nothing is
+removed that the user did not ask to replace (a rerun's per-view videos replace their
+views' videos of another size, :func:`stale_view_videos`). What is allowed to stay: files
+the conversion does not write (the user's own), and a recording's frame folders of the
+same view set (a recording converted in chunks of ``--frames`` into one folder).
 """
 from __future__ import annotations
 

@@ -61,9 +61,10 @@ _VIEW_PNG = re.compile(r"\d+_\d+\.png")
 def remove_stale_views(shot_dir: str | Path, names: Sequence[str]) -> list[Path]:
     """Remove the view PNGs in ``shot_dir`` that are not among ``names`` (the shot's whole
     view set), and return them: an earlier run's views of another ``views`` setting
-    (after 5 x 5 views, a 3 x 3 run left 3_3.png ... 4_4.png beside its own, and the
-    folder a user takes to COLMAP or NeRF mixed two view sets; Snakemake removes only the
-    outputs it reruns). Nothing reads them: every consumer reads views.json."""
+    (after 5 x 5 views, a 3 x 3 run left 0_3.png ... 4_4.png, sixteen views, beside its
+    own, and the folder a user takes to COLMAP or NeRF mixed two view sets; Snakemake
+    removes only the outputs it reruns). Nothing reads them: every consumer reads
+    views.json."""
     keep = {f"{n}.png" for n in names}
     stale = sorted(p for p in Path(shot_dir).iterdir()
                    if _VIEW_PNG.fullmatch(p.name) and p.name not in keep)
