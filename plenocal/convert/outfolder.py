@@ -18,13 +18,13 @@ from collections.abc import Callable
 from pathlib import Path
 
 from plenocal.convert.errors import ConvertError
-from plenocal.names import view_names
+from plenocal.names import VIEW_PATTERN, view_names
 
 #: the names ``plenocal convert`` writes in its output folder: a still image's views,
 #: patch sizes and disparity.json; a recording's view videos (plenocal.io.yuv.mpeg_name),
 #: frame folders, set-up and video.json
 CONVERSION_NAME = re.compile(
-    r"(?P<view>\d+_\d+)\.png|v_(?P<video>\d+_\d+)_\S+\.yuv|frame_\d{5}"
+    rf"(?P<view>{VIEW_PATTERN})\.png|v_(?P<video>{VIEW_PATTERN})_\S+\.yuv|frame_[0-9]{{5}}"
     r"|patch_size\.(?:npy|png)|disparity\.json|video\.json|convert_setup\.json")
 
 #: a still image's files besides its views (plenocal.cli)

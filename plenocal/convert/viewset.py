@@ -25,6 +25,7 @@ from pathlib import Path
 
 from plenocal.artifacts.versioned import complete, read_versioned
 from plenocal.io.files import file_sha256, write_json
+from plenocal.names import VIEW_PATTERN
 
 FORMAT = "plenocal.view_set"
 VERSION = 1
@@ -55,7 +56,7 @@ def write_view_set(shot_dir: str | Path, names: Sequence[str]) -> Path:
 
 
 #: a view's PNG in a shot's folder (plenocal.names.view_name)
-_VIEW_PNG = re.compile(r"\d+_\d+\.png")
+_VIEW_PNG = re.compile(rf"(?:{VIEW_PATTERN})\.png")
 
 
 def remove_stale_views(shot_dir: str | Path, names: Sequence[str]) -> list[Path]:
