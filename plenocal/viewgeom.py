@@ -190,6 +190,23 @@ def _rows(layout: ViewLayout, rows: slice, dtype) -> np.ndarray:
     return np.arange(layout.height, dtype=dtype)[rows][:, None]
 
 
+def _lattice_table(layout: ViewLayout
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The lens table of the tile lattice with a margin of empty cells (-1), flattened;
+    its shape (2,); the lattice coordinates of its first cell (2,); the output-pixel ->
+    lattice matrix (2, 2) and the tile centre it is taken about (2,)."""
+    c0 = layout.tile_centres
+    ref = c0[0]
+    B = layout.basis.T  # columns: output-pixel vectors of the two lattice steps
+    Binv = np.linalg.inv(B)
+    lat = np.rint((c0 - ref) @ Binv.T).astype(np.int64)
+    lo = lat.min(axis=0) - _MARGIN
+    shape = lat.max(axis=0) - lo + 1 + _MARGIN
+    table = np.full(tuple(shape), -1, dtype=np.int32)
+    table[lat[:, 0] - lo[0], lat[:, 1] - lo[1]] = np.arange(len(c0))
+    return table.ravel(), shape, lo, Binv, ref
+
+
 def _lattice_lookup(layout: ViewLayout, k: int, rows: slice = slice(None)
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The lens table of the tile lattice, flattened with a margin of empty cells (-1),
@@ -200,15 +217,7 @@ def _lattice_lookup(layout: ViewLayout, k: int, rows: slice = slice(None)
     ``table[cell[u] + off[n]]``."""
     ys = _rows(layout, rows, np.float64)
     xs = np.arange(layout.width, dtype=np.float64)[None, :]
-    c0 = layout.tile_centres
-    ref = c0[0]
-    B = layout.basis.T  # columns: output-pixel vectors of the two lattice steps
-    Binv = np.linalg.inv(B)
-    lat = np.rint((c0 - ref) @ Binv.T).astype(np.int64)
-    lo = lat.min(axis=0) - _MARGIN
-    shape = lat.max(axis=0) - lo + 1 + _MARGIN
-    table = np.full(tuple(shape), -1, dtype=np.int32)
-    table[lat[:, 0] - lo[0], lat[:, 1] - lo[1]] = np.arange(len(c0))
+    table, shape, lo, Binv, ref = _lattice_table(layout)
     ax = np.rint(Binv[0, 0] * (xs - ref[0]) + Binv[0, 1] * (ys - ref[1]))
     ay = np.rint(Binv[1, 0] * (xs - ref[0]) + Binv[1, 1] * (ys - ref[1]))
     # a pixel clipped in lies >= 3 empty cells from every lens: its steps (<= 2) find none
@@ -216,7 +225,7 @@ def _lattice_lookup(layout: ViewLayout, k: int, rows: slice = slice(None)
     ay = np.clip(ay - lo[1], 2, shape[1] - 3).astype(np.int32)
     cell = ax * np.int32(shape[1]) + ay
     steps = _STEPS[: max(k, 1)]
-    return table.ravel(), cell, (steps[:, 0] * shape[1] + steps[:, 1]).astype(np.int32)
+    return table, cell, (steps[:, 0] * shape[1] + steps[:, 1]).astype(np.int32)
 
 
 def _tile_dist2(layout: ViewLayout, li: np.ndarray, rows: slice = slice(None)
@@ -335,12 +344,12 @@ def nearest_slots(layout: ViewLayout, keep: int = 3, k: int = 7, rows: slice = s
     slot-major, for the output ``rows`` (all by default; a band gives the same numbers as
     those rows of the whole): (lens index (keep, h, W) int32, -1 where none; squared
     distance in tile units (keep, h, W) float32, inf where none). Ties (to 2^-22 tile^2)
-    keep the candidate order. A sorting network on uint32 keys ``quantised d2 << 5 |
-    candidate`` (one pass, at most ``keep`` min/max per candidate) instead of sorting
-    (H, W, k) arrays; each slot's lens and distance are then read from the candidates'
-    by the candidate number in its key. ``k``: up to ``len(_STEPS)`` (19) candidates
-    (:func:`candidates_within`). Inside :func:`remembered_slots` the tables are made once
-    per layout geometry and band and handed out again, read-only."""
+    keep the candidate order: each pixel's uint32 keys ``quantised d2 << 5 | candidate``
+    kept sorted by insertion, ``keep`` of them, in one compiled pass over the pixels
+    (:mod:`plenocal.slotkernels`; the bits of the numpy sorting network it replaced).
+    ``k``: up to ``len(_STEPS)`` (19) candidates (:func:`candidates_within`). Inside
+    :func:`remembered_slots` the tables are made once per layout geometry and band and
+    handed out again, read-only."""
     if k > len(_STEPS):
         raise ValueError(f"nearest_slots takes at most {len(_STEPS)} candidates, got {k}")
     keep = min(keep, k)
@@ -356,37 +365,22 @@ def nearest_slots(layout: ViewLayout, keep: int = 3, k: int = 7, rows: slice = s
 
 def _nearest_slots(layout: ViewLayout, keep: int, k: int, rows: slice
                    ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`nearest_slots` computed."""
-    table, cell, off = _lattice_lookup(layout, k, rows)
-    # every candidate's lens and distance; row k: none (-1, inf)
-    lens = np.empty((k + 1,) + cell.shape, np.int32)
-    dist = np.empty(lens.shape, np.float32)
-    lens[k], dist[k] = -1, np.inf
-    bits = np.uint32(_KEY_BITS)
-    slots: list[np.ndarray] = []
-    for n, o in enumerate(off):
-        table.take(cell + o, out=lens[n])
-        dist[n] = _tile_dist2(layout, lens[n], rows)
-        # the quantised distance, at most _KEY_MAX (float32 rounds _KEY_MAX up to 2^27)
-        key = np.minimum(dist[n] * _KEY_SCALE, _KEY_MAX).astype(np.uint32)
-        np.minimum(key, np.uint32(_KEY_MAX), out=key)
-        key <<= bits
-        key |= np.uint32(n)
-        for s in range(min(n, keep)):  # insert key: the slots filled so far stay sorted
-            lo_ = np.minimum(slots[s], key)
-            np.maximum(slots[s], key, out=key)
-            slots[s] = lo_
-        if n < keep:
-            slots.append(key)
-    flat_lens, flat_dist = lens.ravel(), dist.ravel()
-    column = np.arange(cell.size, dtype=np.intp).reshape(cell.shape)
-    idx = np.empty((keep,) + cell.shape, np.int32)
+    """:func:`nearest_slots` computed, in one compiled pass over the pixels
+    (:func:`plenocal.slotkernels.nearest_slots_band`)."""
+    from plenocal.slotkernels import nearest_slots_band  # noqa: PLC0415 (numba: 0.3 s)
+
+    f = np.float32
+    table, shape, lo, Binv, ref = _lattice_table(layout)
+    ys = np.arange(layout.height, dtype=np.float64)[rows]
+    idx = np.empty((keep, len(ys), layout.width), np.int32)
     dist2 = np.empty(idx.shape, np.float32)
-    for s in range(keep):
-        n = (slots[s] & np.uint32((1 << _KEY_BITS) - 1)).astype(np.intp)
-        n[(slots[s] >> bits) >= _KEY_MAX] = k  # 32 tiles^2 or more away, or no lens: none
-        n *= cell.size
-        n += column  # the flat position of the candidate's row and this pixel
-        flat_lens.take(n, out=idx[s])
-        flat_dist.take(n, out=dist2[s])
+    # index -1 (no lens): a centre at infinity, so that its distance is inf
+    tcx = np.append(layout.tile_centres[:, 0], np.inf).astype(f)
+    tcy = np.append(layout.tile_centres[:, 1], np.inf).astype(f)
+    nearest_slots_band(table, int(shape[1]), float(lo[0]), float(lo[1]),
+                       np.ascontiguousarray(Binv, dtype=np.float64),
+                       np.ascontiguousarray(ref, dtype=np.float64), ys, layout.width,
+                       np.ascontiguousarray(_STEPS[:k], dtype=np.int64), tcx, tcy,
+                       f(1.0 / layout.tile ** 2), f(_KEY_SCALE), np.uint32(_KEY_MAX),
+                       _KEY_BITS, idx, dist2)
     return idx, dist2

@@ -159,21 +159,72 @@ def reaches_rim(offset_px: float, patch_px: float, safe_diameter: float) -> bool
 class RenderPlan:
     """The per-shot geometry of output rows ``rows`` (every view's; all rows, or a band of
     them: :meth:`plenocal.convert.shot.ShotConversion.render_views` plans band by band
-    so that the arrays stay small; h below is the band's height)."""
+    so that the arrays stay small; h below is the band's height). The sampling positions
+    and offsets of the central view (``map_x`` ... ``off_y``) are made from the slots'
+    lenses when first asked for (the compiled renderer computes them per pixel:
+    :mod:`plenocal.convert.renderkernels`)."""
     layout: ViewLayout
-    map_x: np.ndarray  # (K, h, W) float32 sensor x sampled for the central view
-    map_y: np.ndarray
-    off_x: np.ndarray  # (K, h, W) offset from the micro-image centre, central view
-    off_y: np.ndarray
+    lens: np.ndarray  # (K, h, W) int32 each slot's used lens, -1 where none
     tile_weight: np.ndarray  # (K, h, W) float32
     weight_table: np.ndarray  # (RADIAL_LEVELS,) radial weight (rim x centre + floor)
     gain_table: np.ndarray  # (T, RADIAL_LEVELS) 1 / vignetting profile per lens type
     radial_scale: float  # table entry per squared px of radius (radial_tables)
-    # (K, h, W) intp: RADIAL_LEVELS x the gain_table row of each slot's lens (T > 1)
-    gain_base: np.ndarray | None = None
+    lens_scale: np.ndarray  # (m,) float32 sign x P / T per used lens
+    lens_row: np.ndarray  # (m,) int64 each used lens's row of gain_table
     rows: slice = field(default_factory=lambda: slice(None))  # the output rows covered
     # (h, W) float32 the floor's share of a pixel's weight: floor x the slots' tile weights
     floor_weight: np.ndarray | None = None
+    _maps: tuple[np.ndarray, ...] | None = field(default=None, repr=False)
+
+    def _sampling(self) -> tuple[np.ndarray, ...]:
+        """(map_x, map_y, off_x, off_y), each (K, h, W) float32: the central view's
+        sensor samples (-1e4 where a slot has no lens) and their offsets from the
+        micro-image centres, ``s (u - o_i) P_i / T`` (:meth:`ViewLayout.sensor_points`)."""
+        if self._maps is None:
+            lay = self.layout
+            K, H, W = self.lens.shape
+            f = np.float32
+            ys = np.arange(lay.height, dtype=f)[self.rows][:, None]
+            xs = np.arange(W, dtype=f)[None, :]
+            tcx, tcy = (lay.tile_centres[:, a].astype(f) for a in (0, 1))
+            lcx, lcy = (lay.lens_centres[:, a].astype(f) for a in (0, 1))
+            maps = tuple(np.empty((K, H, W), f) for _ in range(4))
+            map_x, map_y, off_x, off_y = maps
+            for k in range(K):
+                have = self.lens[k] >= 0
+                li = np.where(have, self.lens[k], 0)
+                sk = self.lens_scale.take(li)
+                np.multiply(xs - tcx.take(li), sk, out=off_x[k])
+                np.multiply(ys - tcy.take(li), sk, out=off_y[k])
+                np.add(off_x[k], lcx.take(li), out=map_x[k])
+                np.add(off_y[k], lcy.take(li), out=map_y[k])
+                map_x[k][~have] = -1e4
+                map_y[k][~have] = -1e4
+            self._maps = maps
+        return self._maps
+
+    @property
+    def map_x(self) -> np.ndarray:  # (K, h, W) float32 sensor x sampled, central view
+        return self._sampling()[0]
+
+    @property
+    def map_y(self) -> np.ndarray:
+        return self._sampling()[1]
+
+    @property
+    def off_x(self) -> np.ndarray:  # (K, h, W) offset from the micro-image centre
+        return self._sampling()[2]
+
+    @property
+    def off_y(self) -> np.ndarray:
+        return self._sampling()[3]
+
+    @property
+    def gain_base(self) -> np.ndarray | None:
+        """(K, h, W) intp: RADIAL_LEVELS x the gain_table row of each slot's lens (T > 1)."""
+        if len(self.gain_table) <= 1:
+            return None
+        return self.lens_row.take(np.maximum(self.lens, 0)) * RADIAL_LEVELS
 
 
 def make_plan(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
@@ -196,11 +247,10 @@ def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
                profile_row: np.ndarray | None = None,
                rows: slice = slice(None)) -> list[RenderPlan]:
     """One :class:`RenderPlan` per blend in ``blends``, sharing the geometry: the nearest
-    tiles and their sampling positions are computed once for the most slots, and a
-    blend of fewer slots takes the first (nearest) of them (views of the arrays, no
-    copy). ``rows``: the output rows to plan (a slice with step 1; all by default); a
-    band's plan holds the same numbers as those rows of the whole view's. See
-    :func:`make_plan` for the other arguments."""
+    tiles are found once for the most slots, and a blend of fewer slots takes the first
+    (nearest) of them (views of the arrays, no copy). ``rows``: the output rows to plan
+    (a slice with step 1; all by default); a band's plan holds the same numbers as those
+    rows of the whole view's. See :func:`make_plan` for the other arguments."""
     patch = np.asarray(patch, dtype=np.float64)
     if patch.shape != (len(layout.lens_index),):
         raise ValueError(f"need one patch size per used lens ({len(layout.lens_index)}), "
@@ -210,33 +260,17 @@ def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
     idx, dist2 = nearest_slots(layout, keep=max(b.slots for b in blends),
                                k=candidates_within(max(b.fade_radius for b in blends)),
                                rows=rows)
-    K, H, W = idx.shape
+    K = idx.shape[0]
     have = idx >= 0
-    lens = np.where(have, idx, 0)
-    f = np.float32  # remap reads positions to 1/32 px: float32 is ample
-    ys = np.arange(layout.height, dtype=f)[rows][:, None]
-    xs = np.arange(W, dtype=f)[None, :]
+    f = np.float32
     # the central view (q_rc = 0) samples m_i + s (u - o_i) P_i / T (ViewLayout.sensor_points)
-    scale = (layout.sign * patch / layout.tile).astype(f)
-    tcx, tcy = (layout.tile_centres[:, a].astype(f) for a in (0, 1))
-    lcx, lcy = (layout.lens_centres[:, a].astype(f) for a in (0, 1))
-    map_x, map_y = (np.empty((K, H, W), f) for _ in range(2))
-    off_x, off_y = (np.empty((K, H, W), f) for _ in range(2))
-    for k in range(K):
-        li = lens[k]
-        sk = scale.take(li)
-        np.multiply(xs - tcx.take(li), sk, out=off_x[k])
-        np.multiply(ys - tcy.take(li), sk, out=off_y[k])
-        np.add(off_x[k], lcx.take(li), out=map_x[k])
-        np.add(off_y[k], lcy.take(li), out=map_y[k])
-        map_x[k][~have[k]] = -1e4
-        map_y[k][~have[k]] = -1e4
-    focus_w = None if focus is None else np.asarray(focus, dtype=f).take(lens)
-    gain_base = None
+    lens_scale = (layout.sign * patch / layout.tile).astype(f)
+    focus_w = None if focus is None else np.asarray(focus, dtype=f).take(np.maximum(idx, 0))
+    lens_row = np.zeros(len(patch), np.int64)
     if profile is not None and np.ndim(profile) == 2 and len(profile) > 1:
         if profile_row is None or np.shape(profile_row) != patch.shape:
             raise ValueError("a profile per lens type needs profile_row, one row per used lens")
-        gain_base = np.asarray(profile_row, dtype=np.intp).take(lens) * RADIAL_LEVELS
+        lens_row = np.asarray(profile_row, dtype=np.int64)
     plans = []
     for blend in blends:
         k = min(blend.slots, K)
@@ -251,9 +285,9 @@ def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
         np.maximum(wt[0], np.where(have[0], f(_FLOOR), f(0.0)), out=wt[0])
         weight_table, gain_tab, radial_scale = radial_tables(safe_diameter, blend, profile)
         plans.append(RenderPlan(
-            layout=layout, map_x=map_x[:k], map_y=map_y[:k], off_x=off_x[:k],
-            off_y=off_y[:k], tile_weight=wt, weight_table=weight_table, gain_table=gain_tab,
-            radial_scale=radial_scale, gain_base=None if gain_base is None else gain_base[:k],
+            layout=layout, lens=idx[:k], tile_weight=wt, weight_table=weight_table,
+            gain_table=gain_tab, radial_scale=radial_scale, lens_scale=lens_scale,
+            lens_row=lens_row if len(gain_tab) > 1 else np.zeros(len(patch), np.int64),
             rows=rows, floor_weight=wt.sum(axis=0) * f(_FLOOR)))
     return plans
 
@@ -352,30 +386,50 @@ def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int,
     faster, reading a quarter or half the bytes; ``unit`` brings them to [0, 1]),
     corrected for the micro images' vignetting where the plan has a profile. Each slot's
     samples are read at positions rounded to 1/32 px (OpenCV's fixed-point maps; the
-    module docstring). Rendered in bands of :data:`BAND_ROWS` rows (the same numbers as
-    whole; 1.3-1.5x faster). A four-channel source is no faster than three here: the
-    samples' reads from the frame, not the interpolation, bound the remap (measured on
-    Boxer: 3.09 against 3.10 s). ``support``: an (h, W) float32 array that receives each
-    pixel's support (:func:`pixel_support`; :func:`plenocal.convert.holes.fill_unsupported`
-    mends the pixels that have too little)."""
+    module docstring). The weights and maps are made, and the samples blended, by
+    compiled passes (:mod:`plenocal.convert.renderkernels`: the same bits as
+    :func:`view_weights`, :func:`slot_samples` and ``cv2.accumulateProduct``). A
+    four-channel source is no faster than three here: the samples' reads from the frame,
+    not the interpolation, bound the remap (measured on Boxer: 3.09 against 3.10 s).
+    ``support``: an (h, W) float32 array that receives each pixel's support
+    (:func:`pixel_support`; :func:`plenocal.convert.holes.fill_unsupported` mends the
+    pixels that have too little)."""
+    from plenocal.convert.renderkernels import (  # noqa: PLC0415 (numba: 0.3 s to import)
+        accumulate_slots,
+        slot_weights_and_maps,
+    )
+
+    if source.dtype not in (np.uint8, np.uint16, np.float32):
+        raise ValueError(f"views sample uint8, uint16 or float32 frames, not {source.dtype}")
     o = plan.layout.offset_image(r, c)
+    K, H, W = plan.lens.shape
     ch = 1 if source.ndim == 2 else source.shape[2]
-    H, W = plan.map_x.shape[1:]
-    out = np.zeros((H, W) + ((ch,) if ch > 1 else ()), dtype=np.float32)
-    convert = source.dtype != np.float32
-    for y0 in range(0, H, BAND_ROWS):
-        rows = slice(y0, min(y0 + BAND_ROWS, H))
-        w = view_weights(plan, r, c, with_gain=True, rows=rows, unit=unit,
-                         support=None if support is None else support[rows])
-        band = out[rows]
-        for k in range(w.shape[0]):
-            s = slot_samples(plan, source, k, o, rows)
-            if convert:
-                s = s.astype(np.float32)
-            # band += s * w_k in one pass (numpy's broadcast over channels takes 3x as long)
-            cv2.accumulateProduct(s.reshape(band.shape),
-                                  w[k] if ch == 1 else cv2.merge([w[k]] * ch), band)
-    return out if ch > 1 else out[..., None]
+    f = np.float32
+    w = np.empty((K, H, W), f)
+    xy = np.empty((K, H, W, 2), np.int16)
+    frac = np.empty((K, H, W), np.uint16)
+    sup = np.empty((H, W), f) if support is None else support
+    slot_weights_and_maps(plan.lens, plan.tile_weight, plan.floor_weight,
+                          plan.rows.indices(plan.layout.height)[0], *_per_lens(plan),
+                          plan.weight_table, plan.gain_table, f(plan.radial_scale),
+                          f(o[0]), f(o[1]), f(unit), w, xy, frac, sup)
+    samples = np.empty((K, H, W, ch), source.dtype)
+    for k in range(K):
+        cv2.remap(source, xy[k], frac[k], cv2.INTER_LINEAR, dst=samples[k].reshape(
+            (H, W) if ch == 1 else (H, W, ch)), borderMode=cv2.BORDER_REPLICATE)
+    out = np.zeros((H, W, ch), dtype=f)
+    accumulate_slots(samples, w, out)
+    return out
+
+
+def _per_lens(plan: RenderPlan) -> tuple[np.ndarray, ...]:
+    """(lens_scale, tcx, tcy, lcx, lcy, lens_row): the plan's per-lens values, float32
+    (the row int64), for :func:`plenocal.convert.renderkernels.slot_weights_and_maps`."""
+    lay = plan.layout
+    f = np.float32
+    return (plan.lens_scale, *(np.ascontiguousarray(a[:, i], dtype=f)
+                               for a in (lay.tile_centres, lay.lens_centres)
+                               for i in (0, 1)), plan.lens_row)
 
 
 def pixel_support(plan: RenderPlan, total: np.ndarray, rows: slice = slice(None),

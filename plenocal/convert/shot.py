@@ -762,6 +762,7 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
     (``convert.grid_foreign``; :func:`plenocal.convert.setup.foreign_grid_error`).
     ``analysis``: the shot's measurements made before (:mod:`plenocal.convert.analysis`;
     rule ``convert_views``). ``threads``: see :class:`ShotConversion`."""
+    from plenocal.convert.renderkernels import warm_in_background  # noqa: PLC0415
     from plenocal.convert.setup import (  # noqa: PLC0415
         centred_where_unverified,
         check_and_grid,
@@ -771,6 +772,7 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
     )
 
     settings = settings or ConvertSettings()
+    warm_in_background()  # numba's set-up while the frame is decoded
     sensor = read_sensor_size(camera_yaml) if camera_yaml is not None else None
     image = load_lenslet(lenslet, sensor)
     calib = load_calib(calib_xml)

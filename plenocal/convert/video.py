@@ -397,6 +397,9 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
     if setup is not None and setup_frame is not None:
         raise ConvertError(f"--setup-frame {setup_frame} with --setup: the set-up is read from "
                            "the file, not decided on a frame; give one of the two")
+    from plenocal.convert.renderkernels import warm_in_background  # noqa: PLC0415
+
+    warm_in_background()  # numba's set-up while the first frame is read and analysed
     conv = VideoConverter(calib, n_views, settings, video, setup, grid_foreign, threads)
     if setup is None:
         k = chosen[0] if setup_frame is None else setup_frame

@@ -1,0 +1,175 @@
+"""Compiled (numba) parts of :func:`plenocal.convert.render.render_view`, the same bits as
+the numpy and OpenCV chain they replaced.
+
+That chain made, per view and slot, the samples' offsets and radial table entries, their
+weights and OpenCV's fixed-point maps (``cv2.convertMaps``) in passes over whole arrays,
+then a ``cv2.remap``, a float copy and a product (``cv2.accumulateProduct``): 2.7 of
+HandTools' 3.6 s of views on one core. OpenCV's remap stays (its vector code reads a
+slot's samples in 3 ns a pixel, faster than anything compiled here); around it:
+
+- :func:`slot_weights_and_maps`, one pass per band row over each slot's runs of pixels
+  that share a lens (a tile's width: the lens's values read once, the loop inside a run
+  without branches): the weights as :func:`plenocal.convert.render.view_weights` makes
+  them (float32, the same operations in the same order) and the positions as
+  ``cv2.convertMaps`` rounds them, to 1/32 px (``rint(32 x)``: an integer part and a
+  5-bit fraction);
+- :func:`accumulate_slots`, the blend as ``cv2.accumulateProduct`` adds it, ``acc + s w``
+  rounded once (computed in float64, where the product of two float32 is exact).
+
+No fast-math: the same bits on every run and with any number of threads. (Kept in a file
+of its own: numba's cache tracks a kernel's own file only.)
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True, nogil=True)
+def slot_weights_and_maps(lens, tile_weight, floor_weight, y0, lens_scale, tcx, tcy, lcx,
+                          lcy, lens_row, weight_table, gain_table, radial_scale, ox, oy,
+                          unit, w, xy, frac, support):  # pragma: no cover - numba
+    """For the band of output rows ``y0 ..``: each slot's normalised weight times its
+    vignetting gain into ``w`` (K, h, W) float32, its sample's fixed-point position into
+    ``xy`` (K, h, W, 2) int16 and ``frac`` (K, h, W) uint16 (``cv2.convertMaps``' CV_16SC2
+    maps), and each pixel's support (:func:`plenocal.convert.render.pixel_support`) into
+    ``support`` (h, W) float32.
+
+    ``lens`` (K, h, W) int32 each slot's used lens (-1: none); ``tile_weight`` (K, h, W)
+    and ``floor_weight`` (h, W) float32 (:class:`plenocal.convert.render.RenderPlan`);
+    per used lens (m,): ``lens_scale`` float32 (``sign P / T``), its tile centre ``tcx,
+    tcy`` and micro-image centre ``lcx, lcy`` float32, ``lens_row`` int64 its row of
+    ``gain_table`` (T, L); ``weight_table`` (L,) float32 and ``radial_scale``
+    (:func:`plenocal.convert.render.radial_tables`); ``(ox, oy)`` float32 the view's
+    offset q_rc; ``unit`` float32 the source's unit. A slot without a lens weighs 0 and
+    samples the frame's corner (OpenCV's maps put it far outside: the same 0 in the
+    blend)."""
+    K, h, W = lens.shape
+    L = weight_table.shape[0]
+    top = np.float32(L - 1)
+    half = np.float32(0.5)
+    tiny = np.float32(1e-12)
+    sub = np.float32(32.0)
+    total = np.empty(W, np.float32)
+    g = np.empty((K, W), np.float32)  # each slot's gain, for the row being made
+    for yi in range(h):
+        yf = np.float32(y0 + yi)
+        for k in range(K):
+            row = lens[k, yi]
+            wt = tile_weight[k, yi]
+            wk = w[k, yi]
+            gk = g[k]
+            qk = xy[k, yi]
+            fk = frac[k, yi]
+            a = 0
+            while a < W:  # runs of pixels whose slot k holds one lens
+                li = row[a]
+                e = a + 1
+                while e < W and row[e] == li:
+                    e += 1
+                if li < 0:
+                    for x in range(a, e):
+                        wk[x] = 0.0
+                        gk[x] = 0.0
+                        qk[x, 0] = 0
+                        qk[x, 1] = 0
+                        fk[x] = 0
+                    a = e
+                    continue
+                s = lens_scale[li]
+                cx = tcx[li]
+                mx = lcx[li]
+                offy = (yf - tcy[li]) * s
+                ey = offy + oy
+                ey *= ey
+                iy = np.int64(np.rint((offy + lcy[li] + oy) * sub))
+                qy = np.int16(min(max(iy >> 5, -32768), 32767))
+                fy = (iy & 31) * 32
+                gain = gain_table[lens_row[li]]
+                for x in range(a, e):
+                    offx = (np.float32(x) - cx) * s
+                    ex = offx + ox
+                    ex *= ex
+                    ex += ey
+                    ex *= radial_scale
+                    ex += half
+                    entry = np.int64(min(ex, top))
+                    wk[x] = weight_table[entry] * wt[x]
+                    gk[x] = gain[entry]
+                    ix = np.int64(np.rint((offx + mx + ox) * sub))
+                    qk[x, 0] = np.int16(min(max(ix >> 5, -32768), 32767))
+                    qk[x, 1] = qy
+                    fk[x] = np.uint16(fy + (ix & 31))
+                a = e
+        # the pixels' totals and supports, and the normalisation (view_weights' order)
+        for x in range(W):
+            total[x] = 0.0
+        for k in range(K):
+            wk = w[k, yi]
+            for x in range(W):
+                total[x] += wk[x]
+        for x in range(W):
+            t = total[x]
+            support[yi, x] = t - floor_weight[yi, x]
+            total[x] = unit / max(t, tiny)
+        for k in range(K):
+            wk = w[k, yi]
+            gk = g[k]
+            for x in range(W):
+                wk[x] = (wk[x] * total[x]) * gk[x]
+
+
+@numba.njit(cache=True, nogil=True)
+def accumulate_slots(samples, w, out):  # pragma: no cover - numba
+    """``out`` (h, W, C) float32 += ``samples[k] w[k]`` for each slot k in turn, each sum
+    rounded once as ``cv2.accumulateProduct`` rounds it; ``samples`` (K, h, W, C) of any
+    type, ``w`` (K, h, W) float32."""
+    K, h, W, C = samples.shape
+    for k in range(K):
+        for y in range(h):
+            for x in range(W):
+                wk = np.float64(w[k, y, x])
+                for c in range(C):
+                    out[y, x, c] = np.float32(np.float64(out[y, x, c])
+                                              + np.float64(samples[k, y, x, c]) * wk)
+
+
+def warm() -> None:
+    """Load every compiled kernel of the views (:mod:`plenocal.slotkernels` and this
+    module) with the argument types a conversion gives them (8- and 16-bit frames), on
+    arrays of a few pixels: numba's first call loads its cache and sets itself up, about
+    0.3 s (0.5 s with ``import numba``), which :func:`warm_in_background` hides behind
+    the frame's decoding."""
+    from plenocal.slotkernels import nearest_slots_band  # noqa: PLC0415
+
+    f = np.float32
+    idx = np.empty((1, 1, 1), np.int32)
+    nearest_slots_band(np.full(64, -1, np.int32), 8, 0.0, 0.0, np.eye(2), np.zeros(2),
+                       np.zeros(1), 1, np.zeros((1, 2), np.int64), np.zeros(2, f),
+                       np.zeros(2, f), f(1.0), f(1.0), np.uint32(1), 5, idx,
+                       np.empty((1, 1, 1), f))
+    w = np.empty((1, 1, 1), f)
+    per_lens = [np.zeros(1, f)] * 5
+    slot_weights_and_maps(np.zeros((1, 1, 1), np.int32), np.zeros((1, 1, 1), f),
+                          np.zeros((1, 1), f), 0, *per_lens, np.zeros(1, np.int64),
+                          np.ones(2, f), np.ones((1, 2), f), f(1.0), f(0.0), f(0.0), f(1.0),
+                          w, np.empty((1, 1, 1, 2), np.int16), np.empty((1, 1, 1), np.uint16),
+                          np.empty((1, 1), f))
+    for dtype in (np.uint8, np.uint16):
+        accumulate_slots(np.zeros((1, 1, 1, 3), dtype), w, np.zeros((1, 1, 3), f))
+
+
+def warm_in_background() -> None:
+    """:func:`warm` on a daemon thread: the conversion goes on (reading the frame lets go
+    of the GIL), and its first call of a kernel waits for numba's lock if the load is
+    still under way. An error here is left to that first call to raise."""
+    import threading  # noqa: PLC0415
+
+    def run() -> None:
+        try:
+            warm()
+        except Exception:  # noqa: BLE001, S110  (the real call raises it with its context)
+            pass
+
+    threading.Thread(target=run, name="plenocal-warm-kernels", daemon=True).start()
