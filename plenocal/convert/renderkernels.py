@@ -124,15 +124,22 @@ def slot_weights_and_maps(lens, tile_weight, floor_weight, y0, lens_scale, tcx, 
 def accumulate_slots(samples, w, out):  # pragma: no cover - numba
     """``out`` (h, W, C) float32 += ``samples[k] w[k]`` for each slot k in turn, each sum
     rounded once as ``cv2.accumulateProduct`` rounds it; ``samples`` (K, h, W, C) of any
-    type, ``w`` (K, h, W) float32."""
+    type, ``w`` (K, h, W) float32, both C-contiguous. Row by row, each slot's weights
+    spread over the channels first, so that the sum runs over one contiguous row (it
+    vectorises: twice as fast as a loop over the channels of each pixel)."""
     K, h, W, C = samples.shape
-    for k in range(K):
-        for y in range(h):
+    spread = np.empty(W * C, np.float64)
+    for y in range(h):
+        acc = out[y].reshape(W * C)
+        for k in range(K):
+            s = samples[k, y].reshape(W * C)
+            wk = w[k, y]
             for x in range(W):
-                wk = np.float64(w[k, y, x])
+                v = np.float64(wk[x])
                 for c in range(C):
-                    out[y, x, c] = np.float32(np.float64(out[y, x, c])
-                                              + np.float64(samples[k, y, x, c]) * wk)
+                    spread[x * C + c] = v
+            for i in range(W * C):
+                acc[i] = np.float32(np.float64(acc[i]) + np.float64(s[i]) * spread[i])
 
 
 def warm() -> None:
