@@ -393,7 +393,8 @@ def test_a_recording_that_fails_leaves_the_previous_run_as_it_was(tmp_path, monk
 @needs_real
 def test_identical_frames_give_identical_views(tmp_path):
     """Frames A A B B: frame 1 equals frame 0 and frame 3 frame 2 byte for byte, with the
-    temporal hold (the default) and per-frame PNG output; every run the same bytes."""
+    temporal hold (the default) and per-frame PNG output; every run the same bytes, in
+    every file (video.json and convert_setup.json too: no times in them)."""
     a, b, calib = _frames()
     clip = _clip(tmp_path, [a, a, b, b], 8)
     xml = tmp_path / "calib.xml"
@@ -410,9 +411,12 @@ def test_identical_frames_give_identical_views(tmp_path):
     for name in view_names(5):
         path = runs[0] / doc["views"]["files"][name]
         data = path.read_bytes()
-        assert data == (runs[1] / path.name).read_bytes()
         frames = [data[k * vfmt.frame_bytes:(k + 1) * vfmt.frame_bytes] for k in range(4)]
         assert frames[0] == frames[1] and frames[2] == frames[3] and frames[0] != frames[2]
+    files = sorted(p.name for p in runs[0].iterdir())
+    assert "video.json" in files and files == sorted(p.name for p in runs[1].iterdir())
+    for name in files:
+        assert (runs[0] / name).read_bytes() == (runs[1] / name).read_bytes(), name
     r = _cli("convert", str(clip), str(xml), "-o", str(tmp_path / "png"), "--frames", "2:4")
     assert r.returncode == 0, r.stderr
     assert sorted(p.name for p in (tmp_path / "png").glob("frame_*")) == ["frame_00002",
@@ -420,6 +424,39 @@ def test_identical_frames_give_identical_views(tmp_path):
     for name in ("2_2", "0_4"):
         assert ((tmp_path / "png/frame_00002" / f"{name}.png").read_bytes()
                 == (tmp_path / "png/frame_00003" / f"{name}.png").read_bytes())
+
+
+@needs_real
+@pytest.mark.parametrize("frames", ["0:2", "1:2"])
+def test_the_decided_frame_is_read_once(tmp_path, monkeypatch, frames):
+    """The frame the set-up is decided on (the first converted) is read from the file and
+    turned into RGB once, not again for its views: two frames, two reads; one frame, one;
+    the views the bytes of a conversion whose set-up was given."""
+    import plenocal.convert.video as video_mod
+    from plenocal.convert.setup import read_setup
+    from plenocal.io.raytrix import read_calib
+
+    a, b, calib = _frames()
+    clip = _clip(tmp_path, [a, b], 8)
+    xml = tmp_path / "calib.xml"
+    write_calib(calib, xml)
+    reads = []
+    read = video_mod.read_frame
+    monkeypatch.setattr(video_mod, "read_frame", lambda *x: reads.append(x[2]) or read(*x))
+    video_mod.convert_recording(clip, read_calib(xml), tmp_path / "o", 5, ConvertSettings(),
+                                VideoSettings(temporal="off"), frames=frames,
+                                out_format="png")
+    chosen = parse_frames(frames, 2)
+    assert reads == list(chosen)
+    video_mod.convert_recording(clip, read_calib(xml), tmp_path / "g", 5, ConvertSettings(),
+                                VideoSettings(temporal="off"), frames=frames,
+                                out_format="png",
+                                setup=read_setup(tmp_path / "o" / "convert_setup.json"))
+    assert reads == list(chosen) * 2
+    for k in chosen:
+        for name in ("2_2", "0_4"):
+            assert ((tmp_path / f"o/frame_{k:05d}/{name}.png").read_bytes()
+                    == (tmp_path / f"g/frame_{k:05d}/{name}.png").read_bytes())
 
 
 @needs_real

@@ -324,12 +324,14 @@ def unmatched_frame_error(check: GridCheck, scores: dict[str, float] | None,
 
 
 def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: ConvertSettings,
-                 source: str, grid_foreign: str = _CONVERT["grid_foreign"]
+                 source: str, grid_foreign: str = _CONVERT["grid_foreign"], threads: int = 1
                  ) -> tuple[ConverterSetup, ShotConversion]:
     """Decide the per-camera set-up on one shot; returns it and that shot's conversion.
     A foreign grid stops here (:func:`foreign_grid_error`, ``grid_foreign``: the config's
     ``convert.grid_foreign``) before any view is made, and so does a grid the check could
-    not confirm on a frame whose micro images match nothing (:func:`unmatched_frame_error`)."""
+    not confirm on a frame whose micro images match nothing (:func:`unmatched_frame_error`).
+    ``threads``: the shot's measurements side by side
+    (:class:`plenocal.convert.shot.ShotConversion`; the same numbers with any number)."""
     grid, check = check_and_grid(image, calib, settings.grid)
     log.info("%s: %s", source, check.summary())
     error = foreign_grid_error(check, calib.source, source, grid_foreign)
@@ -346,13 +348,14 @@ def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: Con
                                LATTICE_DIGITS)
         pitch = round_floats(float(grid.diameter), LATTICE_DIGITS)
         grid = lattice_grid(calib, grid.width, grid.height, lattice, pitch)
-    shot = ShotConversion(image, calib, n_views, settings, source=source, grid=grid)
+    shot = ShotConversion(image, calib, n_views, settings, source=source, grid=grid,
+                          threads=threads)
     error = unmatched_frame_error(check, shot.match_scores, calib.source, source,
                                   grid_foreign)
     if error is not None:
         raise ConvertError(error)
     grid, shot, centred = centred_where_unverified(image, calib, n_views, settings, source,
-                                                   grid, check, shot)
+                                                   grid, check, shot, threads)
     lattice = centred or lattice
     warnings = [f"{source}: {w}" for w in check.warnings] + shot.warnings
     if shot.border_cut.any:  # the views are smaller than the sensor's lenses allow: said

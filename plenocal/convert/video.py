@@ -237,7 +237,7 @@ class VideoConverter:
         set-up's grid, its kind and its patch settings."""
         kw = {} if self.grid_foreign is None else {"grid_foreign": self.grid_foreign}
         self.setup, shot = decide_setup(image, self.calib, self.n_views, self.base, source,
-                                        **kw)
+                                        threads=self.threads, **kw)
         self._decided = (source, shot.analysis)
         return self.setup
 
@@ -401,6 +401,7 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
 
     warm_in_background()  # numba's set-up while the first frame is read and analysed
     conv = VideoConverter(calib, n_views, settings, video, setup, grid_foreign, threads)
+    decided_frame: tuple[int, np.ndarray] | None = None
     if setup is None:
         k = chosen[0] if setup_frame is None else setup_frame
         if not -count <= k < count:
@@ -408,8 +409,11 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
                                "(negative numbers count from the end, as in --frames)")
         k %= count
         t0 = time.perf_counter()
-        conv.decide(lenslet_frame(read_frame(path, fmt, k), fmt.bits, video.matrix,
-                                  video.range), f"{path.name}[{k}]")
+        image = lenslet_frame(read_frame(path, fmt, k), fmt.bits, video.matrix, video.range)
+        conv.decide(image, f"{path.name}[{k}]")
+        if k == chosen[0]:  # converted first: not read and turned into RGB again
+            decided_frame = (k, image)
+        del image
         log.info("%s: set-up decided on frame %d (MLA %s, tile %d px per lens pitch, D' "
                  "%.2f px); %.2f s", path.name, k, conv.setup.mla, conv.setup.tile,
                  conv.setup.safe_diameter_px or float("nan"), time.perf_counter() - t0)
@@ -421,7 +425,7 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
     # last: a run that fails or is stopped leaves the previous run's files as they were
     with staged_outputs(out, last=("video.json",)) as stage:
         doc = _convert_frames(path, fmt, count, chosen, conv, stage, n_views, video,
-                              out_format, threads)
+                              out_format, threads, decided_frame)
     if out_format == "yuv":  # this run's views' videos at an earlier run's size replaced
         for old in stale_view_videos(out, set(doc["views"]["files"].values())):
             old.unlink()
@@ -431,15 +435,17 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
 
 def _convert_frames(path: Path, fmt: YuvFormat, count: int, chosen: range,
                     conv: VideoConverter, out: Path, n_views: int, video: VideoSettings,
-                    out_format: str, threads: int) -> dict:
-    """:func:`convert_recording`'s frames, written to ``out`` (its staging folder)."""
+                    out_format: str, threads: int,
+                    first: tuple[int, np.ndarray] | None = None) -> dict:
+    """:func:`convert_recording`'s frames, written to ``out`` (its staging folder).
+    ``first``: (frame number, its :func:`lenslet_frame`) where it was read already (the
+    set-up's frame); handed on, not kept."""
     assert conv.setup is not None
     write_setup(out / "convert_setup.json", conv.setup)
     names = view_names(n_views)
     writer: ViewVideos | None = None
     records: list[dict] = []
     view_fmt: YuvFormat | None = None
-    t_all = time.perf_counter()
     # the frames share one layout: the renderer's nearest-lens tables are made once (a
     # recording of one frame keeps none: nothing would ask again)
     slots = contextlib.ExitStack()
@@ -448,7 +454,11 @@ def _convert_frames(path: Path, fmt: YuvFormat, count: int, chosen: range,
     try:
         for i, k in enumerate(chosen):
             t0 = time.perf_counter()
-            image = lenslet_frame(read_frame(path, fmt, k), fmt.bits, video.matrix, video.range)
+            if first is not None and first[0] == k:
+                image, first = first[1], None
+            else:
+                image = lenslet_frame(read_frame(path, fmt, k), fmt.bits, video.matrix,
+                                      video.range)
             shot = conv.convert(image, f"{path.name}[{k}]")
             L = shot.layout
             if view_fmt is None:
@@ -487,14 +497,13 @@ def _convert_frames(path: Path, fmt: YuvFormat, count: int, chosen: range,
                 write_json(folder / "disparity.json", stats)
             p = stats["patch_size_px"]
             rec = {"frame": k, "patch_median_px": p["median"],
-                   "confident_share": p["confident_share"], "held_share": conv.held_share,
-                   "seconds": round(time.perf_counter() - t0, 3)}
+                   "confident_share": p["confident_share"], "held_share": conv.held_share}
             records.append(rec)
             log.info("frame %d (%d/%d): patch sizes median %.2f px, %.0f%% confident%s; "
                      "%.2f s", k, i + 1, len(chosen), p["median"], 100 * p["confident_share"],
                      "" if conv.held_share is None
                      else f", {100 * conv.held_share:.0f}% held from the previous frame",
-                     rec["seconds"])
+                     time.perf_counter() - t0)
     finally:
         slots.close()
     assert view_fmt is not None
@@ -508,6 +517,6 @@ def _convert_frames(path: Path, fmt: YuvFormat, count: int, chosen: range,
                      "files": ({n: writer.paths[n].name for n in names}
                                if writer is not None else None)},
            "set_up": {"decided_on": conv.setup.decided_on, "file": "convert_setup.json"},
-           "frames": records, "seconds": round(time.perf_counter() - t_all, 3)}
+           "frames": records}
     write_json(out / "video.json", doc)
     return doc
