@@ -26,11 +26,14 @@ neighbours (:mod:`plenocal.convert.holes`). Each sample is divided by the micro 
 vignetting profile at its radius (:mod:`plenocal.convert.vignetting`).
 
 The radial weight and gain are tables over the squared radius (:data:`RADIAL_LEVELS`
-entries: no square root per sample, and 8-bit indices that :func:`cv2.LUT` reads; the
-steps are finest at the rim, where the weight falls fastest), and the samples are read
-through OpenCV's fixed-point maps (:func:`cv2.convertMaps`: positions to 1/32 px, the
-interpolation 1.5x as fast as from float maps, whose conversion OpenCV 5 no longer does
-inside the remap).
+entries: no square root per sample; the steps are finest at the rim, where the weight
+falls fastest), and the samples are read through OpenCV's fixed-point maps (positions to
+1/32 px, as :func:`cv2.convertMaps` rounds them; the interpolation 1.5x as fast as from
+float maps, whose conversion OpenCV 5 no longer does inside the remap). The weights, the
+maps and the blend are compiled passes (:mod:`plenocal.convert.renderkernels`), the same
+bits as the numpy and OpenCV calls of :func:`view_weights` and :func:`slot_samples`, which
+stay for the measures that read a slot's samples on their own
+(:mod:`plenocal.convert.centring`, :func:`blend_disagreement`).
 
 The frame the samples are read from may be prefiltered once against bilinear
 interpolation's blur (``convert.blend.prefilter``, :mod:`plenocal.convert.prefilter`: off

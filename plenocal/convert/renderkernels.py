@@ -52,16 +52,20 @@ def slot_weights_and_maps(lens, tile_weight, floor_weight, y0, lens_scale, tcx, 
     tiny = np.float32(1e-12)
     sub = np.float32(32.0)
     total = np.empty(W, np.float32)
-    g = np.empty((K, W), np.float32)  # each slot's gain, for the row being made
+    g = np.empty((K, W), np.float32)
+    ent = np.empty(W, np.int32)
+    px = np.empty(W, np.float32)
+    gbase = np.empty(W, np.int32)
+    fyr = np.empty(W, np.int32)
+    qyr = np.empty(W, np.int16)
+    gains = gain_table.ravel()
+    # per row and slot: each pixel's table entry, x position (1/32 px) and its lens's
+    # gain row, y position and fraction (constant along a run), then the table lookups,
+    # then the fixed-point maps: loops of arithmetic alone vectorise, lookups do not
     for yi in range(h):
         yf = np.float32(y0 + yi)
         for k in range(K):
             row = lens[k, yi]
-            wt = tile_weight[k, yi]
-            wk = w[k, yi]
-            gk = g[k]
-            qk = xy[k, yi]
-            fk = frac[k, yi]
             a = 0
             while a < W:  # runs of pixels whose slot k holds one lens
                 li = row[a]
@@ -70,11 +74,11 @@ def slot_weights_and_maps(lens, tile_weight, floor_weight, y0, lens_scale, tcx, 
                     e += 1
                 if li < 0:
                     for x in range(a, e):
-                        wk[x] = 0.0
-                        gk[x] = 0.0
-                        qk[x, 0] = 0
-                        qk[x, 1] = 0
-                        fk[x] = 0
+                        ent[x] = 0
+                        px[x] = 0.0
+                        gbase[x] = 0
+                        fyr[x] = 0
+                        qyr[x] = 0
                     a = e
                     continue
                 s = lens_scale[li]
@@ -85,8 +89,8 @@ def slot_weights_and_maps(lens, tile_weight, floor_weight, y0, lens_scale, tcx, 
                 ey *= ey
                 iy = np.int64(np.rint((offy + lcy[li] + oy) * sub))
                 qy = np.int16(min(max(iy >> 5, -32768), 32767))
-                fy = (iy & 31) * 32
-                gain = gain_table[lens_row[li]]
+                fy = np.int32((iy & 31) * 32)
+                gb = np.int32(lens_row[li] * L)
                 for x in range(a, e):
                     offx = (np.float32(x) - cx) * s
                     ex = offx + ox
@@ -94,14 +98,26 @@ def slot_weights_and_maps(lens, tile_weight, floor_weight, y0, lens_scale, tcx, 
                     ex += ey
                     ex *= radial_scale
                     ex += half
-                    entry = np.int64(min(ex, top))
-                    wk[x] = weight_table[entry] * wt[x]
-                    gk[x] = gain[entry]
-                    ix = np.int64(np.rint((offx + mx + ox) * sub))
-                    qk[x, 0] = np.int16(min(max(ix >> 5, -32768), 32767))
-                    qk[x, 1] = qy
-                    fk[x] = np.uint16(fy + (ix & 31))
+                    ent[x] = np.int32(min(ex, top))
+                    px[x] = (offx + mx + ox) * sub
+                    gbase[x] = gb
+                    fyr[x] = fy
+                    qyr[x] = qy
                 a = e
+            wk = w[k, yi]
+            wt = tile_weight[k, yi]
+            gk = g[k]
+            for x in range(W):
+                en = ent[x]
+                wk[x] = weight_table[en] * wt[x]
+                gk[x] = gains[gbase[x] + en]
+            qk = xy[k, yi]
+            fk = frac[k, yi]
+            for x in range(W):
+                ix = np.int32(np.rint(px[x]))
+                qk[x, 0] = np.int16(min(max(ix >> 5, -32768), 32767))
+                qk[x, 1] = qyr[x]
+                fk[x] = np.uint16(fyr[x] + (ix & 31))
         # the pixels' totals and supports, and the normalisation (view_weights' order)
         for x in range(W):
             total[x] = 0.0
