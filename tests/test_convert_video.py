@@ -563,20 +563,30 @@ def test_yuv_to_rgb_by_rows_is_the_whole_frame():
                 H, W, a, b)
 
 
-def test_view_to_yuv_by_rows_is_the_whole_view(monkeypatch):
-    """The views are written as YUV in bands of rows (memory on 31-MP frames): the same
-    planes as rgb_to_yuv of the whole view, for even and odd sizes."""
+@pytest.mark.parametrize("bits", [8, 10, 16])
+def test_view_to_yuv_is_rgb_to_yuv_of_the_view_bit_for_bit(bits):
+    """The views' YUV planes (one compiled pass over the integer view) are rgb_to_yuv's of
+    the view over its type's range, bit for bit: 8- and 16-bit views, both matrices and
+    ranges, even and odd sizes (an odd last row or column left out of the chroma), values
+    at both ends."""
     from plenocal.convert import video
-    from plenocal.io.yuv import rgb_to_yuv
+    from plenocal.io.yuv import MATRICES, RANGES, rgb_to_yuv
 
-    monkeypatch.setattr(video, "FRAME_ROWS", 6)
-    rng = np.random.default_rng(1)
-    for H, W in [(40, 30), (41, 31)]:
-        view = rng.integers(0, 65536, (H, W, 3)).astype(np.uint16)
-        whole = rgb_to_yuv(np.multiply(view, np.float32(1.0 / 65535.0), dtype=np.float32), 10)
-        banded = video.view_to_yuv(view, 10)
-        for a, b in zip(whole, banded, strict=True):
-            assert a.dtype == b.dtype and np.array_equal(a, b), (H, W)
+    rng = np.random.default_rng(bits)
+    for dtype in (np.uint8, np.uint16):
+        top = np.iinfo(dtype).max
+        for H, W in [(40, 30), (41, 31), (2, 3)]:
+            view = rng.integers(0, top + 1, (H, W, 3)).astype(dtype)
+            view[0, 0] = 0
+            view[-1, -1] = top
+            for matrix in MATRICES:
+                for span in RANGES:
+                    want = rgb_to_yuv(np.multiply(view, np.float32(1.0 / top),
+                                                  dtype=np.float32), bits, matrix, span)
+                    got = video.view_to_yuv(view, bits, matrix, span)
+                    for a, b in zip(want, got, strict=True):
+                        assert a.dtype == b.dtype and a.shape == b.shape
+                        assert np.array_equal(a, b), (dtype, H, W, matrix, span)
 
 
 @needs_real

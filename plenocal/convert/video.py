@@ -65,10 +65,10 @@ from plenocal.io.yuv import (
     YuvError,
     YuvFormat,
     frame_count,
+    integer_rgb_to_yuv,
     mpeg_name,
     read_frame,
     resolve_format,
-    rgb_to_yuv,
     write_frame,
     yuv_to_rgb,
 )
@@ -122,32 +122,18 @@ def lenslet_frame(planes: tuple[np.ndarray, np.ndarray, np.ndarray], bits: int,
     return out
 
 
-#: rows of a frame turned from YUV into RGB, or of a view from RGB into YUV, at a time
-#: (even: a 2 x 2 chroma block is never cut)
+#: rows of a frame turned from YUV into RGB at a time (even: a 2 x 2 chroma block is never
+#: cut)
 FRAME_ROWS = 256
 
 
 def view_to_yuv(view: np.ndarray, bits: int, matrix: str = DEFAULT_MATRIX,
                 rng: str = DEFAULT_RANGE) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The (Y, Cb, Cr) planes of an 8- or 16-bit RGB view (:func:`plenocal.io.yuv.rgb_to_yuv`
-    of view / 255 or / 65535), made in bands of :data:`FRAME_ROWS` rows: the same planes as
-    the whole view's, without a float copy of it (98 MB and as much again in temporaries
-    for a view of a 31-MP frame)."""
-    H = view.shape[0]
-    planes = None
-    unit = np.float32(1.0 / np.iinfo(view.dtype).max)
-    for a in range(0, H, FRAME_ROWS):
-        b = min(a + FRAME_ROWS, H)
-        rgb = np.multiply(view[a:b], unit, dtype=np.float32)
-        part = rgb_to_yuv(rgb, bits, matrix, rng)
-        if planes is None:
-            planes = (np.empty((H,) + part[0].shape[1:], part[0].dtype),
-                      *(np.empty((H // 2,) + p.shape[1:], p.dtype) for p in part[1:]))
-        planes[0][a:b] = part[0]
-        for full, p in zip(planes[1:], part[1:], strict=True):
-            full[a // 2:a // 2 + len(p)] = p
-    assert planes is not None
-    return planes
+    of view / 255 or / 65535): one compiled pass, without a float copy of the view (98 MB
+    and as much again in temporaries for a view of a 31-MP frame;
+    :func:`plenocal.io.yuv.integer_rgb_to_yuv`)."""
+    return integer_rgb_to_yuv(view, bits, matrix, rng)
 
 
 def video_settings(base: ConvertSettings) -> ConvertSettings:

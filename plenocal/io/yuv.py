@@ -250,6 +250,28 @@ def yuv_to_rgb(planes: tuple[np.ndarray, np.ndarray, np.ndarray], bits: int,
     return np.clip(np.dstack([R, G, B]), 0.0, 1.0)
 
 
+def integer_rgb_to_yuv(view: np.ndarray, bits: int, matrix: str = DEFAULT_MATRIX,
+                       rng: str = DEFAULT_RANGE) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`rgb_to_yuv` of an 8- or 16-bit RGB image (H, W, 3) over its type's range
+    (``view / 255`` or ``/ 65535`` in float32), the same planes in one compiled pass
+    without a float copy (:mod:`plenocal.io.yuvkernels`)."""
+    from plenocal.io.yuvkernels import view_to_yuv420  # noqa: PLC0415 (numba)
+
+    if view.ndim != 3 or view.shape[2] != 3 or view.dtype not in (np.uint8, np.uint16):
+        raise ValueError(f"an 8- or 16-bit RGB image, not {view.dtype} {view.shape}")
+    kr, kg, kb = _coefficients(matrix)
+    black, yspan, zero, cspan = _levels(bits, rng)
+    H, W = view.shape[:2]
+    dtype = np.uint8 if bits == 8 else np.uint16
+    planes = (np.empty((H, W), dtype), np.empty((H // 2, W // 2), dtype),
+              np.empty((H // 2, W // 2), dtype))
+    f = np.float32
+    view_to_yuv420(np.ascontiguousarray(view), f(1.0 / np.iinfo(view.dtype).max), f(kr), f(kg),
+                   f(kb), f(0.5 / (1 - kb)), f(0.5 / (1 - kr)), f(black), f(yspan), f(zero),
+                   f(cspan), f((1 << bits) - 1), *planes)
+    return planes
+
+
 def rgb_to_yuv(rgb: np.ndarray, bits: int, matrix: str = DEFAULT_MATRIX,
                rng: str = DEFAULT_RANGE) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(Y, Cb, Cr) planes (uint8 for 8 bits, else uint16) of an RGB image (H, W, 3) in
