@@ -77,6 +77,15 @@ def view_name(r: int, c: int) -> str:
     return f"{r}_{c}"
 
 
+#: a recording's per-frame folder of views (``plenocal convert --format png`` of a video)
+FRAME_FOLDER_PATTERN = r"frame_[0-9]{5}"
+
+
+def frame_folder(k: int) -> str:
+    """The folder of frame ``k``'s views in a recording's PNG output: ``frame_{k:05d}``."""
+    return f"frame_{k:05d}"
+
+
 def parse_view(name: str) -> tuple[int, int]:
     """(r, c) of a view name ``{r}_{c}``."""
     m = _VIEW_RE.fullmatch(name)

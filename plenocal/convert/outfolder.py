@@ -18,13 +18,13 @@ from collections.abc import Callable
 from pathlib import Path
 
 from plenocal.convert.errors import ConvertError
-from plenocal.names import VIEW_PATTERN, view_names
+from plenocal.names import FRAME_FOLDER_PATTERN, VIEW_PATTERN, frame_folder, view_names
 
 #: the names ``plenocal convert`` writes in its output folder: a still image's views,
 #: patch sizes and disparity.json; a recording's view videos (plenocal.io.yuv.mpeg_name),
 #: frame folders, set-up and video.json
 CONVERSION_NAME = re.compile(
-    rf"(?P<view>{VIEW_PATTERN})\.png|v_(?P<video>{VIEW_PATTERN})_\S+\.yuv|frame_[0-9]{{5}}"
+    rf"(?P<view>{VIEW_PATTERN})\.png|v_(?P<video>{VIEW_PATTERN})_\S+\.yuv|{FRAME_FOLDER_PATTERN}"
     r"|patch_size\.(?:npy|png)|disparity\.json|video\.json|convert_setup\.json")
 
 #: a still image's files besides its views (plenocal.cli)
@@ -54,7 +54,7 @@ def recording_claims(n_views: int, frames: range, out_format: str
     views = set(view_names(n_views))
     own = set(RECORDING_FILES)
     if out_format == "png":
-        own |= {f"frame_{k:05d}" for k in frames}
+        own |= {frame_folder(k) for k in frames}
 
     def claims(name: str) -> str | None:
         if name in own:

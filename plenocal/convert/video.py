@@ -72,7 +72,7 @@ from plenocal.io.yuv import (
     write_frame,
     yuv_to_rgb,
 )
-from plenocal.names import view_names
+from plenocal.names import frame_folder, view_names
 from plenocal.viewgeom import remembered_slots
 
 log = logging.getLogger("plenocal.convert")
@@ -454,7 +454,7 @@ def _convert_frames(path: Path, fmt: YuvFormat, count: int, chosen: range,
             elif (L.width, L.height) != (view_fmt.width, view_fmt.height):
                 raise ConvertError(f"{path.name}[{k}]: views of {L.width}x{L.height}, the "
                                    f"video's are {view_fmt.width}x{view_fmt.height}")
-            folder = out / f"frame_{k:05d}"
+            folder = out / frame_folder(k)
             if out_format == "png":
                 folder.mkdir()
             # views in groups within the converter's memory budget: 16-bit for YUV videos
