@@ -7,14 +7,18 @@ then a ``cv2.remap``, a float copy and a product (``cv2.accumulateProduct``): 2.
 HandTools' 3.6 s of views on one core. OpenCV's remap stays (its vector code reads a
 slot's samples in 3 ns a pixel, faster than anything compiled here); around it:
 
-- :func:`slot_weights_and_maps`, one pass per band row over each slot's runs of pixels
-  that share a lens (a tile's width: the lens's values read once, the loop inside a run
-  without branches): the weights as :func:`plenocal.convert.render.view_weights` makes
-  them (float32, the same operations in the same order) and the positions as
-  ``cv2.convertMaps`` rounds them, to 1/32 px (``rint(32 x)``: an integer part and a
-  5-bit fraction);
-- :func:`accumulate_slots`, the blend as ``cv2.accumulateProduct`` adds it, ``acc + s w``
-  rounded once (computed in float64, where the product of two float32 is exact).
+- :func:`slot_weights_and_maps`, per band row and slot: the runs of pixels that share a
+  lens (a tile's width: the lens's values read once), then the table lookups, then the
+  fixed-point maps, each in a loop of its own (loops of arithmetic alone vectorise): the
+  weights as :func:`plenocal.convert.render.view_weights` makes them (float32, the same
+  operations in the same order) and the positions as ``cv2.convertMaps`` rounds them, to
+  1/32 px (``rint(32 x)``: an integer part and a 5-bit fraction);
+- :func:`accumulate_slots`, the blend as ``cv2.accumulateProduct`` adds it: ``acc + s w``
+  in float64 (the product of two float32 is exact there), rounded to float32. OpenCV
+  fuses the multiply and add and rounds once; the float64 sum rounds first only where
+  ``acc`` and ``s w`` differ by more than about 2^29 in scale, so the two can differ in
+  the last bit of such a sum once in about 2^29 of them (none on the tests' frames or
+  the real ones: ``tests/test_renderkernels.py``, BENCHMARKS.md).
 
 No fast-math: the same bits on every run and with any number of threads. (Kept in a file
 of its own: numba's cache tracks a kernel's own file only.)
@@ -139,10 +143,11 @@ def slot_weights_and_maps(lens, tile_weight, floor_weight, y0, lens_scale, tcx, 
 @numba.njit(cache=True, nogil=True)
 def accumulate_slots(samples, w, out):  # pragma: no cover - numba
     """``out`` (h, W, C) float32 += ``samples[k] w[k]`` for each slot k in turn, each sum
-    rounded once as ``cv2.accumulateProduct`` rounds it; ``samples`` (K, h, W, C) of any
-    type, ``w`` (K, h, W) float32, both C-contiguous. Row by row, each slot's weights
-    spread over the channels first, so that the sum runs over one contiguous row (it
-    vectorises: twice as fast as a loop over the channels of each pixel)."""
+    rounded as ``cv2.accumulateProduct`` rounds it (the module docstring); ``samples``
+    (K, h, W, C) of any type, ``w`` (K, h, W) float32, both C-contiguous. Row by row, each
+    slot's weights spread over the channels first, so that the sum runs over one
+    contiguous row (it vectorises: twice as fast as a loop over the channels of each
+    pixel)."""
     K, h, W, C = samples.shape
     spread = np.empty(W * C, np.float64)
     for y in range(h):
