@@ -15,10 +15,11 @@ slot's samples in 3 ns a pixel, faster than anything compiled here); around it:
   1/32 px (``rint(32 x)``: an integer part and a 5-bit fraction);
 - :func:`accumulate_slots`, the blend as ``cv2.accumulateProduct`` adds it: ``acc + s w``
   in float64 (the product of two float32 is exact there), rounded to float32. OpenCV
-  fuses the multiply and add and rounds once; the float64 sum rounds first only where
-  ``acc`` and ``s w`` differ by more than about 2^29 in scale, so the two can differ in
-  the last bit of such a sum once in about 2^29 of them (none on the tests' frames or
-  the real ones: ``tests/test_renderkernels.py``, BENCHMARKS.md).
+  fuses the multiply and add and rounds once. The float64 sum is exact where ``acc`` and
+  ``s w`` are within a factor of 2^6 of each other; elsewhere it rounds first, and the
+  second rounding then differs from the single one only where the first lands on a
+  float32 half-way point: about one such sum in 2^29 (none on the tests' frames or the
+  real ones: ``tests/test_renderkernels.py``, BENCHMARKS.md).
 
 No fast-math: the same bits on every run and with any number of threads. (Kept in a file
 of its own: numba's cache tracks a kernel's own file only.)
