@@ -98,3 +98,27 @@ def test_textured_pairs_score_as_their_plain_mean():
     plain, _, _ = ps.match_scores(gray, grid, cand, r, 9, texture_scale=None)
     inner = grid.inside()
     assert np.allclose(weighted[inner], plain[inner], atol=1e-5)
+
+
+def test_match_scores_are_the_same_bits_lens_chunk_by_chunk(monkeypatch):
+    """match_scores makes its block maps and squared blocks a chunk of lenses at a time
+    (memory on 40-MP sensors): chunks of 7 lenses give the bits of one chunk of all, with
+    the second ring, vignetting gains and pair weights."""
+    from plenocal.convert.vignetting import lens_type_profiles
+
+    opt = small_optics(320, 240)
+    calib = calib_for_optics(opt)
+    grid = MicrolensGrid(calib, 320, 240)
+    img = lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 3))
+    gray = ps.to_gray(img)
+    cand = np.arange(3.0, 9.01, 0.5)
+    r = calib.safe_diameter / 7
+    vig = lens_type_profiles(gray, grid)
+    runs = []
+    for chunk in (7, 10**6):
+        monkeypatch.setattr(ps, "LENS_CHUNK", chunk)
+        runs.append(ps.match_scores(gray, grid, cand, r, 9, ring2=True, vignetting=vig,
+                                    texture_scale=0.02))
+    assert len(grid) > 7 * 3
+    for a, b in zip(*runs, strict=True):
+        assert np.array_equal(a, b, equal_nan=True)
