@@ -84,16 +84,19 @@ def test_flat_pairs_do_not_outvote_the_edge():
     assert np.median(np.abs(plain.raw[edge] - p_true)) > 0.4
 
 
+def textured_plane():
+    """A textured plane at patch size 6 px on a small grid: (grid, grey image, candidate
+    sizes, block radius)."""
+    calib = calib_for_optics(small_optics(320, 240))
+    grid = MicrolensGrid(calib, 320, 240)
+    img = lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 3))
+    return grid, ps.to_gray(img), np.arange(3.0, 9.01, 0.5), calib.safe_diameter / 7
+
+
 def test_textured_pairs_score_as_their_plain_mean():
     """Where every block carries texture (weights saturated), the weighted score is the
     plain mean ZNCC of the lens's pairs: the weights change nothing on a textured plane."""
-    opt = small_optics(320, 240)
-    calib = calib_for_optics(opt)
-    grid = MicrolensGrid(calib, 320, 240)
-    img = lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 3))
-    gray = ps.to_gray(img)
-    cand = np.arange(3.0, 9.01, 0.5)
-    r = calib.safe_diameter / 7
+    grid, gray, cand, r = textured_plane()
     weighted, _, _ = ps.match_scores(gray, grid, cand, r, 9, texture_scale=1e-6)
     plain, _, _ = ps.match_scores(gray, grid, cand, r, 9, texture_scale=None)
     inner = grid.inside()
@@ -106,13 +109,7 @@ def test_match_scores_are_the_same_bits_lens_chunk_by_chunk(monkeypatch):
     the second ring, vignetting gains and pair weights."""
     from plenocal.convert.vignetting import lens_type_profiles
 
-    opt = small_optics(320, 240)
-    calib = calib_for_optics(opt)
-    grid = MicrolensGrid(calib, 320, 240)
-    img = lenslet_from_patch_size(grid, 6.0, random_texture(512, 1.5, 3))
-    gray = ps.to_gray(img)
-    cand = np.arange(3.0, 9.01, 0.5)
-    r = calib.safe_diameter / 7
+    grid, gray, cand, r = textured_plane()
     vig = lens_type_profiles(gray, grid)
     runs = []
     for chunk in (7, 10**6):

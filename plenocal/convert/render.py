@@ -174,6 +174,8 @@ class RenderPlan:
     radial_scale: float  # table entry per squared px of radius (radial_tables)
     lens_scale: np.ndarray  # (m,) float32 sign x P / T per used lens
     lens_row: np.ndarray  # (m,) int64 each used lens's row of gain_table
+    # (4, m) float32 rows: each used lens's tile centre x, y and micro-image centre x, y
+    centres: np.ndarray
     rows: slice = field(default_factory=lambda: slice(None))  # the output rows covered
     # (h, W) float32 the floor's share of a pixel's weight: floor x the slots' tile weights
     floor_weight: np.ndarray | None = None
@@ -189,8 +191,7 @@ class RenderPlan:
             f = np.float32
             ys = np.arange(lay.height, dtype=f)[self.rows][:, None]
             xs = np.arange(W, dtype=f)[None, :]
-            tcx, tcy = (lay.tile_centres[:, a].astype(f) for a in (0, 1))
-            lcx, lcy = (lay.lens_centres[:, a].astype(f) for a in (0, 1))
+            tcx, tcy, lcx, lcy = self.centres
             maps = tuple(np.empty((K, H, W), f) for _ in range(4))
             map_x, map_y, off_x, off_y = maps
             for k in range(K):
@@ -268,6 +269,8 @@ def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
     f = np.float32
     # the central view (q_rc = 0) samples m_i + s (u - o_i) P_i / T (ViewLayout.sensor_points)
     lens_scale = (layout.sign * patch / layout.tile).astype(f)
+    centres = np.array([layout.tile_centres[:, 0], layout.tile_centres[:, 1],
+                        layout.lens_centres[:, 0], layout.lens_centres[:, 1]], dtype=f)
     focus_w = None if focus is None else np.asarray(focus, dtype=f).take(np.maximum(idx, 0))
     lens_row = np.zeros(len(patch), np.int64)
     if profile is not None and np.ndim(profile) == 2 and len(profile) > 1:
@@ -290,6 +293,7 @@ def make_plans(layout: ViewLayout, patch: np.ndarray, safe_diameter: float,
         plans.append(RenderPlan(
             layout=layout, lens=idx[:k], tile_weight=wt, weight_table=weight_table,
             gain_table=gain_tab, radial_scale=radial_scale, lens_scale=lens_scale,
+            centres=centres,
             lens_row=lens_row if len(gain_tab) > 1 else np.zeros(len(patch), np.int64),
             rows=rows, floor_weight=wt.sum(axis=0) * f(_FLOOR)))
     return plans
@@ -428,11 +432,7 @@ def render_view(plan: RenderPlan, source: np.ndarray, r: int, c: int,
 def _per_lens(plan: RenderPlan) -> tuple[np.ndarray, ...]:
     """(lens_scale, tcx, tcy, lcx, lcy, lens_row): the plan's per-lens values, float32
     (the row int64), for :func:`plenocal.convert.renderkernels.slot_weights_and_maps`."""
-    lay = plan.layout
-    f = np.float32
-    return (plan.lens_scale, *(np.ascontiguousarray(a[:, i], dtype=f)
-                               for a in (lay.tile_centres, lay.lens_centres)
-                               for i in (0, 1)), plan.lens_row)
+    return (plan.lens_scale, *plan.centres, plan.lens_row)
 
 
 def pixel_support(plan: RenderPlan, total: np.ndarray, rows: slice = slice(None),
