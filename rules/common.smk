@@ -768,7 +768,7 @@ STAGE_RULES = {
     "verify": (
         r"view_features(_\d+){1,2}|view_matches|reprojection(_calib|_complete)?"
         r"|baseline_(sfm|scratch)|depth_view|synthesis_exp\d+(_part)?|mpeg_views"
-        r"|gt_errors|convert_quality"
+        r"|gt_errors|convert_quality|gaussian_splatting"
     ),
     # a stage's jobs of one kind, by the name their rules share (the README's second
     # table): the name a user reads in the log as view_features_2 and types without
@@ -878,6 +878,14 @@ def scratch_sfm_input(wildcards):
 
 def reprojection_targets(dataset):
     return [res(dataset, "eval", "reprojection.json")]
+
+
+def gaussian_splatting_targets(dataset):
+    """calibration/gaussian_splatting/ where export.gaussian_splatting asks for it in the
+    default run."""
+    if not stage_config("export")["gaussian_splatting"]:
+        return []
+    return [res(dataset, "calibration", "gaussian_splatting")]
 
 
 # --- helpers of rules/rig.smk ---------------------------------------------------------

@@ -60,6 +60,29 @@ rule reprojection_complete:
         "../scripts/reprojection.py"
 
 
+# every view cropped about its principal point and named <shot>_<r>_<c>.png, with
+# colmap_points' model: the dataset the reference 3D Gaussian splatting code trains on
+# (export.gaussian_splatting puts it in the default run; asked for by path, it is made)
+rule gaussian_splatting:
+    input:
+        model="results/{dataset}/calibration/colmap_points",
+        view_sets=lambda wc: view_sets(wc.dataset, cams(wc.dataset)),
+    output:
+        directory("results/{dataset}/calibration/gaussian_splatting"),
+    log:
+        log_path("gaussian_splatting"),
+    benchmark:
+        bench_path("gaussian_splatting")
+    conda:
+        "../envs/plenocal.yaml"
+    threads: 1
+    resources:
+        mem_mb=600,
+        runtime=30,
+    script:
+        "../scripts/gaussian_splatting.py"
+
+
 rule reprojection:
     input:
         evals=lambda wc: [
@@ -91,3 +114,4 @@ rule reprojection:
 
 
 TARGETS.append(reprojection_targets)
+TARGETS.append(gaussian_splatting_targets)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -86,6 +87,48 @@ def test_colmap_points_hold_the_calibration_and_table_i_points(tiny_complete_run
         want = cams[image.name[:-4]]
         np.testing.assert_allclose(got.K, want.K, atol=1e-9)
         np.testing.assert_allclose(got.cam_to_world, want.cam_to_world, atol=1e-9)
+
+
+def test_gaussian_splatting_dataset_asked_for_by_path(tiny_complete_run: Path, tmp_path):
+    """calibration/gaussian_splatting (rule gaussian_splatting), off the default run: asked
+    for by path after a complete run, it is the one job that runs; every view of
+    colmap_points with its principal point at its image's centre, named flat, with the
+    model's points; the default run still has nothing to do; with
+    export.gaussian_splatting on, the default run makes it."""
+    import cv2  # noqa: F401, PLC0415  (before pycolmap)
+    import pycolmap  # noqa: PLC0415
+
+    work = clone(tiny_complete_run, tmp_path / "run")
+    target = "results/tiny/calibration/gaussian_splatting"
+    dry = snakemake(work, "-n", target)
+    out = dry.stdout + dry.stderr
+    assert dry.returncode == 0, out[-3000:]
+    assert re.search(r"^gaussian_splatting\s+1$", out, re.M) and re.search(
+        r"^total\s+1$", out, re.M), out[-3000:]
+    proc = snakemake(work, target)
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    gs = work / target
+    rec = pycolmap.Reconstruction(str(gs / "sparse" / "0"))
+    points = pycolmap.Reconstruction(
+        str(work / "results" / "tiny" / "calibration" / "colmap_points"))
+    assert rec.num_reg_images() == points.num_reg_images() == 90
+    assert rec.num_points3D() == points.num_points3D()
+    assert len(list((gs / "images").glob("*.png"))) == 90
+    for image in rec.images.values():
+        assert "/" not in image.name and (gs / "images" / image.name).is_file()
+        cam = rec.camera(image.camera_id)
+        assert tuple(cam.params[2:]) == (cam.width / 2, cam.height / 2)
+        h, w = cv2.imread(str(gs / "images" / image.name)).shape[:2]
+        assert (w, h) == (cam.width, cam.height)
+    noop = snakemake(work, "-n")
+    assert "Nothing to be done" in noop.stdout + noop.stderr
+    cfg = yaml.safe_load((work / "config.yaml").read_text())
+    cfg.setdefault("export", {})["gaussian_splatting"] = True
+    (work / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    shutil.rmtree(gs)
+    dry = snakemake(work, "-n")
+    out = dry.stdout + dry.stderr
+    assert re.search(r"^gaussian_splatting\s+1$", out, re.M), out[-3000:]
 
 
 def max_rotation_deg(calib, truth, keys) -> float:
