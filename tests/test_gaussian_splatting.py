@@ -184,3 +184,14 @@ def test_a_camera_with_distortion_is_refused(tmp_path):
     with pytest.raises(ValueError, match="SIMPLE_RADIAL.*PINHOLE"):
         export_gaussian_splatting(tmp_path, tmp_path / "gs", lambda k: None, write_image)
     assert not (tmp_path / "gs").exists()
+
+
+def test_a_view_of_another_size_than_its_camera_is_refused(tmp_path):
+    cams = {"x00_y00/0_0": _camera("a", 3.0, 0.0, 0.0)}
+    model = tmp_path / "model"
+    model.mkdir()
+    build_reconstruction(cams).write_binary(str(model))
+    small = np.zeros((H // 2, W // 2, 3), np.uint8)
+    with pytest.raises(ValueError, match=r"x00_y00/0_0 is 160x120 px, its camera 320x240"):
+        export_gaussian_splatting(model, tmp_path / "gs", lambda k: small, write_image)
+    assert not (tmp_path / "gs").exists()

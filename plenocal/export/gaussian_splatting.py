@@ -126,6 +126,7 @@ def export_gaussian_splatting(model_dir: str | Path, out_dir: str | Path,
 
     rec = pycolmap.Reconstruction(str(model_dir))
     windows: dict[int, tuple[tuple[int, float, int], tuple[int, float, int]]] = {}
+    sizes: dict[int, tuple[int, int]] = {}  # each camera's (width, height) in the model
     for cam_id, cam in rec.cameras.items():
         model = cam.model.name
         if model == "PINHOLE":
@@ -141,10 +142,12 @@ def export_gaussian_splatting(model_dir: str | Path, out_dir: str | Path,
         except ValueError as exc:
             raise ValueError(f"{model_dir}: camera {cam_id}: {exc}") from None
         windows[cam_id] = (wx, wy)
+        sizes[cam_id] = (int(cam.width), int(cam.height))
         cam.model = "PINHOLE"
         cam.width, cam.height = wx[2], wy[2]
         cam.params = [fx, fy, wx[2] / 2.0, wy[2] / 2.0]
     crops: dict[str, dict] = {}
+    info: dict = {}
     names = {flat_name(im.name) for im in rec.images.values()}
     if len(names) != rec.num_images():
         raise ValueError(f"{model_dir}: image names that differ only by '/' and '_'")
@@ -157,8 +160,12 @@ def export_gaussian_splatting(model_dir: str | Path, out_dir: str | Path,
             im = rec.images[image_id]
             key, _, _ = im.name.rpartition(".")
             wx, wy = windows[im.camera_id]
-            write_view(tmp / "images" / flat_name(im.name),
-                       shift_crop(read_view(key), wx, wy))
+            view = read_view(key)
+            if (view.shape[1], view.shape[0]) != sizes[im.camera_id]:
+                raise ValueError(f"{model_dir}: view {key} is {view.shape[1]}x{view.shape[0]}"
+                                 " px, its camera {}x{}: the views and the model are of two "
+                                 "runs".format(*sizes[im.camera_id]))
+            write_view(tmp / "images" / flat_name(im.name), shift_crop(view, wx, wy))
             shift = np.array([wx[0] + wx[1], wy[0] + wy[1]])
             for point in im.points2D:
                 point.xy = point.xy - shift
@@ -169,13 +176,12 @@ def export_gaussian_splatting(model_dir: str | Path, out_dir: str | Path,
             if progress is not None and (done % 50 == 0 or done == len(order)):
                 progress(done, len(order))
         rec.write_binary(str(tmp / "sparse" / "0"))
-        info = {"format": FORMAT, "version": 1,
-                "convention": "origin_px: the crop's first pixel in its source view "
-                              "(pixel centres at integers); each camera's principal "
-                              "point is its image's centre",
-                "views": dict(sorted(crops.items()))}
+        info.update({"format": FORMAT, "version": 1,
+                     "convention": "origin_px: the crop's first pixel in its source view "
+                                   "(pixel centres at integers); each camera's principal "
+                                   "point is its image's centre",
+                     "views": dict(sorted(crops.items()))})
         write_json(tmp / "crops.json", info)
-        crops["__info__"] = info
 
     atomic_write_dir(out_dir, write)
-    return crops.pop("__info__")
+    return info
