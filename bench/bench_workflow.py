@@ -139,7 +139,7 @@ def rule_benchmarks(workdir: Path) -> dict[str, dict[str, float]]:
 NOOP_RUNS = 5
 
 
-def noop(work: Path, scratch: Path) -> dict:
+def noop(work: Path) -> dict:
     """``snakemake -n`` after a complete run: seconds (best, median and slowest of
     :data:`NOOP_RUNS`) and jobs planned;
     in this environment as it is (the SLURM plugin's probe waiting where it waits:
@@ -184,7 +184,7 @@ def logged_wall(work: Path) -> float:
 def full_run(config: dict, label: str, scratch: Path) -> dict:
     work = make_copy(scratch / label, config)
     wall, _ = snakemake(work, log=scratch / f"{label}.log")
-    return {"work": work, "wall": wall, **noop(work, scratch), "rules": rule_benchmarks(work)}
+    return {"work": work, "wall": wall, **noop(work), "rules": rule_benchmarks(work)}
 
 
 def calibration_run(config: dict, scratch: Path, refine_threads: int | None = None,
@@ -207,9 +207,9 @@ def busy_share(rules: dict[str, dict[str, float]], wall: float, cores: int = 2) 
     return sum(r["s"] for r in rules.values()) / (cores * wall)
 
 
-def kept_run(work: Path, scratch: Path) -> dict:
+def kept_run(work: Path) -> dict:
     """A finished full run kept from an earlier invocation (``--keep``)."""
-    return {"work": work, "wall": logged_wall(work), **noop(work, scratch),
+    return {"work": work, "wall": logged_wall(work), **noop(work),
             "rules": rule_benchmarks(work)}
 
 
@@ -383,7 +383,7 @@ def main() -> None:
     sections: dict[str, list[str]] = {}
     try:
         if args.from_kept or not args.skip_full:
-            res = (kept_run(Path(args.from_kept), scratch) if args.from_kept
+            res = (kept_run(Path(args.from_kept)) if args.from_kept
                    else full_run(config, "full", scratch))
             print(f"full run from scratch: {res['wall']:.1f} s")
             print(f"no-op with a fast-failing SLURM probe: {res['noop_wall_fast_probe']:.2f} s")
