@@ -13,6 +13,7 @@ from plenocal.camera import PinholeCamera, k_from_colmap, pose
 from plenocal.export.colmap_model import build_reconstruction
 from plenocal.export.gaussian_splatting import (
     centred_window,
+    eight_bit,
     export_gaussian_splatting,
     flat_name,
     lanczos_taps,
@@ -195,3 +196,12 @@ def test_a_view_of_another_size_than_its_camera_is_refused(tmp_path):
     with pytest.raises(ValueError, match=r"x00_y00/0_0 is 160x120 px, its camera 320x240"):
         export_gaussian_splatting(model, tmp_path / "gs", lambda k: small, write_image)
     assert not (tmp_path / "gs").exists()
+
+
+def test_sixteen_bit_views_are_written_in_eight_bits():
+    v = np.array([[0, 128, 129, 257, 32896, 65535]], np.uint16)
+    np.testing.assert_array_equal(eight_bit(v), [[0, 0, 1, 1, 128, 255]])
+    same = np.arange(256, dtype=np.uint8)
+    assert eight_bit(same) is same
+    with pytest.raises(TypeError):
+        eight_bit(v.astype(np.float32))

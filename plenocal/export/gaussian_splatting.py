@@ -14,9 +14,9 @@ Here each view is cropped to the largest window centred on its principal point
 Lanczos-3 kernel (:func:`lanczos_taps`; an integer origin copies the pixels as they are),
 so that the new image's centre is the principal point exactly. Its camera is PINHOLE with
 ``cx = W' / 2``, ``cy = H' / 2`` (COLMAP's convention: the centre of pixel (0, 0) at
-(0.5, 0.5)), the same focal length and pose; the image is named ``<shot>_<r>_<c>.png``,
-and its 2-D observations move with the crop. The 3-D points are the model's. Layout, as
-the reference code and COLMAP's undistorter write it::
+(0.5, 0.5)), the same focal length and pose; the image is named ``<shot>_<r>_<c>.png``
+(8-bit RGB: :func:`eight_bit`), and its 2-D observations move with the crop. The 3-D
+points are the model's. Layout, as the reference code and COLMAP's undistorter write it::
 
     gaussian_splatting/images/<shot>_<r>_<c>.png
     gaussian_splatting/sparse/0/{cameras,images,points3D}.bin (+ rigs.bin, frames.bin)
@@ -105,6 +105,17 @@ def shift_crop(image: np.ndarray, x: tuple[int, float, int], y: tuple[int, float
     return np.clip(np.rint(out), 0.0, top).astype(image.dtype)
 
 
+def eight_bit(image: np.ndarray) -> np.ndarray:
+    """``image`` as uint8: 16-bit samples scaled by 255 / 65535 and rounded (the trainers'
+    image readers, Pillow among them, take 8-bit RGB PNGs; a 16-bit one is not read as
+    RGB by every one)."""
+    if image.dtype == np.uint8:
+        return image
+    if image.dtype != np.uint16:
+        raise TypeError(f"views are uint8 or uint16, not {image.dtype}")
+    return np.rint(image.astype(np.float32) * np.float32(255.0 / 65535.0)).astype(np.uint8)
+
+
 def flat_name(name: str) -> str:
     """``<shot>/<r>_<c>.png`` -> ``<shot>_<r>_<c>.png`` (unique: shot names hold no
     ``/``, and every view name is ``<r>_<c>``)."""
@@ -165,7 +176,7 @@ def export_gaussian_splatting(model_dir: str | Path, out_dir: str | Path,
                 raise ValueError(f"{model_dir}: view {key} is {view.shape[1]}x{view.shape[0]}"
                                  " px, its camera {}x{}: the views and the model are of two "
                                  "runs".format(*sizes[im.camera_id]))
-            write_view(tmp / "images" / flat_name(im.name), shift_crop(view, wx, wy))
+            write_view(tmp / "images" / flat_name(im.name), eight_bit(shift_crop(view, wx, wy)))
             shift = np.array([wx[0] + wx[1], wy[0] + wy[1]])
             for point in im.points2D:
                 point.xy = point.xy - shift
