@@ -103,6 +103,19 @@ def _legacy_image_names(path) -> list[str]:
     return names
 
 
+def _legacy_point_colours(path) -> list[tuple[int, int, int]]:
+    """points3D.bin read in COLMAP's layout, as the reference code reads it to start its
+    Gaussians (and nothing left over): each point's colour."""
+    data = path.read_bytes()
+    (n,), at, colours = struct.unpack_from("<Q", data), 8, []
+    for _ in range(n):
+        colours.append(struct.unpack_from("<QdddBBBd", data, at)[4:7])
+        (m,) = struct.unpack_from("<Q", data, at + 43)
+        at += 43 + 8 + 8 * m
+    assert at == len(data)
+    return colours
+
+
 def test_the_exported_views_are_the_centred_cameras_renders(tmp_path):
     """Views rendered through cameras whose principal points lie off the centre (by whole
     and fractional pixels, either way), exported: each camera is PINHOLE with its principal
@@ -148,6 +161,7 @@ def test_the_exported_views_are_the_centred_cameras_renders(tmp_path):
     names = _legacy_image_names(out / "sparse" / "0" / "images.bin")
     assert sorted(names) == sorted(flat_name(f"{k}.png") for k in cams)
     assert len({n.split(".")[0] for n in names}) == 3  # the reference code's image names
+    assert _legacy_point_colours(out / "sparse" / "0" / "points3D.bin") == [(200, 100, 50)]
     key_of = {v["image"]: k for k, v in crops["views"].items()}
     for image in got.images.values():
         key = key_of[image.name]
