@@ -383,10 +383,21 @@ def _write_conversion(args: argparse.Namespace, shot, out: Path, threads: int, s
              shot.grid.width, shot.grid.height, args.calib, shot.calib.diameter,
              grid_words(shot.grid_check), settings.grid)
     stats = shot.disparity()
-    log.info("patch sizes %.2f..%.2f px (median %.2f, %.0f%% confident); views %dx%d; "
-             "%.2f s", stats["patch_size_px"]["min"], stats["patch_size_px"]["max"],
-             stats["patch_size_px"]["median"], 100 * stats["patch_size_px"]["confident_share"],
-             stats["width"], stats["height"], time.perf_counter() - t0)
+    # the range disparity.json's D range is taken over first (the percentiles of the
+    # matched lenses), then every lens's: a filled lens, or a lone matched one, may take a
+    # size nothing around it measured (BENCHMARKS.md, "Filled lenses pulled out of the
+    # confident range by the smoothing")
+    import numpy as np  # noqa: PLC0415
+
+    confident = shot.patch.confident[shot.layout.lens_index]
+    measured = shot.used_patch[confident] if confident.any() else shot.used_patch
+    p_lo, p_hi = (float(v) for v in np.percentile(measured, stats["percentiles"]))
+    log.info("patch sizes %.2f..%.2f px (percentiles %g and %g of the matched lenses; "
+             "%.2f..%.2f over all, median %.2f, %.0f%% matched); views %dx%d; %.2f s",
+             p_lo, p_hi, *stats["percentiles"], stats["patch_size_px"]["min"],
+             stats["patch_size_px"]["max"], stats["patch_size_px"]["median"],
+             100 * stats["patch_size_px"]["confident_share"], stats["width"],
+             stats["height"], time.perf_counter() - t0)
     if shot.border_cut.any:
         log.info("%s", shot.border_cut.summary())
     n = args.views * args.views
