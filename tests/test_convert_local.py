@@ -14,7 +14,10 @@ from synth.lenslets import calib_for_optics, random_texture
 
 from plenocal.convert.localcheck import lattice_frequencies, lattice_trace, ssim_map, tile_ssim
 from plenocal.convert.patchsize import (
+    FILL_PERCENTILES,
     UNRELIABLE_WEIGHT,
+    _smooth,
+    fill_and_smooth,
     fill_unreliable,
     lattice_mean,
     reliability,
@@ -213,6 +216,37 @@ def test_fill_takes_the_nearest_confident_lenses_and_stays_in_their_range():
     assert np.all(w[hole] < 0.2)
     trust = reliability(raw, P, conf >= 0.25, 0.5)
     assert np.all(trust[hole] == UNRELIABLE_WEIGHT) and np.all(trust[~hole] == 1.0)
+
+
+def test_smoothing_leaves_no_filled_lens_outside_the_confident_range():
+    """One confident lens at the search range's top among filled ones (a darkened
+    HandTools: one 34.2-px match where the confident lenses span 16.4-19.3 px) outweighed
+    each filled neighbour in the smoothing's weighted median and gave it 34.2 px; the
+    filled lenses now stay within the confident range, and the confident lens keeps its
+    own size."""
+    nb_of: dict[int, list[int]] = {}
+    n = 30
+    xs, ys = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float))
+    centres = np.stack([xs.ravel(), ys.ravel()], axis=1)
+    for i in range(n * n):
+        nb_of[i] = [j for j in (i - 1, i + 1, i - n, i + n, i - n + 1, i + n - 1)
+                    if 0 <= j < n * n and abs(centres[j] - centres[i]).max() <= 1]
+    neighbours = np.array([(v + [-1] * 6)[:6] for v in nb_of.values()])
+    rng = np.random.default_rng(3)
+    raw = rng.uniform(16.4, 19.3, n * n)
+    conf = np.full(n * n, 0.6)  # the real frame's matched lenses: about 0.6
+    dark = centres[:, 1] < 3  # the top rows: nothing to match
+    conf[dark] = 0.01
+    lone = 1 * n + 12  # one confident match at the range's top among them
+    raw[lone], conf[lone] = 34.2, 0.43
+    out, _ = fill_and_smooth(raw, conf, neighbours, centres, 0.25, 1, 17.0)
+    lo, hi = np.percentile(raw[conf >= 0.25], FILL_PERCENTILES)
+    filled = conf < 0.25
+    assert out[filled].min() >= lo and out[filled].max() <= hi
+    assert out[lone] == np.float32(34.2)
+    # without the bound the smoothing carried the lone match into its filled neighbours
+    unbounded = _smooth(*fill_unreliable(raw, conf, centres, 0.25, 17.0)[:2], neighbours, 1)
+    assert unbounded[filled].max() == np.float32(34.2)
 
 
 def test_lattice_mean_by_hand():

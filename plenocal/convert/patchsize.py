@@ -44,7 +44,8 @@ filled by :func:`fill_unreliable`: each from the nearest confident lenses around
 weighted median, never a value carried on from lens to lens through a texture-less
 region, which drew streaks), within the range the confident lenses span (the scene's
 depth range); then every lens gets ``smooth_iterations`` passes of a weighted median
-over itself and its six neighbours (edge-preserving; removes isolated mismatches).
+over itself and its six neighbours (edge-preserving; removes isolated mismatches), and
+the filled lenses are brought back within that range (:func:`fill_and_smooth`).
 
 Reliability: :func:`reliability` weighs each lens in the blend, 1 where its match was
 confident and the map kept it, :data:`UNRELIABLE_WEIGHT` where the size was filled or
@@ -186,10 +187,21 @@ def fill_and_smooth(raw: np.ndarray, confidence: np.ndarray, neighbours: np.ndar
                     centres: np.ndarray, min_confidence: float, smooth_iterations: int,
                     fallback: float) -> tuple[np.ndarray, list[str]]:
     """Fill low-confidence lenses (:func:`fill_unreliable`, ``centres`` in lens pitches),
-    then smooth (weighted medians over the lattice). ``fallback``: the value where no
-    lens is confident."""
+    then smooth (weighted medians over the lattice), and bring the filled lenses back
+    within the range the fill keeps them in (the 2nd-98th percentile of the confident
+    sizes): the smoothing let one confident neighbour outweigh a filled lens and its
+    filled neighbours, and 1-12 % of the filled lenses of every real frame ended outside
+    that range, a darkened HandTools's by up to 14.9 px (34.2 px patches among 16.4-19.3,
+    after one match at its type range's top; BENCHMARKS.md, "Filled lenses pulled out of
+    the confident range by the smoothing"). A confident lens keeps its own size.
+    ``fallback``: the value where no lens is confident."""
     P, w, notes = fill_unreliable(raw, confidence, centres, min_confidence, fallback)
-    return _smooth(P, w, neighbours, smooth_iterations), notes
+    out = _smooth(P, w, neighbours, smooth_iterations)
+    ok = (confidence >= min_confidence) & np.isfinite(raw)
+    if ok.any() and not ok.all():
+        lo, hi = np.percentile(raw[ok], FILL_PERCENTILES)
+        out = np.where(ok, out, np.clip(out, lo, hi)).astype(np.float32)
+    return out, notes
 
 
 def _smooth(P: np.ndarray, w: np.ndarray, neighbours: np.ndarray, iterations: int
@@ -211,6 +223,8 @@ def _smooth(P: np.ndarray, w: np.ndarray, neighbours: np.ndarray, iterations: in
 UNRELIABLE_WEIGHT = 0.1
 FILL_NEIGHBOURS = 12  # confident lenses a filled lens takes its size from (two rings)
 FILL_REACH = 24.0  # lens pitches: farther confident lenses do not fill (the scene's median)
+#: the range of the confident sizes a filled lens is kept in, before and after the smoothing
+FILL_PERCENTILES = (2.0, 98.0)
 
 
 def fill_unreliable(raw: np.ndarray, confidence: np.ndarray, centres: np.ndarray,
@@ -233,7 +247,7 @@ def fill_unreliable(raw: np.ndarray, confidence: np.ndarray, centres: np.ndarray
                      f"{fallback:.3f} px (texture-less image, or calib.xml from another camera)")
         return np.full(n, fallback), np.full(n, 1e-3), notes
     good = raw[ok]
-    lo, hi = np.percentile(good, [2.0, 98.0])
+    lo, hi = np.percentile(good, FILL_PERCENTILES)
     P = np.where(ok, raw, np.nan)
     w = np.where(ok, confidence, 0.0)
     missing = np.flatnonzero(~ok)
