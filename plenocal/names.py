@@ -114,6 +114,13 @@ def view_key(shot: str, view: str) -> str:
     return f"{shot}/{view}"
 
 
+def flat_key(key: str) -> str:
+    """``<shot>/<view>`` (and a file name made of it) -> ``<shot>_<view>``: one name per
+    view where a folder may not hold the shot (MPEG-I camera names, the Gaussian-splatting
+    dataset's images)."""
+    return key.replace("/", "_")
+
+
 def file_key(path: str | PurePath) -> str:
     """The key of a view's file ``.../{shot}/{view}.<ext>`` (a view image, depth map or
     render): :func:`view_key` of its folder's name and its stem."""

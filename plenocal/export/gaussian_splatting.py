@@ -33,6 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from plenocal.names import flat_key
+
 #: the Lanczos kernel's half-width (taps per axis: 2 x this)
 LANCZOS_A = 3
 FORMAT = "plenocal.gaussian_splatting"
@@ -109,17 +111,19 @@ def eight_bit(image: np.ndarray) -> np.ndarray:
     """``image`` as uint8: 16-bit samples scaled by 255 / 65535 and rounded (the trainers'
     image readers, Pillow among them, take 8-bit RGB PNGs; a 16-bit one is not read as
     RGB by every one)."""
+    from plenocal.io.files import to_float, to_uint8  # noqa: PLC0415
+
     if image.dtype == np.uint8:
         return image
     if image.dtype != np.uint16:
         raise TypeError(f"views are uint8 or uint16, not {image.dtype}")
-    return np.rint(image.astype(np.float32) * np.float32(255.0 / 65535.0)).astype(np.uint8)
+    return to_uint8(to_float(image))
 
 
 def flat_name(name: str) -> str:
-    """``<shot>/<r>_<c>.png`` -> ``<shot>_<r>_<c>.png`` (unique: shot names hold no
-    ``/``, and every view name is ``<r>_<c>``)."""
-    return name.replace("/", "_")
+    """``<shot>/<r>_<c>.png`` -> ``<shot>_<r>_<c>.png`` (:func:`plenocal.names.flat_key`;
+    unique: shot names hold no ``/``, and every view name is ``<r>_<c>``)."""
+    return flat_key(name)
 
 
 def export_gaussian_splatting(model_dir: str | Path, out_dir: str | Path,

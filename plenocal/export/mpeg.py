@@ -26,6 +26,7 @@ import numpy as np
 
 from plenocal.camera import PinholeCamera, check_cameras
 from plenocal.io.files import write_json
+from plenocal.names import flat_key
 
 CV_TO_OMAF = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
@@ -104,8 +105,8 @@ def camera_entry(name: str, cam: PinholeCamera, depth_range: tuple[float, float]
 
 
 def mpeg_name(key: str) -> str:
-    """``<cam>/<view>`` -> ``<cam>_<view>``."""
-    return key.replace("/", "_")
+    """``<cam>/<view>`` -> ``<cam>_<view>`` (:func:`plenocal.names.flat_key`)."""
+    return flat_key(key)
 
 
 def mpeg_document(cameras: Mapping[str, PinholeCamera], depth_range: tuple[float, float],
