@@ -22,6 +22,7 @@ from plenocal.io.raytrix import CalibError, read_calib
 from plenocal import job_memory, names
 from plenocal.artifacts import tracks as tracks_artifact
 from plenocal.names import central_view, view_names
+from plenocal.report.sources import EXPORTS
 
 # COLMAP's logging (glog) to standard error alone, which every job's script sends to its
 # rule's log (plenocal.rulelog), instead of also into *.INFO / *.WARNING files of its own
@@ -843,6 +844,14 @@ def report_inputs(wildcards):
         out["depth"] = [
             res(d, "depth", r, f"{c}.png") for r in ("a", "b") for c in cams(d)
         ]
+    # the calibration's files for other tools that this run makes, listed on the page
+    made = set(mpeg_views_targets(d) + gaussian_splatting_targets(d))
+    out["exports"] = [
+        res(d, e.rel)
+        for e in EXPORTS
+        if have(e.rule)
+        and (e.rule not in ("mpeg_views", "gaussian_splatting") or res(d, e.rel) in made)
+    ]
     return out
 
 

@@ -12,8 +12,12 @@ snakemake = globals()["snakemake"]
 log = rule_logger(snakemake, "report")
 
 out = Path(snakemake.output.html)
-info = build_report(Path(snakemake.params.results), out, snakemake.wildcards.dataset,
+results = Path(snakemake.params.results)
+# the exports this run made, as the page names them (under results/<dataset>/)
+exports = [Path(p).relative_to(results).as_posix() for p in snakemake.input.get("exports", [])]
+info = build_report(results, out, snakemake.wildcards.dataset,
                     cams=list(snakemake.params.cams), n_views=int(snakemake.params.views),
-                    synthetic=bool(snakemake.params.synthetic), log=log.info)
+                    synthetic=bool(snakemake.params.synthetic), exports=exports,
+                    log=log.info)
 log.info("wrote %s: %d bytes, %d sections, %d source files linked", out, info["bytes"],
          len(info["sections"]), len(info["linked"]))

@@ -32,7 +32,13 @@ from plenocal.camera import PinholeCamera, intrinsics, pose
 from plenocal.convert.quality import summarise
 from plenocal.io.files import write_image, write_json
 from plenocal.report.html import _hundredths, build_report, shot_means_table
-from plenocal.report.sources import PAPER_TABLE1, layout, table1_rows, table_name
+from plenocal.report.sources import (
+    EXPORTS,
+    PAPER_TABLE1,
+    layout,
+    table1_rows,
+    table_name,
+)
 from plenocal.verify.gt_errors import gt_errors
 from plenocal.verify.synthesis import psnr_tables
 from plenocal.versions import version_text
@@ -341,8 +347,8 @@ def test_page_content_and_determinism(tmp_path):
     assert (res / "report" / "index.html").read_bytes() == first
 
 
-SECTIONS = ("overview", "table1", "gt", "summary", "array", "exp1", "exp2", "exp3", "fig10",
-            "convert", "patch", "depth")
+SECTIONS = ("overview", "table1", "gt", "summary", "array", "files", "exp1", "exp2", "exp3",
+            "fig10", "convert", "patch", "depth")
 
 
 def sections(html: str) -> dict[str, str]:
@@ -355,7 +361,8 @@ def test_every_section_is_shown_from_the_typed_files(tmp_path):
     res = make_results(tmp_path)
     by = sections(build(res))
     assert [k for k in by if k != "sources"] == list(SECTIONS)
-    for key in SECTIONS[:-1]:  # (one depth preview is absent on purpose)
+    # (one depth preview is absent on purpose; the fake tree holds one export, cameras.json)
+    for key in (k for k in SECTIONS[:-1] if k != "files"):
         assert 'class="missing"' not in by[key], (key, by[key][:500])
     assert 'id="table1-rows"' in by["table1"] and "<td>0.702</td>" in by["table1"]
     assert by["gt"].count('<tr id="gt-') == 11  # one row per target (gt_errors.TARGETS)
@@ -444,6 +451,35 @@ def test_exp1_without_a_shot_to_synthesise_says_why(tmp_path):
         page = Page(res, "fake")
         _psnr_section(page, "exp1", result, "", N, cols, rows)
         assert said in "".join(page.parts), (cols, rows, page.parts)
+
+
+def test_the_calibration_files_for_other_tools_are_listed_as_the_run_made_them(tmp_path):
+    """Section "files": every export (sources.EXPORTS) with its tools; the ones the run made
+    linked, an asked-for one that is gone said absent, the others named with their rule and
+    the command that makes them."""
+    res = make_results(tmp_path)
+    (res / "calibration" / "colmap").mkdir(parents=True)
+    (res / "calibration" / "colmap" / "cameras.txt").write_text("# model\n")
+    (res / "calibration" / "gaussian_splatting").mkdir()  # on disk, not made by the run
+    out = res / "report" / "index.html"
+    made = ["calibration/cameras.json", "calibration/colmap", "calibration/mpeg/cameras.json"]
+    build_report(res, out, "fake", cams=CAMS, n_views=N, synthetic=True, exports=made)
+    files = sections(out.read_text())["files"]
+    assert files.count("<tr id=\"file-") == len(EXPORTS)
+    for rel in ("calibration/cameras.json", "calibration/colmap"):
+        assert f'href="../{rel}"' in files
+    assert "calibration/mpeg/cameras.json</code> <span class=\"missing\">absent" in files
+    for e in EXPORTS:
+        if e.rel not in made:
+            assert (f"<code>{e.rel}</code> <span class=\"missing\">not made by this run"
+                    f"</span> <span class=\"note\">(rule <code>{e.rule}</code>: <code>"
+                    f"snakemake -j2 results/fake/{e.rel}</code>)") in files, e.rel
+        assert escape(e.tools) in files
+    # without the run's list, what is on disk
+    build_report(res, out, "fake", cams=CAMS, n_views=N, synthetic=True)
+    files = sections(out.read_text())["files"]
+    assert 'href="../calibration/gaussian_splatting"' in files
+    assert "calibration/mpeg/cameras.json</code> <span class=\"missing\">not made" in files
 
 
 def test_absent_sources_are_named_with_their_rules(tmp_path):

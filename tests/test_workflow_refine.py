@@ -56,6 +56,10 @@ def test_refinement_keeps_every_view_and_does_not_raise_the_errors(tiny_complete
     assert rows["complete"]["num_images"] == rows["eq6"]["num_images"] == 90
     html = (res / "report" / "index.html").read_text()
     assert 'id="t1-eq6"' in html and 'id="kpi-refine"' in html
+    # the calibration's files for other tools that the run made, linked from the page
+    for rel in ("cameras.json", "mpeg/cameras.json", "mpeg/rvs", "colmap", "colmap_points",
+                "eq6/cameras.json"):
+        assert f'href="../calibration/{rel}"' in html, rel
     # the refinement's points and where they came from (refine.tracks, carry_every)
     assert ("from the central views&#x27; matches carried into every 3rd of each shot&#x27;s "
             "other views and from the matches of every view, in one adjustment "
@@ -128,11 +132,18 @@ def test_gaussian_splatting_dataset_asked_for_by_path(tiny_complete_run: Path, t
     shutil.rmtree(gs)
     dry = snakemake(work, "-n")
     out = dry.stdout + dry.stderr
-    # the switch reruns nothing else (no job's params hold the export block): the export
-    # and the default target's own rule, which runs nothing
+    # the switch reruns nothing else (no job's params hold the export block): the export,
+    # the report, which lists it now, and the default target's own rule, which runs nothing
     table = out[out.index("Job stats:"):].splitlines()[3:]
     jobs = dict(m.groups() for m in map(re.compile(r"^(\w+)\s+(\d+)$").match, table) if m)
-    assert jobs == {"gaussian_splatting": "1", "all": "1", "total": "2"}, out[-3000:]
+    assert jobs == {"gaussian_splatting": "1", "report": "1", "all": "1", "total": "3"}, \
+        out[-3000:]
+    html = (work / "results" / "tiny" / "report" / "index.html").read_text()
+    assert "calibration/gaussian_splatting</code> <span class=\"missing\">not made" in html
+    proc = snakemake(work)
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    html = (work / "results" / "tiny" / "report" / "index.html").read_text()
+    assert 'href="../calibration/gaussian_splatting"' in html
 
 
 def max_rotation_deg(calib, truth, keys) -> float:

@@ -13,7 +13,7 @@ iteration).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, replace
 from html import escape
 from pathlib import Path
@@ -384,8 +384,33 @@ def section_cameras(page: Page) -> None:
         + f"hover a point for its name. Source: {links}</figcaption></figure>")
 
 
+def section_exports(page: Page, exports: Collection[str] | None) -> None:
+    """Where the calibration is for each tool (sources.EXPORTS): ``exports``, the ones this
+    run made (paths under results/<dataset>/; None: those on disk), are linked; the others
+    say which rule makes them and how to ask for it."""
+    page.section("files", "Calibration files for other tools")
+    rows = []
+    for e in src.EXPORTS:
+        made = page.has(e.rel) if exports is None else e.rel in exports
+        if made and page.has(e.rel):
+            where = page.link(e.rel)
+        else:
+            why = "absent" if made else "not made by this run"
+            where = (f'<code>{escape(e.rel)}</code> <span class="missing">{why}</span> '
+                     f'<span class="note">(rule <code>{escape(e.rule)}</code>: '
+                     f"<code>snakemake -j2 results/{escape(page.dataset)}/{escape(e.rel)}"
+                     "</code>)</span>")
+        rows.append(f'<tr id="file-{escape(e.rule)}-{len(rows)}"><td class="l">{where}</td>'
+                    f'<td class="l">{escape(e.tools)}</td><td class="l">{escape(e.holds)}'
+                    "</td></tr>")
+    page.add('<table id="exports"><tr><th class="l">file</th><th class="l">for</th>'
+             '<th class="l">holds</th></tr>' + "".join(rows) + "</table>"
+             '<p class="note">The README\'s "Outputs" and "MPEG exports and RVS" say how '
+             "each is read.</p>")
+
+
 def _ordinal(n: int) -> str:
-    """2 -> "2nd", 3 -> "3rd", 11 -> "11th"."""
+    """1st, 2nd, 3rd, 4th ... 11th, 12th, 13th, 21st."""
     suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
     return f"{n}{suffix}"
 
@@ -750,12 +775,6 @@ def track_source(settings: dict) -> str:
             f"views (refine.tracks: central, carry_every: {every})")
 
 
-def _ordinal(n: int) -> str:
-    """1st, 2nd, 3rd, 4th ... 11th, 12th, 13th, 21st."""
-    suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
-    return f"{n}{suffix}"
-
-
 #: Registration A's focal deviation (%) above which the report advises more hand-held
 #: shots. Fixed on the 52 captures of bench_accuracy.py kept when it was chosen (seeds
 #: 49-58): the 38 under it all had the refined focal length within 0.1 % (0.094 % at
@@ -863,11 +882,14 @@ def section_overview(page: Page, synthetic: bool, cams: Sequence[str]) -> None:
 
 def build_report(results: str | Path, out_path: str | Path, dataset: str, *,
                  cams: Sequence[str], n_views: int, synthetic: bool,
+                 exports: Collection[str] | None = None,
                  log: Callable[[str], None] | None = None) -> dict:
     """Write the report page of ``results`` (= ``results/<dataset>``) to ``out_path``.
 
     ``cams``: the dataset's shots (array ``x<col>_y<row>`` and hand-held ``hand<k>``);
-    ``n_views``: N of the N x N sets. Returns what was shown and what was missing."""
+    ``n_views``: N of the N x N sets; ``exports``: the calibration's exports (paths under
+    ``results``) that the run made, None for those on disk. Returns what was shown and
+    what was missing."""
     results = Path(results)
     say = log or (lambda _m: None)
     page = Page(results, dataset)
@@ -887,6 +909,7 @@ def build_report(results: str | Path, out_path: str | Path, dataset: str, *,
     section_summary(page)
     section_cameras(page)
     say("camera array")
+    section_exports(page, exports)
     papers = {
         "exp1": ("Experiment 1 (Fig. 7): central views from the corner shots' central views",
                  "The paper: 28.44 dB on average."),
