@@ -22,7 +22,7 @@ from plenocal.io.raytrix import CalibError, read_calib
 from plenocal import job_memory, names
 from plenocal.artifacts import tracks as tracks_artifact
 from plenocal.names import central_view, view_names
-from plenocal.report.sources import EXPORTS
+from plenocal.report.exports import EXPORTS
 
 # COLMAP's logging (glog) to standard error alone, which every job's script sends to its
 # rule's log (plenocal.rulelog), instead of also into *.INFO / *.WARNING files of its own
@@ -850,7 +850,9 @@ def report_inputs(wildcards):
         res(d, e.rel)
         for e in EXPORTS
         if have(e.rule)
-        and (e.rule not in ("mpeg_views", "gaussian_splatting") or res(d, e.rel) in made)
+        and (
+            e.rule not in ("mpeg_views", "gaussian_splatting") or res(d, e.rel) in made
+        )
     ]
     return out
 

@@ -31,14 +31,9 @@ from plenocal.calib.refine import RefineSettings
 from plenocal.camera import PinholeCamera, intrinsics, pose
 from plenocal.convert.quality import summarise
 from plenocal.io.files import write_image, write_json
+from plenocal.report.exports import EXPORTS
 from plenocal.report.html import _hundredths, build_report, shot_means_table
-from plenocal.report.sources import (
-    EXPORTS,
-    PAPER_TABLE1,
-    layout,
-    table1_rows,
-    table_name,
-)
+from plenocal.report.sources import PAPER_TABLE1, layout, table1_rows, table_name
 from plenocal.verify.gt_errors import gt_errors
 from plenocal.verify.synthesis import psnr_tables
 from plenocal.versions import version_text
@@ -454,7 +449,7 @@ def test_exp1_without_a_shot_to_synthesise_says_why(tmp_path):
 
 
 def test_the_calibration_files_for_other_tools_are_listed_as_the_run_made_them(tmp_path):
-    """Section "files": every export (sources.EXPORTS) with its tools; the ones the run made
+    """Section "files": every export (exports.EXPORTS) with its tools; the ones the run made
     linked, an asked-for one that is gone said absent, the others named with their rule and
     the command that makes them."""
     res = make_results(tmp_path)

@@ -37,6 +37,7 @@ from plenocal.io.files import atomic_write_text, read_json
 from plenocal.names import array_position, array_shot, central_view, key_shot, split_key
 from plenocal.report import figures as fg
 from plenocal.report import sources as src
+from plenocal.report.exports import EXPORTS
 from plenocal.verify.experiments import ArrayLayout
 from plenocal.versions import version_text
 
@@ -385,12 +386,12 @@ def section_cameras(page: Page) -> None:
 
 
 def section_exports(page: Page, exports: Collection[str] | None) -> None:
-    """Where the calibration is for each tool (sources.EXPORTS): ``exports``, the ones this
-    run made (paths under results/<dataset>/; None: those on disk), are linked; the others
-    say which rule makes them and how to ask for it."""
+    """Where the calibration is for each tool (:data:`plenocal.report.exports.EXPORTS`):
+    ``exports``, the ones this run made (paths under results/<dataset>/; None: those on
+    disk), are linked; the others say which rule makes them and how to ask for it."""
     page.section("files", "Calibration files for other tools")
     rows = []
-    for e in src.EXPORTS:
+    for e in EXPORTS:
         made = page.has(e.rel) if exports is None else e.rel in exports
         if made and page.has(e.rel):
             where = page.link(e.rel)
