@@ -387,11 +387,7 @@ def _write_conversion(args: argparse.Namespace, shot, out: Path, threads: int, s
     # matched lenses), then every lens's: a filled lens, or a lone matched one, may take a
     # size nothing around it measured (BENCHMARKS.md, "Filled lenses pulled out of the
     # confident range by the smoothing")
-    import numpy as np  # noqa: PLC0415
-
-    confident = shot.patch.confident[shot.layout.lens_index]
-    measured = shot.used_patch[confident] if confident.any() else shot.used_patch
-    p_lo, p_hi = (float(v) for v in np.percentile(measured, stats["percentiles"]))
+    p_lo, p_hi = stats["patch_size_px"]["range"]
     log.info("patch sizes %.2f..%.2f px (percentiles %g and %g of the matched lenses; "
              "%.2f..%.2f over all, median %.2f, %.0f%% matched); views %dx%d; %.2f s",
              p_lo, p_hi, *stats["percentiles"], stats["patch_size_px"]["min"],

@@ -58,8 +58,9 @@ def disparity_record(layout: ViewLayout, calib: RayCalib, patch: np.ndarray,
     (``patch``/``confident``: per used lens) and the conversion's ``warnings``
     (:mod:`plenocal.artifacts.stage_warnings`). The range is taken between the given
     percentiles of the confident lenses' patch sizes (all lenses' where none is
-    confident): a size filled in where matching had nothing to match is no measured
-    depth (a doll on black once gave D_min = -178 px from its filled background).
+    confident; ``patch_size_px.range``): a size filled in where matching had nothing to
+    match is no measured depth (a doll on black once gave D_min = -178 px from its filled
+    background).
     ``safe_diameter``: the ``D'`` the views were cut with (default: calib.xml's
     ``D - 2 lens_border``)."""
     q, T = layout.q, layout.tile
@@ -107,6 +108,7 @@ def disparity_record(layout: ViewLayout, calib: RayCalib, patch: np.ndarray,
             "percentiles": pct,
             "confident_share": float(np.mean(confident)) if len(confident) else 0.0,
             "filled_share": float(1.0 - np.mean(confident)) if len(confident) else 1.0,
+            "range": [p_lo, p_hi],
             "range_from": "confident lenses" if confident.any() else "all lenses (none "
                           "confident)",
         },

@@ -195,13 +195,25 @@ def fill_and_smooth(raw: np.ndarray, confidence: np.ndarray, neighbours: np.ndar
     after one match at its type range's top; BENCHMARKS.md, "Filled lenses pulled out of
     the confident range by the smoothing"). A confident lens keeps its own size.
     ``fallback``: the value where no lens is confident."""
-    P, w, notes = fill_unreliable(raw, confidence, centres, min_confidence, fallback)
+    ok, bounds = confident_range(raw, confidence, min_confidence)
+    P, w, notes = fill_unreliable(raw, confidence, centres, min_confidence, fallback,
+                                  confident=(ok, bounds))
     out = _smooth(P, w, neighbours, smooth_iterations)
-    ok = (confidence >= min_confidence) & np.isfinite(raw)
-    if ok.any() and not ok.all():
-        lo, hi = np.percentile(raw[ok], FILL_PERCENTILES)
-        out = np.where(ok, out, np.clip(out, lo, hi)).astype(np.float32)
+    if bounds is not None and not ok.all():
+        out = np.where(ok, out, np.clip(out, *bounds)).astype(np.float32)
     return out, notes
+
+
+def confident_range(raw: np.ndarray, confidence: np.ndarray, min_confidence: float
+                    ) -> tuple[np.ndarray, tuple[float, float] | None]:
+    """The confident lenses (``raw`` (n,) matched sizes, ``confidence`` (n,)): (n,) bool,
+    and the :data:`FILL_PERCENTILES` of their sizes, the range a filled lens is kept in
+    (None where no lens is confident)."""
+    ok = (confidence >= min_confidence) & np.isfinite(raw)
+    if not ok.any():
+        return ok, None
+    lo, hi = np.percentile(raw[ok], FILL_PERCENTILES)
+    return ok, (float(lo), float(hi))
 
 
 def _smooth(P: np.ndarray, w: np.ndarray, neighbours: np.ndarray, iterations: int
@@ -228,8 +240,9 @@ FILL_PERCENTILES = (2.0, 98.0)
 
 
 def fill_unreliable(raw: np.ndarray, confidence: np.ndarray, centres: np.ndarray,
-                    min_confidence: float, fallback: float) -> tuple[np.ndarray, np.ndarray,
-                                                                     list[str]]:
+                    min_confidence: float, fallback: float,
+                    confident: tuple[np.ndarray, tuple[float, float] | None] | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """Patch sizes with every unconfident lens filled (module docstring).
 
     ``centres``: (n, 2) lens centres in lens pitches. A lens below ``min_confidence``
@@ -238,16 +251,17 @@ def fill_unreliable(raw: np.ndarray, confidence: np.ndarray, centres: np.ndarray
     found in one pass (filled values never fill others), clipped to the 2nd-98th
     percentile of the confident sizes; where none is that near, the confident median;
     where no lens is confident, ``fallback``. Returns (sizes, weights for the
-    smoothing: the confidence, a tenth of the neighbours' mean for filled lenses, notes)."""
+    smoothing: the confidence, a tenth of the neighbours' mean for filled lenses, notes).
+    ``confident``: :func:`confident_range` of these arguments where the caller has it."""
     notes: list[str] = []
     n = len(raw)
-    ok = (confidence >= min_confidence) & np.isfinite(raw)
-    if not ok.any():
+    ok, bounds = confident or confident_range(raw, confidence, min_confidence)
+    if bounds is None:
         notes.append("no lens matched with confidence: the whole map is the fallback "
                      f"{fallback:.3f} px (texture-less image, or calib.xml from another camera)")
         return np.full(n, fallback), np.full(n, 1e-3), notes
     good = raw[ok]
-    lo, hi = np.percentile(good, FILL_PERCENTILES)
+    lo, hi = bounds
     P = np.where(ok, raw, np.nan)
     w = np.where(ok, confidence, 0.0)
     missing = np.flatnonzero(~ok)
