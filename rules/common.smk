@@ -845,16 +845,18 @@ def report_inputs(wildcards):
             res(d, "depth", r, f"{c}.png") for r in ("a", "b") for c in cams(d)
         ]
     # the calibration's files for other tools that this run makes, listed on the page
-    made = set(mpeg_views_targets(d) + gaussian_splatting_targets(d))
+    made = set(optional_export_targets(d))
     out["exports"] = [
         res(d, e.rel)
         for e in EXPORTS
-        if have(e.rule)
-        and (
-            e.rule not in ("mpeg_views", "gaussian_splatting") or res(d, e.rel) in made
-        )
+        if have(e.rule) and (not e.optional or res(d, e.rel) in made)
     ]
     return out
+
+
+def optional_export_targets(dataset):
+    """The optional exports (plenocal.report.exports.Export.optional) this run makes."""
+    return mpeg_views_targets(dataset) + gaussian_splatting_targets(dataset)
 
 
 def report_targets(dataset):

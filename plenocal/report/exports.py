@@ -16,6 +16,10 @@ class Export:
     rule: str  # the rule that writes it
     tools: str  # who reads it
     holds: str  # what it holds, in words
+    #: made only where the run's targets ask for it (a switch in the config, or the rules
+    #: that make its inputs: rules/common.smk, ``optional_export_targets``), not by every
+    #: run that has its rule
+    optional: bool = False
 
 
 #: the calibration's exports, as the README's "Outputs" lists them, in the order a user looks
@@ -27,7 +31,7 @@ EXPORTS: tuple[Export, ...] = (
            "MPEG-I camera JSON (OMAF axes)"),
     Export("calibration/mpeg/rvs", "mpeg_views", "RVS",
            "one configuration per synthesis experiment, its inputs' depth maps and textures "
-           "in mpeg/depth/ and mpeg/texture/"),
+           "in mpeg/depth/ and mpeg/texture/", optional=True),
     Export("calibration/colmap", "refine", "COLMAP, NeRF tools that read poses",
            "a sparse model: every view's intrinsics and pose, no points; images: views/"),
     Export("calibration/colmap_points", "reprojection_complete",
@@ -35,7 +39,8 @@ EXPORTS: tuple[Export, ...] = (
            "the same cameras with Table I's triangulated points, coloured; images: views/"),
     Export("calibration/gaussian_splatting", "gaussian_splatting",
            "3D Gaussian splatting (graphdeco-inria)",
-           "images/ cropped about each view's principal point, and sparse/0/"),
+           "images/ cropped about each view's principal point, and sparse/0/",
+           optional=True),
     Export("calibration/eq6/cameras.json", "merge", "comparison with the paper",
            "the paper's Eq. 6 result; the same formats in eq6/mpeg/ and eq6/colmap/"),
 )
