@@ -36,6 +36,10 @@ include: "rules/report.smk"
 include: "rules/stages.smk"
 
 
+onstart:
+    warn_stale_shot_folders()
+
+
 rule all:
     default_target: True
     input:

@@ -228,6 +228,19 @@ def res(dataset, *parts):
     return os.path.join("results", dataset, *parts)
 
 
+def warn_stale_shot_folders():
+    """Name every dataset's shot folders under views/ that the config no longer names
+    (plenocal.artifacts.stale_shots; at the start of a run that has jobs, not on a no-op).
+    """
+    from snakemake.logging import logger
+    from plenocal.artifacts.stale_shots import stale_shot_folders, stale_shot_message
+
+    for d in DATASETS:
+        stale = stale_shot_folders(res(d, "views"), cams(d))
+        if stale:
+            logger.warning(stale_shot_message(d, stale))
+
+
 def log_path(rule, name="{dataset}"):
     return f"results/{{dataset}}/logs/{rule}/{name}.log"
 
