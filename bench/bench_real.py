@@ -450,13 +450,16 @@ def speed_main(args: argparse.Namespace, frames: list[str]) -> None:
         out.say(f"Median over the frames of ours / TLCT: PNG {median_ratio('png')}, YUV "
                 f"{median_ratio('yuv')}; load average {os.getloadavg()[0]:.1f} at the end.")
     if args.out:
-        update_sections(args.out, {SPEED_HEADING: list(out)})
+        update_sections(args.out, {SPEED_HEADING: list(out)}, keep_history=args.keep_history)
 
 
 def main() -> None:
     no_huge_pages()  # as the command line: its timings are those a user sees
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=None, help="also write the figures into this BENCHMARKS.md")
+    ap.add_argument("--keep-history", action="store_true",
+                    help="put the new figures first in their section of --out and keep the "
+                         "earlier runs and their notes below (default: replace the section)")
     ap.add_argument("--frames", nargs="*", default=None, help="frame names (default: all)")
     ap.add_argument("--views", type=int, default=5)
     ap.add_argument("--grid", default="auto", choices=("file", "refine", "auto"))
@@ -600,7 +603,7 @@ def main() -> None:
                     f"{100 * r['file_grid']['confident']:.0f}% / {100 * r['confident']:.0f}% "
                     f"| {pair('ssim', '.3f')} | {pair('sharpness_ratio', '.2f')} |")
     if args.out:
-        update_sections(args.out, {HEADING: list(out)})
+        update_sections(args.out, {HEADING: list(out)}, keep_history=args.keep_history)
 
 
 if __name__ == "__main__":

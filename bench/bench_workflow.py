@@ -374,6 +374,9 @@ def main() -> None:
     ap.add_argument("--skip-calibration", action="store_true",
                     help="no separate run of the calibration alone")
     ap.add_argument("--out", default=str(ROOT / "BENCHMARKS.md"))
+    ap.add_argument("--keep-history", action="store_true",
+                    help="put the new figures first in their section of --out and keep the "
+                         "earlier runs and their notes below (default: replace the section)")
     ap.add_argument("--keep", action="store_true", help="keep the scratch folder")
     ap.add_argument("--from-kept", default=None, metavar="DIR",
                     help="summarise a full run kept by --keep (DIR/full) instead of running")
@@ -449,7 +452,7 @@ def main() -> None:
             shutil.rmtree(scratch, ignore_errors=True)
         else:
             print(f"scratch kept in {scratch}")
-    update_sections(args.out, sections)
+    update_sections(args.out, sections, keep_history=args.keep_history)
     print(f"wrote {args.out}")
 
 

@@ -1,5 +1,7 @@
 """BENCHMARKS.md is written by several bench scripts: each replaces its own sections
-(``## <heading>`` up to the next ``## ``) and keeps the others."""
+(``## <heading>`` up to the next ``## ``) and keeps the others; or, with
+``keep_history``, puts its new text at the top of its section and keeps the earlier runs
+and the hand-written paragraphs about them below it."""
 
 from __future__ import annotations
 
@@ -24,8 +26,11 @@ class Lines(list):
         self.say("|" + "---|" * len(columns))
 
 
-def update_sections(path: str | Path, sections: dict[str, list[str]]) -> None:
-    """Replace (or append) the ``## heading`` sections of ``path`` with ``sections``.
+def update_sections(path: str | Path, sections: dict[str, list[str]],
+                    keep_history: bool = False) -> None:
+    """Replace (or append) the ``## heading`` sections of ``path`` with ``sections``;
+    with ``keep_history``, the new lines go first in the section and its earlier body
+    follows them (the runs before, newest first, as the file keeps them by hand).
 
     Every other section is kept where it stands, two of one heading included: a file
     read into a dict by heading lost the first of two sections that a person had given
@@ -39,9 +44,13 @@ def update_sections(path: str | Path, sections: dict[str, list[str]]) -> None:
         heading, _, body = block.partition("\n")
         blocks.append((heading.strip(), body.rstrip("\n").split("\n")))
     todo = dict(sections)
-    for i, (heading, _) in enumerate(blocks):
+    for i, (heading, body) in enumerate(blocks):
         if heading in todo:
-            blocks[i] = (heading, ["", *todo.pop(heading)])
+            earlier = body if keep_history else []
+            while earlier and not earlier[0].strip():
+                earlier = earlier[1:]
+            blocks[i] = (heading, ["", *todo.pop(heading), *([""] if earlier else []),
+                                   *earlier])
     blocks += [(heading, ["", *lines]) for heading, lines in todo.items()]
     out = [TITLE, "", INTRO]
     for heading, body in blocks:

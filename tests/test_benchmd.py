@@ -31,3 +31,18 @@ def test_two_sections_of_one_heading_are_both_kept(tmp_path):
     assert _headings(text) == ["Full run", "Earlier", "Mid", "Earlier"]
     assert "first kept" in text and "second kept" in text and "newer" in text
     assert text.index("first kept") < text.index("m\n") < text.index("second kept")
+
+
+def test_with_the_history_kept_the_new_run_goes_first_and_the_earlier_stay(tmp_path):
+    # bench_real --tlct and bench_workflow rewrote their whole section, and every session
+    # put the runs before, and what it wrote about them, back by hand
+    md = tmp_path / "BENCHMARKS.md"
+    md.write_text("# Benchmarks\n\n## Speed\n\n**At abc** notes\n\n| t |\n|---|\n| 1 |\n\n"
+                  "### Earlier\n\nolder\n\n## B\n\nb\n")
+    benchmd.update_sections(md, {"Speed": ["| t |", "|---|", "| 2 |"]}, keep_history=True)
+    text = md.read_text()
+    assert _headings(text) == ["Speed", "B"]
+    assert text.index("| 2 |") < text.index("**At abc** notes") < text.index("| 1 |")
+    assert "### Earlier\n\nolder\n\n## B" in text
+    benchmd.update_sections(md, {"Speed": ["| 3 |"]})
+    assert "| 3 |" in md.read_text() and "| 2 |" not in md.read_text()
