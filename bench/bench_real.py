@@ -85,7 +85,7 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from benchmd import Lines, update_sections  # noqa: E402
+from benchmd import Lines, add_keep_history, update_sections  # noqa: E402
 
 from plenocal.cli import command_line_block  # noqa: E402
 from plenocal.convert import ConvertSettings, ShotConversion  # noqa: E402
@@ -457,9 +457,7 @@ def main() -> None:
     no_huge_pages()  # as the command line: its timings are those a user sees
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=None, help="also write the figures into this BENCHMARKS.md")
-    ap.add_argument("--keep-history", action="store_true",
-                    help="put the new figures first in their section of --out and keep the "
-                         "earlier runs and their notes below (default: replace the section)")
+    add_keep_history(ap)
     ap.add_argument("--frames", nargs="*", default=None, help="frame names (default: all)")
     ap.add_argument("--views", type=int, default=5)
     ap.add_argument("--grid", default="auto", choices=("file", "refine", "auto"))

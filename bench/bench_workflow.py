@@ -39,7 +39,7 @@ from pathlib import Path
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from benchmd import update_sections  # noqa: E402
+from benchmd import add_keep_history, update_sections  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKFLOW_FILES = ["Snakefile", "rules", "scripts", "config.schema.yaml", "profiles", "report",
@@ -374,9 +374,7 @@ def main() -> None:
     ap.add_argument("--skip-calibration", action="store_true",
                     help="no separate run of the calibration alone")
     ap.add_argument("--out", default=str(ROOT / "BENCHMARKS.md"))
-    ap.add_argument("--keep-history", action="store_true",
-                    help="put the new figures first in their section of --out and keep the "
-                         "earlier runs and their notes below (default: replace the section)")
+    add_keep_history(ap)
     ap.add_argument("--keep", action="store_true", help="keep the scratch folder")
     ap.add_argument("--from-kept", default=None, metavar="DIR",
                     help="summarise a full run kept by --keep (DIR/full) instead of running")

@@ -26,6 +26,15 @@ class Lines(list):
         self.say("|" + "---|" * len(columns))
 
 
+def add_keep_history(parser) -> None:
+    """``--keep-history`` on a bench script's ``argparse`` parser (its value goes to
+    :func:`update_sections`' ``keep_history``)."""
+    parser.add_argument("--keep-history", action="store_true",
+                        help="put the new figures first in their section of --out and keep "
+                             "the earlier runs and their notes below (default: replace the "
+                             "section)")
+
+
 def update_sections(path: str | Path, sections: dict[str, list[str]],
                     keep_history: bool = False) -> None:
     """Replace (or append) the ``## heading`` sections of ``path`` with ``sections``;
