@@ -229,14 +229,15 @@ def res(dataset, *parts):
 
 
 def warn_stale_shot_folders():
-    """Name every dataset's shot folders under views/ that the config no longer names
-    (plenocal.artifacts.stale_shots; at the start of a run that has jobs, not on a no-op).
+    """Name every dataset's shot folders (views/, depth/views/, ground_truth/...) that the
+    config no longer names (plenocal.artifacts.stale_shots; at the start of a run that has
+    jobs, not on a no-op).
     """
     from snakemake.logging import logger
-    from plenocal.artifacts.stale_shots import stale_shot_folders, stale_shot_message
+    from plenocal.artifacts.stale_shots import stale_dataset_folders, stale_shot_message
 
     for d in DATASETS:
-        stale = stale_shot_folders(res(d, "views"), cams(d))
+        stale = stale_dataset_folders(res(d), cams(d))
         if stale:
             logger.warning(stale_shot_message(d, stale))
 

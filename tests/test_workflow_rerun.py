@@ -114,12 +114,16 @@ def test_deleted_view_reruns_its_conversion(complete_run: Path, tmp_path: Path):
     brings it back with the same bytes. The job also removes the views of an earlier
     ``views`` setting from the shot's folder (here two of a 5 x 5 run's, put there by
     hand), which Snakemake does not track (plenocal.convert.viewset.remove_stale_views).
-    A shot folder the config does not name (a shot taken out of the dataset) is named at
-    the run's start with the command that removes it, and left as it is."""
+    A shot's folders the config does not name (a shot taken out of the dataset: its views
+    and its views' depth maps) are named at the run's start with the command that removes
+    them, and left as they are."""
     work = clone(complete_run, tmp_path / "w")
     gone = work / "results/tiny/views/x09_y09"
     gone.mkdir()
     (gone / "0_0.png").write_bytes(b"an earlier run's view")
+    gone_depth = work / "results/tiny/depth/views/x09_y09"
+    gone_depth.mkdir(parents=True)
+    (gone_depth / "0_0.npy").write_bytes(b"an earlier run's depth map")
     shot = sorted(p for p in (work / "results/tiny/views").iterdir() if p.is_dir())[0]
     n = yaml.safe_load((work / "config.yaml").read_text())["datasets"]["tiny"]["views"]
     view = shot / f"{view_names(n)[0]}.png"
@@ -138,8 +142,8 @@ def test_deleted_view_reruns_its_conversion(complete_run: Path, tmp_path: Path):
     assert view.read_bytes() == before
     warning = " ".join(proc.stderr.split())
     assert "that the config no longer names (x09_y09)" in warning, proc.stderr[-3000:]
-    assert "rm -r results/tiny/views/x09_y09" in warning
-    assert (gone / "0_0.png").is_file()
+    assert "rm -r results/tiny/views/x09_y09 results/tiny/depth/views/x09_y09" in warning
+    assert (gone / "0_0.png").is_file() and (gone_depth / "0_0.npy").is_file()
     assert not any(p.exists() for p in stale)
     assert {p.name: p.read_bytes() for p in shot.iterdir() if p != view} == kept
     # the shot's views.json is written again with the same bytes: nothing else reruns
