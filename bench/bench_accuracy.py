@@ -144,6 +144,17 @@ GEOMETRIES["tele-raytrix"] = {
     "main_lens": {**GEOMETRIES["tele"]["main_lens"], "vignetting": {
         "stop_distance_mm": 20.0, "stop_diameter_scale": 1.2}},
 }
+# and a thirteenth, the same way (BENCHMARKS.md, "A thirteenth geometry no run had seen"):
+# a TSPC-like camera: one lens type, micro images more than twice the others' (300 um
+# lenses, about 57 px, against 24 px: fewer, larger lenses, as on the TSPC frames of
+# shared/real/), behind a wider main lens (25 mm) focused nearer, on a 4 x 2 array
+GEOMETRIES["tspc-like"] = {
+    "array": {"cols": 4, "rows": 2, "step_m": 0.012},
+    "handheld": {"count": 6, "max_rotation_deg": 8},
+    "main_lens": {"focal_length_mm": 25.0, "focus_distance_m": 0.45},
+    "scene": {"near_m": 0.35, "far_m": 0.6},
+    "mla": {"pitch_um": 300.0, "k": 4.0, "lens_types": 1},
+}
 DEFAULT_SEEDS = (1, 2, 3, 4, 5)
 TARGETS = ("eval/gt_errors.json", "eval/reprojection.json", "eval/synthesis_exp1.json")
 
