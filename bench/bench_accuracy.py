@@ -144,7 +144,8 @@ GEOMETRIES["tele-raytrix"] = {
     "main_lens": {**GEOMETRIES["tele"]["main_lens"], "vignetting": {
         "stop_distance_mm": 20.0, "stop_diameter_scale": 1.2}},
 }
-# and a thirteenth, the same way (BENCHMARKS.md, "A thirteenth geometry no run had seen"):
+# and a thirteenth, the same way (BENCHMARKS.md, "Held-out captures: seed 90 of five
+# geometries, and a thirteenth geometry no run had seen"):
 # a TSPC-like camera: one lens type, micro images more than twice the others' (300 um
 # lenses, about 57 px, against 24 px: fewer, larger lenses, as on the TSPC frames of
 # shared/real/), behind a wider main lens (25 mm) focused nearer, on a 4 x 2 array
