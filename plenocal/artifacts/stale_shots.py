@@ -23,12 +23,12 @@ from plenocal.names import is_shot
 SHOT_FOLDERS = ("views", "depth/views", "ground_truth/depth", "ground_truth/renders")
 
 
-def stale_shot_folders(views_dir: str | Path, shots: Iterable[str]) -> list[Path]:
-    """The folders under ``views_dir`` (one of a dataset's :data:`SHOT_FOLDERS`, e.g.
+def stale_shot_folders(folder: str | Path, shots: Iterable[str]) -> list[Path]:
+    """The folders under ``folder`` (one of a dataset's :data:`SHOT_FOLDERS`, e.g.
     ``results/<dataset>/views``) named as shots (:func:`plenocal.names.is_shot`) that are
     not among ``shots``, sorted; none where the folder does not exist. Other entries
     (``convert_setup.json``, a user's own folders) are left out."""
-    base = Path(views_dir)
+    base = Path(folder)
     if not base.is_dir():
         return []
     known = set(shots)
@@ -39,7 +39,7 @@ def stale_shot_folders(views_dir: str | Path, shots: Iterable[str]) -> list[Path
 def stale_dataset_folders(dataset_dir: str | Path, shots: Iterable[str]) -> list[Path]:
     """:func:`stale_shot_folders` of each of :data:`SHOT_FOLDERS` under ``dataset_dir``
     (``results/<dataset>``), in that order."""
-    known = list(shots)
+    known = set(shots)  # read once: ``shots`` may be an iterator
     return [p for sub in SHOT_FOLDERS for p in stale_shot_folders(Path(dataset_dir, sub), known)]
 
 
