@@ -125,6 +125,37 @@ def test_rendering_is_deterministic(tmp_path: Path):
     assert img.shape == (180, 240, 3) and img.std() > 0.05
 
 
+@pytest.mark.parametrize("camera", [
+    {},  # the tests' own camera
+    # bench_accuracy's tspc-like: a 25 mm main lens, where the physical virtual depth a / s
+    # and the file's D / P part by 15-19 %, and the scene's far end fell off the range
+    {"main_lens": {"focal_length_mm": 25.0, "focus_distance_m": 0.45},
+     "scene": {"near_m": 0.35, "far_m": 0.6}, "mla": {"pitch_um": 300.0, "k": 4.0}},
+])
+def test_single_type_range_covers_the_scene_as_the_converter_reads_it(camera: dict):
+    """A single lens type's depth range is the scene's, with a margin, in virtual depths as
+    the converter reads them: its candidate patch sizes (P = D / v) hold the exact
+    micro-image disparity of the scene's nearest and farthest points, with room to spare
+    (a best match at the search's end is not trusted)."""
+    from plenocal.convert.patchsize import PatchSizeSettings, type_ranges
+
+    sim = small_sim()
+    for key, value in camera.items():
+        sim[key].update(value)
+    optics = optics_of(sim)
+    calib = make_calib(sim, optics)
+    assert len(calib.lens_types) == 1
+    lo, hi, notes = type_ranges(MicrolensGrid(calib, optics.width, optics.height),
+                                PatchSizeSettings())
+    assert not notes
+    near, far = (abs(float(optics.micro_image_disparity_px(sim["scene"][k])))
+                 for k in ("near_m", "far_m"))
+    assert lo[0] < 0.95 * far and 1.05 * near < hi[0]
+    # the two conventions part on this camera: the physical one alone would not do
+    assert optics.measured_virtual_depth(sim["scene"]["far_m"]) > 1.02 * optics.virtual_depth(
+        sim["scene"]["far_m"])
+
+
 def test_dataset_files(tmp_path: Path):
     sim = small_sim()
     setup_dataset(sim, tmp_path)

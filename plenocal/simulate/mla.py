@@ -11,7 +11,10 @@ The three lens types of a multi-focus MLA are interleaved: type 0 at offset (0, 
 of the centred rectangular sub-grid, types 1 and 2 one lens step along
 ``+lens_base_x`` and ``-lens_base_x``. Depth ranges: each type's depth of field (the
 virtual depths whose blur disc stays within ``depth_of_field_px`` pixels), with the
-outer ends left open as Raytrix writes them (from virtual depth 1, to 100).
+outer ends left open as Raytrix writes them (from virtual depth 1, to 100); a single
+type's range is the scene's depth range with a 15 % margin, in virtual depths as the
+file's readers take them (``P = D / v``:
+:meth:`plenocal.optics.PlenopticOptics.measured_virtual_depth`).
 
 The lens types of the pixels come from :class:`plenocal.grid.MicrolensGrid` built
 from that very file, so the simulator and the reader agree by construction.
@@ -67,8 +70,12 @@ def make_calib(sim: dict, optics: PlenopticOptics) -> RayCalib:
     beta = base_angle(rotation)
     ox, oy = mla["offset_px"]
     if optics.lens_types == 1:
+        # the scene's depth range with a margin, as the file's readers take virtual depths
+        # (P = D / v: optics.measured_virtual_depth). The physical a / s put the far end
+        # of tspc-like's scene past the range (P 14.27 px against a smallest candidate of
+        # 14.72): its background's lenses matched at the search's end, their sizes filled
         near, far = sim["scene"]["near_m"], sim["scene"]["far_m"]
-        v = sorted(abs(float(optics.virtual_depth(z))) for z in (near, far))
+        v = sorted(float(optics.measured_virtual_depth(z)) for z in (near, far))
         types: tuple[LensType, ...] = (
             LensType(0, (0.0, 0.0), round(0.85 * v[0], 6), round(1.15 * v[1], 6)),)
         sub = None
