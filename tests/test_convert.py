@@ -181,6 +181,29 @@ def test_patch_size_follows_the_content_not_the_middle_of_the_range():
     assert abs(np.median(res.patch[far_right]) - 8.0) < 0.1
 
 
+@pytest.mark.parametrize(("patch", "end", "where"), [(4.5, "smallest", "farther"),
+                                                     (10.0, "largest", "nearer")])
+def test_a_scene_beyond_the_files_depth_range_is_warned_about(patch, end, where):
+    """A plane whose patch size lies past the lens type's stated range (sizes 6-9 px) is
+    matched at the search's end on every lens and filled: the converter says so, naming
+    the file and the remedy. With the range open, as the real files state it, the same
+    frame is matched and nothing is said."""
+    opt = small_optics(480, 300)
+    D = opt.micro_image_pitch_px
+    tight = calib_for_optics(opt, depth_range=(D / 9.0, D / 6.0))
+    img = lenslet_from_patch_size(MicrolensGrid(tight, 480, 300), patch,
+                                  random_texture(512, 1.5, 4))
+    grid = MicrolensGrid(replace(tight, source="tight.xml"), 480, 300)
+    said = [w for w in estimate_patch_size(img, grid).warnings if "textured lenses" in w]
+    assert len(said) == 1, said
+    assert f"the {end} patch size searched" in said[0] and where in said[0]
+    assert "lens_type depth_range in tight.xml" in said[0]
+    opened = MicrolensGrid(calib_for_optics(opt, depth_range=(1.0, 100.0)), 480, 300)
+    res = estimate_patch_size(img, opened)
+    assert not [w for w in res.warnings if "textured lenses" in w]
+    assert abs(np.median(res.patch[opened.inside()]) - patch) < 0.1
+
+
 # ---------------------------------------------------------------------------
 # (2) views of a textured plane shift by q T / P between neighbours
 # ---------------------------------------------------------------------------

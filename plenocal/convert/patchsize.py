@@ -39,7 +39,9 @@ minus the best correlation at least 1.5 px away) times the block's texture
 searched range, the type's or the whole search's (a better match was cut off; and
 where nothing textured is seen the micro images' own structure, their vignetting,
 matches best at the smallest candidate, which once filled the face of a doll on black
-with 2 px patches on 70 px micro images). Lenses below ``min_confidence`` are
+with 2 px patches on 70 px micro images); where a share of the textured lenses does so
+at an end that the file's depth ranges set, a warning names the file
+(:func:`range_cut_notes`). Lenses below ``min_confidence`` are
 filled by :func:`fill_unreliable`: each from the nearest confident lenses around it (a
 weighted median, never a value carried on from lens to lens through a texture-less
 region, which drew streaks), within the range the confident lenses span (the scene's
@@ -614,6 +616,45 @@ def focus_weights(grid: MicrolensGrid, patch: np.ndarray, softness: float, floor
     return np.maximum(np.exp(-(d / softness) ** 2), floor).astype(np.float32)
 
 
+#: a warning when at least this share of the textured lenses (and :data:`RANGE_CUT_MIN`
+#: of them) matched best at an end of the search that the file's depth ranges set
+RANGE_CUT_SHARE = 0.05
+RANGE_CUT_MIN = 20
+
+
+def range_cut_notes(grid: MicrolensGrid, settings: PatchSizeSettings, candidates: np.ndarray,
+                    best: np.ndarray, cut: np.ndarray, texture: np.ndarray) -> list[str]:
+    """A warning per end of the search (the smallest or the largest candidate) that the
+    file's lens-type depth ranges set, not the search's own bounds (``min_px``,
+    ``max_fraction D'``), where :data:`RANGE_CUT_SHARE` of the textured lenses (``texture``
+    (n,) >= 0.5, whole lenses) matched best: a scene beyond the stated virtual depths,
+    whose lenses are then filled from their neighbours. The real files open their outer
+    ends (virtual depth 1 to 100), so the search's own bounds hold there; a file with a
+    tight range, or one in another virtual-depth convention than ``P = D / v``, is cut."""
+    c = grid.calib
+    D, cap = c.diameter, settings.max_fraction * c.safe_diameter
+    textured = (texture >= 0.5) & grid.inside()
+    m = int(textured.sum())
+    notes = []
+    if m == 0:
+        return notes
+    ends = (("smallest", 0, max(D / t.depth_max for t in c.lens_types) > settings.min_px,
+             "farther than the largest virtual depth stated"),
+            ("largest", len(candidates) - 1, min(D / t.depth_min for t in c.lens_types) < cap,
+             "nearer than the smallest virtual depth stated"))
+    for name, index, from_file, where in ends:
+        hit = int((textured & cut & (best == index)).sum())
+        if from_file and hit >= max(RANGE_CUT_MIN, RANGE_CUT_SHARE * m):
+            notes.append(
+                f"{100 * hit / m:.0f}% of the textured lenses ({hit} of {m}) matched best at "
+                f"the {name} patch size searched, {candidates[index]:.2f} px, which the "
+                f"lens types' depth ranges set (P = D / v): the scene seems to reach "
+                f"{where}, and those lenses' sizes were filled from their neighbours. "
+                f"Widen the lens_type depth_range in {c.source} (the converter reads "
+                "virtual depths as v = D / P)")
+    return notes
+
+
 def estimate_patch_size(image: np.ndarray, grid: MicrolensGrid,
                         settings: PatchSizeSettings | None = None, mla: str = "keplerian",
                         threads: int = 1, vignetting: Vignetting | None = None
@@ -691,6 +732,8 @@ def estimate_patch_size(image: np.ndarray, grid: MicrolensGrid,
     last = len(candidates) - 1 - np.argmax(allowed[:, ::-1], axis=1)
     cut = (best == first) | (best == last)
     conf = np.where(has & (pairs >= 2) & ~cut, conf, 0.0).astype(np.float32)
+    notes = notes + range_cut_notes(grid, settings, candidates, best, cut,
+                                    texture_share(texture, settings.texture_scale))
     v_mid = np.sqrt([t.depth_min * min(t.depth_max, 10 * t.depth_min)
                      for t in grid.calib.lens_types])
     fallback = float(np.clip(np.median(grid.diameter / v_mid), t_lo.min(), t_hi.max()))
