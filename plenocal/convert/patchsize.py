@@ -1,8 +1,10 @@
 """Per-microlens patch size by block matching against the hexagonal neighbours.
 
 The patch size ``P_i`` of lens ``i`` is the shift of a scene point between
-neighbouring micro images, ``P = D / v`` for a point at virtual depth ``v``
-(exactly :meth:`plenocal.optics.PlenopticOptics.micro_image_disparity_px`). A
+neighbouring micro images (:meth:`plenocal.optics.PlenopticOptics.micro_image_disparity_px`),
+``P = D / v`` for a point at virtual depth ``v`` as the calibration files state it
+(:meth:`~plenocal.optics.PlenopticOptics.measured_virtual_depth`; the physical ``a / s``
+differs from it by the main lens's convergence). A
 Keplerian relay inverts every micro image, so a point at local offset ``x`` in lens
 ``i`` lies at ``x + P n`` in the neighbour in direction ``n`` (unit image vector from
 ``i`` to the neighbour): it moves *towards* the neighbour (the test suite measures
