@@ -305,7 +305,7 @@ class PlenopticOptics:
         patch sizes (:func:`plenocal.convert.patchsize.type_ranges`). It is what matching
         measures; :meth:`virtual_depth`, the physical ``a / s``, leaves out the main lens's
         convergence and the micro images' wider pitch, and differs from it by
-        ``(1 + s / L) / (1 - a / L)``: by 3-7 % on the accuracy bench's cameras, by 15-19 %
+        ``(1 + s / L) / (1 - a / L)``: by 3-8 % on the accuracy bench's cameras, by 15-19 %
         on ``tspc-like``'s (a 25 mm main lens)."""
         return self.micro_image_pitch_px / np.abs(self.micro_image_disparity_px(Z))
 

@@ -181,8 +181,8 @@ def test_patch_size_follows_the_content_not_the_middle_of_the_range():
     assert abs(np.median(res.patch[far_right]) - 8.0) < 0.1
 
 
-@pytest.mark.parametrize(("patch", "end", "where"), [(4.5, "smallest", "farther"),
-                                                     (10.0, "largest", "nearer")])
+@pytest.mark.parametrize(("patch", "end", "where"), [(4.5, "smallest", "beyond"),
+                                                     (10.0, "largest", "below")])
 def test_a_scene_beyond_the_files_depth_range_is_warned_about(patch, end, where):
     """A plane whose patch size lies past the lens type's stated range (sizes 6-9 px) is
     matched at the search's end on every lens and filled: the converter says so, naming

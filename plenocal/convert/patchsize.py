@@ -641,9 +641,9 @@ def range_cut_notes(grid: MicrolensGrid, settings: PatchSizeSettings, candidates
     if m == 0:
         return notes
     ends = (("smallest", 0, max(D / t.depth_max for t in c.lens_types) > settings.min_px,
-             "farther than the largest virtual depth stated"),
+             "beyond the largest virtual depth stated"),
             ("largest", len(candidates) - 1, min(D / t.depth_min for t in c.lens_types) < cap,
-             "nearer than the smallest virtual depth stated"))
+             "below the smallest virtual depth stated"))
     for name, index, from_file, where in ends:
         hit = int((textured & cut & (best == index)).sum())
         if from_file and hit >= max(RANGE_CUT_MIN, RANGE_CUT_SHARE * m):
