@@ -426,6 +426,33 @@ def test_identical_frames_give_identical_views(tmp_path):
                 == (tmp_path / "png/frame_00003" / f"{name}.png").read_bytes())
 
 
+def test_a_warning_is_said_once_per_recording(tmp_path):
+    """Every frame of a clip whose calibration file cuts the patch-size search (a plane at
+    4.5 px, the file's sizes 6-9 px) gets the range warning; the recording says it once,
+    then how many more frames had it."""
+    from synth.lenslets import calib_for_optics, lenslet_from_patch_size, random_texture
+
+    from plenocal.grid import MicrolensGrid
+    from plenocal.optics import PlenopticOptics
+
+    opt = PlenopticOptics(focal_length=0.035, focus_distance=0.6, mla_pitch=130e-6,
+                          mla_f_number=2.8, k=5.0, pixel_size=5.5e-6, width=480, height=300)
+    D = opt.micro_image_pitch_px
+    calib = calib_for_optics(opt, depth_range=(D / 9.0, D / 6.0))
+    img = lenslet_from_patch_size(MicrolensGrid(calib, 480, 300), 4.5,
+                                  random_texture(512, 1.5, 4))
+    clip = _clip(tmp_path, [img] * 3, 8)
+    xml = tmp_path / "calib.xml"
+    write_calib(calib, xml)
+    r = _cli("convert", str(clip), str(xml), "-o", str(tmp_path / "o"), "--format", "yuv",
+             "--mla", "keplerian")
+    assert r.returncode == 0, r.stderr
+    lines = r.stderr.splitlines()
+    said = [ln for ln in lines if "Widen the lens_type depth_range" in ln]
+    assert len(said) == 1, said
+    assert [ln for ln in lines if "came again on 2 more frame(s)" in ln], r.stderr
+
+
 @needs_real
 @pytest.mark.parametrize("frames", ["0:2", "1:2"])
 def test_the_decided_frame_is_read_once(tmp_path, monkeypatch, frames):

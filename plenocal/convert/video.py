@@ -33,6 +33,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import logging
+import re
 import time
 from dataclasses import dataclass
 from functools import partial
@@ -343,6 +344,53 @@ class ViewVideos:
             write_frame(fh, planes, self.fmt)
 
 
+class OncePerRecording(logging.Filter):
+    """Lets each warning of a recording through once: a later frame's warning that reads
+    the same but for its numbers (the frame's index, its shares and sizes) is counted, not
+    logged, and :meth:`summary` gives the counts. Three hundred frames of a recording whose
+    calibration file cuts the patch-size search would otherwise say the same three hundred
+    times."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.repeats: dict[str, tuple[str, int]] = {}  # key: (first message, later count)
+
+    @staticmethod
+    def key(message: str) -> str:
+        return re.sub(r"\d+(?:\.\d+)?", "#", message)
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno != logging.WARNING:
+            return True
+        message = record.getMessage()
+        k = self.key(message)
+        if k not in self.repeats:
+            self.repeats[k] = (message, 0)
+            return True
+        first, n = self.repeats[k]
+        self.repeats[k] = (first, n + 1)
+        return False
+
+    def summary(self) -> list[str]:
+        """One line per warning that came again: its first words and how often."""
+        return [f"the warning \"{first[:80]}...\" came again on {n} more frame(s) of this "
+                "recording (said once)" for first, n in self.repeats.values() if n]
+
+
+@contextlib.contextmanager
+def warnings_once(logger: logging.Logger = log):
+    """:class:`OncePerRecording` on ``logger`` while the block runs; the repeats' counts
+    logged at its end (also when it fails)."""
+    once = OncePerRecording()
+    logger.addFilter(once)
+    try:
+        yield once
+    finally:
+        logger.removeFilter(once)
+        for line in once.summary():
+            logger.warning(line)
+
+
 def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_views: int,
                       settings: ConvertSettings, video: VideoSettings | None = None,
                       size: tuple[int, int] | None = None, bits: int | None = None,
@@ -386,6 +434,19 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
     from plenocal.convert.renderkernels import warm_in_background  # noqa: PLC0415
 
     warm_in_background()  # numba's set-up while the first frame is read and analysed
+    with warnings_once():  # each frame's warnings said once for the recording
+        return _convert_recording(path, fmt, count, chosen, calib, out, n_views, settings,
+                                  video, out_format, setup_frame, setup, grid_foreign,
+                                  threads)
+
+
+def _convert_recording(path: Path, fmt: YuvFormat, count: int, chosen: range,
+                       calib: RayCalib, out: Path, n_views: int, settings: ConvertSettings,
+                       video: VideoSettings, out_format: str, setup_frame: int | None,
+                       setup: ConverterSetup | None, grid_foreign: str | None,
+                       threads: int) -> dict:
+    """:func:`convert_recording` from its set-up on (the arguments checked, the output
+    folder free)."""
     conv = VideoConverter(calib, n_views, settings, video, setup, grid_foreign, threads)
     decided_frame: tuple[int, np.ndarray] | None = None
     if setup is None:
