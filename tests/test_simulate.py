@@ -132,7 +132,7 @@ def test_rendering_is_deterministic(tmp_path: Path):
     {"main_lens": {"focal_length_mm": 25.0, "focus_distance_m": 0.45},
      "scene": {"near_m": 0.35, "far_m": 0.6}, "mla": {"pitch_um": 300.0, "k": 4.0}},
     # the same with a Galilean MLA: the conventions part the other way (the physical range
-    # held this scene too, with less room at its near end)
+    # held this scene too, with 7 % of room at its far end where the new one has 18 %)
     {"main_lens": {"focal_length_mm": 25.0, "focus_distance_m": 0.45},
      "scene": {"near_m": 0.35, "far_m": 0.6},
      "mla": {"pitch_um": 300.0, "k": 4.0, "kind": "galilean"}},
