@@ -35,6 +35,7 @@ import dataclasses
 import logging
 import re
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -378,7 +379,7 @@ class OncePerRecording(logging.Filter):
 
 
 @contextlib.contextmanager
-def warnings_once(logger: logging.Logger = log):
+def warnings_once(logger: logging.Logger = log) -> Iterator[OncePerRecording]:
     """:class:`OncePerRecording` on ``logger`` while the block runs; the repeats' counts
     logged at its end (also when it fails)."""
     once = OncePerRecording()
