@@ -624,25 +624,28 @@ RANGE_CUT_SHARE = 0.05
 RANGE_CUT_MIN = 20
 
 
-def range_cut_notes(grid: MicrolensGrid, settings: PatchSizeSettings, candidates: np.ndarray,
-                    best: np.ndarray, cut: np.ndarray, texture: np.ndarray) -> list[str]:
+def range_cut_notes(grid: MicrolensGrid, settings: PatchSizeSettings, search: tuple[float, float],
+                    candidates: np.ndarray, best: np.ndarray, cut: np.ndarray,
+                    texture: np.ndarray) -> list[str]:
     """A warning per end of the search (the smallest or the largest candidate) that the
     file's lens-type depth ranges set, not the search's own bounds (``min_px``,
     ``max_fraction D'``), where :data:`RANGE_CUT_SHARE` of the textured lenses (``texture``
     (n,) >= 0.5, whole lenses) matched best: a scene beyond the stated virtual depths,
     whose lenses are then filled from their neighbours. The real files open their outer
     ends (virtual depth 1 to 100), so the search's own bounds hold there; a file with a
-    tight range, or one in another virtual-depth convention than ``P = D / v``, is cut."""
+    tight range, or one in another virtual-depth convention than ``P = D / v``, is cut.
+    ``search``: the searched range (:func:`type_ranges`' lowest and highest bounds), set by
+    the file where it lies inside the search's own bounds."""
     c = grid.calib
-    D, cap = c.diameter, settings.max_fraction * c.safe_diameter
     textured = (texture >= 0.5) & grid.inside()
     m = int(textured.sum())
     notes = []
     if m == 0:
         return notes
-    ends = (("smallest", 0, max(D / t.depth_max for t in c.lens_types) > settings.min_px,
+    ends = (("smallest", 0, search[0] > settings.min_px + 1e-9,
              "beyond the largest virtual depth stated"),
-            ("largest", len(candidates) - 1, min(D / t.depth_min for t in c.lens_types) < cap,
+            ("largest", len(candidates) - 1,
+             search[1] < settings.max_fraction * c.safe_diameter - 1e-9,
              "below the smallest virtual depth stated"))
     for name, index, from_file, where in ends:
         hit = int((textured & cut & (best == index)).sum())
@@ -734,7 +737,7 @@ def estimate_patch_size(image: np.ndarray, grid: MicrolensGrid,
     last = len(candidates) - 1 - np.argmax(allowed[:, ::-1], axis=1)
     cut = (best == first) | (best == last)
     conf = np.where(has & (pairs >= 2) & ~cut, conf, 0.0).astype(np.float32)
-    notes = notes + range_cut_notes(grid, settings, candidates, best, cut,
+    notes = notes + range_cut_notes(grid, settings, (start, stop), candidates, best, cut,
                                     texture_share(texture, settings.texture_scale))
     v_mid = np.sqrt([t.depth_min * min(t.depth_max, 10 * t.depth_min)
                      for t in grid.calib.lens_types])
