@@ -212,3 +212,51 @@ def test_ground_truth_cameras_file(tmp_path: Path):
     with pytest.raises(KeyError, match="hand09"):
         ground_truth_cameras(tmp_path, ["hand00", "hand09"], 3, 6, None, out,
                              log=lambda m: None)
+
+
+def test_ground_truth_follows_the_grid_the_views_were_laid_out_on(tmp_path: Path):
+    """A set-up whose grid the converter fitted to the micro images (convert.grid auto on a
+    frame whose check reads a drift: tspc-like-s96's 2.97 px) lays the views out on that
+    lattice: the ground truth takes its size (the views are that size; the cameras were
+    the file grid's, 2 px narrower, and Table I stopped), samples its sensor points, and
+    traces them through the simulated lenses, the file's. With the lattice moved by a
+    pure shift (dx, dy), the central view samples every lens (dx, dy) off its micro
+    image's centre: its camera sits off the axis on the main-lens plane by -L/s times the
+    shift on the sensor, as a view of offset (dx, dy) does (test_ground_truth_structure_
+    by_hand); traced through the moved centres it would stay on the axis. The file's own
+    grid given as a separate object gives the same bytes as none."""
+    from plenocal.io.raytrix import read_calib  # noqa: PLC0415
+
+    sim = small_sim(320, 240)
+    setup_dataset(sim, tmp_path)
+    optics = optics_of(sim)
+    calib = read_calib(tmp_path / "calib.xml")
+    shift = np.array([1.5, -0.8])
+
+    def moved(c, w, h):
+        g = MicrolensGrid(c, w, h)
+        return MicrolensGrid(c, w, h, lattice=(g.origin + shift, g.A))
+
+    plain, same, off = (tmp_path / n / "cameras.json" for n in ("plain", "same", "off"))
+    ground_truth_cameras(tmp_path, ["x00_y00"], 3, 6, None, plain, log=lambda m: None)
+    ground_truth_cameras(tmp_path, ["x00_y00"], 3, 6, None, same, log=lambda m: None,
+                         grid_of=lambda c, w, h: MicrolensGrid(c, w, h))
+    assert same.read_bytes() == plain.read_bytes()
+    said = []
+    ground_truth_cameras(tmp_path, ["x00_y00"], 3, 6, None, off, log=said.append,
+                         grid_of=moved)
+    assert any("the views' grid lies up to 1.70 px" in m for m in said), said
+    layout = make_layout(moved(calib, optics.width, optics.height), 3, 6, even=True)
+    cams = read_cameras(off)
+    assert {(c.width, c.height) for c in cams.values()} == {(layout.width, layout.height)}
+    M = np.asarray(yaml.safe_load((tmp_path / "truth" / "shots.json").read_text())
+                   ["x00_y00"]["cam_to_world"])
+    centre = np.linalg.inv(M) @ np.append(cams["x00_y00/1_1"].centre, 1.0)
+    x0, y0 = optics.sensor_to_metric(np.float64(100.0), np.float64(100.0))
+    x1, y1 = optics.sensor_to_metric(100.0 + shift[0], 100.0 + shift[1])
+    want = -optics.L / optics.s * np.array([x1 - x0, y1 - y0])
+    np.testing.assert_allclose(centre[:2], want, rtol=1e-6, atol=1e-12)
+    assert np.linalg.norm(want) > 1e-5  # a tenth of a millimetre off the axis or more
+    plain_centre = np.linalg.inv(M) @ np.append(read_cameras(plain)["x00_y00/1_1"].centre,
+                                                1.0)
+    np.testing.assert_allclose(plain_centre[:2], 0.0, atol=1e-12)

@@ -13,7 +13,7 @@ every view has the main lens's orientation, its centre lies on the main-lens pla
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +22,7 @@ from plenocal.artifacts.cameras import read_cameras, write_cameras
 from plenocal.camera import PinholeCamera, pose
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_json
-from plenocal.io.raytrix import read_calib
+from plenocal.io.raytrix import RayCalib, read_calib
 from plenocal.optics import PlenopticOptics
 from plenocal.simulate.dataset import optics_from_truth
 from plenocal.viewgeom import ViewLayout, make_layout, parse_view, view_names
@@ -73,11 +73,17 @@ def fit_pinhole(pixels: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.nd
     return K, R.T
 
 
-def view_camera(optics: PlenopticOptics, layout: ViewLayout, r: int, c: int) -> tuple[
-        np.ndarray, np.ndarray, float]:
-    """(K, cam_to_main 4x4, rms residual px) of view (r, c) in the main-lens frame."""
+def view_camera(optics: PlenopticOptics, layout: ViewLayout, r: int, c: int,
+                lens_uv: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+    """(K, cam_to_main 4x4, rms residual px) of view (r, c) in the main-lens frame.
+
+    ``lens_uv`` (m, 2): the true micro-image centres of the layout's lenses, where they
+    differ from those the views were laid out on (``layout.lens_centres``, the default):
+    the tile centres sample the layout's sensor points, and the light there came through
+    the physical lens (:func:`true_lens_centres`)."""
     sensor = layout.chief_sensor_points(r, c)
-    origins, dirs = optics.chief_rays(sensor, layout.lens_centres)
+    origins, dirs = optics.chief_rays(sensor, layout.lens_centres if lens_uv is None
+                                      else lens_uv)
     centre = intersect_rays(origins, dirs)
     K, R = fit_pinhole(layout.tile_centres, dirs)
     proj = (dirs @ R) @ K.T
@@ -86,39 +92,75 @@ def view_camera(optics: PlenopticOptics, layout: ViewLayout, r: int, c: int) -> 
 
 
 def shot_cameras(optics: PlenopticOptics, grid: MicrolensGrid, layout: ViewLayout,
-                 cam_to_world: np.ndarray) -> tuple[dict[str, PinholeCamera], float]:
-    """Ground-truth cameras of every view of one shot, and the worst fit residual."""
+                 cam_to_world: np.ndarray, lens_uv: np.ndarray | None = None
+                 ) -> tuple[dict[str, PinholeCamera], float]:
+    """Ground-truth cameras of every view of one shot, and the worst fit residual
+    (``lens_uv``: :func:`view_camera`)."""
     out = {}
     worst = 0.0
     for name in view_names(layout.n_views):
         r, c = parse_view(name)
-        K, M, rms = view_camera(optics, layout, r, c)
+        K, M, rms = view_camera(optics, layout, r, c, lens_uv)
         worst = max(worst, rms)
         out[name] = PinholeCamera(K, cam_to_world @ M, layout.width, layout.height)
     return out, worst
 
 
+def true_lens_centres(truth: MicrolensGrid, grid: MicrolensGrid, layout: ViewLayout
+                      ) -> np.ndarray | None:
+    """(m, 2) the micro-image centres of ``truth`` (the simulator's calib.xml, exact by
+    construction) at the lattice coordinates of ``layout``'s lenses, which ``grid`` (the
+    grid the views were laid out on) places; None where ``grid`` is ``truth`` itself.
+
+    A grid the converter fitted to the micro images (``convert.grid``: auto or refine,
+    :mod:`plenocal.convert.gridcheck`) or moved onto the corner views' agreement
+    (:mod:`plenocal.convert.centring`) lays the views out on its own lattice, so the views
+    are that size and their tile centres sample the sensor around its centres; the light
+    at those points still came through the physical lenses, at the file's centres."""
+    if grid is truth or (np.array_equal(grid.origin, truth.origin)
+                         and np.array_equal(grid.A, truth.A)):
+        return None
+    ij = grid.ij[layout.lens_index]
+    # the lattice's products written out as MicrolensGrid writes them (the same bits)
+    return truth.origin + ij[:, :1] * truth.A[:, 0] + ij[:, 1:] * truth.A[:, 1]
+
+
 def ground_truth_cameras(data_dir: str | Path, shots: list[str], n_views: int, tile: int,
                          q: float | None, out_json: str | Path, log=print,
                          even: bool = True,
-                         insets_px: Mapping[str, float] | None = None) -> None:
+                         insets_px: Mapping[str, float] | None = None,
+                         grid_of: Callable[[RayCalib, int, int], MicrolensGrid] | None = None
+                         ) -> None:
     """Write the cameras of every view of every shot of ``shots`` (plain format; one job
     for all shots: each takes a fraction of a second, less than a job's start-up).
     ``even``: the converter's ``convert.even_size``; ``insets_px``: the border lenses the
-    views leave out (the set-up's :class:`plenocal.convert.bordercut.BorderCut`): the
-    views' size must match."""
+    views leave out (the set-up's :class:`plenocal.convert.bordercut.BorderCut`);
+    ``grid_of``: the grid the views were laid out on, from the calibration file and the
+    sensor size (the set-up's :meth:`plenocal.convert.setup.ConverterSetup.grid`; None:
+    the file's). The views' size must match; the rays go through the file's lenses
+    (:func:`true_lens_centres`)."""
     data_dir = Path(data_dir)
     optics = optics_from_truth(data_dir / "truth" / "optics.json")
-    grid = MicrolensGrid(read_calib(data_dir / "calib.xml"), optics.width, optics.height)
+    calib = read_calib(data_dir / "calib.xml")
+    truth = MicrolensGrid(calib, optics.width, optics.height)
+    grid = truth if grid_of is None else grid_of(calib, optics.width, optics.height)
+    if (grid.width, grid.height) != (truth.width, truth.height):
+        raise ValueError(f"the views' grid is for {grid.width}x{grid.height}, the simulated "
+                         f"sensor {truth.width}x{truth.height}")
     layout = make_layout(grid, n_views, tile, q, even=even, insets_px=insets_px)
-    truth = read_json(data_dir / "truth" / "shots.json")
+    lens_uv = true_lens_centres(truth, grid, layout)
+    if lens_uv is not None:
+        moved = np.linalg.norm(lens_uv - layout.lens_centres, axis=1)
+        log(f"the views' grid lies up to {moved.max():.2f} px (rms "
+            f"{np.sqrt(np.mean(moved ** 2)):.2f}) from the simulated lenses' centres")
+    shots_truth = read_json(data_dir / "truth" / "shots.json")
     cameras, worst = {}, 0.0
     for cam in shots:
-        if cam not in truth:
+        if cam not in shots_truth:
             raise KeyError(f"{cam}: not a shot of {data_dir / 'truth' / 'shots.json'} "
-                           f"({', '.join(sorted(truth))}); rerun rule simulate_setup?")
+                           f"({', '.join(sorted(shots_truth))}); rerun rule simulate_setup?")
         cams, shot_worst = shot_cameras(optics, grid, layout,
-                                        np.asarray(truth[cam]["cam_to_world"]))
+                                        np.asarray(shots_truth[cam]["cam_to_world"]), lens_uv)
         log(f"{cam}: {len(cams)} view cameras, worst chief-ray fit residual "
             f"{shot_worst:.2e} px")
         cameras.update({f"{cam}/{k}": v for k, v in cams.items()})
