@@ -32,7 +32,7 @@ sigmas): an affine lattice (offset, pitch, rotation, and anisotropic scale / she
 the similarity part of it (offset, pitch, rotation: what a RayCalibData file can hold).
 The drift, the decision and a refinement take the similarity (:func:`refine_grid`): an
 MLA is a rigid lattice, and the anisotropy and shear the affine fit reads are the
-measurement's. On the real frames they are 0.01-0.05 % (the two lattices within 0.3 px
+measurement's. On the real frames they are 0.01-0.05 % (the two lattices within 0.5 px
 of each other); on the simulator's exact file of ``tspc-like`` seed 96 (57-px micro images,
 vignetted corners) 0.31 %, a drift of 2.97 px that the auto rule took (4.07 standard
 errors). A lattice error does not stay a lattice error in the views: each lens is sampled
@@ -196,16 +196,18 @@ class GridCheck:
     judged_drift_px: float  # the drift convert.grid auto judges (module docstring)
     judged_stderr_px: float  # ... and its standard error
     fitted: bool
-    drift_max_px: float  # file grid vs fitted lattice, over every lens on the sensor
+    # file grid vs the fitted lattice's similarity (what a refinement takes), over every
+    # lens on the sensor
+    drift_max_px: float
     drift_rms_px: float
     drift_stderr_px: float  # standard error of the fitted drift at its worst lens
-    regions: dict[str, dict[str, float]]  # per region: fit (dx, dy) and measured median
-    offset_px: tuple[float, float]  # fitted lattice - file grid at the image centre
+    regions: dict[str, dict[str, float]]  # per region: similarity (dx, dy), measured median
+    offset_px: tuple[float, float]  # affine fit - file grid at the image centre
     pitch_ratio: float  # fitted pitch / file pitch (mean of the two lattice vectors)
     rotation_deg: float  # fitted lattice rotation - file rotation, image frame (y down)
-    affine: list[list[float]]  # fitted A = affine @ A_file
-    origin: tuple[float, float]  # fitted lattice: centre of lens (0, 0)
-    A: list[list[float]]  # fitted lattice vectors as columns
+    affine: list[list[float]]  # fitted A = affine @ A_file (reported; not taken)
+    origin: tuple[float, float]  # affine fit: centre of lens (0, 0)
+    A: list[list[float]]  # affine fit's lattice vectors as columns
     similarity_origin: tuple[float, float]  # centre of lens (0, 0) on the best similarity
     residual_rms_px: float  # measurements vs the affine fit
     similarity_residual_rms_px: float  # measurements vs the best similarity
