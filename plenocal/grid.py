@@ -96,9 +96,7 @@ class MicrolensGrid:
         ii, jj = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1),
                              indexing="ij")
         ij = np.stack([ii.ravel(), jj.ravel()], axis=1)
-        # products written out, not BLAS: OpenBLAS's kernels round differently with the
-        # thread count, and the centres must be the same bit for bit on every machine
-        centres = self.origin + ij[:, :1] * self.A[:, 0] + ij[:, 1:] * self.A[:, 1]
+        centres = self.centres_at(ij)
         on = ((centres[:, 0] >= 0) & (centres[:, 0] <= self.width - 1)
               & (centres[:, 1] >= 0) & (centres[:, 1] <= self.height - 1))
         # row-major order of the image: sort by y then x, for stable, readable output
@@ -116,6 +114,13 @@ class MicrolensGrid:
         self.types = self._lens_types(
             (self.ij[:, :1] * A_file[:, 0] + self.ij[:, 1:] * A_file[:, 1]) / D)
         self.neighbours = self._neighbours()
+
+    def centres_at(self, ij: np.ndarray) -> np.ndarray:
+        """(n, 2) image coordinates of the lattice points ``ij`` (n, 2), whether or not
+        they lie on the sensor. The products are written out, not BLAS: OpenBLAS's
+        kernels round differently with the thread count, and the centres must be the
+        same bit for bit on every machine."""
+        return self.origin + ij[:, :1] * self.A[:, 0] + ij[:, 1:] * self.A[:, 1]
 
     # ------------------------------------------------------------------
     @property

@@ -110,19 +110,16 @@ def true_lens_centres(truth: MicrolensGrid, grid: MicrolensGrid, layout: ViewLay
                       ) -> np.ndarray | None:
     """(m, 2) the micro-image centres of ``truth`` (the simulator's calib.xml, exact by
     construction) at the lattice coordinates of ``layout``'s lenses, which ``grid`` (the
-    grid the views were laid out on) places; None where ``grid`` is ``truth`` itself.
+    grid the views were laid out on) places; None where ``grid`` is ``truth``'s lattice.
 
     A grid the converter fitted to the micro images (``convert.grid``: auto or refine,
     :mod:`plenocal.convert.gridcheck`) or moved onto the corner views' agreement
     (:mod:`plenocal.convert.centring`) lays the views out on its own lattice, so the views
     are that size and their tile centres sample the sensor around its centres; the light
     at those points still came through the physical lenses, at the file's centres."""
-    if grid is truth or (np.array_equal(grid.origin, truth.origin)
-                         and np.array_equal(grid.A, truth.A)):
+    if np.array_equal(grid.origin, truth.origin) and np.array_equal(grid.A, truth.A):
         return None
-    ij = grid.ij[layout.lens_index]
-    # the lattice's products written out as MicrolensGrid writes them (the same bits)
-    return truth.origin + ij[:, :1] * truth.A[:, 0] + ij[:, 1:] * truth.A[:, 1]
+    return truth.centres_at(grid.ij[layout.lens_index])
 
 
 def ground_truth_cameras(data_dir: str | Path, shots: list[str], n_views: int, tile: int,
@@ -144,9 +141,6 @@ def ground_truth_cameras(data_dir: str | Path, shots: list[str], n_views: int, t
     calib = read_calib(data_dir / "calib.xml")
     truth = MicrolensGrid(calib, optics.width, optics.height)
     grid = truth if grid_of is None else grid_of(calib, optics.width, optics.height)
-    if (grid.width, grid.height) != (truth.width, truth.height):
-        raise ValueError(f"the views' grid is for {grid.width}x{grid.height}, the simulated "
-                         f"sensor {truth.width}x{truth.height}")
     layout = make_layout(grid, n_views, tile, q, even=even, insets_px=insets_px)
     lens_uv = true_lens_centres(truth, grid, layout)
     if lens_uv is not None:
