@@ -453,6 +453,25 @@ def speed_main(args: argparse.Namespace, frames: list[str]) -> None:
         update_sections(args.out, {SPEED_HEADING: list(out)}, keep_history=args.keep_history)
 
 
+def real_frames(wanted: list[str] | None) -> list[str]:
+    """The frames of ``shared/real/frames`` to measure (all if ``wanted`` is None or empty).
+
+    Stops with the path and the remedy where the folder is missing or holds no frame, or a
+    wanted frame is not there: an empty table must not pass for a measured one.
+    """
+    folder = REAL / "frames"
+    frames = sorted(p.stem for p in folder.glob("*.png"))
+    if not frames:
+        raise SystemExit(f"no lenslet frames (*.png) in {folder}: the benchmark reads the "
+                         f"shared folder beside the repository ({ROOT.parent / 'shared'}); "
+                         f"run it from a checkout that has ../shared/real, or link it there")
+    missing = sorted(set(wanted or ()) - set(frames))
+    if missing:
+        raise SystemExit(f"--frames {' '.join(missing)}: not in {folder} (there: "
+                         f"{', '.join(frames)})")
+    return [f for f in frames if f in wanted] if wanted else frames
+
+
 def main() -> None:
     no_huge_pages()  # as the command line: its timings are those a user sees
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -480,9 +499,7 @@ def main() -> None:
         from plenocal.convert.compare import compare_to_reference as compare  # noqa: PLC0415
     except ImportError:
         compare = None
-    frames = sorted(p.stem for p in (REAL / "frames").glob("*.png"))
-    if args.frames:
-        frames = [f for f in frames if f in args.frames]
+    frames = real_frames(args.frames)
     if args.tlct:
         speed_main(args, frames)
         return
