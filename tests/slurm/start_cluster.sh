@@ -27,9 +27,13 @@ fi
 pgrep -x munged >/dev/null || munged --force 2>/dev/null || su -s /bin/sh munge -c munged \
   || { echo "munged does not start"; exit 3; }
 
-CPUS=$(nproc)
+# the node's CPUs as the machine gives them to us (affinity), not as the caller's OpenMP
+# setting says: nproc honours OMP_NUM_THREADS, and a test process that pinned its pools to
+# one thread made a 1-CPU node, on which every 2-thread job waits for ever (PartitionConfig)
+CPUS=$(env -u OMP_NUM_THREADS -u OMP_THREAD_LIMIT nproc)
 MEM=$(( $(free -m | awk '/^Mem:/{print $2}') * 3 / 4 ))
-cat > /etc/slurm/slurm.conf <<CONF
+CONF_NEW=$(mktemp)
+cat > "$CONF_NEW" <<CONF
 ClusterName=plenocal
 SlurmctldHost=$HOST
 SlurmUser=root
@@ -53,6 +57,20 @@ MpiDefault=none
 NodeName=$HOST CPUs=$CPUS RealMemory=$MEM State=UNKNOWN
 PartitionName=debug Nodes=$HOST Default=YES MaxTime=INFINITE State=UP
 CONF
+chmod 644 "$CONF_NEW"
+# daemons started on another configuration (another node size) keep it until restarted
+running_cpus=$(sinfo -h -N -o %c 2>/dev/null | head -1)
+if ! cmp -s "$CONF_NEW" /etc/slurm/slurm.conf \
+    || { [ -n "$running_cpus" ] && [ "$running_cpus" != "$CPUS" ]; }; then
+  for d in slurmd slurmctld; do pkill -x "$d"; done
+  for _ in $(seq 1 30); do
+    pgrep -x slurmctld >/dev/null || pgrep -x slurmd >/dev/null || break
+    sleep 1
+  done
+  mv "$CONF_NEW" /etc/slurm/slurm.conf
+else
+  rm -f "$CONF_NEW"
+fi
 pgrep -x slurmctld >/dev/null || slurmctld || { echo "slurmctld does not start"; exit 3; }
 pgrep -x slurmd >/dev/null || slurmd || { echo "slurmd does not start"; exit 3; }
 for _ in $(seq 1 60); do
