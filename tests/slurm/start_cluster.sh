@@ -62,7 +62,7 @@ chmod 644 "$CONF_NEW"
 running_cpus=$(sinfo -h -N -o %c 2>/dev/null | head -1)
 if ! cmp -s "$CONF_NEW" /etc/slurm/slurm.conf \
     || { [ -n "$running_cpus" ] && [ "$running_cpus" != "$CPUS" ]; }; then
-  for d in slurmd slurmctld; do pkill -x "$d"; done
+  bash "$(dirname "$0")/stop_cluster.sh"
   for _ in $(seq 1 30); do
     pgrep -x slurmctld >/dev/null || pgrep -x slurmd >/dev/null || break
     sleep 1
