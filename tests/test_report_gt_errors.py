@@ -226,3 +226,28 @@ def test_the_complete_calibrations_focal_error_keeps_its_sign():
     al = gt_errors(truth(), reg_a=reg_a(), rig=rig_doc(), r=R_TRUE, calib=short)["complete"]
     assert al["focal_err_pct"]["mean"] == pytest.approx(0.3, rel=1e-6)
     assert al["focal_err_signed_pct"] == pytest.approx(-0.3, rel=1e-6)
+
+
+def test_the_worst_view_by_rotation_is_named_beside_the_worst_by_centre():
+    """One shot of the calibration turned by 0.05 deg about its central view's centre
+    (every view of it with it, as the rig holds them), another's views moved by 0.2 mm:
+    ``worst_rotation_view`` names a view of the turned shot, ``worst_view`` (by centre
+    error) one of the moved shot."""
+    cams = calib()
+    turned, moved = "hand01", "x02_y01"
+    centre = cams[f"{turned}/1_1"].centre
+    T = pose(rot([0.3, 1.0, 0.0], 0.05), centre - rot([0.3, 1.0, 0.0], 0.05) @ centre)
+    out = {}
+    for k, cam in cams.items():
+        M = cam.cam_to_world
+        if k.startswith(f"{turned}/"):
+            M = T @ M
+        elif k.startswith(f"{moved}/"):
+            M = M.copy()
+            M[:3, 3] += [0.0, 2e-4, 0.0]
+        out[k] = PinholeCamera(cam.K, M, W, H)
+    al = gt_errors(truth(), calib=out)["complete"]
+    assert al["worst_rotation_view"].startswith(f"{turned}/")
+    assert al["worst_view"].startswith(f"{moved}/")
+    assert al["rotation_err_deg"]["max"] == pytest.approx(
+        rotation_angle_deg(np.eye(3), rot([0.3, 1.0, 0.0], 0.05)), rel=0.2)

@@ -299,7 +299,9 @@ def section_gt(page: Page, synthetic: bool) -> None:
             ("centre RMSE / max [mm]", f"{al['centre_rmse_mm']:.4f} / "
              f"{al['centre_max_mm']:.4f} (worst {escape(al['worst_view'])})"),
             ("rotation error mean / max [deg]", f"{al['rotation_err_deg']['mean']:.4f} / "
-             f"{al['rotation_err_deg']['max']:.4f}"),
+             f"{al['rotation_err_deg']['max']:.4f}"
+             + (f" (worst {escape(al['worst_rotation_view'])})"
+                if al.get("worst_rotation_view") else "")),
             ("focal error mean / max [%]", f"{al['focal_err_pct']['mean']:.4f} / "
              f"{al['focal_err_pct']['max']:.4f}"),
             ("principal point error mean / max [px]", f"{al['pp_err_px']['mean']:.4f} / "

@@ -245,8 +245,9 @@ def complete_errors(calib: Mapping[str, PinholeCamera],
         "views_without_truth": sorted(set(calib) - set(truth)),
         "centre_rmse_mm": 1000.0 * float(np.sqrt((err ** 2).mean())),
         "centre_max_mm": 1000.0 * float(err.max()),
-        "worst_view": keys[worst],
+        "worst_view": keys[worst],  # by centre error
         "rotation_err_deg": _stats(rot),
+        "worst_rotation_view": keys[int(np.argmax(rot))],
         "alignment": "rigid: rotation from the orientations, translation from the "
                      "centres (pose_similarity)",
         "centre_aligned": {
