@@ -361,6 +361,14 @@ def test_every_section_is_shown_from_the_typed_files(tmp_path):
         assert 'class="missing"' not in by[key], (key, by[key][:500])
     assert 'id="table1-rows"' in by["table1"] and "<td>0.702</td>" in by["table1"]
     assert by["gt"].count('<tr id="gt-') == 11  # one row per target (gt_errors.TARGETS)
+    # every view's errors: the largest rotation's view is named, as the largest centre
+    # error's is
+    tables = [t for t in by["gt"].split("<h3>")
+              if t.startswith(("Complete calibration (all views", "The paper's Eq. 6 result"))]
+    assert tables
+    for table in tables:
+        row = table.split("rotation error mean / max [deg]", 1)[1].split("</tr>", 1)[0]
+        assert re.search(r"\(worst [\w/]+\)", row), row
     assert "0.0201</b>Eq. 5 mean 0.0201" in by["summary"] and "exact model" in by["summary"]
     for key, names in (("exp1", ["complete", "ground_truth"]), ("exp2", ["complete/x01_y01"]),
                        ("exp3", ["complete/central", "complete/lateral",
