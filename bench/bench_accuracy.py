@@ -660,6 +660,12 @@ def main() -> None:
                 kept[name] = collect(base, exp1=False)
             print(f"  {name}: " + ", ".join(f"{k} {_fmt(f, results[name].get(k))}"
                                             for k, _, f in COLUMNS[:7]), flush=True)
+    if not results:
+        sys.exit("bench_accuracy: no capture measured: none of "
+                 + ("the kept captures" if args.kept else
+                    f"seeds {' '.join(map(str, args.seeds))}")
+                 + f" of {' '.join(args.geometries)} has eval/gt_errors.json under {OUT} "
+                 "(run without --collect-only to make them, or give --seeds / --kept)")
     out = Lines()
     which = ("every kept capture" if args.kept else
              f"seeds {', '.join(map(str, args.seeds))}")

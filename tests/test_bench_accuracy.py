@@ -162,3 +162,16 @@ def test_small_turned_is_small_with_each_turn_doubled():
         # the rotation vectors (axis times angle): the same axis, twice the angle
         np.testing.assert_allclose(cv2.Rodrigues(turned[name][:3, :3])[0],
                                    2 * cv2.Rodrigues(pose[:3, :3])[0], rtol=1e-9, atol=1e-12)
+
+
+def test_collecting_nothing_says_so_by_name_instead_of_a_traceback(tmp_path, monkeypatch,
+                                                                    capsys):
+    """--collect-only on seeds never run: a message naming the seeds and the folder, not
+    max() of an empty sequence."""
+    monkeypatch.setattr(ba, "OUT", tmp_path)
+    monkeypatch.setattr(sys, "argv", ["bench_accuracy.py", "--collect-only", "--no-exp1",
+                                      "--seeds", "12345", "--geometries", "default"])
+    with pytest.raises(SystemExit, match=r"no capture measured: none of seeds 12345 of "
+                                         r"default .*--collect-only"):
+        ba.main()
+    assert "default-s12345: not measured yet" in capsys.readouterr().err
