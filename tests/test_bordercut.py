@@ -109,6 +109,49 @@ def test_flat_scenes_along_a_border_are_not_a_cut(value, whole, why):
     assert not cut_of(paint(img, grid, value, whole=whole), grid, calib).any, why
 
 
+def _in_some_lenses(painted: np.ndarray, img: np.ndarray, grid: MicrolensGrid,
+                    share: float, seed: int = 1) -> np.ndarray:
+    """``painted`` in a random ``share`` of the lenses, ``img`` in the others."""
+    out = img.copy()
+    yy, xx = np.mgrid[0:H, 0:W]
+    keep = np.random.default_rng(seed).random(len(grid.centres)) < share
+    for (mx, my), k in zip(grid.centres, keep, strict=True):
+        if k:
+            disc = (xx - mx) ** 2 + (yy - my) ** 2 <= (grid.diameter / 2 + 1) ** 2
+            out[disc] = painted[disc]
+    return out
+
+
+def test_a_part_clipped_in_most_lenses_but_not_all_is_the_scene():
+    """An overexposed floor along a border (HandTools made 2.5x brighter) saturates the
+    same side of most of a band's micro images, not all (0.52-0.67 of them): their median
+    reads clipped and flat, one-sided, yet the main lens would have cut every one."""
+    calib, grid, img = frame()
+    for share, want in ((0.8, 0), (1.0, 3)):
+        cut = cut_of(_in_some_lenses(paint(img, grid, CAP), img, grid, share), grid, calib)
+        assert cut.bands["top"] == want, (share, cut)
+
+
+def test_a_cut_stays_on_the_side_its_first_band_has_it():
+    """The main lens cuts one side of a border's micro images, band after band: a band
+    flat on the other half (a scene's clipped edge) ends the cut."""
+    calib, grid, img = frame()
+    # bands 0 and 1 cut on their inward half as Boys2's, band 2 flat on its outward half
+    dist = grid.border_distance("top")
+    first, s = dist[grid.inside(0.0)].min(), band_spacing(grid, "top")
+    yy, xx = np.mgrid[0:H, 0:W]
+    out = paint(img, grid, CAP, edges=(-2.0, 2.0))
+    for i in np.flatnonzero(grid.inside(0.0)):
+        if int(np.floor((dist[i] - first) / s + 0.5)) == 2:
+            mx, my = grid.centres[i]
+            disc = (xx - mx) ** 2 + (yy - my) ** 2 <= (grid.diameter / 2) ** 2
+            out[disc & (yy - my < 2.0)] = CAP
+    assert cut_of(paint(img, grid, CAP), grid, calib).bands["top"] == 3
+    cut = cut_of(out, grid, calib)
+    assert cut.bands["top"] == 2, cut
+    assert cut.excess["top"][2] < 0, cut  # one-sided, on the other half
+
+
 def test_views_leave_the_cut_lenses_out_symmetrically_and_show_no_cap():
     calib, grid, img = frame()
     img = paint(img, grid, CAP)

@@ -26,8 +26,25 @@ at least :data:`CLIPPED` or at most :data:`DARK`. A band is cut where its flat c
 facing one way exceeds that of the half facing the other by :data:`ONE_SIDED` or more.
 A flat scene along a border (a black backdrop, a dark floor, an overexposed sky) fills
 both halves, and a flat part at a middle grey is the scene's. The border's first band
-must be cut; every following band cut the same way (clipped, or unlit) is cut too, and
-the first that is not ends the border's cut. The lenses of the cut bands are left out.
+must be cut; every following band cut the same way (clipped, or unlit, on the same half:
+the main lens cuts one side of the border's micro images) is cut too, and the first that
+is not ends the border's cut. The lenses of the cut bands are left out.
+
+A position counts at the cut's level only where at least :data:`EVERY_LENS` of the
+band's lenses are at it there, not where their median is: the main lens takes the same
+part of every micro image of a band, where an overexposed floor or wall saturates most of
+a band's lenses, not all. On the real frames the cuts are found as before (Boys2 and
+Boys2_f150: the same three bands, the same excess, each band's cut part at the level in
+0.97-1.00 of its lenses; Boys2 made 1.15-1.45x brighter: the same four to six bands as
+before), and of twelve frames made brighter or darker until up to a third of them clips
+(BENCHMARKS.md, "Overexposed frames: lens rows lost to a cut that is not there"), eight
+no longer lose lens rows to a cut that is not there (HandTools x1.6-x4 lost 3-6 rows at
+the bottom, its one-sided flat part clipped in 0.52-0.67 of the lenses). Not mended: a
+scene saturated over most of the outermost bands, its micro images flat on one half only
+(Boys2 x1.6: one row on the left, six on the right; Boxer x1.6 three at the top), and
+Fujita2 x0.2's black backdrop (one row): rows lost, never wrong pixels; and a cut beside a
+scene saturated over both halves of the first band (Boys2 x1.6's top) is not found, as
+before.
 
 Decided once per camera, on the central array shot, with the safe diameter (rule
 ``convert_setup``; ``convert.border_cut``), so every shot's views have one size.
@@ -60,6 +77,7 @@ CLIPPED = 0.8  # grey at or over which a flat part is clipped (flat-fielded)
 MAX_BANDS = 10  # bands looked at from each border
 MIN_BAND_LENSES = 8  # fewer lenses in a band: the spread says nothing
 REFERENCE_BANDS = 6  # bands past MAX_BANDS whose variation is the reference
+EVERY_LENS = 0.9  # share of a band's lenses at the cut's level for a position to count
 
 
 @dataclass(frozen=True)
@@ -67,8 +85,8 @@ class BorderCut:
     """Per border (:data:`plenocal.grid.SENSOR_BORDERS`): ``insets_px``, the distance from
     that border (sensor pixels, to a lens centre) under which lenses are left out (0:
     none); ``bands``, the cut bands; ``level``, the grey of the cut part (None where
-    none); ``excess``, each band's one-sided flat-share excess as measured (for the
-    record)."""
+    none); ``excess``, each band's one-sided flat-share excess as measured (after the
+    first band, on the first band's half: negative on the other; for the record)."""
 
     insets_px: dict[str, float] = field(default_factory=lambda: dict.fromkeys(SENSOR_BORDERS, 0.0))
     bands: dict[str, int] = field(default_factory=lambda: dict.fromkeys(SENSOR_BORDERS, 0))
@@ -172,32 +190,33 @@ def measure_border_cut(gray: np.ndarray, grid: MicrolensGrid, safe_diameter_px: 
             continue
         outward = (-ys if b == "top" else ys if b == "bottom" else -xs if b == "left" else xs)
         halves = (disc & (outward < -0.5), disc & (outward > 0.5))  # inward, outward
-        excess, kind, level0, n = [], None, None, 0
+        excess, kind, side, level0, n = [], None, None, None, 0
         for k in range(MAX_BANDS):
             band = band_at(k)
             if len(band) < MIN_BAND_LENSES:
                 break
             var, stack = _variation(gray, grid.centres[band], xs, ys)
-            value = np.median(stack, axis=0)
             flat = var < FLAT_SPREAD * ref
             # each extreme level on its own: a clipped cap beside a black scene (a figure
             # on black) is one-sided as a clipped part, though flat on both halves
             best = None
-            for name, part in (("clipped", flat & (value >= CLIPPED)),
-                               ("unlit", flat & (value <= DARK))):
+            for name, at_level in (("clipped", stack >= CLIPPED), ("unlit", stack <= DARK)):
                 if kind is not None and name != kind:
                     continue  # the next bands continue the first band's cut
+                part = flat & (at_level.mean(axis=0) >= EVERY_LENS)
                 shares = [float(part[h].mean()) for h in halves]
-                ex = abs(shares[0] - shares[1])
+                # the next bands continue the first band's cut on its side
+                cut_half = int(np.argmax(shares)) if side is None else side
+                ex = shares[cut_half] - shares[1 - cut_half]
                 if best is None or ex > best[1]:
-                    best = (name, ex, part & halves[int(np.argmax(shares))])
-            name, ex, part = best
+                    best = (name, ex, cut_half, part & halves[cut_half])
+            name, ex, cut_half, part = best
             excess.append(round(ex, 4))
             if ex < ONE_SIDED:
                 break
-            kind = name
+            kind, side = name, cut_half
             if level0 is None:
-                level0 = float(value[part].mean())
+                level0 = float(np.median(stack, axis=0)[part].mean())
             n = k + 1
         excesses[b] = excess
         if n:
