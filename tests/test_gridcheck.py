@@ -474,6 +474,43 @@ def test_foreign_grid_stops_convert_setup():
         foreign_grid_error(check, "calib.xml", "x", "ignore")
 
 
+def test_the_grid_errors_say_when_the_frame_is_overexposed():
+    """Boys2 made 2x brighter (60 % of it clipped) read its own calib.xml as foreign: the
+    error blamed the file alone. Where a fifth or more of the frame is clipped at full
+    scale the error says so, and how to decide the set-up on another frame instead."""
+    from plenocal.convert import ConvertSettings  # noqa: PLC0415
+    from plenocal.convert.errors import ConvertError  # noqa: PLC0415
+    from plenocal.convert.levels import clipped_share  # noqa: PLC0415
+    from plenocal.convert.setup import decide_setup, overexposure_hint  # noqa: PLC0415
+
+    calib = _calib(35.0, 0.0)
+    W, H = 700, 560
+    img = _frame(calib, W, H)
+    off = replace(calib, offset=(calib.offset[0] + 14.0, calib.offset[1]))
+    settings = ConvertSettings.from_config({"grid": "auto"})
+    messages = {}
+    for rows in (0, 84, 224):
+        frame = img.copy()
+        frame[:rows] = np.iinfo(frame.dtype).max
+        with pytest.raises(ConvertError) as exc:
+            decide_setup(frame, off, 3, settings, source="x.png")
+        messages[rows] = str(exc.value)
+    assert "clipped at full scale" not in messages[0]
+    assert "clipped at full scale" not in messages[84]  # 15 % of the rows
+    assert "40% of the frame's pixels are clipped at full scale" in messages[224]
+    assert "--setup convert_setup.json" in messages[224]
+    assert overexposure_hint(img) == ""
+    # the share: any channel at full scale; 16-bit data at its own bit depth
+    rgb = np.zeros((4, 5, 3), np.uint8)
+    rgb[0, :, 1] = 255
+    rgb[1, :2] = 254
+    assert clipped_share(rgb) == pytest.approx(0.25)
+    twelve = np.full((10, 10), 1000, np.uint16)
+    twelve[:3] = 4095
+    assert clipped_share(twelve) == pytest.approx(0.3)
+    assert clipped_share(np.full((2, 2), 3000, np.uint16)) == 0.0
+
+
 def test_a_grid_the_check_cannot_confirm_on_micro_images_that_match_nothing_stops():
     """The check confirms nothing (too few lit lenses measured) and the micro images match
     their neighbours as neither MLA kind: another camera's calib.xml whose grid falls

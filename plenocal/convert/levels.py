@@ -36,6 +36,18 @@ def significant_bits(image: np.ndarray, setting: int | str = "auto") -> int:
     return next(b for b in AUTO_DEPTHS if peak <= (1 << b) - 1)
 
 
+def clipped_share(image: np.ndarray) -> float:
+    """The share of the pixels at full scale in any channel (8-bit data 255, 16-bit data
+    ``2^bits - 1`` of :func:`significant_bits`): the frame's overexposed part."""
+    if image.size == 0 or image.dtype not in (np.uint8, np.uint16):
+        return 0.0
+    top = (1 << significant_bits(image)) - 1
+    at_top = image == top
+    if at_top.ndim == 3:
+        at_top = at_top.any(axis=2)
+    return float(at_top.mean())
+
+
 def to_unit_float(image: np.ndarray, bits: int) -> np.ndarray:
     """float32 in [0, 1] (contiguous) of an 8/16-bit image holding ``bits`` bits."""
     f = np.multiply(image, np.float32(1.0 / ((1 << bits) - 1)), dtype=np.float32)  # one pass

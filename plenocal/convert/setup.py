@@ -51,6 +51,7 @@ from plenocal.convert.gridcheck import (
     grid_for_mode,
     round_floats,
 )
+from plenocal.convert.levels import clipped_share
 from plenocal.convert.shot import ConvertSettings, ShotConversion, build_grid
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_json, write_json
@@ -253,6 +254,29 @@ def _check_policy(policy: str) -> None:
                            f"{', '.join(GRID_FOREIGN)}")
 
 
+#: share of a frame's pixels clipped at full scale from which the grid errors say that the
+#: frame, not the file, may be what the check failed on (:func:`overexposure_hint`)
+OVEREXPOSED_SHARE = 0.2
+
+
+def overexposure_hint(image: np.ndarray) -> str:
+    """A sentence for the grid errors where a fifth or more of ``image`` is clipped
+    (:data:`OVEREXPOSED_SHARE`), else "". Saturated micro images lose the edges and the
+    falloff the grid check measures the lattice by: Boys2 made 2x brighter (60 % of its
+    pixels clipped) read its own calib.xml as foreign (a pitch 1.6 % off, 47 px of drift),
+    where the frame as recorded (4 % clipped) measures 42 % of its lit lenses within 1.4 px
+    of one lattice; HandTools 4x brighter (59 % clipped) still measured 69 %."""
+    share = clipped_share(image)
+    if share < OVEREXPOSED_SHARE:
+        return ""
+    return (f". But {100 * share:.0f}% of the frame's pixels are clipped at full scale: "
+            "an overexposed frame hides the micro images' edges from the check, and the "
+            "file may not be at fault. Decide the set-up on a frame of this camera exposed "
+            "without clipping (the workflow's central array shot; plenocal convert on a "
+            "recording: --setup-frame K) and convert this one with it (plenocal convert: "
+            "--setup convert_setup.json)")
+
+
 def foreign_grid_error(check: GridCheck, calib_source: str, frame: str,
                        policy: str = _CONVERT["grid_foreign"]) -> str | None:
     """The error that stops the run when the grid check found the calib.xml grid foreign
@@ -336,7 +360,7 @@ def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: Con
     log.info("%s: %s", source, check.summary())
     error = foreign_grid_error(check, calib.source, source, grid_foreign)
     if error is not None:
-        raise ConvertError(error)
+        raise ConvertError(error + overexposure_hint(image))
     lattice = pitch = None
     if check.refined:
         # to LATTICE_DIGITS significant digits (1e-4 px on a 4000-px sensor): the fit's
@@ -353,7 +377,7 @@ def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: Con
     error = unmatched_frame_error(check, shot.match_scores, calib.source, source,
                                   grid_foreign)
     if error is not None:
-        raise ConvertError(error)
+        raise ConvertError(error + overexposure_hint(image))
     grid, shot, centred = centred_where_unverified(image, calib, n_views, settings, source,
                                                    grid, check, shot, threads)
     lattice = centred or lattice

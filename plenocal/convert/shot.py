@@ -767,6 +767,7 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
         centred_where_unverified,
         check_and_grid,
         foreign_grid_error,
+        overexposure_hint,
         read_setup,
         unmatched_frame_error,
     )
@@ -790,13 +791,13 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
     log.info("%s", check.summary())
     error = foreign_grid_error(check, calib.source, str(lenslet), grid_foreign)
     if error is not None:
-        raise ConvertError(error)
+        raise ConvertError(error + overexposure_hint(image))
     shot = ShotConversion(image, calib, n_views, settings, source=str(lenslet), grid=grid,
                           analysis=analysis, threads=threads)
     error = unmatched_frame_error(check, shot.match_scores, calib.source, str(lenslet),
                                   grid_foreign)
     if error is not None:
-        raise ConvertError(error)
+        raise ConvertError(error + overexposure_hint(image))
     grid, shot, _ = centred_where_unverified(image, calib, n_views, settings, str(lenslet),
                                              grid, check, shot, threads)
     for note in check.warnings:  # after the centring, which may change what they say
