@@ -264,8 +264,9 @@ def overexposure_hint(image: np.ndarray) -> str:
     (:data:`OVEREXPOSED_SHARE`), else "". Saturated micro images lose the edges and the
     falloff the grid check measures the lattice by: Boys2 made 2x brighter (60 % of its
     pixels clipped) read its own calib.xml as foreign (a pitch 1.6 % off, 47 px of drift),
-    where the frame as recorded (4 % clipped) measures 42 % of its lit lenses within 1.4 px
-    of one lattice; HandTools 4x brighter (59 % clipped) still measured 69 %."""
+    where the frame as recorded (4 % clipped) measures 42 % of its lit lenses and is
+    refined onto the lattice they give; HandTools 4x brighter (59 % clipped) still measured
+    69 %."""
     share = clipped_share(image)
     if share < OVEREXPOSED_SHARE:
         return ""
