@@ -42,10 +42,9 @@ no longer lose lens rows to a cut that is not there (HandTools x1.6-x4 lost 3-6 
 the bottom, its one-sided flat part clipped in 0.52-0.67 of the lenses). Not mended: a
 scene saturated over most of the outermost bands, its micro images flat on one half only
 (Boys2 x1.6: one row on the left, six on the right; Boxer x1.6 two at the top, one
-before), and
-Fujita2 x0.2's black backdrop (one row): rows lost, never wrong pixels; and a cut beside a
-scene saturated over both halves of the first band (Boys2 x1.6's top) is not found, as
-before.
+before), and Fujita2 x0.2's black backdrop (one row): rows lost, never wrong pixels; and
+a cut beside a scene saturated over both halves of the first band (Boys2 x1.6's top) is
+not found, as before.
 
 Decided once per camera, on the central array shot, with the safe diameter (rule
 ``convert_setup``; ``convert.border_cut``), so every shot's views have one size.
