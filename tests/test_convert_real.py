@@ -302,6 +302,25 @@ def test_boys2_cut_border_lenses_are_left_out(boys2_views):
         assert _row_detail(now.view(r, c))[2:40].min() > 0.5, (r, c)
 
 
+def test_an_overexposed_floor_is_not_a_cut_border(tmp_path):
+    """HandTools made 2.5x brighter (a third of it clipped): its bottom lens rows saturate
+    on one side of most micro images, not all (0.52-0.67 of a band's lenses), and the
+    views lost their bottom 112 rows to a cut that is not there. The main lens cuts every
+    lens of a band alike (Boys2: 0.97-1.00)."""
+    from plenocal.convert import convert_files  # noqa: PLC0415
+
+    assert REAL is not None
+    img = cv2.imread(str(REAL / "frames" / "HandTools.png"), cv2.IMREAD_UNCHANGED)
+    bright = np.clip(img.astype(np.float32) * 2.5, 0, 255).astype(np.uint8)
+    assert (bright == 255).any(axis=2).mean() > 0.3
+    frame = tmp_path / "HandTools_x2.5.png"
+    cv2.imwrite(str(frame), bright)
+    shot = convert_files(frame, REAL / "frames" / "HandTools.xml", None, 5,
+                         ConvertSettings(mla="keplerian"))
+    assert not shot.border_cut.any, shot.border_cut
+    assert shot.layout.height >= 1188
+
+
 def test_lattice_trace_fails_the_paper_spacing_corner_view_and_passes_the_measured(boys2_views):
     """Issue 33: at the paper's q the TSPC corner views carry the lens lattice (their
     trace above TLCT's); at the q of the measured D' (0.71 of it) not."""
