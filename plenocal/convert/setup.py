@@ -51,7 +51,7 @@ from plenocal.convert.gridcheck import (
     grid_for_mode,
     round_floats,
 )
-from plenocal.convert.levels import clipped_share
+from plenocal.convert.levels import OVEREXPOSED_SHARE, clipped_share
 from plenocal.convert.shot import ConvertSettings, ShotConversion, build_grid
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_json, write_json
@@ -252,11 +252,6 @@ def _check_policy(policy: str) -> None:
     if policy not in GRID_FOREIGN:
         raise ConvertError(f"convert.grid_foreign: {policy!r} is not one of "
                            f"{', '.join(GRID_FOREIGN)}")
-
-
-#: share of a frame's pixels clipped at full scale from which the grid errors say that the
-#: frame, not the file, may be what the check failed on (:func:`overexposure_hint`)
-OVEREXPOSED_SHARE = 0.2
 
 
 def overexposure_hint(image: np.ndarray) -> str:

@@ -43,7 +43,13 @@ from plenocal.convert.analysis import ConvertAnalysis
 from plenocal.convert.bordercut import BorderCut, measure_border_cut
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.holes import fill_unsupported, weak_box
-from plenocal.convert.levels import render_source, significant_bits, to_unit_float
+from plenocal.convert.levels import (
+    OVEREXPOSED_SHARE,
+    clipped_share,
+    render_source,
+    significant_bits,
+    to_unit_float,
+)
 from plenocal.convert.patchsize import (
     PatchSizeResult,
     PatchSizeSettings,
@@ -515,6 +521,14 @@ class ShotConversion:
         # here, not on the pool: the matching waits for the profiles, and the pool's
         # worker is measuring the safe diameter meanwhile
         vignetting = lens_type_profiles(gray, self.grid)
+        clipped = clipped_share(self._image)
+        if clipped >= OVEREXPOSED_SHARE:
+            note = (f"{100 * clipped:.0f}% of the frame is clipped at full scale: the views "
+                    "carry no detail there, and the patch sizes, the grid check and the "
+                    "border cut have less to go on (the real frames of shared/real clip "
+                    "4 % at most); expose without clipping where you can")
+            log.warning("%s: %s", source, note)
+            self.warnings.append(f"{source}: {note}")
         mla, scores, check = st.mla, None, None
         if st.mla == "auto":
             # the pool's worker is done with the safe diameter by now (it takes as long
