@@ -217,6 +217,29 @@ def test_shots_array_on_the_stage_and_hand_held_orbiting_the_scene():
     assert make_shots(sim, centre)["hand01"].tobytes() == shots["hand01"].tobytes()
 
 
+def test_the_hand_held_poses_can_take_another_seeds_turns():
+    """simulate.handheld.seed: the scene of one seed shot with another seed's turns and
+    offsets (a diagnostic); absent, the poses are the seed's own, as before."""
+    import copy  # noqa: PLC0415
+
+    from plenocal.simulate.dataset import make_shots  # noqa: PLC0415
+
+    sim = small_sim()
+    centre = np.array([0.01, 0.005, 0.6])
+    other = copy.deepcopy(sim)
+    other["seed"] = sim["seed"] + 5
+    crossed = copy.deepcopy(sim)
+    crossed["handheld"]["seed"] = other["seed"]
+    own, theirs, got = (make_shots(s, centre) for s in (sim, other, crossed))
+    for name in own:
+        want = theirs if name.startswith("hand") else own
+        assert got[name].tobytes() == want[name].tobytes(), name
+    assert own["hand00"].tobytes() != theirs["hand00"].tobytes()
+    same = copy.deepcopy(sim)
+    same["handheld"]["seed"] = sim["seed"]
+    assert all(make_shots(same, centre)[n].tobytes() == own[n].tobytes() for n in own)
+
+
 # --- the Raytrix-like camera: multi-focus MLA, turned grid, noise (issue 13) ----------
 
 RAYTRIX_ROTATION = math.pi / 2 + 0.001

@@ -53,7 +53,8 @@ def make_shots(sim: dict, scene_centre: np.ndarray) -> dict[str, np.ndarray]:
     Array shots sit on a stage at (col step, row step, 0) looking along +z. Hand-held
     shots orbit the scene centre: a random rotation (up to ``max_rotation_deg`` about
     a random axis) turns the camera about the scene centre, then a random offset (up
-    to ``max_offset_m`` per axis) moves it, so that every shot sees the scene.
+    to ``max_offset_m`` per axis) moves it, so that every shot sees the scene. The turns
+    and offsets are drawn from ``handheld.seed`` where it is given, else from ``seed``.
     """
     a = sim["array"]
     step = a["step_m"]
@@ -62,7 +63,7 @@ def make_shots(sim: dict, scene_centre: np.ndarray) -> dict[str, np.ndarray]:
         for c in range(a["cols"]):
             shots[array_shot(c, r)] = pose(np.eye(3), np.array([c * step, r * step, 0.0]))
     hh = sim["handheld"]
-    rng = np.random.default_rng([sim["seed"], 3])
+    rng = np.random.default_rng([hh.get("seed", sim["seed"]), 3])  # the poses' own seed
     centre_array = np.array([(a["cols"] - 1) * step / 2, (a["rows"] - 1) * step / 2, 0.0])
     dist = float(np.linalg.norm(scene_centre - centre_array))
     for k in range(hh["count"]):
