@@ -63,7 +63,8 @@ def make_shots(sim: dict, scene_centre: np.ndarray) -> dict[str, np.ndarray]:
         for c in range(a["cols"]):
             shots[array_shot(c, r)] = pose(np.eye(3), np.array([c * step, r * step, 0.0]))
     hh = sim["handheld"]
-    rng = np.random.default_rng([hh.get("seed", sim["seed"]), 3])  # the poses' own seed
+    # the poses' own seed where given (it has no schema default: absent, the scene's)
+    rng = np.random.default_rng([hh["seed"] if "seed" in hh else sim["seed"], 3])
     centre_array = np.array([(a["cols"] - 1) * step / 2, (a["rows"] - 1) * step / 2, 0.0])
     dist = float(np.linalg.norm(scene_centre - centre_array))
     for k in range(hh["count"]):
