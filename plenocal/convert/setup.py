@@ -254,15 +254,15 @@ def _check_policy(policy: str) -> None:
                            f"{', '.join(GRID_FOREIGN)}")
 
 
-def overexposure_hint(image: np.ndarray) -> str:
+def overexposure_hint(image: np.ndarray | None) -> str:
     """A sentence for the grid errors where a fifth or more of ``image`` is clipped
-    (:data:`OVEREXPOSED_SHARE`), else "". Saturated micro images lose the edges and the
-    falloff the grid check measures the lattice by: Boys2 made 2x brighter (60 % of its
-    pixels clipped) read its own calib.xml as foreign (a pitch 1.6 % off, 47 px of drift),
-    where the frame as recorded (4 % clipped) measures 42 % of its lit lenses and is
-    refined onto the lattice they give; HandTools 4x brighter (59 % clipped) still measured
-    69 %."""
-    share = clipped_share(image)
+    (:data:`OVEREXPOSED_SHARE`), else "" (and where no image is given). Saturated micro
+    images lose the edges and the falloff the grid check measures the lattice by: Boys2
+    made 2x brighter (60 % of its pixels clipped) read its own calib.xml as foreign (a
+    pitch 1.6 % off, 47 px of drift), where the frame as recorded (4 % clipped) measures
+    42 % of its lit lenses and is refined onto the lattice they give; HandTools 4x
+    brighter (59 % clipped) still measured 69 %."""
+    share = 0.0 if image is None else clipped_share(image)
     if share < OVEREXPOSED_SHARE:
         return ""
     return (f". But {100 * share:.0f}% of the frame's pixels are clipped at full scale: "
@@ -274,12 +274,14 @@ def overexposure_hint(image: np.ndarray) -> str:
 
 
 def foreign_grid_error(check: GridCheck, calib_source: str, frame: str,
-                       policy: str = _CONVERT["grid_foreign"]) -> str | None:
+                       policy: str = _CONVERT["grid_foreign"], *,
+                       image: np.ndarray | None = None) -> str | None:
     """The error that stops the run when the grid check found the calib.xml grid foreign
     (not on the micro images: another camera's file) and it is used as it is, or None
     (``policy`` ``warn``: the user goes on; ``convert.grid`` ``refine``: the views use the
     lattice fitted to the image). Converting on a foreign grid gives views that registration
-    A cannot match, and its error then blames the texture and the overlap."""
+    A cannot match, and its error then blames the texture and the overlap. ``image``: the
+    frame, whose overexposure the message names (:func:`overexposure_hint`)."""
     _check_policy(policy)
     if not check.foreign or check.refined or policy == "warn":
         return None
@@ -292,7 +294,8 @@ def foreign_grid_error(check: GridCheck, calib_source: str, frame: str,
             "looks like another camera's or another sensor crop's file. Put this camera's "
             "calib.xml there, or set convert.grid: refine to convert on the lattice fitted to "
             "the image, or convert.grid_foreign: warn to convert on this grid all the same "
-            "(plenocal convert: --grid refine, or --set grid_foreign=warn)")
+            "(plenocal convert: --grid refine, or --set grid_foreign=warn)"
+            + overexposure_hint(image))
 
 
 #: the mean best ZNCC of neighbouring micro images (:func:`plenocal.convert.patchsize.
@@ -308,7 +311,8 @@ UNMATCHED_ZNCC = 0.75
 
 def unmatched_frame_error(check: GridCheck, scores: dict[str, float] | None,
                           calib_source: str, frame: str,
-                          policy: str = _CONVERT["grid_foreign"]) -> str | None:
+                          policy: str = _CONVERT["grid_foreign"], *,
+                          image: np.ndarray | None = None) -> str | None:
     """The error that stops the run where the grid check could not confirm the calib.xml
     grid (``check.verified`` false: too few lit lenses measured) and the micro images
     match their neighbours as neither MLA kind (``scores``: each kind's mean best ZNCC,
@@ -320,7 +324,7 @@ def unmatched_frame_error(check: GridCheck, scores: dict[str, float] | None,
     are flat, not wrong; :func:`plenocal.convert.shot.mla_undecided` says that the kind
     was assumed): both scores 0 or not measured, which only a frame whose matched lenses
     hold one grey level each gives (the ZNCC of two constant blocks is taken as 0; sensor
-    noise alone reads about 0.1)."""
+    noise alone reads about 0.1). ``image``: as :func:`foreign_grid_error`'s."""
     _check_policy(policy)
     if policy == "warn" or check.verified or not scores:
         return None
@@ -340,7 +344,7 @@ def unmatched_frame_error(check: GridCheck, scores: dict[str, float] | None,
             "the workflow's central array shot; plenocal convert on a recording: "
             "--setup-frame K). The views would be a mosaic of misplaced patches. To "
             "convert all the same: convert.grid_foreign: warn (plenocal convert: --set "
-            "grid_foreign=warn)")
+            "grid_foreign=warn)" + overexposure_hint(image))
 
 
 def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: ConvertSettings,
@@ -354,9 +358,9 @@ def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: Con
     (:class:`plenocal.convert.shot.ShotConversion`; the same numbers with any number)."""
     grid, check = check_and_grid(image, calib, settings.grid)
     log.info("%s: %s", source, check.summary())
-    error = foreign_grid_error(check, calib.source, source, grid_foreign)
+    error = foreign_grid_error(check, calib.source, source, grid_foreign, image=image)
     if error is not None:
-        raise ConvertError(error + overexposure_hint(image))
+        raise ConvertError(error)
     lattice = pitch = None
     if check.refined:
         # to LATTICE_DIGITS significant digits (1e-4 px on a 4000-px sensor): the fit's
@@ -371,9 +375,9 @@ def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: Con
     shot = ShotConversion(image, calib, n_views, settings, source=source, grid=grid,
                           threads=threads)
     error = unmatched_frame_error(check, shot.match_scores, calib.source, source,
-                                  grid_foreign)
+                                  grid_foreign, image=image)
     if error is not None:
-        raise ConvertError(error + overexposure_hint(image))
+        raise ConvertError(error)
     grid, shot, centred = centred_where_unverified(image, calib, n_views, settings, source,
                                                    grid, check, shot, threads)
     lattice = centred or lattice

@@ -781,7 +781,6 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
         centred_where_unverified,
         check_and_grid,
         foreign_grid_error,
-        overexposure_hint,
         read_setup,
         unmatched_frame_error,
     )
@@ -803,15 +802,15 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
         return shot
     grid, check = check_and_grid(image, calib, settings.grid)
     log.info("%s", check.summary())
-    error = foreign_grid_error(check, calib.source, str(lenslet), grid_foreign)
+    error = foreign_grid_error(check, calib.source, str(lenslet), grid_foreign, image=image)
     if error is not None:
-        raise ConvertError(error + overexposure_hint(image))
+        raise ConvertError(error)
     shot = ShotConversion(image, calib, n_views, settings, source=str(lenslet), grid=grid,
                           analysis=analysis, threads=threads)
     error = unmatched_frame_error(check, shot.match_scores, calib.source, str(lenslet),
-                                  grid_foreign)
+                                  grid_foreign, image=image)
     if error is not None:
-        raise ConvertError(error + overexposure_hint(image))
+        raise ConvertError(error)
     grid, shot, _ = centred_where_unverified(image, calib, n_views, settings, str(lenslet),
                                              grid, check, shot, threads)
     for note in check.warnings:  # after the centring, which may change what they say
