@@ -18,7 +18,13 @@ from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_image, to_float
 from plenocal.io.raytrix import read_calib, write_calib
 from plenocal.optics import PlenopticOptics
-from plenocal.simulate.dataset import make_calib, nearest_lens_map, render_shot, setup_dataset
+from plenocal.simulate.dataset import (
+    make_calib,
+    make_shots,
+    nearest_lens_map,
+    render_shot,
+    setup_dataset,
+)
 from plenocal.simulate.mla import lens_type_map
 from plenocal.simulate.raytrace import prepare_lenslet, render_lenslet, trace_lenslet
 from plenocal.simulate.scene import SceneArrays, pack_textures, scene_arrays
@@ -194,8 +200,6 @@ def test_dataset_files(tmp_path: Path):
 
 
 def test_shots_array_on_the_stage_and_hand_held_orbiting_the_scene():
-    from plenocal.simulate.dataset import make_shots
-
     sim = small_sim()
     centre = np.array([0.01, 0.005, 0.6])
     shots = make_shots(sim, centre)
@@ -220,10 +224,6 @@ def test_shots_array_on_the_stage_and_hand_held_orbiting_the_scene():
 def test_the_hand_held_poses_can_take_another_seeds_turns():
     """simulate.handheld.seed: the scene of one seed shot with another seed's turns and
     offsets (a diagnostic); absent, the poses are the seed's own, as before."""
-    import copy  # noqa: PLC0415
-
-    from plenocal.simulate.dataset import make_shots  # noqa: PLC0415
-
     sim = small_sim()
     centre = np.array([0.01, 0.005, 0.6])
     other = copy.deepcopy(sim)
