@@ -24,7 +24,7 @@ from plenocal.convert.quality import summarise, view_quality
 from plenocal.convert.setup import decide_setup
 from plenocal.convert.shot import mla_contradiction, mla_undecided
 from plenocal.grid import MicrolensGrid
-from plenocal.io.files import write_image
+from plenocal.io.files import png_truncation, read_image, write_image
 from plenocal.io.raytrix import LensType, RayCalib, read_calib, write_calib
 from plenocal.names import view_names
 from plenocal.optics import PlenopticOptics
@@ -649,6 +649,26 @@ def test_error_unreadable_image(shot_files):
         convert_files(shot_files / "x00_y00.png", shot_files / "calib.xml", None, 3)
     with pytest.raises(ConvertError, match="cannot read the lenslet image"):
         convert_files(shot_files / "missing.png", shot_files / "calib.xml", None, 3)
+
+
+def test_error_truncated_png_names_the_cut_before_libpng_speaks(shot_files, capfd):
+    """A lenslet PNG cut short (a copy that stopped) is named as truncated, with where it
+    stops, and libpng's own "Read Error" does not come first; a PNG with bytes after its
+    IEND chunk still reads."""
+    whole = (shot_files / "x00_y00.png").read_bytes()
+    (shot_files / "cut.png").write_bytes(whole[: len(whole) * 2 // 3])
+    capfd.readouterr()
+    with pytest.raises(ConvertError, match=r"cut.png: a truncated PNG, cut short in its "
+                                            r"'IDAT' chunk.*copy or make it again"):
+        convert_files(shot_files / "cut.png", shot_files / "calib.xml", None, 3)
+    assert "libpng" not in capfd.readouterr().err
+    (shot_files / "cut.png").write_bytes(whole[:33])  # the signature and the header chunk
+    with pytest.raises(ConvertError, match=r"cut short after 33 bytes \(no IEND chunk\)"):
+        convert_files(shot_files / "cut.png", shot_files / "calib.xml", None, 3)
+    (shot_files / "tail.png").write_bytes(whole + b"appended by a tool")
+    assert png_truncation(shot_files / "tail.png") is None
+    assert np.array_equal(read_image(shot_files / "tail.png"),
+                          read_image(shot_files / "x00_y00.png"))
 
 
 def test_error_lens_type_without_depth_range(shot_files):

@@ -75,7 +75,7 @@ from plenocal.convert.safediameter import SafeDiameter, measure_safe_diameter
 from plenocal.convert.threads import Inline, opencv_threads, run_all
 from plenocal.convert.vignetting import lens_type_profiles
 from plenocal.grid import MicrolensGrid
-from plenocal.io.files import read_image
+from plenocal.io.files import TruncatedImageError, read_image
 from plenocal.io.lenslet import sensor_mismatch
 from plenocal.io.raytrix import CalibError, RayCalib, read_calib
 from plenocal.names import parse_view, view_names
@@ -190,6 +190,8 @@ def load_lenslet(path: str | Path, sensor_size: tuple[int, int] | None = None) -
     path = Path(path)
     try:
         img = read_image(path)
+    except TruncatedImageError as exc:
+        raise ConvertError(f"cannot read the lenslet image: {exc}") from None
     except (OSError, FileNotFoundError) as exc:
         raise ConvertError(f"{path}: cannot read the lenslet image ({exc}); is it a PNG?") \
             from None
