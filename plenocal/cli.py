@@ -2,13 +2,13 @@
 as RLC / TLCT users expect, writing what the workflow's rule ``convert`` writes.
 
     plenocal convert LENSLET CALIB.xml -o DIR [--views N] [--galilean | --mla KIND]
-        [--tile-size auto|N] [--grid file|refine|auto] [--bit-depth auto|N]
+        [--tile-size auto|N] [--grid file|refine|auto] [--bit-depth auto|N] [--bayer CFA]
         [--set key=value ...] [--setup convert_setup.json]
     plenocal convert RECORDING.yuv CALIB.xml -o DIR [--size WxH] [--bit-depth N]
         [--frames A:B] [--format png|yuv] [--setup-frame K] [--temporal hold|off] ...
 
 Options map onto the keys of the config's ``convert`` block (``mla``, ``tile_size``,
-``grid``, ``bit_depth``; ``--set`` reaches any other key, dotted for nested blocks, e.g.
+``grid``, ``bit_depth``, ``bayer``; ``--set`` reaches any other key, dotted for nested blocks, e.g.
 ``--set patch_size.block_samples=9``); the block is checked against config.schema.yaml
 and completed with its defaults (as the workflow's rule ``convert`` gets it; the
 workflow's config.yaml fixes ``tile_size: 6`` for its synthetic ground truth, the command
@@ -36,6 +36,7 @@ from pathlib import Path
 import yaml
 
 from plenocal.config import deep_update, stage_defaults
+from plenocal.convert.demosaic import BAYER_PATTERNS
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.outfolder import check_output_folder, still_claims
 from plenocal.convert.prefilter import OPTIMAL_A
@@ -180,6 +181,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "measure them, move the file's lattice onto the centres the corner "
                         "views agree on, plenocal.convert.centring). The check always runs and "
                         "lands in disparity.json. Default: auto")
+    c.add_argument("--bayer", choices=BAYER_PATTERNS, default=None, metavar="PATTERN",
+                   help="the frame is a sensor's raw one-channel readout behind this colour "
+                        "filter array, its top-left 2 x 2 block row by row: "
+                        f"{', '.join(BAYER_PATTERNS)} (convert.bayer); it is demosaiced "
+                        "first. Default: none (a grey frame that looks like a mosaic is "
+                        "warned of, with the patterns that fit)")
     _auto_or_int(c, "--bit-depth",
                  "significant bits of a 16-bit image (convert.bit_depth): auto (10, 12 or "
                  "14 bits recognised from the maximum) or 8..16")
@@ -281,6 +288,8 @@ def convert_config(args: argparse.Namespace) -> dict:
         cfg["tile_size"] = args.tile_size
     if args.bit_depth is not None:
         cfg["bit_depth"] = args.bit_depth
+    if args.bayer is not None:
+        cfg["bayer"] = args.bayer
     if args.grid is not None:
         cfg["grid"] = args.grid
     return cfg
@@ -332,6 +341,9 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
         if given:
             raise ConvertError(f"{' and '.join(given)}: for a raw YUV recording (LENSLET "
                                f"ending in .yuv); {args.lenslet} is one image")
+    elif settings.bayer != "none":
+        raise ConvertError(f"convert.bayer {settings.bayer}: for a raw one-channel PNG frame; "
+                           f"{args.lenslet} is a YUV recording, in colour already")
     out = Path(args.out)
     made = not out.exists()
     try:  # before the work: a folder that cannot be made fails now, not after the analysis

@@ -13,9 +13,10 @@ snakemake = globals()["snakemake"]
 log = rule_logger(snakemake, "convert_setup")
 cv2.setNumThreads(max(1, int(snakemake.threads)))
 
-image = load_lenslet(snakemake.input.lenslet, read_sensor_size(snakemake.input.camera))
-calib = load_calib(snakemake.input.calib)
 settings = ConvertSettings.from_config(snakemake.params.convert)
+image = load_lenslet(snakemake.input.lenslet, read_sensor_size(snakemake.input.camera),
+                     settings.bayer)
+calib = load_calib(snakemake.input.calib)
 if snakemake.params.convert.get("video_frames"):  # the shot is given as a video: its
     settings = video_settings(settings)  # frame by rule lenslet_frame: 16 (or 8) bits
 setup, _ = decide_setup(image, calib, int(snakemake.params.views), settings,

@@ -41,6 +41,7 @@ from plenocal.artifacts.disparity import disparity_record
 from plenocal.config import settings_from, stage_defaults, with_defaults
 from plenocal.convert.analysis import ConvertAnalysis
 from plenocal.convert.bordercut import BorderCut, measure_border_cut
+from plenocal.convert.demosaic import BAYER_PATTERNS, demosaic, mosaic_warning
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.holes import fill_unsupported, weak_box
 from plenocal.convert.levels import (
@@ -113,6 +114,7 @@ class ConvertSettings:
     mla: str = _CONVERT["mla"]
     even_size: bool = _CONVERT["even_size"]
     bit_depth: int | str = _CONVERT["bit_depth"]
+    bayer: str = _CONVERT["bayer"]  # none | a CFA pattern (plenocal.convert.demosaic)
     devignette: bool = _CONVERT["devignette"]
     grid: str = _CONVERT["grid"]  # file | refine | auto (plenocal.convert.gridcheck)
     border_cut: str = _CONVERT["border_cut"]  # auto | off (plenocal.convert.bordercut)
@@ -138,6 +140,9 @@ class ConvertSettings:
         b = self.bit_depth
         if not (b == "auto" or (isinstance(b, int) and 8 <= b <= 16)):
             raise ConvertError(f"convert.bit_depth: 'auto' or 8..16, not {b!r}")
+        if self.bayer not in ("none", *BAYER_PATTERNS):
+            raise ConvertError(f"convert.bayer: none or a colour filter array of "
+                               f"{', '.join(BAYER_PATTERNS)}, not {self.bayer!r}")
 
     @classmethod
     def from_config(cls, cfg: dict | None) -> ConvertSettings:
@@ -155,6 +160,7 @@ class ConvertSettings:
             mla=str(cfg["mla"]),
             even_size=bool(cfg["even_size"]),
             bit_depth=bits if isinstance(bits, str) else int(bits),
+            bayer=str(cfg["bayer"]),
             devignette=bool(cfg["devignette"]),
             grid=str(cfg["grid"]),
             # YAML 1.1 reads a bare ``off`` as false
@@ -185,8 +191,14 @@ def read_sensor_size(camera_yaml: str | Path) -> tuple[int, int] | None:
     return int(w), int(h)
 
 
-def load_lenslet(path: str | Path, sensor_size: tuple[int, int] | None = None) -> np.ndarray:
-    """Read a lenslet image; check its size against the datasheet's sensor size."""
+def load_lenslet(path: str | Path, sensor_size: tuple[int, int] | None = None,
+                 bayer: str | None = None) -> np.ndarray:
+    """Read a lenslet image; check its size against the datasheet's sensor size.
+
+    ``bayer``: ``convert.bayer``, the colour filter array of a raw one-channel frame,
+    which is then demosaiced (:func:`plenocal.convert.demosaic.demosaic`); ``none`` or
+    None: the frame as it is, and a grey one that looks like a mosaic is warned of
+    (:func:`plenocal.convert.demosaic.mosaic_warning`)."""
     path = Path(path)
     try:
         img = read_image(path)
@@ -200,6 +212,15 @@ def load_lenslet(path: str | Path, sensor_size: tuple[int, int] | None = None) -
                            f"{img.dtype}); need an 8- or 16-bit grey or RGB PNG")
     if sensor_size is not None and (img.shape[1], img.shape[0]) != tuple(sensor_size):
         raise ConvertError(sensor_mismatch(path, (img.shape[1], img.shape[0]), sensor_size))
+    if bayer not in (None, "none"):
+        if img.ndim != 2:
+            raise ConvertError(f"{path}: convert.bayer is {bayer}, but the frame has "
+                               f"{img.shape[2]} channels: it is demosaiced already; set "
+                               "convert.bayer: none (plenocal convert: leave out --bayer)")
+        return demosaic(img, bayer)
+    note = mosaic_warning(img)
+    if note is not None:
+        log.warning("%s: %s", path, note)
     return img
 
 
@@ -790,7 +811,7 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
     settings = settings or ConvertSettings()
     warm_in_background()  # numba's set-up while the frame is decoded
     sensor = read_sensor_size(camera_yaml) if camera_yaml is not None else None
-    image = load_lenslet(lenslet, sensor)
+    image = load_lenslet(lenslet, sensor, settings.bayer)
     calib = load_calib(calib_xml)
     H, W = image.shape[:2]
     if setup_json is not None:
