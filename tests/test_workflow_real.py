@@ -292,3 +292,36 @@ def test_video_settings_are_checked_before_any_job(video_capture, tmp_path: Path
     assert proc.returncode != 0 and not (dest / "results").exists()
     assert (f"datasets.{NAME}.video.frame.x01_y01 = 3: " in out
             and "holds 3 frames (0..2): give an index below 3" in out), out[-2000:]
+
+
+def test_raw_bayer_shots_are_demosaiced_by_the_workflow(tiny_complete_run, tmp_path: Path):
+    """A real capture whose shots are raw one-channel RGGB readouts (the tiny run's lenslet
+    images mosaicked) with ``convert.bayer: RGGB``: rule convert_setup and the conversions
+    demosaic them, and each shot's central view is the colour frame's within the
+    demosaicing's error."""
+    import numpy as np
+
+    from plenocal.io.files import read_image, write_image
+
+    work = make_capture(tiny_complete_run, tmp_path / "bayer")
+    shots = sorted((work / "data" / NAME / "lenslet").glob("*.png"))
+    for path in shots:
+        rgb = read_image(path)
+        raw = np.empty(rgb.shape[:2], rgb.dtype)
+        for k, channel in enumerate((0, 1, 1, 2)):  # R G / G B
+            dy, dx = divmod(k, 2)
+            raw[dy::2, dx::2] = rgb[dy::2, dx::2, channel]
+        write_image(path, raw)
+    cfg = yaml.safe_load((work / "config.yaml").read_text())
+    cfg.setdefault("convert", {})["bayer"] = "RGGB"
+    (work / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    proc = snakemake(work, "--until", "convert")
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-4000:]
+    res = work / "results" / NAME
+    for path in shots:
+        centre = read_image(res / "views" / path.stem / "1_1.png").astype(float)
+        ref = read_image(tiny_complete_run / "results" / "tiny" / "views" / path.stem
+                         / "1_1.png").astype(float)
+        assert centre.shape == ref.shape, path.stem
+        diff = np.abs(centre - ref).mean() / ref.mean()
+        assert diff < 0.03, (path.stem, diff)
