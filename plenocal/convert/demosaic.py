@@ -25,8 +25,8 @@ neighbours, 1.4 px away, differ from it more than its side neighbours, 1 px away
 Bayer mosaic the two greens of each 2 x 2 block are diagonal neighbours of the same
 colour, and differ from each other far less than from the red and blue beside them. The
 measure is the mean absolute difference along the more alike diagonal over that along
-the sides: 1.18-1.43 on the grey versions of every frame in ``shared/real``, 0.16-0.66
-on the same frames mosaicked (white-balanced) and 0.07-0.27 with a raw sensor's channel
+the sides: 1.20-1.43 on the grey versions of every frame in ``shared/real``, 0.15-0.64
+on the same frames mosaicked (white-balanced) and 0.11-0.30 with a raw sensor's channel
 gains. A frame under :data:`MOSAIC_LIKENESS` is reported as a likely mosaic.
 """
 
