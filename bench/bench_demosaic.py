@@ -68,8 +68,8 @@ def main() -> None:
                 ours = demosaic(m, pattern)
                 times.append(time.perf_counter() - t)
             a, b = psnr(ours, rgb), psnr(cv2.cvtColor(m, _OPENCV[pattern]), rgb)
-            like = (mosaic_likeness(grey)[0], mosaic_likeness(m)[0],
-                    mosaic_likeness(mosaic_of(raw_like, pattern))[0])
+            like = (mosaic_likeness(grey), mosaic_likeness(m),
+                    mosaic_likeness(mosaic_of(raw_like, pattern)))
             print(f"| {path.stem} | {rgb.shape[0] * rgb.shape[1] / 1e6:.1f} | {pattern} "
                   f"| {a:.2f} | {b:.2f} | {a - b:+.2f} | {min(times):.2f} "
                   f"| {like[0]:.2f} / {like[1]:.2f} / {like[2]:.2f} |", flush=True)

@@ -186,7 +186,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "filter array, its top-left 2 x 2 block row by row: "
                         f"{', '.join(BAYER_PATTERNS)} (convert.bayer); it is demosaiced "
                         "first. Default: none (a grey frame that looks like a mosaic is "
-                        "warned of, with the patterns that fit)")
+                        "warned of)")
     _auto_or_int(c, "--bit-depth",
                  "significant bits of a 16-bit image (convert.bit_depth): auto (10, 12 or "
                  "14 bits recognised from the maximum) or 8..16")

@@ -23,8 +23,10 @@ were presumably made by a like interpolation); 0.1-0.3 s for a 12-MP frame.
 **Telling a mosaic** (:func:`mosaic_likeness`): in a grey frame a pixel's diagonal
 neighbours, 1.4 px away, differ from it more than its side neighbours, 1 px away; in a
 Bayer mosaic the two greens of each 2 x 2 block are diagonal neighbours of the same
-colour, and differ from each other far less than from the red and blue beside them. The
-measure is the mean absolute difference along the more alike diagonal over that along
+colour, and differ from each other far less than from the red and blue beside them (or,
+under a raw sensor's gains, a dark red and a dark blue can be the more alike pair: the
+measure does not tell which diagonal the greens are on, so the warning does not name a
+pattern). The measure is the mean absolute difference along the more alike diagonal over that along
 the sides: 1.20-1.43 on the grey versions of every frame in ``shared/real``, 0.15-0.64
 on the same frames mosaicked (white-balanced) and 0.11-0.30 with a raw sensor's channel
 gains. A frame under :data:`MOSAIC_LIKENESS` is reported as a likely mosaic.
@@ -128,15 +130,16 @@ def demosaic(mosaic: np.ndarray, pattern: str, band_rows: int = _BAND_ROWS) -> n
     return out
 
 
-def mosaic_likeness(image: np.ndarray, crop: int = 2048) -> tuple[float, str]:
-    """How much a one-channel frame looks like a Bayer mosaic, and where its greens are.
+def mosaic_likeness(image: np.ndarray, crop: int = 2048) -> float:
+    """How much a one-channel frame looks like a Bayer mosaic: the mean absolute difference
+    between the pixels of the more alike diagonal of each 2 x 2 block over the mean along
+    its sides (a grey frame about 1.2-1.4, pure noise 1.0, a mosaic well under
+    :data:`MOSAIC_LIKENESS`). Measured on the central ``crop`` x ``crop`` pixels
+    (even-aligned).
 
-    Returns ``(likeness, greens)``: the mean absolute difference between the pixels of
-    the more alike diagonal of each 2 x 2 block over the mean along its sides (a grey
-    frame about 1.2-1.4, a mosaic well under :data:`MOSAIC_LIKENESS`), and ``"main"``
-    where that diagonal runs from (0, 0) to (1, 1) (greens there: ``GRBG`` or
-    ``GBRG``), ``"anti"`` where from (0, 1) to (1, 0) (``RGGB`` or ``BGGR``). Measured
-    on the central ``crop`` x ``crop`` pixels (even-aligned)."""
+    Which diagonal is the more alike does not tell the pattern: it is the greens' where
+    the scene is coloured, but a dark red and a dark blue can be nearer each other than
+    two greens across an edge (a lenslet frame under a raw sensor's gains did that)."""
     if image.ndim != 2:
         raise ValueError(f"one channel expected, not shape {image.shape}")
     h, w = image.shape
@@ -149,21 +152,21 @@ def mosaic_likeness(image: np.ndarray, crop: int = 2048) -> tuple[float, str]:
     sides = float(np.mean([np.mean(np.abs(p00 - p01)), np.mean(np.abs(p00 - p10)),
                            np.mean(np.abs(p11 - p01)), np.mean(np.abs(p11 - p10))]))
     if sides == 0.0:
-        return float("inf"), "main"  # a flat frame: nothing to tell
-    return min(main, anti) / sides, ("main" if main <= anti else "anti")
+        return float("inf")  # a flat frame: nothing to tell
+    return min(main, anti) / sides
 
 
 def mosaic_warning(image: np.ndarray) -> str | None:
     """A warning for a one-channel frame that looks like a raw Bayer mosaic, naming the
-    patterns that fit and the setting that demosaics it; None otherwise."""
+    setting that demosaics it; None otherwise."""
     if image.ndim != 2 or min(image.shape) < 4:
         return None
-    likeness, greens = mosaic_likeness(image)
+    likeness = mosaic_likeness(image)
     if not likeness < MOSAIC_LIKENESS:
         return None
-    fits = "GRBG or GBRG" if greens == "main" else "RGGB or BGGR"
     return (f"the grey frame looks like a raw Bayer mosaic (its pixels are alike along one "
             f"diagonal of each 2 x 2 block, {likeness:.2f} of the sides' difference; a grey "
-            f"frame gives about 1.2-1.4): the greens fit {fits}. If it is, give the pattern "
-            f"(plenocal convert --bayer PATTERN, or convert.bayer in the config) and the "
-            f"views come out in colour, without the mosaic's checker pattern")
+            f"frame gives about 1.2-1.4). If it is, give the camera's colour filter array, "
+            f"{', '.join(BAYER_PATTERNS)} (its datasheet or its raw files' metadata say "
+            f"which), as plenocal convert --bayer PATTERN or convert.bayer in the config, "
+            f"and the views come out in colour, without the mosaic's checker pattern")

@@ -197,8 +197,8 @@ def load_lenslet(path: str | Path, sensor_size: tuple[int, int] | None = None,
 
     ``bayer``: ``convert.bayer``, the colour filter array of a raw one-channel frame,
     which is then demosaiced (:func:`plenocal.convert.demosaic.demosaic`); ``none`` or
-    None: the frame as it is, and a grey one that looks like a mosaic is warned of
-    (:func:`plenocal.convert.demosaic.mosaic_warning`)."""
+    None: the frame as it is (the conversion warns of a grey one that looks like a
+    mosaic: :func:`plenocal.convert.demosaic.mosaic_warning`)."""
     path = Path(path)
     try:
         img = read_image(path)
@@ -218,9 +218,6 @@ def load_lenslet(path: str | Path, sensor_size: tuple[int, int] | None = None,
                                f"{img.shape[2]} channels: it is demosaiced already; set "
                                "convert.bayer: none (plenocal convert: leave out --bayer)")
         return demosaic(img, bayer)
-    note = mosaic_warning(img)
-    if note is not None:
-        log.warning("%s: %s", path, note)
     return img
 
 
@@ -550,6 +547,10 @@ class ShotConversion:
                     "carry no detail there, and the patch sizes, the grid check and the "
                     "border cut have less to go on (the real frames of shared/real clip "
                     "4 % at most); expose without clipping where you can")
+            log.warning("%s: %s", source, note)
+            self.warnings.append(f"{source}: {note}")
+        note = mosaic_warning(self._image)  # a raw readout read as grey (convert.bayer)
+        if note is not None:
             log.warning("%s: %s", source, note)
             self.warnings.append(f"{source}: {note}")
         mla, scores, check = st.mla, None, None
