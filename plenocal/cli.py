@@ -8,8 +8,8 @@ as RLC / TLCT users expect, writing what the workflow's rule ``convert`` writes.
         [--frames A:B] [--format png|yuv] [--setup-frame K] [--temporal hold|off] ...
 
 Options map onto the keys of the config's ``convert`` block (``mla``, ``tile_size``,
-``grid``, ``bit_depth``, ``bayer``; ``--set`` reaches any other key, dotted for nested blocks, e.g.
-``--set patch_size.block_samples=9``); the block is checked against config.schema.yaml
+``grid``, ``bit_depth``, ``bayer``; ``--set`` reaches any other key, dotted for nested
+blocks, e.g. ``--set patch_size.block_samples=9``); the block is checked against config.schema.yaml
 and completed with its defaults (as the workflow's rule ``convert`` gets it; the
 workflow's config.yaml fixes ``tile_size: 6`` for its synthetic ground truth, the command
 line keeps the schema's ``auto``) and goes through :meth:`ConvertSettings.from_config`.

@@ -282,8 +282,8 @@ def read_image(path: str | Path) -> np.ndarray:
         raise FileNotFoundError(f"{path}: image not found")
     cut = png_truncation(path)
     if cut is not None:
-        raise TruncatedImageError(f"{path}: a truncated PNG, {cut}: the file was not copied or "
-                      "written whole; copy or make it again")
+        raise TruncatedImageError(f"{path}: a truncated PNG, {cut}: the file was not "
+                                  "copied or written whole; copy or make it again")
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise OSError(f"{path}: not a readable image")
