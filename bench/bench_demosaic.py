@@ -20,22 +20,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from plenocal.convert.demosaic import MOSAIC_LIKENESS, demosaic, mosaic_likeness
+from plenocal.convert.demosaic import MOSAIC_LIKENESS, demosaic, mosaic, mosaic_likeness
 
 FRAMES = Path(__file__).resolve().parents[1] / ".." / "shared" / "real" / "frames"
-_CHANNEL = {"R": 0, "G": 1, "B": 2}
 # OpenCV names a Bayer code by the second row's first two colours (its own convention)
 _OPENCV = {"RGGB": cv2.COLOR_BayerBG2RGB, "GRBG": cv2.COLOR_BayerGB2RGB,
            "GBRG": cv2.COLOR_BayerGR2RGB, "BGGR": cv2.COLOR_BayerRG2RGB}
 RAW_GAINS = np.array([0.55, 1.0, 0.7])
-
-
-def mosaic_of(rgb: np.ndarray, pattern: str) -> np.ndarray:
-    out = np.empty(rgb.shape[:2], rgb.dtype)
-    for k, colour in enumerate(pattern):
-        dy, dx = divmod(k, 2)
-        out[dy::2, dx::2] = rgb[dy::2, dx::2, _CHANNEL[colour]]
-    return out
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
@@ -61,7 +52,7 @@ def main() -> None:
         grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
         raw_like = np.clip(rgb * RAW_GAINS, 0, 255).astype(np.uint8)
         for pattern in args.patterns:
-            m = mosaic_of(rgb, pattern)
+            m = mosaic(rgb, pattern)
             times = []
             for _ in range(3):
                 t = time.perf_counter()
@@ -69,7 +60,7 @@ def main() -> None:
                 times.append(time.perf_counter() - t)
             a, b = psnr(ours, rgb), psnr(cv2.cvtColor(m, _OPENCV[pattern]), rgb)
             like = (mosaic_likeness(grey), mosaic_likeness(m),
-                    mosaic_likeness(mosaic_of(raw_like, pattern)))
+                    mosaic_likeness(mosaic(raw_like, pattern)))
             print(f"| {path.stem} | {rgb.shape[0] * rgb.shape[1] / 1e6:.1f} | {pattern} "
                   f"| {a:.2f} | {b:.2f} | {a - b:+.2f} | {min(times):.2f} "
                   f"| {like[0]:.2f} / {like[1]:.2f} / {like[2]:.2f} |", flush=True)

@@ -19,6 +19,7 @@ from plenocal.convert.demosaic import (
     MOSAIC_LIKENESS,
     colour_sites,
     demosaic,
+    mosaic,
     mosaic_likeness,
     mosaic_warning,
 )
@@ -28,22 +29,11 @@ from plenocal.io.files import write_image
 from plenocal.io.raytrix import write_calib
 from plenocal.optics import PlenopticOptics
 
-_CHANNEL = {"R": 0, "G": 1, "B": 2}
-
 
 def small_optics() -> PlenopticOptics:
     """The default simulated camera (config.yaml) on a 400 x 300 sensor."""
     return PlenopticOptics(focal_length=0.035, focus_distance=0.6, mla_pitch=130e-6,
                            mla_f_number=2.8, k=5.0, pixel_size=5.5e-6, width=400, height=300)
-
-
-def mosaic_of(rgb: np.ndarray, pattern: str) -> np.ndarray:
-    """The one-channel readout of ``rgb`` behind the colour filter array ``pattern``."""
-    out = np.empty(rgb.shape[:2], rgb.dtype)
-    for k, colour in enumerate(pattern):
-        dy, dx = divmod(k, 2)
-        out[dy::2, dx::2] = rgb[dy::2, dx::2, _CHANNEL[colour]]
-    return out
 
 
 def affine_frame(h: int = 40, w: int = 52) -> np.ndarray:
@@ -52,6 +42,15 @@ def affine_frame(h: int = 40, w: int = 52) -> np.ndarray:
     y, x = np.mgrid[0:h, 0:w].astype(np.int64)
     channels = (1000 + 24 * x + 40 * y, 30000 - 16 * x + 8 * y, 5000 + 64 * y)
     return np.stack(channels, axis=2).astype(np.uint16)
+
+
+def test_the_mosaic_keeps_each_pixels_filtered_colour():
+    rgb = np.arange(4 * 6 * 3, dtype=np.uint16).reshape(4, 6, 3)
+    m = mosaic(rgb, "GRBG")  # G R / B G
+    assert m[0, 0] == rgb[0, 0, 1] and m[0, 1] == rgb[0, 1, 0]
+    assert m[1, 0] == rgb[1, 0, 2] and m[3, 5] == rgb[3, 5, 1] and m.dtype == np.uint16
+    with pytest.raises(ValueError, match="RGB frame"):
+        mosaic(rgb[:, :, 0], "GRBG")
 
 
 def test_colour_sites_by_pattern():
@@ -69,15 +68,15 @@ def test_an_affine_frame_comes_back_exactly(pattern):
     every channel comes back to the bit away from the border (where the reflected
     frame is not affine); the known samples are kept as they are everywhere."""
     rgb = affine_frame()
-    out = demosaic(mosaic_of(rgb, pattern), pattern)
+    out = demosaic(mosaic(rgb, pattern), pattern)
     assert out.dtype == np.uint16 and out.shape == rgb.shape
     assert np.array_equal(out[2:-2, 2:-2], rgb[2:-2, 2:-2])
-    assert np.array_equal(mosaic_of(out, pattern), mosaic_of(rgb, pattern))
+    assert np.array_equal(mosaic(out, pattern), mosaic(rgb, pattern))
 
 
 def test_the_wrong_pattern_does_not_come_back():
     rgb = affine_frame()
-    out = demosaic(mosaic_of(rgb, "RGGB"), "BGGR")
+    out = demosaic(mosaic(rgb, "RGGB"), "BGGR")
     assert not np.array_equal(out[2:-2, 2:-2], rgb[2:-2, 2:-2])
 
 
@@ -112,8 +111,8 @@ def test_the_detector_tells_a_mosaic_from_a_grey_frame():
     assert mosaic_likeness(noise) == pytest.approx(1.0, abs=0.05)
     assert mosaic_warning(noise) is None
     for pattern in BAYER_PATTERNS:
-        assert mosaic_likeness(mosaic_of(rgb, pattern)) < MOSAIC_LIKENESS
-        assert "--bayer PATTERN" in mosaic_warning(mosaic_of(rgb, pattern))
+        assert mosaic_likeness(mosaic(rgb, pattern)) < MOSAIC_LIKENESS
+        assert "--bayer PATTERN" in mosaic_warning(mosaic(rgb, pattern))
     assert mosaic_warning(rgb) is None  # three channels: not a mosaic
     assert mosaic_likeness(np.full((8, 8), 9, np.uint8)) == float("inf")
 
@@ -126,7 +125,7 @@ def bayer_shot(tmp_path):
                                   random_texture(256, 1.5, 5))
     rgb = (rgb * np.array([0.55, 1.0, 0.7])).astype(np.uint8)  # a raw sensor's channel gains
     write_image(tmp_path / "rgb.png", rgb)
-    write_image(tmp_path / "raw.png", mosaic_of(rgb, "RGGB"))
+    write_image(tmp_path / "raw.png", mosaic(rgb, "RGGB"))
     write_calib(calib, tmp_path / "calib.xml")
     return tmp_path
 

@@ -301,17 +301,13 @@ def test_raw_bayer_shots_are_demosaiced_by_the_workflow(tiny_complete_run, tmp_p
     demosaicing's error."""
     import numpy as np
 
+    from plenocal.convert.demosaic import mosaic
     from plenocal.io.files import read_image, write_image
 
     work = make_capture(tiny_complete_run, tmp_path / "bayer")
     shots = sorted((work / "data" / NAME / "lenslet").glob("*.png"))
     for path in shots:
-        rgb = read_image(path)
-        raw = np.empty(rgb.shape[:2], rgb.dtype)
-        for k, channel in enumerate((0, 1, 1, 2)):  # R G / G B
-            dy, dx = divmod(k, 2)
-            raw[dy::2, dx::2] = rgb[dy::2, dx::2, channel]
-        write_image(path, raw)
+        write_image(path, mosaic(read_image(path), "RGGB"))
     cfg = yaml.safe_load((work / "config.yaml").read_text())
     cfg.setdefault("convert", {})["bayer"] = "RGGB"
     (work / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))

@@ -78,6 +78,21 @@ def colour_sites(pattern: str) -> dict[str, tuple[int, int]]:
     return {"R": sites["R"], "B": sites["B"]}
 
 
+def mosaic(rgb: np.ndarray, pattern: str) -> np.ndarray:
+    """The one-channel readout ``(H, W)`` of an RGB frame ``(H, W, 3)`` behind the colour
+    filter array ``pattern``: each pixel keeps the one colour its filter passes (the
+    forward model that :func:`demosaic` inverts; tests and benchmarks make raw frames
+    with it)."""
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f"an RGB frame (H, W, 3), not shape {rgb.shape}")
+    sites = colour_sites(pattern)
+    out = rgb[:, :, 1].copy()
+    for colour, channel in (("R", 0), ("B", 2)):
+        dy, dx = sites[colour]
+        out[dy::2, dx::2] = rgb[dy::2, dx::2, channel]
+    return out
+
+
 def _demosaic_band(band: np.ndarray, pattern: str) -> np.ndarray:
     """Eqs. M1-M4 on a float32 band whose first row is an even row of the frame."""
     import cv2  # noqa: PLC0415
