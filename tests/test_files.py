@@ -5,9 +5,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from plenocal.io.files import STAGE_PREFIX, staged_outputs
+from plenocal.io.files import (
+    STAGE_PREFIX,
+    TruncatedImageError,
+    png_truncation,
+    read_image,
+    staged_outputs,
+    write_image,
+)
 
 
 def _tree(folder: Path) -> dict[str, bytes | None]:
@@ -66,3 +74,27 @@ def test_a_killed_runs_staging_folder_goes_with_the_next_run(tmp_path):
         assert not stale.exists()
         (stage / "x.png").write_bytes(b"whole")
     assert _tree(out) == {"x.png": b"whole"}
+
+
+def test_png_truncation_is_found_wherever_the_file_stops(tmp_path: Path):
+    """Every prefix of a PNG short of its end is named as cut short; the whole file, one
+    with bytes appended after IEND, and files that are no PNG are not (those are left to
+    the decoder's own error)."""
+    img = np.random.default_rng(0).integers(0, 65535, (40, 30, 3)).astype(np.uint16)
+    whole_path = tmp_path / "whole.png"
+    write_image(whole_path, img)
+    whole = whole_path.read_bytes()
+    assert png_truncation(whole_path) is None
+    cut = tmp_path / "cut.png"
+    for n in (8, 9, 33, 40, len(whole) // 2, len(whole) - 13, len(whole) - 1):
+        cut.write_bytes(whole[:n])
+        assert png_truncation(cut) is not None, n
+        with pytest.raises(TruncatedImageError, match=r"cut.png: a truncated PNG, cut short"):
+            read_image(cut)
+    cut.write_bytes(whole + b"trailing")
+    assert png_truncation(cut) is None and np.array_equal(read_image(cut), img)
+    for other in (b"", b"GIF89a", b"not a png at all"):
+        cut.write_bytes(other)
+        assert png_truncation(cut) is None
+        with pytest.raises(OSError, match="not a readable image"):
+            read_image(cut)
