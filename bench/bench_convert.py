@@ -14,8 +14,13 @@ from __future__ import annotations
 
 import os
 
-for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-    os.environ[_v] = "1"
+# run as a script only: imported (tests/test_bench_real.py), the one-thread settings would
+# reach the importing process, whose numba, having started its threads, then refuses to
+# compile another kernel ("Cannot set NUMBA_NUM_THREADS to a different value")
+if __name__ == "__main__":
+    for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+               "NUMBA_NUM_THREADS"):
+        os.environ[_v] = "1"
 
 import argparse  # noqa: E402
 import sys  # noqa: E402

@@ -1,6 +1,8 @@
 """bench/bench_real.py's choice of frames: a missing folder or frame stops it, with the
 path and the remedy, instead of printing an empty table that reads as a measured one."""
 
+import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -25,3 +27,40 @@ def test_a_frame_not_there_is_named(tmp_path, monkeypatch):
         bench_real.real_frames(["Handtools"])
     assert bench_real.real_frames(["HandTools"]) == ["HandTools"]
     assert bench_real.real_frames(None) == ["Boys2", "HandTools"]
+
+
+_IMPORT_AFTER_NUMBA = """
+import sys
+sys.path.insert(0, "bench")
+import numba
+import numpy as np
+
+@numba.njit(parallel=True)
+def total(x):
+    s = 0.0
+    for i in numba.prange(x.size):
+        s += x[i]
+    return s
+
+total(np.ones(8))  # numba's threads started, as by the simulator's tests
+import bench_real  # noqa: F401
+
+@numba.njit
+def plus_one(x):
+    return x + 1
+
+print(plus_one(1))  # a kernel compiled after the import
+"""
+
+
+def test_importing_the_bench_leaves_the_process_threads_alone():
+    """Imported (as above), bench_real once set NUMBA_NUM_THREADS=1 in the importing
+    process: every numba kernel compiled after it in that pytest worker then failed
+    ("Cannot set NUMBA_NUM_THREADS to a different value once the threads have been
+    launched"), the simulator's tests among them. Its one-thread settings are now for its
+    own process only."""
+    root = Path(__file__).resolve().parents[1]
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
+    out = subprocess.run([sys.executable, "-c", _IMPORT_AFTER_NUMBA], cwd=root, env=env,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0 and out.stdout.strip() == "2", out.stderr[-2000:]
