@@ -145,8 +145,9 @@ def build_parser() -> argparse.ArgumentParser:
                        description=CONVERT_HELP,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     c.add_argument("lenslet", metavar="LENSLET",
-                   help="the lenslet (raw plenoptic) image: 8- or 16-bit grey or RGB PNG, the "
-                        "full sensor readout the calib.xml belongs to")
+                   help="the lenslet (raw plenoptic) image: 8- or 16-bit grey or RGB PNG (or "
+                        "a raw Bayer mosaic with --bayer), the full sensor readout the "
+                        "calib.xml belongs to; or a raw YUV 4:2:0 recording (.yuv, below)")
     c.add_argument("calib", metavar="CALIB.xml",
                    help="the camera's RayCalibData file (Raytrix calib.xml: micro-image "
                         "diameter, grid offset and rotation, lens types)")
