@@ -24,7 +24,8 @@ from plenocal.convert.quality import summarise, view_quality
 from plenocal.convert.setup import decide_setup
 from plenocal.convert.shot import mla_contradiction, mla_undecided
 from plenocal.grid import MicrolensGrid
-from plenocal.io.files import png_truncation, read_image, write_image
+from plenocal.io.files import read_image, write_image
+from plenocal.io.png import truncation as png_truncation
 from plenocal.io.raytrix import LensType, RayCalib, read_calib, write_calib
 from plenocal.names import view_names
 from plenocal.optics import PlenopticOptics

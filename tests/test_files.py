@@ -11,11 +11,11 @@ import pytest
 from plenocal.io.files import (
     STAGE_PREFIX,
     TruncatedImageError,
-    png_truncation,
     read_image,
     staged_outputs,
     write_image,
 )
+from plenocal.io.png import truncation as png_truncation
 
 
 def _tree(folder: Path) -> dict[str, bytes | None]:

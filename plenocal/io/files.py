@@ -233,54 +233,20 @@ def write_images(items: Iterable[tuple[str | Path, np.ndarray]], threads: int = 
             pass  # re-raises a worker's error
 
 
-PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-_PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"  # an empty IEND chunk and its CRC
-
-
 class TruncatedImageError(OSError):
     """A PNG whose file ends before its IEND chunk (a copy or write that stopped early)."""
-
-
-def png_truncation(path: str | Path) -> str | None:
-    """Where a PNG file is cut short, or None when its chunks run to IEND (or it is no PNG).
-
-    A copy or download that stopped early leaves a PNG without its end; libpng then
-    prints its own "Read Error" before the reader can say which file and why. The file's
-    last 12 bytes are IEND on every whole PNG that nothing was appended to, so the common
-    case reads 12 bytes; otherwise the chunk headers are walked (a seek per chunk)."""
-    path = Path(path)
-    size = path.stat().st_size
-    with open(path, "rb") as fh:
-        if fh.read(8) != PNG_SIGNATURE:
-            return None
-        if size >= 20:
-            fh.seek(size - 12)
-            if fh.read(12) == _PNG_END:
-                return None
-        pos = 8
-        while True:
-            fh.seek(pos)
-            head = fh.read(8)
-            if len(head) < 8:
-                return f"cut short after {pos} bytes (no IEND chunk)"
-            length, kind = int.from_bytes(head[:4], "big"), head[4:]
-            end = pos + 12 + length
-            if end > size:
-                return (f"cut short in its {kind.decode('latin-1')!r} chunk at byte {pos} "
-                        f"({size - pos} of its {12 + length} bytes present)")
-            if kind == b"IEND":
-                return None
-            pos = end
 
 
 def read_image(path: str | Path) -> np.ndarray:
     """Read a PNG as stored (uint8 or uint16; RGB order for colour)."""
     import cv2  # noqa: PLC0415
 
+    from plenocal.io.png import truncation  # noqa: PLC0415
+
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: image not found")
-    cut = png_truncation(path)
+    cut = truncation(path)  # before libpng, which prints its own "Read Error" first
     if cut is not None:
         raise TruncatedImageError(f"{path}: a truncated PNG, {cut}: the file was not "
                                   "copied or written whole; copy or make it again")

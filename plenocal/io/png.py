@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import struct
 import zlib
+from pathlib import Path
 
 import numpy as np
 
@@ -108,3 +109,39 @@ def encode_png(image: np.ndarray, level: int = 1) -> bytes:
     for a in range(0, max(len(data), 1), IDAT_BYTES):
         parts += chunk(b"IDAT", data[a:a + IDAT_BYTES])
     return b"".join(parts + chunk(b"IEND", b""))
+
+
+#: a whole PNG's last 12 bytes: the empty IEND chunk and its CRC
+_END = b"".join(chunk(b"IEND", b""))
+
+
+def truncation(path: str | Path) -> str | None:
+    """Where a PNG file is cut short, or None when its chunks run to IEND (or it is no PNG).
+
+    A copy or download that stopped early leaves a PNG without its end; libpng then
+    prints its own "Read Error" before the reader can say which file and why. The file's
+    last 12 bytes are IEND on every whole PNG that nothing was appended to, so the common
+    case reads 12 bytes; otherwise the chunk headers are walked (a seek per chunk)."""
+    path = Path(path)
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        if fh.read(len(SIGNATURE)) != SIGNATURE:
+            return None
+        if size >= 20:
+            fh.seek(size - 12)
+            if fh.read(12) == _END:
+                return None
+        pos = len(SIGNATURE)
+        while True:
+            fh.seek(pos)
+            head = fh.read(8)
+            if len(head) < 8:
+                return f"cut short after {pos} bytes (no IEND chunk)"
+            length, kind = int.from_bytes(head[:4], "big"), head[4:]
+            end = pos + 12 + length
+            if end > size:
+                return (f"cut short in its {kind.decode('latin-1')!r} chunk at byte {pos} "
+                        f"({size - pos} of its {12 + length} bytes present)")
+            if kind == b"IEND":
+                return None
+            pos = end
