@@ -74,8 +74,7 @@ def colour_sites(pattern: str) -> dict[str, tuple[int, int]]:
     pattern = pattern.upper()
     if pattern not in BAYER_PATTERNS:
         raise ValueError(f"Bayer pattern {pattern!r}: one of {', '.join(BAYER_PATTERNS)}")
-    sites = {pattern[k]: (k // 2, k % 2) for k in (0, 1, 2, 3) if pattern[k] != "G"}
-    return {"R": sites["R"], "B": sites["B"]}
+    return {colour: divmod(k, 2) for k, colour in enumerate(pattern) if colour != "G"}
 
 
 def mosaic(rgb: np.ndarray, pattern: str) -> np.ndarray:
