@@ -12,15 +12,11 @@ lenslet image per second, and the accuracy of the patch sizes against the truth.
 
 from __future__ import annotations
 
-import os
-
-# run as a script only: imported (tests/test_bench_real.py), the one-thread settings would
-# reach the importing process, whose numba, having started its threads, then refuses to
-# compile another kernel ("Cannot set NUMBA_NUM_THREADS to a different value")
+# run as a script only (bench/one_thread.py says why)
 if __name__ == "__main__":
-    for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-               "NUMBA_NUM_THREADS"):
-        os.environ[_v] = "1"
+    from one_thread import pin
+
+    pin()
 
 import argparse  # noqa: E402
 import sys  # noqa: E402

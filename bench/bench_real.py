@@ -65,13 +65,11 @@ import os
 #: the environment a user runs ``plenocal convert`` in (``--tlct``): before the one-thread
 #: settings below, which are for the in-process measures
 USER_ENV = dict(os.environ)
-# run as a script only: imported (tests/test_bench_real.py), the one-thread settings would
-# reach the importing process, whose numba, having started its threads, then refuses to
-# compile another kernel ("Cannot set NUMBA_NUM_THREADS to a different value")
+# run as a script only (bench/one_thread.py says why)
 if __name__ == "__main__":
-    for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-               "NUMBA_NUM_THREADS"):
-        os.environ[_v] = "1"
+    from one_thread import pin
+
+    pin()
 
 import argparse  # noqa: E402
 import re  # noqa: E402
