@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import re
 import shutil
@@ -496,18 +497,43 @@ def source_rows(results: dict[str, dict]) -> list[str]:
     return lines
 
 
+def refined_sd_pct(r: dict) -> float | None:
+    """The refined focal length's own standard deviation (%) that ``refine.json`` gives
+    (``refine.focal_sd``), where the refinement was kept and gave one."""
+    d = r.get("refine") or {}
+    if not d.get("enabled") or d.get("rejected"):
+        return None
+    return ((d.get("focal_px") or {}).get("std") or {}).get("std_pct")
+
+
+def sd_summary(results: dict[str, dict]) -> str | None:
+    """How well the refined focal length's own deviation predicts its error against the
+    truth: the errors over it, their RMS and largest, and how many lie within 2."""
+    z = [r["focal_signed_pct"] / refined_sd_pct(r) for r in results.values()
+         if refined_sd_pct(r) and r.get("focal_signed_pct") is not None]
+    if not z:
+        return None
+    rms = math.sqrt(statistics.fmean(v * v for v in z))
+    return (f"The refined focal length's error over its own standard deviation "
+            f"(`refine.json` `focal_px.std`): RMS {rms:.2f}, at most {max(map(abs, z)):.2f}, "
+            f"{sum(abs(v) <= 2 for v in z)} of {len(z)} within 2.")
+
+
 def refine_rows(results: dict[str, dict]) -> list[str]:
     """What rule ``refine`` did on each capture (``calibration/refine.json``): its gain in
     the median reprojection error of its observations, the largest shot shift against the
-    limit, and whether ``calibration/`` holds the refined cameras."""
+    limit, whether ``calibration/`` holds the refined cameras, and the refined focal
+    length's own standard deviation with the error over it."""
     lines = ["| capture | median obs. error before / after px | gain % | largest shot shift "
-             "mm (limit) | written |", "|---|---:|---:|---:|---|"]
+             "mm (limit) | written | focal sd % | focal error / sd |",
+             "|---|---:|---:|---:|---|---:|---:|"]
     for name, r in results.items():
         d = r.get("refine")
         if not d or not d.get("enabled"):
-            lines.append(f"| {name} | - | - | - | Eq. 6 (refine off) |")
+            lines.append(f"| {name} | - | - | - | Eq. 6 (refine off) | - | - |")
             continue
         g = d.get("gain") or {}
+        sd = refined_sd_pct(r) if r.get("focal_signed_pct") is not None else None
         shifted = d.get("max_shift_mm") is not None and d["max_shift_mm"] > d["limit_mm"]
         written = ("refined" if not d.get("rejected") else
                    "Eq. 6 (a shot moved too far)" if shifted else "Eq. 6 (gain too small)")
@@ -515,7 +541,9 @@ def refine_rows(results: dict[str, dict]) -> list[str]:
                      f"{_fmt('{:.4f}', g.get('median_after_px'))} | "
                      f"{_fmt('{:+.2f}', g.get('gain_pct'))} | "
                      f"{_fmt('{:.2f}', d.get('max_shift_mm'))} "
-                     f"({_fmt('{:.2f}', d.get('limit_mm'))}) | {written} |")
+                     f"({_fmt('{:.2f}', d.get('limit_mm'))}) | {written} | "
+                     f"{_fmt('{:.3f}', sd)} | "
+                     f"{_fmt('{:+.2f}', r['focal_signed_pct'] / sd if sd else None)} |")
     return lines
 
 
@@ -697,6 +725,9 @@ def main() -> None:
     out.say("")
     for line in refine_rows(results):
         out.say(line)
+    if sd_summary(results):
+        out.say("")
+        out.say(sd_summary(results))
     out.say("")
     out.say("Table I, ratios:")
     out.say("")

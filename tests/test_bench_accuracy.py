@@ -175,3 +175,26 @@ def test_collecting_nothing_says_so_by_name_instead_of_a_traceback(tmp_path, mon
                                          r"default .*--collect-only"):
         ba.main()
     assert "default-s12345: not measured yet" in capsys.readouterr().err
+
+
+def test_the_refined_focal_lengths_deviation_is_judged_against_its_error():
+    """Hand-computed: errors +0.10 and -0.03 % over deviations 0.05 and 0.10 % are +2.0 and
+    -0.3 deviations (RMS sqrt((4 + 0.09) / 2) = 1.43); a rejected refinement, one without a
+    deviation and one turned off take no part."""
+    def capture(err, sd, **refine):
+        std = {} if sd is None else {"std": {"std_pct": sd}}
+        return {"focal_signed_pct": err,
+                "refine": {"enabled": True, "rejected": False, "gain": {},
+                           "focal_px": {"refined": 1000.0, **std}, **refine}}
+
+    results = {"a-s1": capture(0.10, 0.05), "b-s1": capture(-0.03, 0.10),
+               "c-s1": capture(0.2, 0.01, rejected=True), "d-s1": capture(0.2, None),
+               "e-s1": {"focal_signed_pct": 0.3, "refine": {"enabled": False}}}
+    assert ba.sd_summary(results) == (
+        "The refined focal length's error over its own standard deviation (`refine.json` "
+        "`focal_px.std`): RMS 1.43, at most 2.00, 2 of 2 within 2.")
+    rows = ba.refine_rows(results)
+    assert rows[2].endswith("| 0.050 | +2.00 |") and rows[3].endswith("| 0.100 | -0.30 |")
+    assert rows[4].endswith("| - | - |") and rows[5].endswith("| - | - |")
+    assert rows[6].endswith("| Eq. 6 (refine off) | - | - |")
+    assert ba.sd_summary({"d-s1": capture(0.2, None)}) is None

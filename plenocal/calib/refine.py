@@ -479,32 +479,43 @@ def focal_pass_std(rec, model: RigModel, settings: RefineSettings, *, refine_rig
                    work_dir: str | Path | None = None) -> dict:
     """The focal length's standard deviation at the end of the focal pass (config
     ``refine.focal_sd``; :mod:`plenocal.calib.refine_uncertainty`), its problem set up as
-    the pass's (:func:`_adjustment_setup`). Reads ``rec``, changes nothing."""
+    the pass's (:func:`_adjustment_setup`) on a thinned copy of ``rec`` where ``rec`` holds
+    more than :data:`~plenocal.calib.refine_uncertainty.MAX_OBSERVATIONS` observations.
+    Reads ``rec``, changes nothing."""
     import pycolmap  # noqa: PLC0415
 
-    from plenocal.calib.refine_uncertainty import sensor_focal_std_pct  # noqa: PLC0415
+    from plenocal.calib import refine_uncertainty as ru  # noqa: PLC0415
 
     o, cfg = _adjustment_setup(rec, model, settings, refine_focal=True, refine_rig=refine_rig,
                                hold_frame=hold_frame, loss_scale_px=loss_scale_px,
                                refine_pp=True)
+    errors = observation_errors(rec, work_dir)
+    every = ru.points_every(len(errors))
+    problem, kept, total = ru.thinned(rec, every) if every > 1 else (rec, len(errors),
+                                                                      len(errors))
     # setting the problem up rewrites the frames' poses in their last bits (their
     # parametrisation): kept and put back, so that the refinement's result is the same
-    # bytes with and without this estimate
+    # bytes with and without this estimate (a thinned copy's are its own)
     poses = {f: np.array(rec.frames[f].rig_from_world.params) for f in rec.frames}
     try:
-        adjuster = pycolmap.create_default_ceres_bundle_adjuster(o, cfg, rec)
+        adjuster = pycolmap.create_default_ceres_bundle_adjuster(o, cfg, problem)
         held = {model.frame_of_shot[s] for s in held_shots(model, settings, hold_frame)}
         frames = [f for f in sorted(model.frame_of_shot.values()) if f not in held]
-        out = sensor_focal_std_pct(rec, sorted(set(model.camera_of_view.values())), frames,
-                                   errors_px=observation_errors(rec, work_dir),
-                                   bundle_adjuster=adjuster)
+        out = ru.sensor_focal_std_pct(problem, sorted(set(model.camera_of_view.values())),
+                                      frames, errors_px=errors, bundle_adjuster=adjuster,
+                                      observations_share=kept / max(total, 1))
         del adjuster
     finally:
         for f, params in poses.items():
             rec.frames[f].rig_from_world.params[:] = params
-    log.info("the focal length's standard deviation (the focal pass's covariance): %s "
-             "(%.1f s)", "not estimated" if out["std_pct"] is None
-             else f"{out['std_pct']:.3f} %", out["seconds"])
+        del problem
+    # the time in the log, not in refine.json (the same bytes run after run)
+    seconds = out.pop("seconds")
+    out.update(points_every=every, observations=kept)
+    log.info("the focal length's standard deviation (the focal pass's covariance on every "
+             "%d-th point, %d of %d observations): %s (%.1f s)", every, kept, total,
+             "not estimated" if out["std_pct"] is None else f"{out['std_pct']:.3f} %",
+             seconds)
     return out
 
 
