@@ -25,10 +25,13 @@ reconstruction: every k-th point (:func:`points_every`: the smallest k that leav
 :data:`MAX_OBSERVATIONS` observations), its variance then scaled by the share of the
 observations kept (``sd = sd_thinned * sqrt(kept / all)``: the variance of a mean of
 independent clusters falls as their number). On three captures of the ``small``, default and
-``dense`` geometries every fourth and every eighth point gave the whole problem's deviation
-to 0.001 % of the focal length (0.100 / 0.103 %, 0.047 / 0.047 / 0.047 %, 0.045 / 0.045 /
-0.044 %), in 0.4-1.9 s against 2.5-12.2 s, and the refine job's peak memory stayed its
-own (1.33 GB against 1.78 GB with the whole problem on the default geometry; BENCHMARKS.md,
+``dense`` geometries (seed 101) it gave the whole problem's deviation to within 0.004 % of
+the focal length, 4 % of the figure: 0.0998 % whole against 0.1004 % on every second point
+and 0.1035 % on every fourth (small); 0.0470 against 0.0487 % on every fifth (default, the
+rule's k), 0.0472 and 0.0470 % on every fourth and eighth; 0.0447 against 0.0458 % on every
+seventh (dense), 0.0447 and 0.0437 %. It took 0.7-1.6 s against 2.5-12.2 s, and the refine
+job's peak memory stayed its own (1.33 GB on the default geometry with and without it,
+1.78 GB with the whole problem; BENCHMARKS.md,
 "The refined focal length's standard deviation on every run").
 
 COLMAP's estimator sums in an order that moves the last bits of its result from run to run
