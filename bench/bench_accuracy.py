@@ -509,8 +509,8 @@ def refined_sd_pct(r: dict) -> float | None:
 def sd_summary(results: dict[str, dict]) -> str | None:
     """How well the refined focal length's own deviation predicts its error against the
     truth: the errors over it, their RMS and largest, and how many lie within 2."""
-    z = [r["focal_signed_pct"] / refined_sd_pct(r) for r in results.values()
-         if refined_sd_pct(r) and r.get("focal_signed_pct") is not None]
+    pairs = [(r.get("focal_signed_pct"), refined_sd_pct(r)) for r in results.values()]
+    z = [err / sd for err, sd in pairs if sd and err is not None]
     if not z:
         return None
     rms = math.sqrt(statistics.fmean(v * v for v in z))
@@ -725,9 +725,10 @@ def main() -> None:
     out.say("")
     for line in refine_rows(results):
         out.say(line)
-    if sd_summary(results):
+    summary = sd_summary(results)
+    if summary:
         out.say("")
-        out.say(sd_summary(results))
+        out.say(summary)
     out.say("")
     out.say("Table I, ratios:")
     out.say("")
