@@ -57,6 +57,7 @@ import time
 import numpy as np
 
 from plenocal.calib.reg_a.uncertainty import noise_per_coordinate_px
+from plenocal.rounding import round_floats
 
 #: the most observations the covariance is estimated on (module docstring)
 MAX_OBSERVATIONS = 250_000
@@ -86,9 +87,9 @@ def thinned(rec, every: int) -> tuple[object, int, int]:
     return out, kept, total
 
 
-def significant(x: float, digits: int = SIGNIFICANT) -> float:
-    """``x`` rounded to ``digits`` significant digits."""
-    return float(f"{x:.{digits - 1}e}") if x and math.isfinite(x) else x
+def significant(x: float) -> float:
+    """``x`` rounded to :data:`SIGNIFICANT` significant digits."""
+    return round_floats(x, SIGNIFICANT)
 
 
 def sensor_focal_std_pct(rec, camera_ids: list[int], pose_frames: list[int], *,

@@ -132,6 +132,7 @@ import numpy as np
 from plenocal.convert.exact import magnitude, remap
 from plenocal.grid import MicrolensGrid
 from plenocal.io.raytrix import RayCalib
+from plenocal.rounding import round_floats
 
 AUTO_DRIFT_PX = 1.0  # refine (convert.grid: auto) past this drift of the file's grid
 AUTO_DRIFT_SIGMAS = 4.0  # ... and when the drift is this many standard errors
@@ -164,21 +165,6 @@ REGIONS = ("top_left", "top_right", "centre", "bottom_left", "bottom_right")
 REPORT_DECIMALS = 4
 SHAPE_DECIMALS = 9
 SHAPE_FIELDS = ("affine", "A", "pitch_ratio", "rotation_deg")
-
-
-def round_floats(value, digits: int, decimals: bool = False):
-    """``value`` with every float (in nested dicts, lists and tuples) rounded to
-    ``digits`` significant digits, or to ``digits`` decimals where ``decimals``; other
-    values unchanged (-0.0 written as 0.0)."""
-    if isinstance(value, float):
-        if not math.isfinite(value):
-            return value
-        return (round(value, digits) if decimals else float(f"{value:.{digits}g}")) + 0.0
-    if isinstance(value, dict):
-        return {k: round_floats(v, digits, decimals) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return type(value)(round_floats(v, digits, decimals) for v in value)
-    return value
 
 
 @dataclass

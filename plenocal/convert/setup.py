@@ -49,13 +49,13 @@ from plenocal.convert.gridcheck import (
     UNVERIFIED_USE,
     GridCheck,
     grid_for_mode,
-    round_floats,
 )
 from plenocal.convert.levels import OVEREXPOSED_SHARE, clipped_share
 from plenocal.convert.shot import ConvertSettings, ShotConversion, build_grid
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_json, write_json
 from plenocal.io.raytrix import RayCalib
+from plenocal.rounding import round_floats
 
 # 2: safe_diameter_px, q_px and the safe-diameter measure; 3: pitch_px; 4: least_reach;
 # 5: border_cut
