@@ -41,6 +41,7 @@ from plenocal.convert.errors import ConvertError
 from plenocal.convert.outfolder import check_output_folder, still_claims
 from plenocal.convert.prefilter import OPTIMAL_A
 from plenocal.convert.video import TEMPORAL_MODES
+from plenocal.io.png import VIEW_BITS_CHOICES, view_dtype
 from plenocal.io.yuv import (
     DEFAULT_MATRIX,
     DEFAULT_RANGE,
@@ -225,6 +226,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="hold (default): a lens keeps the previous frame's patch size where "
                         "it still matches nearly as well (no flicker on static scenes); "
                         "off: every frame converted alone, as its PNG")
+    c.add_argument("--png-bits", type=int, choices=VIEW_BITS_CHOICES, default=None,
+                   metavar="8|16",
+                   help="bits per sample of the PNG views: 8 (default; what every image tool "
+                        "reads) or 16, which keeps the levels of a frame of more than 8 bits "
+                        "(a 10-, 12- or 16-bit PNG or recording) and the blend's fractions "
+                        "of a level; not with --format yuv, whose videos are of the input's "
+                        "bit depth")
     c.add_argument("--threads", type=_threads, default=None, metavar="N",
                    help="threads that render and write the views (the same bytes with any "
                         "number). Default: the cores this process may use")
@@ -331,6 +339,9 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
                                "file a command: convert a folder's frames one by one)")
         if path is not None and not Path(path).is_file():
             raise ConvertError(f"{path}: {what} not found")
+    if args.png_bits is not None and args.out_format != "png":
+        raise ConvertError(f"--png-bits {args.png_bits} with --format {args.out_format}: the "
+                           "PNG views' bits; the YUV videos are of the input's bit depth")
     video = Path(args.lenslet).suffix.lower() == ".yuv"
     if not video:
         given = [flag for flag, value in (("--size", args.size), ("--frames", args.frames),
@@ -419,7 +430,7 @@ def _write_conversion(args: argparse.Namespace, shot, out: Path, threads: int, s
         try:
             picture = side.submit(lambda: write_image(stage / "patch_size.png",
                                                       shot.patch_picture()))
-            for views in shot.view_groups(threads=threads):
+            for views in shot.view_groups(threads=threads, dtype=view_dtype(args.png_bits)):
                 write_images(((stage / f"{name}.png", img) for name, img in views.items()),
                              threads)
                 done += len(views)
@@ -457,6 +468,7 @@ def run_convert_video(args: argparse.Namespace, settings, block: dict,
             ("matrix", args.yuv_matrix), ("range", args.yuv_range),
             ("temporal", args.temporal)) if value is not None}),
         size=args.size, bits=bits, frames=args.frames, out_format=args.out_format,
+        png_bits=args.png_bits,
         setup_frame=args.setup_frame,
         setup=None if args.setup is None else read_setup(args.setup),
         grid_foreign=block["grid_foreign"], threads=args.threads or default_threads())

@@ -279,6 +279,46 @@ def test_10bit_clip_to_10bit_view_videos_matching_the_frames_pngs(tmp_path):
 
 
 @needs_real
+def test_16bit_png_views_keep_a_10bit_clips_levels(tmp_path):
+    """``--png-bits 16``: a 10-bit clip's PNG views keep its levels. The frame's PNG
+    converted to 16-bit views with the video's set-up matches the 10-bit view videos to a
+    level (the 8-bit views above: 4), and the recording converted to PNG frames with
+    ``--png-bits 16`` gives those same views, sample for sample. The option is refused
+    with ``--format yuv``, whose videos are of the input's depth already."""
+    a, _, calib = _frames()
+    clip, xml, out, _, doc = _video_of(tmp_path, [a], 10, calib)
+    W, H = doc["views"]["width"], doc["views"]["height"]
+    assert doc["views"]["bits"] == 10
+    vfmt, fmt = YuvFormat(W, H, 10), resolve_format(clip)
+    png = tmp_path / "f0.png"
+    write_image(png, lenslet_frame(read_frame(clip, fmt, 0), 10))
+    single = tmp_path / "single"
+    r = _cli("convert", str(png), str(xml), "-o", str(single), "--bit-depth", "16",
+             "--setup", str(out / "convert_setup.json"), "--png-bits", "16")
+    assert r.returncode == 0, r.stderr
+    frames = tmp_path / "frames"
+    r = _cli("convert", str(clip), str(xml), "-o", str(frames), "--format", "png",
+             "--temporal", "off", "--setup", str(out / "convert_setup.json"),
+             "--png-bits", "16")
+    assert r.returncode == 0, r.stderr
+    assert json.loads((frames / "video.json").read_text())["views"]["bits"] == 16
+    for name in ("2_2", "0_0", "4_4", "1_3"):
+        view = read_image(single / f"{name}.png")
+        assert view.dtype == np.uint16 and view.shape == (H, W, 3)
+        assert np.array_equal(read_image(frames / "frame_00000" / f"{name}.png"), view)
+        # more than an 8-bit view's 256 levels in a channel: the 10 bits are kept
+        assert len(np.unique(view[..., 1])) > 256
+        got = read_frame(out / doc["views"]["files"][name], vfmt, 0)
+        want = rgb_to_yuv(view.astype(np.float32) / 65535.0, 10)
+        for g, w in zip(got, want, strict=True):
+            assert np.abs(g.astype(int) - w.astype(int)).max() <= 1, name
+    r = _cli("convert", str(clip), str(xml), "-o", str(tmp_path / "no"), "--format", "yuv",
+             "--png-bits", "16")
+    assert r.returncode == 2 and "--png-bits 16 with --format yuv" in r.stderr, r.stderr
+    assert not (tmp_path / "no").exists()
+
+
+@needs_real
 def test_8bit_clip_to_8bit_view_videos_are_the_frames_png_views(tmp_path):
     """An 8-bit clip (frames 0, 150 of a Fujita2 crop) is held as 8-bit RGB frames, as their
     PNGs: each frame's view videos are exactly rgb_to_yuv of the 8-bit views converted from

@@ -58,6 +58,7 @@ from plenocal.convert.threads import map_threads
 from plenocal.convert.vignetting import lens_type_profiles
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import staged_outputs, write_images, write_json
+from plenocal.io.png import view_dtype
 from plenocal.io.raytrix import RayCalib
 from plenocal.io.yuv import (
     DEFAULT_MATRIX,
@@ -397,7 +398,8 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
                       size: tuple[int, int] | None = None, bits: int | None = None,
                       frames: str | None = None, out_format: str = "png",
                       setup_frame: int | None = None, setup: ConverterSetup | None = None,
-                      grid_foreign: str | None = None, threads: int = 1) -> dict:
+                      grid_foreign: str | None = None, threads: int = 1,
+                      png_bits: int | None = None) -> dict:
     """Convert the frames ``frames`` (:func:`parse_frames`) of the raw YUV 4:2:0 file
     ``path`` (format: :func:`plenocal.io.yuv.resolve_format` with ``size`` / ``bits``) into
     ``out``: ``yuv``, one video per view of the input's bit depth
@@ -409,8 +411,9 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
     place at the end, video.json last (:func:`plenocal.io.files.staged_outputs`): a run
     that fails leaves ``out`` as it was.
     Progress per frame on the ``plenocal.convert`` logger; ``threads``: the views of a frame
-    are rendered on that many threads (the same bytes with any number). Returns the
-    video.json record."""
+    are rendered on that many threads (the same bytes with any number). ``png_bits``: the PNG
+    views' bits per sample (:func:`plenocal.io.png.view_dtype`; a recording of more than 8
+    bits keeps its levels at 16). Returns the video.json record."""
     path = Path(path)
     out = Path(out)
     video = video or VideoSettings()
@@ -438,14 +441,14 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
     with warnings_once():  # each frame's warnings said once for the recording
         return _convert_recording(path, fmt, count, chosen, calib, out, n_views, settings,
                                   video, out_format, setup_frame, setup, grid_foreign,
-                                  threads)
+                                  threads, view_dtype(png_bits))
 
 
 def _convert_recording(path: Path, fmt: YuvFormat, count: int, chosen: range,
                        calib: RayCalib, out: Path, n_views: int, settings: ConvertSettings,
                        video: VideoSettings, out_format: str, setup_frame: int | None,
                        setup: ConverterSetup | None, grid_foreign: str | None,
-                       threads: int) -> dict:
+                       threads: int, png_dtype: type) -> dict:
     """:func:`convert_recording` from its set-up on (the arguments checked, the output
     folder free)."""
     conv = VideoConverter(calib, n_views, settings, video, setup, grid_foreign, threads)
@@ -473,7 +476,7 @@ def _convert_recording(path: Path, fmt: YuvFormat, count: int, chosen: range,
     # last: a run that fails or is stopped leaves the previous run's files as they were
     with staged_outputs(out, last=("video.json",)) as stage:
         doc = _convert_frames(path, fmt, count, chosen, conv, stage, n_views, video,
-                              out_format, threads, decided_frame)
+                              out_format, threads, decided_frame, png_dtype=png_dtype)
     if out_format == "yuv":  # this run's views' videos at an earlier run's size replaced
         for old in stale_view_videos(out, set(doc["views"]["files"].values())):
             old.unlink()
@@ -484,10 +487,10 @@ def _convert_recording(path: Path, fmt: YuvFormat, count: int, chosen: range,
 def _convert_frames(path: Path, fmt: YuvFormat, count: int, chosen: range,
                     conv: VideoConverter, out: Path, n_views: int, video: VideoSettings,
                     out_format: str, threads: int,
-                    first: tuple[int, np.ndarray] | None = None) -> dict:
+                    first: tuple[int, np.ndarray] | None = None, *, png_dtype: type) -> dict:
     """:func:`convert_recording`'s frames, written to ``out`` (its staging folder).
     ``first``: (frame number, its :func:`lenslet_frame`) where it was read already (the
-    set-up's frame); handed on, not kept."""
+    set-up's frame); handed on, not kept. ``png_dtype``: the PNG views' samples."""
     assert conv.setup is not None
     write_setup(out / "convert_setup.json", conv.setup)
     names = view_names(n_views)
@@ -521,12 +524,14 @@ def _convert_frames(path: Path, fmt: YuvFormat, count: int, chosen: range,
                 folder.mkdir()
             # views in groups within the converter's memory budget: 16-bit for YUV videos
             # of more than 8 bits (rounded again to the input's depth there), 8-bit for
-            # PNGs and for 8-bit videos, whose frames are 8-bit RGB (lenslet_frame): twice
-            # as many views in the budget (one group on a 12-MP frame, where 16-bit views
-            # took two, each planning the frame again) and a third of the softening time
-            deep = writer is not None and fmt.bits > 8
-            for views in shot.view_groups(threads=threads,
-                                          dtype=np.uint16 if deep else np.uint8):
+            # 8-bit videos, whose frames are 8-bit RGB (lenslet_frame): twice as many views
+            # in the budget (one group on a 12-MP frame, where 16-bit views took two, each
+            # planning the frame again) and a third of the softening time; PNGs as asked
+            if writer is not None:
+                dtype = np.uint16 if fmt.bits > 8 else np.uint8
+            else:
+                dtype = png_dtype
+            for views in shot.view_groups(threads=threads, dtype=dtype):
                 if writer is not None:  # made side by side, written in view order
                     to_yuv = partial(view_to_yuv, bits=fmt.bits, matrix=video.matrix,
                                      rng=video.range)
@@ -562,6 +567,7 @@ def _convert_frames(path: Path, fmt: YuvFormat, count: int, chosen: range,
            "temporal": {"mode": video.temporal, "hold_margin": video.hold_margin},
            "views": {"n": n_views, "width": view_fmt.width, "height": view_fmt.height,
                      "format": out_format,
+                     "bits": fmt.bits if writer is not None else 8 * np.dtype(png_dtype).itemsize,
                      "files": ({n: writer.paths[n].name for n in names}
                                if writer is not None else None)},
            "set_up": {"decided_on": conv.setup.decided_on, "file": "convert_setup.json"},

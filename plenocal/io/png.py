@@ -41,6 +41,21 @@ LEVELS = (0, 1, 2, 3)
 #: may be cut anywhere between chunks)
 IDAT_BYTES = 1 << 30
 
+#: bits per sample of the PNG views ``plenocal convert`` writes, unless ``--png-bits`` says
+#: 16: what every image tool reads (Pillow, which NeRF and Gaussian-splatting loaders use,
+#: reads 16-bit colour PNGs as 8-bit)
+VIEW_BITS = 8
+#: the bits per sample a PNG view may have
+VIEW_BITS_CHOICES = (8, 16)
+
+
+def view_dtype(bits: int | None) -> type:
+    """The sample type of PNG views of ``bits`` bits per sample (None: :data:`VIEW_BITS`)."""
+    bits = VIEW_BITS if bits is None else bits
+    if bits not in VIEW_BITS_CHOICES:
+        raise ValueError(f"PNG views hold 8 or 16 bits per sample, not {bits}")
+    return np.uint8 if bits == 8 else np.uint16
+
 
 def chunk(kind: bytes, data: bytes | memoryview) -> list[bytes | memoryview]:
     """One PNG chunk as its parts, to be joined once with the others: length, type, data
