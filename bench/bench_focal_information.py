@@ -9,7 +9,7 @@ Two parts.
    its largest and rms size is what the observations must resolve to fix the focal length
    to ``e``. (A parallel array fixes nothing: the focal length trades off against depth.)
 2. **What moves it on real observations** (per kept capture of ``bench_accuracy.py``):
-   each of the refinement's points (:func:`plenocal.calib.refine.select_points`) is
+   each of the refinement's points (:func:`plenocal.calib.track_sets.select_points`) is
    triangulated with the true cameras; an observation's residual is its offset from the
    true projection. Observations more than ``--within`` px off (mismatches) are dropped
    from every run below, so that only small, honest errors are left. The refinement
@@ -51,6 +51,7 @@ from benchmd import Lines, update_sections  # noqa: E402
 from plenocal.artifacts.cameras import read_cameras  # noqa: E402
 from plenocal.artifacts.rig import RigB, read_rig  # noqa: E402
 from plenocal.calib import refine as rf  # noqa: E402
+from plenocal.calib import track_sets as tsets  # noqa: E402
 from plenocal.calib.reg_b.rig import rig_at_focal  # noqa: E402
 from plenocal.config import validate_config  # noqa: E402
 from plenocal.names import array_shots, split_key  # noqa: E402
@@ -258,7 +259,7 @@ def refine_runs(cap: KeptCapture, runs: list[str], rebuild) -> dict:
     run's robust scale (``auto`` would follow each run's own median error, and weigh the
     runs' residuals differently). Returns ``runs`` (run -> signed focal error %),
     ``median`` (run -> median reprojection error after, px) and ``loss_scale``."""
-    original = rf.rig_reconstruction
+    original = tsets.rig_reconstruction
     state = {"run": runs[0]}
 
     def patched(tracks, views, shot_poses, width, height, point_ids, work_dir=None,
@@ -269,7 +270,7 @@ def refine_runs(cap: KeptCapture, runs: list[str], rebuild) -> dict:
 
     out: dict = {"runs": {}, "median": {}}
     settings = cap.settings
-    rf.rig_reconstruction = patched
+    tsets.rig_reconstruction = patched
     try:
         for how in runs:
             state["run"] = how
@@ -285,7 +286,7 @@ def refine_runs(cap: KeptCapture, runs: list[str], rebuild) -> dict:
             print(f"{cap.name} {how:30s} focal {out['runs'][how]:+.3f} % "
                   f"({time.perf_counter() - t0:.0f} s)", flush=True)
     finally:
-        rf.rig_reconstruction = original
+        tsets.rig_reconstruction = original
     return out
 
 

@@ -687,7 +687,7 @@ def track_config():
     return {k: cfg[k] for k in TRACK_KEYS if k in cfg}
 
 
-#: the refine: keys of :func:`track_config` (plenocal.calib.refine.make_track_set)
+#: the refine: keys of :func:`track_config` (plenocal.calib.track_sets.make_track_set)
 TRACK_KEYS = (
     "matches",
     "carry_every",

@@ -1,6 +1,6 @@
 """Rule refine_tracks: one track set of the joint refinement (its source, the wildcard:
 central or views), triangulated with the Eq. 6 cameras and aligned by the views' patches
-(plenocal.calib.refine.make_track_set), for rule refine."""
+(plenocal.calib.track_sets.make_track_set), for rule refine."""
 
 # first, before numpy, OpenCV and pycolmap size their thread pools (plenocal.library_threads)
 from plenocal.library_threads import pin_library_threads
@@ -16,7 +16,8 @@ import cv2  # noqa: E402, F401  (before pycolmap: see DESIGN.md on cv2/pycolmap)
 from plenocal.artifacts.cameras import read_cameras  # noqa: E402
 from plenocal.artifacts.rig import read_rig  # noqa: E402
 from plenocal.artifacts.tracks import write_tracks  # noqa: E402
-from plenocal.calib.refine import RefineSettings, make_track_set  # noqa: E402
+from plenocal.calib.refine import RefineSettings  # noqa: E402
+from plenocal.calib.track_sets import make_track_set  # noqa: E402
 from plenocal.convert.viewset import view_set_files  # noqa: E402
 from plenocal.io.files import make_temp_dir  # noqa: E402
 from plenocal.rulelog import rule_logger  # noqa: E402

@@ -9,6 +9,8 @@ from synth.scenes import default_scene, render, rig_cameras, view_sets
 
 from plenocal.artifacts.rig import RigB
 from plenocal.calib import refine as rf
+from plenocal.calib import rig_model as rm
+from plenocal.calib import track_sets as tsets
 from plenocal.calib.reg_a import viewdb
 from plenocal.calib.scale import array_step_scale
 from plenocal.camera import PinholeCamera, invert_pose, pose
@@ -62,9 +64,9 @@ def eq6_of(views: dict[str, PinholeCamera], rig: RigB, seed: int = 1) -> dict[st
     moved = {shot: pose(_rot(rng.normal(size=3), 0.1) @ M[:3, :3],
                         M[:3, 3] + rng.normal(size=3) * 0.001 / np.sqrt(3))
              for shot, M in true.items()}
-    spread = rf.spread({s: M[:3, 3] for s, M in true.items()})
+    spread = rm.spread({s: M[:3, 3] for s, M in true.items()})
     c = np.mean([M[:3, 3] for M in moved.values()], axis=0)
-    k = spread / rf.spread({s: M[:3, 3] for s, M in moved.items()})
+    k = spread / rm.spread({s: M[:3, 3] for s, M in moved.items()})
     out = {}
     for shot, M in moved.items():
         M[:3, 3] = c + k * (M[:3, 3] - c)
@@ -130,7 +132,7 @@ def test_a_wrong_rig_is_pulled_back_towards_the_truth_when_refined(capture):
     eq6 = eq6_of(views, wrong)
     out = rf.refine_calibration(eq6, wrong, db, settings(rig="scale"),
                                 hold_shot="x00_y00")
-    refined = rf.rig_views_from_cameras(out.cameras, "x00_y00")
+    refined = rm.rig_views_from_cameras(out.cameras, "x00_y00")
     true = rig.view_poses()
 
     def baseline_err(poses) -> float:
@@ -471,13 +473,13 @@ def test_a_covariance_colmap_refuses_leaves_the_refinement_and_says_why(capture,
 def test_a_principal_point_shift_is_the_turn_that_moves_the_image_centre_as_far():
     """Hand-computed: f = 500 px, a shift of (+2, -1) px puts the optical axis's point at
     x = 2 / 500, y = -1 / 500 in normalised coordinates, by a rotation."""
-    R = rf.turn_of_shift(np.array([2.0, -1.0]), 500.0)
+    R = rm.turn_of_shift(np.array([2.0, -1.0]), 500.0)
     assert np.allclose(R @ R.T, np.eye(3), atol=1e-15)
     assert np.isclose(np.linalg.det(R), 1.0)
     x = R @ np.array([0.0, 0.0, 1.0])
     assert np.isclose(x[0] / x[2], 2.0 / 500.0, rtol=0, atol=1e-15)
     assert np.isclose(x[1] / x[2], -1.0 / 500.0, rtol=0, atol=1e-15)
-    assert np.allclose(rf.turn_of_shift(np.zeros(2), 500.0), np.eye(3), atol=0)
+    assert np.allclose(rm.turn_of_shift(np.zeros(2), 500.0), np.eye(3), atol=0)
 
 
 def _two_shot_rig(tmp_path, shift_px):
@@ -505,7 +507,7 @@ def _two_shot_rig(tmp_path, shift_px):
             keypoints[name] = uv + 0.5  # COLMAP's pixel centres
     points = {k + 1: (X[k], [(image_id, k) for image_id in sorted(names)])
               for k in range(len(X))}
-    rec, model = rf.rig_reconstruction_of(names, points, keypoints, rig_views, shots, w, h)
+    rec, model = rm.rig_reconstruction_of(names, points, keypoints, rig_views, shots, w, h)
     return rec, model, rig_views, f
 
 
@@ -517,11 +519,11 @@ def test_turning_the_frames_takes_a_common_principal_point_shift_and_keeps_the_h
     and the held frame keeps its pose."""
     shift = np.array([1.2, -0.7])
     rec, model, rig_views, f = _two_shot_rig(tmp_path, shift)
-    before = rf.observation_errors(rec, tmp_path)
+    before = rm.observation_errors(rec, tmp_path)
     assert np.median(before) > 1.2
     held = np.asarray(rec.frame(model.frame_of_shot["x00_y00"]).rig_from_world.matrix())
-    rf.turn_frames(rec, model, rf.turn_of_shift(shift, f), "x00_y00")
-    after = rf.observation_errors(rec, tmp_path)
+    rm.turn_frames(rec, model, rm.turn_of_shift(shift, f), "x00_y00")
+    after = rm.observation_errors(rec, tmp_path)
     # second order: x^2 |shift| px at normalised x up to 0.1 (the turned shot's points)
     assert after.max() < 0.025 and np.median(after) < 0.005, (after.max(), np.median(after))
     assert np.allclose(rec.frame(model.frame_of_shot["x00_y00"]).rig_from_world.matrix(),
@@ -540,22 +542,22 @@ def test_the_final_pass_starts_where_the_focal_pass_ended(tmp_path):
         p[2:4] += shift
         p[2] += 0.05 if v == "1_2" else 0.0  # and one view's own offset
         rec.camera(cid).params = p
-    assert rf.observation_errors(rec, tmp_path).max() < 0.06
+    assert rm.observation_errors(rec, tmp_path).max() < 0.06
     turn = rf.warm_start(rec, model, rig_views, settings(rig="scale_pp"), f, "x00_y00")
     assert np.isclose(turn, np.degrees(np.hypot(*np.arctan(shift / f))), rtol=1e-3)
-    pp = rf.principal_points(rec, model)
-    central_b = np.array(rf._colmap_params(rig_views["1_1"][0])[2:4])
+    pp = rm.principal_points(rec, model)
+    central_b = np.array(rm.colmap_params(rig_views["1_1"][0])[2:4])
     assert np.array_equal(pp["1_1"], central_b)
     assert np.allclose(pp["1_2"] - central_b, [0.05, 0.0], atol=1e-9)  # its own offset kept
     # the focal pass's end again, to the turn's second order (test above)
-    assert rf.observation_errors(rec, tmp_path).max() < 0.05 + 0.025
+    assert rm.observation_errors(rec, tmp_path).max() < 0.05 + 0.025
     cold, _, _, _ = _two_shot_rig(tmp_path, shift)
-    rf.set_intrinsics(cold, model, rig_views)  # B's principal points back alone
-    assert np.median(rf.observation_errors(cold, tmp_path)) > 1.2
+    rm.set_intrinsics(cold, model, rig_views)  # B's principal points back alone
+    assert np.median(rm.observation_errors(cold, tmp_path)) > 1.2
     held, _, _, _ = _two_shot_rig(tmp_path, shift)
     assert rf.warm_start(held, model, rig_views, settings(frames="hold"), f, "x00_y00") == 0.0
-    assert np.array_equal(rf.principal_points(held, model)["1_2"],
-                          np.array(rf._colmap_params(rig_views["1_2"][0])[2:4]))
+    assert np.array_equal(rm.principal_points(held, model)["1_2"],
+                          np.array(rm.colmap_params(rig_views["1_2"][0])[2:4]))
 
 
 def test_the_final_pass_stops_at_its_own_cap_and_ends_lower_than_from_bs_cameras(
@@ -573,7 +575,7 @@ def test_the_final_pass_stops_at_its_own_cap_and_ends_lower_than_from_bs_cameras
     assert focal["turn_deg"] > 0.0
 
     def cold(rec, model, views, settings, focal, hold_shot):
-        rf.set_intrinsics(rec, model, views)
+        rm.set_intrinsics(rec, model, views)
         return 0.0
 
     monkeypatch.setattr(rf, "warm_start", cold)
@@ -598,7 +600,7 @@ def test_track_sets_written_and_read_back_give_the_same_bytes(capture, tmp_path)
     eq6 = eq6_of(views, rig)
     s = settings()
     whole = rf.refine_calibration(eq6, rig, db, s, hold_shot="x00_y00", images=images)
-    ts, align, _ = rf.make_track_set("views", eq6, rig, db, s, images)
+    ts, align, _ = tsets.make_track_set("views", eq6, rig, db, s, images)
     at.write_tracks(tmp_path / "views", "views", ts, align)
     stored = at.read_tracks(tmp_path / "views")
     # refine.json's statistics: the alignment's as written there (dumps_json's digits)

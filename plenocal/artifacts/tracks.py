@@ -35,7 +35,7 @@ VERSION = 1
 SOURCES = ("central", "views")
 #: ``refine.tracks`` -> the track sets it adjusts, in the order they are joined: the
 #: central views' matches carried into every view, every view's own matches, or both
-#: (rule refine's inputs, :func:`plenocal.calib.refine.track_sources`)
+#: (rule refine's inputs, :func:`plenocal.calib.track_sets.track_sources`)
 SOURCES_OF = {"central": ("central",), "views": ("views",), "both": ("central", "views")}
 _ARRAYS = ("keypoints", "keypoint_counts", "point_ids", "xyz", "track_lengths", "elements")
 _REMEDY = "rerun rule refine_tracks"

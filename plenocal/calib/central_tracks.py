@@ -27,7 +27,7 @@ has registration A's form, images named ``<shot>.png``), so:
    reflection) is dropped, a central view's SIFT keypoint stays as it is, as in the
    views' path.
 
-The result is a :class:`TrackSet`, which :func:`plenocal.calib.refine.rig_reconstruction_of`
+The result is a :class:`TrackSet`, which :func:`plenocal.calib.rig_model.rig_reconstruction_of`
 turns into the rig's reconstruction.
 
 Conventions: keypoints in COLMAP's (pixel centres at +0.5); cameras internal (OpenCV axes,

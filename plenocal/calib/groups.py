@@ -1,6 +1,6 @@
 """Groups of things that links tie together (union-find): the shots that matched pairs
 (rule view_matches, :func:`plenocal.calib.reg_a.viewdb.nearest_shots`) or shared 3-D points
-(rule refine, :func:`plenocal.calib.refine.shot_groups`) tie into one group."""
+(rule refine, :func:`plenocal.calib.shot_ties.shot_groups`) tie into one group."""
 
 from __future__ import annotations
 

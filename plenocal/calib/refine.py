@@ -5,7 +5,7 @@ The paper's complete calibration (Eq. 6, ``M_ij = M_i^A M_j^B``) takes every sho
 and the focal length from registration A, which sees only the 28 central views, and
 every view's place in its set from registration B; the other views only ride along.
 This step adjusts them together, as COLMAP 4 models a camera rig
-(:func:`rig_reconstruction`):
+(:func:`~plenocal.calib.track_sets.rig_reconstruction`):
 
 * each shot is one **frame** (one rig pose, ``rig_from_world``, initialised by Eq. 6);
 * its N x N views are the rig's **sensors**, placed by registration B
@@ -25,7 +25,8 @@ This step adjusts them together, as COLMAP 4 models a camera rig
   sets on fresh captures");
 * their observations aligned by their patches to their track's reference observation
   (``refine.align``, :mod:`plenocal.calib.track_alignment`, given the views' images:
-  :func:`aligned_keypoints`), since SIFT's placement on soft views leans the focal length.
+  :func:`~plenocal.calib.track_sets.aligned_keypoints`), since SIFT's placement on soft
+  views leans the focal length.
 
 COLMAP's bundle adjustment then moves the frames and the points, one frame held (the
 gauge). Where the matches leave the shots in groups that share no point (rule view_matches
@@ -85,25 +86,47 @@ from __future__ import annotations
 
 import logging
 import math
-import shutil
-import tempfile
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
 from plenocal.artifacts.rig import RigB
-from plenocal.artifacts.tracks import SOURCES_OF
 from plenocal.calib.central_tracks import TrackSet, joined
-from plenocal.calib.groups import Groups
-from plenocal.calib.reg_a import colmap as cm
-from plenocal.calib.reg_a import viewdb
+from plenocal.calib.rig_model import (
+    RigModel,
+    cameras_of,
+    colmap_params,
+    frame_centres,
+    frame_poses,
+    identity_view,
+    observation_errors,
+    principal_points,
+    rescale,
+    rig_reconstruction_of,
+    rig_views_from_model,
+    sensor_params,
+    set_intrinsics,
+    set_rig,
+    shared_focal,
+    spread,
+    turn_frames,
+    turn_of_shift,
+    with_focal,
+)
 from plenocal.calib.scale import array_step_scale
+from plenocal.calib.shot_ties import place_groups, point_shots, shot_groups, shot_ties
 from plenocal.calib.track_alignment import AlignSettings
-from plenocal.calib.view_greys import ViewGreys, grey_of
-from plenocal.camera import PinholeCamera, invert_pose, k_to_colmap, pose, rotation_angle_deg
+from plenocal.calib.track_sets import (
+    TrackSource,
+    track_sources,
+    tracks_of_central_views,
+    tracks_of_every_view,
+)
+from plenocal.calib.view_greys import ViewGreys
+from plenocal.camera import PinholeCamera, rotation_angle_deg
 from plenocal.config import settings_from, stage_defaults
 from plenocal.names import split_key
 
@@ -231,209 +254,6 @@ class RefineSettings:
         if num_threads is not None:
             kw["num_threads"] = num_threads
         return cls(**kw, seed=seed)
-
-
-# --- the COLMAP boundary -------------------------------------------------------------
-
-
-def rigid3d(M: np.ndarray):
-    """A 4x4 (or 3x4) rigid transform as a ``pycolmap.Rigid3d`` (rotation re-orthonormalised
-    by SVD, as :func:`plenocal.calib.reg_a.colmap._rigid` does)."""
-    import pycolmap  # noqa: PLC0415
-
-    M = np.asarray(M, dtype=float)
-    U, _, Vt = np.linalg.svd(M[:3, :3])
-    return pycolmap.Rigid3d(pycolmap.Rotation3d(U @ Vt), M[:3, 3].copy())
-
-
-def _camera_sensor(camera_id: int):
-    import pycolmap  # noqa: PLC0415
-
-    return pycolmap.sensor_t(type=pycolmap.SensorType.CAMERA, id=int(camera_id))
-
-
-def _colmap_params(K: np.ndarray) -> list[float]:
-    Kc = k_to_colmap(K)
-    return [float(Kc[0, 0]), float(Kc[1, 1]), float(Kc[0, 2]), float(Kc[1, 2])]
-
-
-@dataclass
-class RigModel:
-    """The rig reconstruction's bookkeeping: sensor camera ids by view, frame ids by shot,
-    the reference (central) view."""
-
-    camera_of_view: dict[str, int]
-    frame_of_shot: dict[str, int]
-    central: str
-
-
-def rig_reconstruction(tracks, views: Mapping[str, tuple[np.ndarray, np.ndarray]],
-                       shot_poses: Mapping[str, np.ndarray], width: int, height: int,
-                       point_ids: list[int], work_dir: str | Path | None = None,
-                       keypoints: Mapping[str, np.ndarray] | None = None):
-    """A ``pycolmap.Reconstruction`` of one rig (``views``: view -> (K, cam_to_central), the
-    central view the one whose pose is the identity) with one frame per shot
-    (``shot_poses``: shot -> its central view's cam_to_world), every image of ``tracks``
-    (a reconstruction triangulated with the same cameras, images named ``<shot>/<view>.png``)
-    in its frame, and the points ``point_ids`` of ``tracks`` with their tracks. Each
-    image's keypoints are read through ``tracks``'s binary files (written under
-    ``work_dir``): the same numbers as through the bindings, whose per-point objects took
-    1.9 s for 700 views of 1,300 keypoints; or given (``keypoints``: image name -> (n, 2),
-    COLMAP's convention, the aligned ones of :func:`aligned_keypoints`). Returns the
-    reconstruction and its :class:`RigModel`."""
-    ts = track_set_of(tracks, point_ids, work_dir, keypoints)
-    return rig_reconstruction_of(ts.names, ts.points, ts.keypoints, views, shot_poses, width,
-                                 height)
-
-
-def track_set_of(tracks, point_ids: list[int], work_dir: str | Path | None = None,
-                 keypoints: Mapping[str, np.ndarray] | None = None) -> TrackSet:
-    """The points ``point_ids`` of the reconstruction ``tracks`` as plain data: every image
-    of ``tracks`` by its id, its keypoints (read through ``tracks``'s binary files under
-    ``work_dir`` where ``keypoints`` is None, as :func:`rig_reconstruction` says) and the
-    points with their tracks, in the order of ``point_ids``."""
-    from plenocal.verify.reprojection import read_keypoints  # noqa: PLC0415
-
-    if keypoints is None:
-        keypoints = read_keypoints(tracks, work_dir)
-    names = {image_id: tracks.image(image_id).name for image_id in sorted(tracks.images)}
-    points = {}
-    for pid in point_ids:
-        p = tracks.point3D(pid)
-        points[pid] = (p.xyz, [(e.image_id, e.point2D_idx) for e in p.track.elements])
-    return TrackSet(names, dict(keypoints), points, int(tracks.num_points3D()))
-
-
-def rig_reconstruction_of(image_names: Mapping[int, str],
-                          points: Mapping[int, tuple[np.ndarray, list[tuple[int, int]]]],
-                          keypoints: Mapping[str, np.ndarray],
-                          views: Mapping[str, tuple[np.ndarray, np.ndarray]],
-                          shot_poses: Mapping[str, np.ndarray], width: int, height: int):
-    """:func:`rig_reconstruction` of plain data: ``image_names`` image id ->
-    ``<shot>/<view>.png``, ``points`` point id -> (X, its track's (image id, keypoint index)
-    pairs), added in the mapping's order, ``keypoints`` image name -> (n, 2) COLMAP's convention
-    (:class:`plenocal.calib.central_tracks.TrackSet` holds the three)."""
-    import pycolmap  # noqa: PLC0415
-
-    names = sorted(views)
-    central = identity_view(views)
-    rec = pycolmap.Reconstruction()
-    cam_of = {v: i + 1 for i, v in enumerate(names)}
-    for v in names:
-        rec.add_camera(pycolmap.Camera(model="PINHOLE", width=int(width), height=int(height),
-                                       params=_colmap_params(views[v][0]),
-                                       camera_id=cam_of[v]))
-    rig = pycolmap.Rig(rig_id=1)
-    rig.add_ref_sensor(_camera_sensor(cam_of[central]))
-    for v in names:
-        if v != central:
-            rig.add_sensor(_camera_sensor(cam_of[v]), rigid3d(invert_pose(views[v][1])))
-    rec.add_rig(rig)
-    images = {}
-    for image_id in sorted(image_names):
-        name = image_names[image_id]
-        shot, view = split_key(name[:-4])
-        if shot not in shot_poses or view not in cam_of:
-            raise ValueError(f"{name}: not a view of the rig's shots")
-        images[image_id] = (shot, view, name)
-    shots = sorted(shot_poses)
-    frame_of = {s: i + 1 for i, s in enumerate(shots)}
-    for s in shots:
-        frame = pycolmap.Frame(frame_id=frame_of[s], rig_id=1)
-        frame.rig_from_world = rigid3d(invert_pose(shot_poses[s]))
-        for image_id, (shot, view, _) in images.items():
-            if shot == s:
-                frame.add_data_id(pycolmap.data_t(sensor_id=_camera_sensor(cam_of[view]),
-                                                  id=image_id))
-        rec.add_frame(frame)
-    for image_id, (shot, view, name) in images.items():
-        new = pycolmap.Image(name=name, keypoints=keypoints[name],
-                             camera_id=cam_of[view], image_id=image_id)
-        new.frame_id = frame_of[shot]
-        rec.add_image(new)
-    for s in shots:
-        rec.register_frame(frame_of[s])
-    for xyz, elements in points.values():
-        track = pycolmap.Track()
-        for image_id, idx in elements:
-            track.add_element(int(image_id), int(idx))
-        rec.add_point3D(np.asarray(xyz, float), track)
-    return rec, RigModel(cam_of, frame_of, central)
-
-
-def select_points(tracks, max_points: int) -> list[int]:
-    """At most ``max_points`` of the points of ``tracks`` seen in three or more images:
-    every k-th in id order (deterministic), k the smallest that keeps within the limit."""
-    ids = sorted(pid for pid in tracks.point3D_ids() if tracks.point3D(pid).track.length() >= 3)
-    stride = max(1, math.ceil(len(ids) / max_points))
-    return ids[::stride]
-
-
-def aligned_keypoints(tracks, point_ids: list[int], images: Mapping[str, str | Path],
-                      settings: AlignSettings, num_threads: int,
-                      work_dir: str | Path | None = None
-                      ) -> tuple[dict[str, np.ndarray], dict]:
-    """Every image's keypoints of ``tracks`` (image name -> (n, 2), COLMAP's convention),
-    those observing the points ``point_ids`` aligned to their track's reference observation
-    by their patches (:mod:`plenocal.calib.track_alignment`), with its statistics.
-    ``images``: view key (``<shot>/<view>``) -> the view's image file."""
-    from plenocal.calib import track_alignment as ta  # noqa: PLC0415
-    from plenocal.verify.reprojection import read_keypoints  # noqa: PLC0415
-
-    keypoints = read_keypoints(tracks, work_dir)
-    name_of = {i: tracks.image(i).name for i in tracks.images}
-    by_id = {i: keypoints[n] for i, n in name_of.items()}
-    cameras = {}
-    for i in name_of:
-        im = tracks.image(i)
-        T = im.cam_from_world().matrix()
-        cameras[i] = (tracks.camera(im.camera_id).calibration_matrix(), T[:, :3], T[:, 3])
-    points = {}
-    for pid in point_ids:
-        p = tracks.point3D(pid)
-        points[pid] = (np.asarray(p.xyz, float),
-                       [(e.image_id, e.point2D_idx) for e in p.track.elements])
-    missing = sorted({name_of[i][:-4] for i in name_of} - set(images))
-    if missing:
-        raise ValueError(f"refine.align: no image file for {len(missing)} views "
-                         f"({', '.join(missing[:5])}): rerun the conversion")
-
-    def load(i: int) -> np.ndarray:
-        return grey_of(images, name_of[i][:-4])
-
-    t0 = time.perf_counter()
-    obs, rows = ta.track_observations(points, cameras, by_id)
-    uv, aligned, stats = ta.align_observations(obs, load, settings, num_threads)
-    out = {n: kp.copy() for n, kp in keypoints.items()}
-    rows = np.asarray(rows).reshape(-1, 2)
-    for i, sel in ta.rows_of(rows[:, 0]).items():
-        out[name_of[i]][rows[sel, 1]] = uv[sel]
-    log.info("observations aligned by their patches: %d of %d (median shift %s px, %.1f s)",
-             stats["aligned"], stats["observations"],
-             "-" if stats["shift_median_px"] is None else f"{stats['shift_median_px']:.3f}",
-             time.perf_counter() - t0)
-    return out, stats
-
-
-def cameras_of(rec) -> dict[str, PinholeCamera]:
-    """Every image of a rig reconstruction -> its camera (internal convention)."""
-    out = {}
-    for image_id in sorted(rec.images):
-        im = rec.image(image_id)
-        out[im.name[:-4]] = cm.pinhole_from_colmap(im, rec.camera(im.camera_id))
-    return out
-
-
-def observation_errors(rec, work_dir: str | Path | None = None) -> np.ndarray:
-    """Reprojection error (px) of every observation of ``rec``'s points, in the internal
-    convention (read back through COLMAP's binary files, as Table I reads them)."""
-    from plenocal.verify import reprojection as rp  # noqa: PLC0415
-
-    obs, ids, xyz = rp.read_model(rec, work_dir)
-    cams = cameras_of(rec)
-    errs = [np.linalg.norm(cams[name[:-4]].project(xyz[rows])[0] - uv, axis=1)
-            for name, rows, uv in rp.image_observations(obs, ids, sorted(obs))]
-    return np.concatenate(errs) if errs else np.zeros(0)
 
 
 def _loss(name: str):
@@ -568,213 +388,6 @@ def bundle_adjust(rec, model: RigModel, settings: RefineSettings, *, refine_foca
     return out
 
 
-def frame_centres(rec, model: RigModel) -> dict[str, np.ndarray]:
-    """Each shot's rig (central view) centre, world coordinates (:func:`frame_poses`)."""
-    return {shot: M[:3, 3] for shot, M in frame_poses(rec, model).items()}
-
-
-def spread(centres: Mapping[str, np.ndarray]) -> float:
-    """RMS distance of the centres from their mean: the array's size."""
-    P = np.array([centres[k] for k in sorted(centres)])
-    return float(np.sqrt(((P - P.mean(axis=0)) ** 2).sum(axis=1).mean()))
-
-
-def frame_poses(rec, model: RigModel) -> dict[str, np.ndarray]:
-    """Each shot's rig (central view) cam_to_world, world coordinates."""
-    out = {}
-    for shot, fid in model.frame_of_shot.items():
-        M = np.eye(4)
-        M[:3, :] = np.asarray(rec.frame(fid).rig_from_world.matrix(), dtype=float)
-        out[shot] = invert_pose(M)
-    return out
-
-
-def shot_groups(ties: list[frozenset[str]], shots: Iterable[str]) -> list[list[str]]:
-    """The shots as the points ``ties`` (:func:`point_shots`) tie them: two shots are in
-    one group where a chain of points links them. Several groups where the matches leave
-    them apart (rule view_matches pairs each shot with its nearest shots only, which can
-    split the array in two): then no point fixes where one group lies relative to another.
-    Each group sorted, the groups by their first shot."""
-    groups = Groups(shots)
-    for seen in ties:
-        first, *rest = sorted(seen)
-        for other in rest:
-            groups.join(other, first)
-    return groups.groups()
-
-
-def point_shots(rec, model: RigModel) -> list[frozenset[str]]:
-    """The shots that see each of the adjustment's points (those seen by two or more: the
-    points that tie shots together)."""
-    shot_of_frame = {fid: shot for shot, fid in model.frame_of_shot.items()}
-    # each image's shot looked up once, not once per observation (1.2 million on the
-    # default data: 2.6 -> 1.2 s, the same sets)
-    shot_of_image = {i: shot_of_frame[rec.image(i).frame_id] for i in rec.images}
-    out = []
-    for pid in rec.point3D_ids():
-        seen = frozenset(shot_of_image[el.image_id] for el in rec.point3D(pid).track.elements)
-        if len(seen) > 1:
-            out.append(seen)
-    return out
-
-
-def shot_ties(ties: list[frozenset[str]], shots: list[str],
-              to: set[str] | None = None) -> dict[str, int]:
-    """Per shot of ``shots``, how many of the points ``ties`` (:func:`point_shots`) it
-    shares with another shot, or with one of the shots ``to``: the points that tie its
-    pose to them (a shot whose points are its own only is held by nothing but the loss and
-    the solver's steps)."""
-    out = dict.fromkeys(shots, 0)
-    for seen in ties:
-        for shot in seen:
-            if shot in out and (seen - {shot}) & (seen if to is None else to):
-                out[shot] += 1
-    return out
-
-
-def place_groups(rec, model: RigModel, eq6_poses: Mapping[str, np.ndarray],
-                 groups: list[list[str]], hold_shot: str) -> dict[str, float]:
-    """Put every group of shots (:func:`shot_groups`) that the held shot's does not hold
-    where Eq. 6 puts it relative to that group: the gauge of the adjustment is one rigid
-    motion per group (the rig, shared by all, fixes one scale for all), and the held frame
-    fixes only its own group's; the others drift along theirs as the solver's steps take
-    them (on a capture of the wide geometry, 6.7 mm along the views' axes while the rig's
-    baselines rescaled the array by 1.7 %). The similarity that best maps the held group's
-    Eq. 6 poses onto its adjusted ones (:func:`plenocal.verify.gt_errors.pose_similarity`)
-    carries Eq. 6's other poses into the adjustment's frame; each other group, frames and
-    points, is moved by the rigid motion that best fits it onto them (which leaves every
-    reprojection as it is). Returns each moved group's correction (mm, largest centre
-    move) by its first shot."""
-    from plenocal.verify.gt_errors import pose_similarity  # noqa: PLC0415
-
-    ref = next(g for g in groups if hold_shot in g)
-    now = frame_poses(rec, model)
-
-    def fit(shots, src, dst, with_scale):
-        return pose_similarity(np.array([src[k][:3, 3] for k in shots]),
-                               np.array([dst[k][:3, 3] for k in shots]),
-                               [src[k][:3, :3] for k in shots],
-                               [dst[k][:3, :3] for k in shots], with_scale=with_scale)
-
-    s, R, t = fit(ref, eq6_poses, now, len(ref) > 1)
-    target = {k: pose(R @ M[:3, :3], s * R @ M[:3, 3] + t) for k, M in eq6_poses.items()}
-    moved = {}
-    for group in groups:
-        if group is ref:
-            continue
-        _, Rg, tg = fit(group, now, target, False)
-        G = pose(Rg, tg)
-        for shot in group:
-            rec.frame(model.frame_of_shot[shot]).rig_from_world = rigid3d(
-                invert_pose(G @ now[shot]))
-        frames = {model.frame_of_shot[k] for k in group}
-        for pid in rec.point3D_ids():
-            p = rec.point3D(pid)
-            if rec.image(p.track.elements[0].image_id).frame_id in frames:
-                p.xyz = Rg @ np.asarray(p.xyz, dtype=float) + tg
-        moved[group[0]] = 1000.0 * max(float(np.linalg.norm(G[:3, :3] @ now[k][:3, 3] + tg
-                                                            - now[k][:3, 3])) for k in group)
-    return moved
-
-
-def rescale(rec, factor: float) -> None:
-    """Scale ``rec`` by ``factor`` about the world origin: its points, its frames and its
-    rig's sensor translations (COLMAP's ``Reconstruction.transform`` scales all three), a
-    gauge of the adjustment wherever the rig's size is not held."""
-    import pycolmap  # noqa: PLC0415
-
-    rec.transform(pycolmap.Sim3d(float(factor), pycolmap.Rotation3d(), np.zeros(3)))
-
-
-def sensor_params(rec) -> dict[int, np.ndarray]:
-    """The rig's sensor_from_rig parameters (quaternion xyzw, translation) by camera id."""
-    rig = rec.rig(1)
-    return {s.id: np.asarray(rig.sensor_from_rig(s).params, dtype=float).copy()
-            for s in rig.non_ref_sensors}
-
-
-def shared_focal(rec, model: RigModel) -> tuple[float, dict[str, float]]:
-    """The mean of the sensors' focal lengths (fx, fy) weighted by their observations,
-    and each sensor's."""
-    counts = {cid: 0 for cid in model.camera_of_view.values()}
-    for image_id in rec.images:
-        im = rec.image(image_id)
-        counts[im.camera_id] += im.num_points3D
-    per = {v: 0.5 * float(rec.camera(cid).params[0] + rec.camera(cid).params[1])
-           for v, cid in model.camera_of_view.items()}
-    w = np.array([counts[model.camera_of_view[v]] for v in sorted(per)], dtype=float)
-    f = np.array([per[v] for v in sorted(per)])
-    if w.sum() <= 0:
-        raise ValueError("refinement: no sensor has an observation")
-    return float((w * f).sum() / w.sum()), per
-
-
-def set_intrinsics(rec, model: RigModel, views: Mapping[str, tuple[np.ndarray, np.ndarray]],
-                   offsets: Mapping[str, np.ndarray] | None = None) -> None:
-    """Each sensor's camera as ``views`` gives it (registration B's K); with ``offsets``
-    (view -> (dx, dy) px), its principal point moved by them."""
-    for v, cid in model.camera_of_view.items():
-        params = _colmap_params(views[v][0])
-        if offsets is not None:
-            params[2] += float(offsets[v][0])
-            params[3] += float(offsets[v][1])
-        rec.camera(cid).params = params
-
-
-def principal_points(rec, model: RigModel) -> dict[str, np.ndarray]:
-    """Each view's principal point (COLMAP's pixel convention), px."""
-    return {v: np.array(rec.camera(cid).params[2:4], dtype=float)
-            for v, cid in model.camera_of_view.items()}
-
-
-def turn_of_shift(shift_px: np.ndarray, focal_px: float) -> np.ndarray:
-    """The turn of a camera (3 x 3, applied to camera coordinates: x right, y down, z
-    forward) that moves its image as the shift ``shift_px`` = (dx, dy) of its principal
-    point does, exactly at the image centre, to first order elsewhere: the least rotation
-    that takes the optical axis to the direction (dx / f, dy / f, 1), about the axis
-    (-dy, dx, 0) by ``atan(|shift| / f)`` (Rodrigues' formula)."""
-    d = np.asarray(shift_px, dtype=float)
-    norm = float(np.hypot(d[0], d[1]))
-    if norm == 0.0:
-        return np.eye(3)
-    k = np.array([-d[1], d[0], 0.0]) / norm
-    angle = math.atan(norm / focal_px)
-    Kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * Kx + (1.0 - math.cos(angle)) * (Kx @ Kx)
-
-
-def turn_frames(rec, model: RigModel, turn: np.ndarray, hold_shot: str) -> None:
-    """Turn every frame of ``rec`` by ``turn`` in its own (rig) axes, and the world about
-    the held shot's rig so that its frame keeps its pose: with ``H`` the held frame's
-    rig_from_world, the points go to ``T p`` with ``T = H^-1 R H`` and each frame's
-    rig_from_world ``F`` to ``R F T^-1`` (for the held one ``H`` again). What every frame
-    sees moves as if each view's principal point had moved by the shift of
-    :func:`turn_of_shift`: the common shift of the focal pass taken back into the frames
-    (:func:`warm_start`)."""
-    R4 = np.eye(4)
-    R4[:3, :3] = turn
-    H = np.eye(4)
-    H[:3, :] = np.asarray(rec.frame(model.frame_of_shot[hold_shot]).rig_from_world.matrix(),
-                          dtype=float)
-    T = invert_pose(H) @ R4 @ H
-    A, b = T[:3, :3], T[:3, 3]
-    for pid in rec.point3D_ids():
-        point = rec.point3D(pid)
-        point.xyz = A @ np.asarray(point.xyz, dtype=float) + b
-    T_inv = invert_pose(T)
-    for fid in sorted(model.frame_of_shot.values()):
-        F = np.eye(4)
-        F[:3, :] = np.asarray(rec.frame(fid).rig_from_world.matrix(), dtype=float)
-        rec.frame(fid).rig_from_world = rigid3d(R4 @ F @ T_inv)
-
-
-def set_rig(rec, model: RigModel, views: Mapping[str, tuple[np.ndarray, np.ndarray]]) -> None:
-    rig = rec.rig(1)
-    for v, cid in model.camera_of_view.items():
-        if v != model.central:
-            rig.set_sensor_from_rig(_camera_sensor(cid), rigid3d(invert_pose(views[v][1])))
-
-
 # --- the refinement ------------------------------------------------------------------
 
 
@@ -821,8 +434,9 @@ def refine_calibration(eq6: Mapping[str, PinholeCamera], rig: RigB, database: st
     auto`` the result's scale is that step fitted to the refined array shots
     (:func:`refined_step_scale`). ``track_sets``: source (:func:`track_sources`) -> the
     track set and its alignment's statistics, made beforehand (rule ``refine_tracks``:
-    :func:`make_track_set`), or a function that reads them (rule ``refine``: then no
-    reference outlives the rig reconstruction); the databases and images are not read."""
+    :func:`~plenocal.calib.track_sets.make_track_set`), or a function that reads them
+    (rule ``refine``: then no reference outlives the rig reconstruction); the databases
+    and images are not read."""
     t0 = time.perf_counter()
     views = rig.view_poses()
     shots = sorted({split_key(k)[0] for k in eq6})
@@ -881,13 +495,13 @@ def _tracks_rig(eq6: Mapping[str, PinholeCamera], views: Mapping[str, tuple], ce
         # the adjustments)
         images = ViewGreys(images)
     if settings.tracks == "views":
-        ts, align, t_tri = _view_tracks(eq6, database, settings, images, align_threads,
+        ts, align, t_tri = tracks_of_every_view(eq6, database, settings, images, align_threads,
                                         work_dir)
     else:
-        ts, align, t_tri = _central_tracks(eq6, central, database, settings, images,
+        ts, align, t_tri = tracks_of_central_views(eq6, central, database, settings, images,
                                            align_threads, work_dir)
     if settings.tracks == "both":
-        ts_views, align_views, t_views = _view_tracks(eq6, view_database, settings, images,
+        ts_views, align_views, t_views = tracks_of_every_view(eq6, view_database, settings, images,
                                                       align_threads, work_dir)
         ts, t_tri = joined(ts, ts_views), t_tri + t_views
         align = {"enabled": True, "central": align, "views": align_views}
@@ -906,47 +520,6 @@ def _rig_of_tracks(ts: TrackSet, views: Mapping[str, tuple], shot_poses: Mapping
     return rec, model, ts.triangulated, len(ts.points)
 
 
-def track_sources(settings: RefineSettings) -> tuple[str, ...]:
-    """The track sets ``settings.tracks`` adjusts, in the order they are joined
-    (:data:`plenocal.artifacts.tracks.SOURCES_OF`)."""
-    return SOURCES_OF[settings.tracks]
-
-
-def identity_view(views: Mapping[str, tuple[np.ndarray, np.ndarray]]) -> str:
-    """The rig's view at the identity pose, its central view (``views``:
-    :meth:`RigB.view_poses`; by pose, where :func:`plenocal.names.central_view` names it by
-    the grid's size)."""
-    central = [v for v in views if np.allclose(views[v][1], np.eye(4), atol=1e-12)]
-    if len(central) != 1:
-        raise ValueError("the rig has no view at the identity pose (its central view): "
-                         "rerun rule rig_b")
-    return central[0]
-
-
-def make_track_set(source: str, eq6: Mapping[str, PinholeCamera], rig: RigB,
-                   database: str | Path, settings: RefineSettings,
-                   images: Mapping[str, str | Path] | None,
-                   align_threads: int | None = None,
-                   work_dir: str | Path | None = None) -> tuple[TrackSet, dict, float]:
-    """One track set of the refinement (rule ``refine_tracks``), as
-    :func:`refine_calibration` makes it for ``source``: ``central`` the central views'
-    matches (``database``: rule match_central's) carried into every view, ``views`` every
-    view's matches (rule view_matches'); triangulated with the Eq. 6 cameras ``eq6`` and
-    aligned by the views' patches (``images``). Returns the set, its alignment's
-    statistics and its triangulation's seconds (the central views' set: all its
-    seconds)."""
-    if source == "views":
-        return _view_tracks(eq6, database, settings, images, align_threads, work_dir)
-    if source == "central":
-        return _central_tracks(eq6, identity_view(rig.view_poses()), database, settings,
-                               images, align_threads, work_dir)
-    raise ValueError(f"track set source {source!r}: use central or views")
-
-
-#: a track set made beforehand and its alignment's statistics, or a function that reads
-#: them (:func:`refine_calibration`'s ``track_sets``)
-TrackSource = tuple[TrackSet, dict] | Callable[[], tuple[TrackSet, dict]]
-
 #: the remedy where a track source gives too few points
 _TOO_FEW = {
     "views": "the views have too few matches: see matches/matches.json",
@@ -955,74 +528,6 @@ _TOO_FEW = {
     "both": "the central views' and every view's matches together; see "
             "matches/matches.json",
 }
-
-
-def _central_tracks(eq6: Mapping[str, PinholeCamera], central: str, database: str | Path,
-                    settings: RefineSettings, images: Mapping[str, str | Path] | None,
-                    align_threads: int | None, work_dir: str | Path | None
-                    ) -> tuple[TrackSet, dict, float]:
-    """The tracks of the central views' matches (``database``, rule match_central's),
-    carried into the other views (:mod:`plenocal.calib.central_tracks`), at most
-    ``settings.max_points`` of them (every k-th point id); their alignment's statistics
-    and the time taken."""
-    from plenocal.calib.central_tracks import central_track_set  # noqa: PLC0415
-
-    if images is None:
-        raise ValueError(f"refine.tracks {settings.tracks} carries the central views' points "
-                         "into the other views by their pixels: the views' images are needed")
-    t0 = time.perf_counter()
-    tmp = Path(tempfile.mkdtemp(prefix="plenocal_refine_", dir=work_dir))
-    try:
-        ts, stats = central_track_set(database, eq6, central, images, settings, tmp,
-                                      align_threads)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    ids = sorted(ts.points)
-    ids = ids[::max(1, math.ceil(len(ids) / settings.max_points))]
-    kept = TrackSet(ts.names, ts.keypoints, {pid: ts.points[pid] for pid in ids},
-                    ts.triangulated)
-    return kept, {"enabled": True, **stats}, time.perf_counter() - t0
-
-
-def _view_tracks(eq6: Mapping[str, PinholeCamera], database: str | Path,
-                 settings: RefineSettings, images: Mapping[str, str | Path] | None,
-                 align_threads: int | None, work_dir: str | Path | None
-                 ) -> tuple[TrackSet, dict, float]:
-    """The tracks of the verified matches of every view (``database``, rule view_matches'),
-    triangulated with the Eq. 6 cameras, at most ``settings.max_points`` of them
-    (:func:`select_points`), their observations aligned by their patches where
-    ``settings.align`` says so and the images are given; the alignment's statistics and
-    the triangulation's time."""
-    from plenocal.verify import reprojection as rp  # noqa: PLC0415
-
-    t0 = time.perf_counter()
-    tmp = Path(tempfile.mkdtemp(prefix="plenocal_refine_", dir=work_dir))
-    try:
-        db = tmp / "database.db"
-        names = sorted(eq6)
-        across = None
-        if settings.matches == "across":
-            def across(a: str, b: str) -> bool:
-                return split_key(a)[0] != split_key(b)[0]
-        viewdb.subset_database(database, db, names, dict(eq6), keep_pair=across)
-        colmap_cams = {f"{k}.png": eq6[k] for k in names}
-        tracks = cm.known_pose_reconstruction(db, colmap_cams, update_intrinsics=False)
-        opts = rp.triangulation_options(settings.max_error_px, settings.min_angle_deg,
-                                        settings.seed, settings.num_threads)
-        rp.triangulate(tracks, db, opts, settings.seed, colmap_cams, tmp)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    t_tri = time.perf_counter() - t0
-    ids = select_points(tracks, settings.max_points)
-    keypoints, align = None, {"enabled": False}
-    if settings.align.enabled and images is not None and ids:
-        keypoints, stats = aligned_keypoints(
-            tracks, ids, images, settings.align,
-            settings.num_threads if align_threads is None else align_threads, work_dir)
-        align = {"enabled": True, **stats}
-    elif settings.align.enabled:
-        align["why"] = "no view images given: the observations are SIFT's keypoints"
-    return track_set_of(tracks, ids, work_dir, keypoints), align, t_tri
 
 
 def warm_start(rec, model: RigModel, views: Mapping[str, tuple[np.ndarray, np.ndarray]],
@@ -1043,7 +548,7 @@ def warm_start(rec, model: RigModel, views: Mapping[str, tuple[np.ndarray, np.nd
     the focal pass's, less that shift: the central view's is B's, as before. With
     ``frames: hold`` no frame may turn: B's cameras only, as before."""
     focal_pass = principal_points(rec, model)
-    b = {v: np.array(_colmap_params(views[v][0])[2:4]) for v in model.camera_of_view}
+    b = {v: np.array(colmap_params(views[v][0])[2:4]) for v in model.camera_of_view}
     if settings.frames == "hold":
         set_intrinsics(rec, model, views)
         return 0.0
@@ -1087,7 +592,7 @@ def _adjusted(rec, model: RigModel, eq6, rig: RigB, views, shots, central, shot_
                                       hold_frame=hold_shot, loss_scale_px=loss_scale,
                                       work_dir=work_dir)
         rig_views = (rig_at_focal(focal).view_poses() if rig_at_focal is not None
-                     else {v: (_with_focal(K, focal), M) for v, (K, M) in views.items()})
+                     else {v: (with_focal(K, focal), M) for v, (K, M) in views.items()})
         passes["focal"]["turn_deg"] = warm_start(rec, model, rig_views, settings, focal,
                                                  hold_shot)
         if not free_rig:
@@ -1312,32 +817,3 @@ def shot_shifts(eq6: Mapping[str, PinholeCamera], refined: Mapping[str, PinholeC
     return out
 
 
-def _with_focal(K: np.ndarray, focal: float) -> np.ndarray:
-    out = np.array(K, dtype=float)
-    out[0, 0] = out[1, 1] = focal
-    return out
-
-
-def rig_views_from_model(rec, model: RigModel) -> dict[str, np.ndarray]:
-    """The rig's sensors as cam_to_central (internal), by view."""
-    rig = rec.rig(1)
-    out = {model.central: np.eye(4)}
-    for v, cid in model.camera_of_view.items():
-        if v != model.central:
-            M = np.eye(4)
-            M[:3, :] = np.asarray(rig.sensor_from_rig(_camera_sensor(cid)).matrix(), dtype=float)
-            out[v] = invert_pose(M)
-    return out
-
-
-
-def rig_views_from_cameras(cameras: Mapping[str, PinholeCamera], shot: str,
-                           central: str | None = None) -> dict[str, np.ndarray]:
-    """The rig as a calibration places one shot's views: view -> cam_to_central (the
-    central view ``central``, by default the middle of the shot's N x N names)."""
-    names = sorted(split_key(k)[1] for k in cameras if split_key(k)[0] == shot)
-    if not names:
-        raise ValueError(f"no view of shot {shot}")
-    c = central or names[len(names) // 2]
-    inv = invert_pose(cameras[f"{shot}/{c}"].cam_to_world)
-    return {v: inv @ cameras[f"{shot}/{v}"].cam_to_world for v in names}

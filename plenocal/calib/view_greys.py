@@ -2,7 +2,7 @@
 (:mod:`plenocal.calib.track_alignment`), decoded once per refinement.
 
 With ``refine.tracks: both`` the central views' points (:mod:`plenocal.calib.central_tracks`)
-and every view's own matches (:func:`plenocal.calib.refine.aligned_keypoints`) are aligned
+and every view's own matches (:func:`plenocal.calib.track_sets.aligned_keypoints`) are aligned
 on the same views one after the other, and each view was decoded for each: on the default
 dataset 700 PNGs twice, about 4.5 s of the refine job's 90. :class:`ViewGreys` keeps what
 it decoded while it lives (the two alignments, not the adjustments after them).
