@@ -9,7 +9,7 @@ import pytest
 from PIL import Image
 
 from plenocal.io.files import read_image, write_image
-from plenocal.io.png import SIGNATURE, encode_png
+from plenocal.io.png import SIGNATURE, VIEW_BITS, encode_png, view_dtype
 
 
 def _chunks(data: bytes) -> list[tuple[bytes, bytes]]:
@@ -94,3 +94,19 @@ def test_png_splits_large_data_over_idat_chunks(tmp_path, monkeypatch):
     assert set(kinds[1:-1]) == {b"IDAT"} and len(kinds) > 10
     (tmp_path / "split.png").write_bytes(data)
     assert np.array_equal(read_image(tmp_path / "split.png"), img)
+
+
+def test_view_bits_choose_the_samples_and_pillow_reads_16_bit_colour_as_8_bit(tmp_path):
+    """``plenocal convert --png-bits``: 8 by default, 16 on request, nothing else; and why 8
+    stays the default: Pillow opens a 16-bit colour PNG as 8-bit RGB (its high bytes)."""
+    assert VIEW_BITS == 8 and view_dtype(None) is np.uint8
+    assert view_dtype(8) is np.uint8 and view_dtype(16) is np.uint16
+    with pytest.raises(ValueError, match="8 or 16 bits per sample, not 12"):
+        view_dtype(12)
+    rgb = ((np.arange(4 * 6 * 3).reshape(4, 6, 3) * 911) % 65536).astype(np.uint16)
+    path = tmp_path / "v.png"
+    write_image(path, rgb)
+    assert np.array_equal(read_image(path), rgb)
+    with Image.open(path) as im:
+        assert im.mode == "RGB"
+        assert np.array_equal(np.asarray(im), (rgb >> 8).astype(np.uint8))
