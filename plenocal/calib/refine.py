@@ -90,6 +90,7 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -129,6 +130,9 @@ from plenocal.calib.view_greys import ViewGreys
 from plenocal.camera import PinholeCamera, rotation_angle_deg
 from plenocal.config import settings_from, stage_defaults
 from plenocal.names import split_key
+
+if TYPE_CHECKING:
+    from pycolmap import LossFunctionType, Reconstruction
 
 log = logging.getLogger(__name__)
 
@@ -256,14 +260,14 @@ class RefineSettings:
         return cls(**kw, seed=seed)
 
 
-def _loss(name: str):
+def _loss(name: str) -> LossFunctionType:
     import pycolmap  # noqa: PLC0415
 
     return getattr(pycolmap.LossFunctionType, name.upper())
 
 
-def _adjustment_setup(rec, model: RigModel, settings: RefineSettings, *, refine_focal: bool,
-                      refine_rig: bool, hold_frame: str, loss_scale_px: float,
+def _adjustment_setup(rec: Reconstruction, model: RigModel, settings: RefineSettings, *,
+                      refine_focal: bool, refine_rig: bool, hold_frame: str, loss_scale_px: float,
                       refine_pp: bool = False) -> tuple:
     """The options and the configuration (``pycolmap.BundleAdjustmentOptions``,
     ``pycolmap.BundleAdjustmentConfig``) of :func:`bundle_adjust`'s problem, but for the
@@ -294,8 +298,8 @@ def held_shots(model: RigModel, settings: RefineSettings, hold_frame: str) -> li
     return sorted(model.frame_of_shot) if settings.frames == "hold" else [hold_frame]
 
 
-def focal_pass_std(rec, model: RigModel, settings: RefineSettings, *, refine_rig: bool,
-                   hold_frame: str, loss_scale_px: float,
+def focal_pass_std(rec: Reconstruction, model: RigModel, settings: RefineSettings, *,
+                   refine_rig: bool, hold_frame: str, loss_scale_px: float,
                    work_dir: str | Path | None = None) -> dict:
     """The focal length's standard deviation at the end of the focal pass (config
     ``refine.focal_sd``; :mod:`plenocal.calib.refine_uncertainty`), its problem set up as
@@ -339,8 +343,8 @@ def focal_pass_std(rec, model: RigModel, settings: RefineSettings, *, refine_rig
     return out
 
 
-def bundle_adjust(rec, model: RigModel, settings: RefineSettings, *, refine_focal: bool,
-                  refine_rig: bool, hold_frame: str, loss_scale_px: float,
+def bundle_adjust(rec: Reconstruction, model: RigModel, settings: RefineSettings, *,
+                  refine_focal: bool, refine_rig: bool, hold_frame: str, loss_scale_px: float,
                   refine_pp: bool = False, max_iterations: int | None = None) -> dict:
     """COLMAP's bundle adjustment of ``rec``: frames and points, each sensor's focal length
     where ``refine_focal``, each sensor's principal point where ``refine_pp`` (the central
@@ -530,8 +534,9 @@ _TOO_FEW = {
 }
 
 
-def warm_start(rec, model: RigModel, views: Mapping[str, tuple[np.ndarray, np.ndarray]],
-               settings: RefineSettings, focal: float, hold_shot: str) -> float:
+def warm_start(rec: Reconstruction, model: RigModel,
+               views: Mapping[str, tuple[np.ndarray, np.ndarray]], settings: RefineSettings,
+               focal: float, hold_shot: str) -> float:
     """Registration B's cameras at the shared focal length (``views``: the rig built again
     for ``focal``) set back after the focal pass, so that the final pass starts where the
     focal pass ended; the turn it took (degrees).
@@ -566,9 +571,12 @@ def warm_start(rec, model: RigModel, views: Mapping[str, tuple[np.ndarray, np.nd
     return angle
 
 
-def _adjusted(rec, model: RigModel, eq6, rig: RigB, views, shots, central, shot_poses,
-              settings: RefineSettings, *, hold_shot, rig_at_focal, step_m, points, align,
-              t0, t_tri, work_dir) -> Refinement:
+def _adjusted(rec: Reconstruction, model: RigModel, eq6: Mapping[str, PinholeCamera],
+              rig: RigB, views: Mapping[str, tuple[np.ndarray, np.ndarray]], shots: list[str],
+              central: str, shot_poses: Mapping[str, np.ndarray], settings: RefineSettings, *,
+              hold_shot: str, rig_at_focal: Callable[[float], RigB] | None,
+              step_m: float | None, points: dict, align: dict, t0: float, t_tri: float,
+              work_dir: str | Path | None) -> Refinement:
     """The adjustments of :func:`refine_calibration` on the rig reconstruction ``rec``, and
     its report."""
     before = observation_errors(rec, work_dir)
@@ -688,7 +696,7 @@ def _adjusted(rec, model: RigModel, eq6, rig: RigB, views, shots, central, shot_
     return Refinement(cams, report, rig_views, sensors_before, sensor_params(rec))
 
 
-def refined_step_scale(rec, model: RigModel, step_m: float) -> dict | None:
+def refined_step_scale(rec: Reconstruction, model: RigModel, step_m: float) -> dict | None:
     """The stage's step ``step_m`` fitted to the refined array shots
     (:func:`plenocal.calib.scale.array_step_scale` on the frames' poses, the units the
     adjustment left): its ``r`` is the factor that gives them that step, metres per unit.

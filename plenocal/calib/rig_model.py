@@ -23,6 +23,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,8 +31,11 @@ from plenocal.calib.reg_a import colmap as cm
 from plenocal.camera import PinholeCamera, invert_pose, k_to_colmap
 from plenocal.names import split_key
 
+if TYPE_CHECKING:
+    from pycolmap import Reconstruction, Rigid3d, sensor_t
 
-def rigid3d(M: np.ndarray):
+
+def rigid3d(M: np.ndarray) -> Rigid3d:
     """A 4x4 (or 3x4) rigid transform as a ``pycolmap.Rigid3d`` (rotation re-orthonormalised
     by SVD, as :func:`plenocal.calib.reg_a.colmap._rigid` does)."""
     import pycolmap  # noqa: PLC0415
@@ -41,7 +45,7 @@ def rigid3d(M: np.ndarray):
     return pycolmap.Rigid3d(pycolmap.Rotation3d(U @ Vt), M[:3, 3].copy())
 
 
-def _camera_sensor(camera_id: int):
+def _camera_sensor(camera_id: int) -> sensor_t:
     import pycolmap  # noqa: PLC0415
 
     return pycolmap.sensor_t(type=pycolmap.SensorType.CAMERA, id=int(camera_id))
@@ -66,7 +70,8 @@ def rig_reconstruction_of(image_names: Mapping[int, str],
                           points: Mapping[int, tuple[np.ndarray, list[tuple[int, int]]]],
                           keypoints: Mapping[str, np.ndarray],
                           views: Mapping[str, tuple[np.ndarray, np.ndarray]],
-                          shot_poses: Mapping[str, np.ndarray], width: int, height: int):
+                          shot_poses: Mapping[str, np.ndarray], width: int, height: int
+                          ) -> tuple[Reconstruction, RigModel]:
     """:func:`~plenocal.calib.track_sets.rig_reconstruction` of plain data: ``image_names``
     image id -> ``<shot>/<view>.png``, ``points`` point id -> (X, its track's (image id,
     keypoint index) pairs), added in the mapping's order, ``keypoints`` image name -> (n, 2)
@@ -119,7 +124,7 @@ def rig_reconstruction_of(image_names: Mapping[int, str],
     return rec, RigModel(cam_of, frame_of, central)
 
 
-def cameras_of(rec) -> dict[str, PinholeCamera]:
+def cameras_of(rec: Reconstruction) -> dict[str, PinholeCamera]:
     """Every image of a rig reconstruction -> its camera (internal convention)."""
     out = {}
     for image_id in sorted(rec.images):
@@ -128,7 +133,7 @@ def cameras_of(rec) -> dict[str, PinholeCamera]:
     return out
 
 
-def observation_errors(rec, work_dir: str | Path | None = None) -> np.ndarray:
+def observation_errors(rec: Reconstruction, work_dir: str | Path | None = None) -> np.ndarray:
     """Reprojection error (px) of every observation of ``rec``'s points, in the internal
     convention (read back through COLMAP's binary files, as Table I reads them)."""
     from plenocal.verify import reprojection as rp  # noqa: PLC0415
@@ -140,7 +145,7 @@ def observation_errors(rec, work_dir: str | Path | None = None) -> np.ndarray:
     return np.concatenate(errs) if errs else np.zeros(0)
 
 
-def frame_centres(rec, model: RigModel) -> dict[str, np.ndarray]:
+def frame_centres(rec: Reconstruction, model: RigModel) -> dict[str, np.ndarray]:
     """Each shot's rig (central view) centre, world coordinates (:func:`frame_poses`)."""
     return {shot: M[:3, 3] for shot, M in frame_poses(rec, model).items()}
 
@@ -151,7 +156,7 @@ def spread(centres: Mapping[str, np.ndarray]) -> float:
     return float(np.sqrt(((P - P.mean(axis=0)) ** 2).sum(axis=1).mean()))
 
 
-def frame_poses(rec, model: RigModel) -> dict[str, np.ndarray]:
+def frame_poses(rec: Reconstruction, model: RigModel) -> dict[str, np.ndarray]:
     """Each shot's rig (central view) cam_to_world, world coordinates."""
     out = {}
     for shot, fid in model.frame_of_shot.items():
@@ -161,7 +166,7 @@ def frame_poses(rec, model: RigModel) -> dict[str, np.ndarray]:
     return out
 
 
-def rescale(rec, factor: float) -> None:
+def rescale(rec: Reconstruction, factor: float) -> None:
     """Scale ``rec`` by ``factor`` about the world origin: its points, its frames and its
     rig's sensor translations (COLMAP's ``Reconstruction.transform`` scales all three), a
     gauge of the adjustment wherever the rig's size is not held."""
@@ -170,14 +175,14 @@ def rescale(rec, factor: float) -> None:
     rec.transform(pycolmap.Sim3d(float(factor), pycolmap.Rotation3d(), np.zeros(3)))
 
 
-def sensor_params(rec) -> dict[int, np.ndarray]:
+def sensor_params(rec: Reconstruction) -> dict[int, np.ndarray]:
     """The rig's sensor_from_rig parameters (quaternion xyzw, translation) by camera id."""
     rig = rec.rig(1)
     return {s.id: np.asarray(rig.sensor_from_rig(s).params, dtype=float).copy()
             for s in rig.non_ref_sensors}
 
 
-def shared_focal(rec, model: RigModel) -> tuple[float, dict[str, float]]:
+def shared_focal(rec: Reconstruction, model: RigModel) -> tuple[float, dict[str, float]]:
     """The mean of the sensors' focal lengths (fx, fy) weighted by their observations,
     and each sensor's."""
     counts = {cid: 0 for cid in model.camera_of_view.values()}
@@ -193,7 +198,8 @@ def shared_focal(rec, model: RigModel) -> tuple[float, dict[str, float]]:
     return float((w * f).sum() / w.sum()), per
 
 
-def set_intrinsics(rec, model: RigModel, views: Mapping[str, tuple[np.ndarray, np.ndarray]],
+def set_intrinsics(rec: Reconstruction, model: RigModel,
+                   views: Mapping[str, tuple[np.ndarray, np.ndarray]],
                    offsets: Mapping[str, np.ndarray] | None = None) -> None:
     """Each sensor's camera as ``views`` gives it (registration B's K); with ``offsets``
     (view -> (dx, dy) px), its principal point moved by them."""
@@ -205,7 +211,7 @@ def set_intrinsics(rec, model: RigModel, views: Mapping[str, tuple[np.ndarray, n
         rec.camera(cid).params = params
 
 
-def principal_points(rec, model: RigModel) -> dict[str, np.ndarray]:
+def principal_points(rec: Reconstruction, model: RigModel) -> dict[str, np.ndarray]:
     """Each view's principal point (COLMAP's pixel convention), px."""
     return {v: np.array(rec.camera(cid).params[2:4], dtype=float)
             for v, cid in model.camera_of_view.items()}
@@ -227,7 +233,7 @@ def turn_of_shift(shift_px: np.ndarray, focal_px: float) -> np.ndarray:
     return np.eye(3) + math.sin(angle) * Kx + (1.0 - math.cos(angle)) * (Kx @ Kx)
 
 
-def turn_frames(rec, model: RigModel, turn: np.ndarray, hold_shot: str) -> None:
+def turn_frames(rec: Reconstruction, model: RigModel, turn: np.ndarray, hold_shot: str) -> None:
     """Turn every frame of ``rec`` by ``turn`` in its own (rig) axes, and the world about
     the held shot's rig so that its frame keeps its pose: with ``H`` the held frame's
     rig_from_world, the points go to ``T p`` with ``T = H^-1 R H`` and each frame's
@@ -252,7 +258,8 @@ def turn_frames(rec, model: RigModel, turn: np.ndarray, hold_shot: str) -> None:
         rec.frame(fid).rig_from_world = rigid3d(R4 @ F @ T_inv)
 
 
-def set_rig(rec, model: RigModel, views: Mapping[str, tuple[np.ndarray, np.ndarray]]) -> None:
+def set_rig(rec: Reconstruction, model: RigModel,
+            views: Mapping[str, tuple[np.ndarray, np.ndarray]]) -> None:
     rig = rec.rig(1)
     for v, cid in model.camera_of_view.items():
         if v != model.central:
@@ -276,7 +283,7 @@ def with_focal(K: np.ndarray, focal: float) -> np.ndarray:
     return out
 
 
-def rig_views_from_model(rec, model: RigModel) -> dict[str, np.ndarray]:
+def rig_views_from_model(rec: Reconstruction, model: RigModel) -> dict[str, np.ndarray]:
     """The rig's sensors as cam_to_central (internal), by view."""
     rig = rec.rig(1)
     out = {model.central: np.eye(4)}

@@ -10,12 +10,16 @@ back where Eq. 6 places it relative to the held one (:func:`shot_groups`,
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from plenocal.calib.groups import Groups
 from plenocal.calib.rig_model import RigModel, frame_poses, rigid3d
 from plenocal.camera import invert_pose, pose
+
+if TYPE_CHECKING:
+    from pycolmap import Reconstruction
 
 
 def shot_groups(ties: list[frozenset[str]], shots: Iterable[str]) -> list[list[str]]:
@@ -32,7 +36,7 @@ def shot_groups(ties: list[frozenset[str]], shots: Iterable[str]) -> list[list[s
     return groups.groups()
 
 
-def point_shots(rec, model: RigModel) -> list[frozenset[str]]:
+def point_shots(rec: Reconstruction, model: RigModel) -> list[frozenset[str]]:
     """The shots that see each of the adjustment's points (those seen by two or more: the
     points that tie shots together)."""
     shot_of_frame = {fid: shot for shot, fid in model.frame_of_shot.items()}
@@ -61,7 +65,7 @@ def shot_ties(ties: list[frozenset[str]], shots: list[str],
     return out
 
 
-def place_groups(rec, model: RigModel, eq6_poses: Mapping[str, np.ndarray],
+def place_groups(rec: Reconstruction, model: RigModel, eq6_poses: Mapping[str, np.ndarray],
                  groups: list[list[str]], hold_shot: str) -> dict[str, float]:
     """Put every group of shots (:func:`shot_groups`) that the held shot's does not hold
     where Eq. 6 puts it relative to that group: the gauge of the adjustment is one rigid

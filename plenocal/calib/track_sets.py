@@ -32,23 +32,26 @@ from plenocal.artifacts.tracks import SOURCES_OF
 from plenocal.calib.central_tracks import TrackSet
 from plenocal.calib.reg_a import colmap as cm
 from plenocal.calib.reg_a import viewdb
-from plenocal.calib.rig_model import identity_view, rig_reconstruction_of
+from plenocal.calib.rig_model import RigModel, identity_view, rig_reconstruction_of
 from plenocal.calib.track_alignment import AlignSettings
 from plenocal.calib.view_greys import grey_of
 from plenocal.camera import PinholeCamera
 from plenocal.names import split_key
 
 if TYPE_CHECKING:
+    from pycolmap import Reconstruction
+
     from plenocal.calib.refine import RefineSettings
 
 # the refinement's logger: its log reads as one step's, as before these were a module
 log = logging.getLogger("plenocal.calib.refine")
 
 
-def rig_reconstruction(tracks, views: Mapping[str, tuple[np.ndarray, np.ndarray]],
+def rig_reconstruction(tracks: Reconstruction, views: Mapping[str, tuple[np.ndarray, np.ndarray]],
                        shot_poses: Mapping[str, np.ndarray], width: int, height: int,
                        point_ids: list[int], work_dir: str | Path | None = None,
-                       keypoints: Mapping[str, np.ndarray] | None = None):
+                       keypoints: Mapping[str, np.ndarray] | None = None
+                       ) -> tuple[Reconstruction, RigModel]:
     """A ``pycolmap.Reconstruction`` of one rig (``views``: view -> (K, cam_to_central), the
     central view the one whose pose is the identity) with one frame per shot
     (``shot_poses``: shot -> its central view's cam_to_world), every image of ``tracks``
@@ -64,7 +67,7 @@ def rig_reconstruction(tracks, views: Mapping[str, tuple[np.ndarray, np.ndarray]
                                  height)
 
 
-def track_set_of(tracks, point_ids: list[int], work_dir: str | Path | None = None,
+def track_set_of(tracks: Reconstruction, point_ids: list[int], work_dir: str | Path | None = None,
                  keypoints: Mapping[str, np.ndarray] | None = None) -> TrackSet:
     """The points ``point_ids`` of the reconstruction ``tracks`` as plain data: every image
     of ``tracks`` by its id, its keypoints (read through ``tracks``'s binary files under
@@ -82,7 +85,7 @@ def track_set_of(tracks, point_ids: list[int], work_dir: str | Path | None = Non
     return TrackSet(names, dict(keypoints), points, int(tracks.num_points3D()))
 
 
-def select_points(tracks, max_points: int) -> list[int]:
+def select_points(tracks: Reconstruction, max_points: int) -> list[int]:
     """At most ``max_points`` of the points of ``tracks`` seen in three or more images:
     every k-th in id order (deterministic), k the smallest that keeps within the limit."""
     ids = sorted(pid for pid in tracks.point3D_ids() if tracks.point3D(pid).track.length() >= 3)
@@ -90,8 +93,8 @@ def select_points(tracks, max_points: int) -> list[int]:
     return ids[::stride]
 
 
-def aligned_keypoints(tracks, point_ids: list[int], images: Mapping[str, str | Path],
-                      settings: AlignSettings, num_threads: int,
+def aligned_keypoints(tracks: Reconstruction, point_ids: list[int],
+                      images: Mapping[str, str | Path], settings: AlignSettings, num_threads: int,
                       work_dir: str | Path | None = None
                       ) -> tuple[dict[str, np.ndarray], dict]:
     """Every image's keypoints of ``tracks`` (image name -> (n, 2), COLMAP's convention),
