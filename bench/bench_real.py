@@ -183,6 +183,23 @@ def tspc_corners(name: str, grid, check) -> tuple[float, float] | None:
                  for g in (grid, fitted))
 
 
+def _aspect(view: np.ndarray, frame: np.ndarray) -> float | None:
+    """``view``'s x scale over its y scale against the lenslet frame it was made from
+    (:func:`plenocal.convert.compare.sensor_aspect`); None where the two cannot be aligned."""
+    from plenocal.convert.compare import sensor_aspect  # noqa: PLC0415
+
+    try:
+        return sensor_aspect(view, frame)[0]
+    except ValueError:  # ConvertError: not aligned
+        return None
+
+
+def aspect_cell(aspect: dict) -> str:
+    """The table's cell of the central views' aspects against the frame (ours / the
+    reference's, x scale over y scale: 1 is the sensor's square pixels)."""
+    return " / ".join("-" if aspect[k] is None else f"{aspect[k]:.3f}" for k in ("ours", "ref"))
+
+
 def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
                 compare, mla_mode: str = "table", grid_ab: bool = False) -> dict:
     lenslet = REAL / "frames" / f"{name}.png"
@@ -243,6 +260,10 @@ def bench_frame(name: str, views: int, grid_mode: str, pictures: Path | None,
             row["cmp"] = compare(centre, ref)
         except ValueError as exc:  # ConvertError: alignment failed
             row["cmp"] = {"error": str(exc)}
+    # the central view's aspect against the frame itself (square pixels: 1), and the
+    # reference's (plenocal.convert.compare.sensor_aspect)
+    row["aspect"] = {"ours": _aspect(centre, image),
+                     "ref": _aspect(ref, image) if ref is not None else None}
     if grid_ab and refined:
         # the same conversion on the file's grid, for what the refinement changed
         file_shot = ShotConversion(image, calib, views, settings, source=str(lenslet),
@@ -521,13 +542,15 @@ def main() -> None:
     out.say("Targets (issue 12): at most 3 s per 4 MP for all views on one core; central view "
             "at least the reference's size, SSIM >= 0.85 and sharpness >= 0.8 against it "
             "(plenocal.convert.compare). Pictures: bench/out/<frame>.png (raw | ours | "
-            "reference | patch sizes) and <frame>_centre.png.")
+            "reference | patch sizes) and <frame>_centre.png. Aspect: the central view's x "
+            "scale over its y scale against the frame, both blurred until no micro image is "
+            "left (plenocal.convert.compare.sensor_aspect): 1 for the sensor's square pixels.")
     if compare is None:
         out.say("(plenocal.convert.compare not present: no comparison with the reference)")
     out.say("")
     out.head("frame", "size", "MLA", "check s", "prepare s", "views s", "total s", "s / 4 MP",
              "view", "ref. view", "confident", "grid drift max / rms px",
-             "grid refined / centred", "SSIM", "sharpness")
+             "grid refined / centred", "SSIM", "sharpness", "aspect ours / ref.")
     rows = []
     for name in frames:
         r = bench_frame(name, args.views, args.grid, pictures, compare, args.mla, args.grid_ab)
@@ -543,7 +566,8 @@ def main() -> None:
         out.say(f"| {name} | {r['size']} | {r['mla']} | {r['t_check']:.2f} | {r['t_prep']:.2f} "
                 f"| {r['t_views']:.2f} | {r['t_total']:.2f} | {r['t_total'] * 4 / r['mp']:.2f} "
                 f"| {r['view'][0]}x{r['view'][1]} | {ref_size} | {100 * r['confident']:.0f}% "
-                f"| {drift} | {grid_cell(r['refined'], ck)} | {ssim} | {sharp} |")
+                f"| {drift} | {grid_cell(r['refined'], ck)} | {ssim} | {sharp} "
+                f"| {aspect_cell(r['aspect'])} |")
     out.say("")
     out.say("Grid check per frame (fitted lattice minus the file's grid at the lens nearest each "
             "corner and the centre, px; lenses measured; fitted pitch and rotation against "

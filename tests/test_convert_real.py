@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from plenocal.convert import ConvertSettings, ShotConversion
-from plenocal.convert.compare import compare_to_reference, fine_detail
+from plenocal.convert.compare import compare_to_reference, fine_detail, sensor_aspect
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.patchsize import detect_mla_kind
 from plenocal.convert.render import blend_disagreement
@@ -122,6 +122,26 @@ def test_views_upright_and_parallax_direction(fujita):
     # the horizontal pair does not move vertically, nor the vertical pair horizontally
     assert abs(content_shift(left, right, kangaroo)[1]) < 1.0
     assert abs(content_shift(up, down, kangaroo)[0]) < 1.0
+
+
+def test_views_have_the_sensors_square_pixels_and_tlcts_do_not():
+    """The views are the sensor image scaled by T / D about its centre: square pixels.
+    Against the lenslet frame they were made from, blurred until no micro image is left,
+    Fujita2's central and corner views read its aspect to 0.5 % (measured 0.9994 and
+    1.0005); TLCT's central view reads 7 % off it (1.074: the measure sees an aspect that
+    is not the sensor's; BENCHMARKS.md, "Whose views have square pixels")."""
+    from plenocal.convert import convert_files  # noqa: PLC0415
+
+    assert REAL is not None
+    frame = cv2.imread(str(REAL / "frames" / "Fujita2.png"))[..., ::-1]
+    shot = convert_files(REAL / "frames" / "Fujita2.png", REAL / "frames" / "Fujita2.xml",
+                         None, 5, ConvertSettings(), threads=2)
+    for r, c in ((2, 2), (0, 0)):
+        aspect, cc = sensor_aspect(shot.view(r, c), frame)
+        assert cc > 0.95 and abs(aspect - 1.0) < 0.005, (r, c, aspect, cc)
+    tlct = cv2.imread(str(REAL / "reference" / "Fujita2" / "centre.png"))[..., ::-1]
+    aspect, cc = sensor_aspect(tlct, frame)
+    assert cc > 0.95 and aspect > 1.05, (aspect, cc)
 
 
 def test_mosaic_measure_fails_the_wrong_kind_and_passes_the_right_one(fujita):

@@ -18,6 +18,15 @@ them is the bar. Two numbers:
 
 Targets (issue 12): SSIM >= 0.85, sharpness ratio >= 0.8, our view at least the
 reference's size.
+
+Which of the two has square pixels the frame itself says (:func:`sensor_aspect`): a view
+against the lenslet frame it was made from, both blurred until the micro images are gone
+(what is left is the scene as the lattice of lenses sees it), aligned by an affine map.
+On the real frames of ``shared/real`` our central views read the sensor's aspect to
+0.1 % on the Raytrix frames (the corner views to 0.7 %) and within the measure's 1.5 % on
+the TSPC ones (whose large inverted
+micro images leave the blurred frame least like the scene); TLCT's are 4-8 % off it
+(BENCHMARKS.md, "Whose views have square pixels").
 """
 
 from __future__ import annotations
@@ -120,3 +129,42 @@ def compare_to_reference(ours_img: np.ndarray, ref_img: np.ndarray) -> dict:
         "meets_targets": bool(ssim >= SSIM_TARGET and sharp >= SHARPNESS_TARGET
                               and big_enough),
     }
+
+
+#: :func:`sensor_aspect`: the width both images are brought to, and the blur (px at that
+#: width) that leaves no micro image: a 68-px micro image of a 4,000-px TSPC frame is 7 px
+#: wide at 400
+ASPECT_WIDTH = 400
+ASPECT_SIGMA = 2.5
+
+
+def sensor_aspect(view: np.ndarray, frame: np.ndarray) -> tuple[float, float]:
+    """The aspect of ``view`` against the lenslet ``frame`` it was made from (grey or RGB,
+    any depth): both area-averaged to :data:`ASPECT_WIDTH` px and blurred by
+    :data:`ASPECT_SIGMA` px, then the affine map from the view onto the frame by ECC
+    (:func:`cv2.findTransformECC`, started with the view spanning 100, 90, 80 or 70 % of
+    the frame's width about its centre, the best correlation kept). Returns (its x scale
+    over its y scale, the correlation): 1 where the view has the sensor's square pixels."""
+    def prep(img: np.ndarray) -> np.ndarray:
+        g = grey(img)
+        h = max(8, int(round(g.shape[0] * ASPECT_WIDTH / g.shape[1])))
+        small = cv2.resize(g, (ASPECT_WIDTH, h), interpolation=cv2.INTER_AREA)
+        return cv2.GaussianBlur(small, (0, 0), ASPECT_SIGMA)
+
+    a, b = prep(view), prep(frame)
+    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 300, 1e-7)
+    best: tuple[float, np.ndarray] | None = None
+    for cover in (1.0, 0.9, 0.8, 0.7):
+        k = cover * b.shape[1] / a.shape[1]
+        warp = np.array([[k, 0, (b.shape[1] - k * a.shape[1]) / 2],
+                         [0, k, (b.shape[0] - k * a.shape[0]) / 2]], np.float32)
+        try:
+            cc, W = cv2.findTransformECC(b, a, warp, cv2.MOTION_AFFINE, criteria, None, 5)
+        except cv2.error:  # ECC did not converge from this start
+            continue
+        if best is None or cc > best[0]:
+            best = (float(cc), W)
+    if best is None:
+        raise ConvertError("the view could not be aligned with its lenslet frame")
+    cc, W = best
+    return float(np.hypot(*W[:, 0]) / np.hypot(*W[:, 1])), cc
