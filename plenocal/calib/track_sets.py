@@ -43,7 +43,8 @@ if TYPE_CHECKING:
 
     from plenocal.calib.refine import RefineSettings
 
-# the refinement's logger: its log reads as one step's, as before these were a module
+# the refinement's logger: the track sets' lines read as the step's own, as they did
+# before this module was split off refine.py
 log = logging.getLogger("plenocal.calib.refine")
 
 
