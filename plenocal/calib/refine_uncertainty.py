@@ -78,13 +78,11 @@ def thinned(rec, every: int) -> tuple[object, int, int]:
     ``(copy, kept, all)``. ``rec`` itself is not changed."""
     import pycolmap  # noqa: PLC0415
 
-    total = sum(p.track.length() for p in rec.points3D.values())
     out = pycolmap.Reconstruction(rec)
     for i, point_id in enumerate(sorted(out.point3D_ids())):
         if i % every:
             out.delete_point3D(point_id)
-    kept = sum(p.track.length() for p in out.points3D.values())
-    return out, kept, total
+    return out, out.compute_num_observations(), rec.compute_num_observations()
 
 
 def significant(x: float) -> float:
