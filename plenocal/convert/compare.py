@@ -24,9 +24,8 @@ against the lenslet frame it was made from, both blurred until the micro images 
 (what is left is the scene as the lattice of lenses sees it), aligned by an affine map.
 On the real frames of ``shared/real`` our central views read the sensor's aspect to
 0.1 % on the Raytrix frames (the corner views to 0.7 %) and within the measure's 1.5 % on
-the TSPC ones (whose large inverted
-micro images leave the blurred frame least like the scene); TLCT's are 4-8 % off it
-(BENCHMARKS.md, "Whose views have square pixels").
+the TSPC ones (whose large inverted micro images leave the blurred frame least like the
+scene); TLCT's are 4-8 % off it (BENCHMARKS.md, "Whose views have square pixels").
 """
 
 from __future__ import annotations
