@@ -866,6 +866,34 @@ def test_soften_unreliable_blurs_only_the_box_it_softens():
         np.testing.assert_array_equal(soften_unreliable(view.copy(), rmap, sigma), whole)
 
 
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_soften_unreliable_in_strips_is_the_whole_blend(dtype):
+    """soften_unreliable blends SOFTEN_ROWS rows at a time (the weights and the result of
+    a whole 31-MP frame's filled view are 44 MB): a view softened nearly everywhere, taller
+    than three strips and of an odd width, comes out as one blend of the whole box, to the
+    bit (8 bits: cv2.blendLinear; 16 bits: in float32, rounded)."""
+    from plenocal.convert.render import SOFTEN_ROWS, _lowpass, soften_unreliable
+
+    rng = np.random.default_rng(11)
+    H, W = 3 * SOFTEN_ROWS + 77, 131
+    top = np.iinfo(dtype).max
+    view = cv2.GaussianBlur(rng.integers(0, top, (H, W, 3), dtype=dtype), (0, 0), 1.0)
+    rmap = rng.random((H, W), dtype=np.float32)
+    rmap[:5] = 1.0  # the box starts below the first rows
+    sigma = 2.5
+    ys = slice(5, H)
+    blurred = _lowpass(view, sigma)[ys]
+    r = rmap[ys]
+    if dtype == np.uint8:
+        whole = cv2.blendLinear(view[ys], blurred, r, 1.0 - r)
+    else:
+        mixed = cv2.blendLinear(view[ys].astype(np.float32), blurred.astype(np.float32), r, 1.0 - r)
+        whole = np.rint(mixed).astype(np.uint16)
+    out = soften_unreliable(view.copy(), rmap, sigma)
+    np.testing.assert_array_equal(out[ys], whole)
+    np.testing.assert_array_equal(out[:5], view[:5])
+
+
 @pytest.mark.parametrize("safe_diameter", [16.0, 50.0])
 def test_radial_tables_follow_the_weight_formula_in_the_squared_radius(safe_diameter):
     """The blend weight read from the 256-entry tables over the squared radius

@@ -3,6 +3,7 @@ fill that takes them from their supported neighbours (plenocal.convert.holes).""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 from synth.lenslets import calib_for_optics, lenslet_from_patch_size, random_texture
@@ -10,9 +11,13 @@ from test_convert import FIXED_TILE, small_optics
 
 from plenocal.convert import ShotConversion
 from plenocal.convert.holes import (
+    LEVEL_SUPPORT,
     SLAB_MARGIN_PX,
+    STRIP_ROWS,
     SUPPORT_FULL,
+    SparseConfidence,
     fill_unsupported,
+    push_pull,
     support_confidence,
     weak_box,
 )
@@ -156,3 +161,77 @@ def test_boxes_band_by_band_give_the_same_fill_as_the_whole_confidence():
     whole = fill_unsupported(view.copy(), support_confidence(support))
     assert np.array_equal(fill_unsupported(view.copy(), boxes), whole)
     assert not np.array_equal(whole, view)
+
+
+def test_scattered_weak_pixels_are_kept_sparse_and_give_the_same_fill():
+    """A band whose weak pixels are under half its box is kept as their indices and
+    confidences (SparseConfidence: 8 bytes a weak pixel, not 4 a pixel of the box: on a
+    frame whose lenses are mostly filled, every band's box spans the view); the fill from
+    sparse, dense and mixed boxes is the fill from the whole confidence map, to the bit."""
+    rng = np.random.default_rng(8)
+    H, W = 160, 150
+    view = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    support = np.full((H, W), 0.5, np.float32)
+    support[3:96:7, 2::5] = rng.uniform(0.0, SUPPORT_FULL, (len(range(3, 96, 7)),
+                                                            len(range(2, W, 5))))
+    support[100:108, 20:30] = 0.0  # a dense hole, alone in its band
+    boxes = []
+    for y in range(0, H, 16):
+        box = weak_box(support[y:y + 16])
+        if box is not None:
+            boxes.append((y + box[0], box[1], box[2]))
+    sparse = [c for _, _, c in boxes if isinstance(c, SparseConfidence)]
+    dense = [c for _, _, c in boxes if not isinstance(c, SparseConfidence)]
+    assert sparse and dense
+    for c in sparse:  # only the pixels below 1, each below 1
+        assert (c.vals < 1.0).all() and c.idx.dtype == np.int32
+    conf = support_confidence(support)
+    whole = fill_unsupported(view.copy(), conf)
+    assert np.array_equal(fill_unsupported(view.copy(), boxes), whole)
+    assert not np.array_equal(whole[conf < 1.0], view[conf < 1.0])
+
+
+def _push_pull_whole(img: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """The push-pull of the module docstring on whole arrays, each level at once: what
+    push_pull computed before it worked in strips."""
+    if float(c.max()) <= 0.0:
+        return img.copy()
+    nums, dens = [img * c[..., None]], [c]
+    while min(dens[-1].shape) > 1 and (len(dens) == 1 or float(dens[-1].min()) < LEVEL_SUPPORT):
+        y = cv2.pyrDown(nums[-1])
+        nums.append(y.reshape(y.shape[0], y.shape[1], img.shape[2]))
+        dens.append(cv2.pyrDown(dens[-1]))
+    d = dens[-1]
+    mean = nums[-1].sum(axis=(0, 1)) / max(float(d.sum()), 1e-30)
+    est = nums[-1] / np.maximum(d, np.float32(1e-12))[..., None]
+    est[d <= 0] = mean
+    for lv in range(len(nums) - 2, -1, -1):
+        h, w = dens[lv].shape
+        up = cv2.pyrUp(est, dstsize=(w, h)).reshape(h, w, img.shape[2])
+        if lv == 0:
+            a, v = c, img
+        else:
+            a = np.minimum(dens[lv] * np.float32(1.0 / LEVEL_SUPPORT), np.float32(1.0))
+            v = nums[lv] / np.maximum(dens[lv], np.float32(1e-12))[..., None]
+        est = a[..., None] * v + (1.0 - a[..., None]) * up
+    return est
+
+
+@pytest.mark.parametrize("shape", [(2 * STRIP_ROWS + 45, 97, 3), (STRIP_ROWS + 1, 64, 1),
+                                   (9, 300, 3), (1, 50, 3), (300, 1, 3), (2, 2, 3)])
+def test_push_pull_in_strips_gives_the_whole_pyramids_bits(shape):
+    """push_pull makes its finest level in strips of STRIP_ROWS rows (the level's products
+    and OpenCV's pyrDown / pyrUp with the rows their 5-tap kernels reach), so that a fill
+    never holds a view-sized float array: the same bits as the pyramid of whole arrays, at
+    odd heights and widths, one channel or three, a row or a column alone, and with holes
+    wider than a strip."""
+    rng = np.random.default_rng(sum(shape))
+    img = rng.random(shape, dtype=np.float32) * 255
+    c = rng.random(shape[:2], dtype=np.float32)
+    c[c < 0.3] = 0.0
+    c[c > 0.8] = 1.0
+    if shape[0] > STRIP_ROWS:
+        c[10:STRIP_ROWS + 20, 5:40] = 0.0  # a hole across a strip's edge
+    np.testing.assert_array_equal(push_pull(img, c), _push_pull_whole(img, c))
+    zero = np.zeros(shape[:2], np.float32)
+    np.testing.assert_array_equal(push_pull(img, zero), img)

@@ -476,6 +476,10 @@ def _lowpass(img: np.ndarray, sigma_px: float) -> np.ndarray:
     return small.reshape(img.shape)
 
 
+#: rows of a view blended with its blur at a time (:func:`soften_unreliable`; a multiple of 64)
+SOFTEN_ROWS = 256
+
+
 def soften_unreliable(view: np.ndarray, rmap: np.ndarray, sigma_px: float) -> np.ndarray:
     """``view`` (H, W, C; uint8, uint16 or float32) blended with its Gaussian blur
     (``sigma_px``) where ``rmap`` (:func:`reliability_map`) is below 1:
@@ -494,16 +498,21 @@ def soften_unreliable(view: np.ndarray, rmap: np.ndarray, sigma_px: float) -> np
     px = slice(max(0, xs.start - m), min(w, xs.stop + m))
     blurred = _lowpass(np.ascontiguousarray(view[py, px]), sigma_px)[
         ys.start - py.start:ys.stop - py.start, xs.start - px.start:xs.stop - px.start]
-    part = np.ascontiguousarray(view[ys, xs])
-    r = np.ascontiguousarray(rmap[ys, xs], dtype=np.float32)
-    if view.dtype == np.uint16:  # cv2.blendLinear takes 8-bit and float images: in float32
-        # (a 1574 x 1190 view: 44 ms, against 60-90 ms for the products channel by channel)
-        mixed = cv2.blendLinear(part.astype(np.float32), blurred.astype(np.float32), r, 1.0 - r)
-        np.rint(mixed, out=mixed)
-        view[ys, xs] = mixed.astype(np.uint16).reshape(part.shape)
-        return view
-    view[ys, xs] = cv2.blendLinear(part, np.ascontiguousarray(blurred), r,
-                                   1.0 - r).reshape(part.shape)
+    # in strips of SOFTEN_ROWS rows (a whole blend's weights and result are 44 MB on a
+    # 31-MP frame's filled view); a multiple of 64 rows starts every strip on a multiple
+    # of OpenCV's vector width, so the strips give the whole blend's bits
+    for r0 in range(ys.start, ys.stop, SOFTEN_ROWS):
+        rows = slice(r0, min(r0 + SOFTEN_ROWS, ys.stop))
+        part = np.ascontiguousarray(view[rows, xs])
+        r = np.ascontiguousarray(rmap[rows, xs], dtype=np.float32)
+        soft = np.ascontiguousarray(blurred[r0 - ys.start:rows.stop - ys.start])
+        if view.dtype == np.uint16:  # cv2.blendLinear takes 8-bit and float images: float32
+            # (a 1574 x 1190 view: 44 ms, against 60-90 ms for the products channel by channel)
+            mixed = cv2.blendLinear(part.astype(np.float32), soft.astype(np.float32), r, 1.0 - r)
+            np.rint(mixed, out=mixed)
+            view[rows, xs] = mixed.astype(np.uint16).reshape(part.shape)
+        else:
+            view[rows, xs] = cv2.blendLinear(part, soft, r, 1.0 - r).reshape(part.shape)
     return view
 
 

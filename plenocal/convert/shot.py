@@ -43,7 +43,7 @@ from plenocal.convert.analysis import ConvertAnalysis
 from plenocal.convert.bordercut import BorderCut, measure_border_cut
 from plenocal.convert.demosaic import BAYER_PATTERNS, demosaic, mosaic_warning
 from plenocal.convert.errors import ConvertError
-from plenocal.convert.holes import fill_unsupported, weak_box
+from plenocal.convert.holes import Confidence, fill_unsupported, weak_box
 from plenocal.convert.levels import (
     OVEREXPOSED_SHARE,
     clipped_share,
@@ -624,7 +624,7 @@ class ShotConversion:
         todo = [(name, *parse_view(name)) for name in names]
         out = {name: np.empty((H, W, ch), dtype) for name, _, _ in todo}
         # where pixels lack support: name -> [(row, column, confidence box)] (holes.weak_box)
-        weak: dict[str, list[tuple[int, int, np.ndarray]]] = {name: [] for name, _, _ in todo}
+        weak: dict[str, list[tuple[int, int, Confidence]]] = {name: [] for name, _, _ in todo}
 
         def band(rows: slice) -> None:
             plans = self.plans_for_rows(rows)
