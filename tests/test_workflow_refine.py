@@ -72,8 +72,8 @@ def test_refinement_keeps_every_view_and_does_not_raise_the_errors(tiny_complete
 def test_colmap_points_hold_the_calibration_and_table_i_points(tiny_complete_run: Path):
     """calibration/colmap_points (rule reprojection_complete): every view of
     calibration/cameras.json with its camera and pose, the 3-D points of Table I's complete
-    row, and image names that the views folder holds (a Gaussian-splatting trainer's
-    images folder)."""
+    row as COLMAP filters its models (each observation within 4 px), and image names that
+    the views folder holds (a Gaussian-splatting trainer's images folder)."""
     import cv2  # noqa: F401, PLC0415  (before pycolmap)
     import pycolmap  # noqa: PLC0415
 
@@ -84,13 +84,18 @@ def test_colmap_points_hold_the_calibration_and_table_i_points(tiny_complete_run
     rows = read_reprojection_table(res / "eval" / "reprojection.json").rows
     rec = pycolmap.Reconstruction(str(res / "calibration" / "colmap_points"))
     assert rec.num_reg_images() == len(cams) == 90
-    assert rec.num_points3D() == rows["complete"]["num_points3D"] > 100
+    assert 0.9 * rows["complete"]["num_points3D"] <= rec.num_points3D() > 100
+    assert rec.num_points3D() <= rows["complete"]["num_points3D"]
     for image in rec.images.values():
         assert (res / "views" / image.name).is_file(), image.name
         got = pinhole_from_colmap(image, rec.camera(image.camera_id))
         want = cams[image.name[:-4]]
         np.testing.assert_allclose(got.K, want.K, atol=1e-9)
         np.testing.assert_allclose(got.cam_to_world, want.cam_to_world, atol=1e-9)
+        for p2 in image.points2D:
+            if p2.has_point3D():
+                uv = image.project_point(rec.points3D[p2.point3D_id].xyz)
+                assert np.linalg.norm(uv - p2.xy) <= 4.0 + 1e-6
 
 
 def test_gaussian_splatting_dataset_asked_for_by_path(tiny_complete_run: Path, tmp_path):

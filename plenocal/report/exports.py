@@ -36,7 +36,8 @@ EXPORTS: tuple[Export, ...] = (
            "a sparse model: every view's intrinsics and pose, no points; images: views/"),
     Export("calibration/colmap_points", "reprojection_complete",
            "nerfstudio (splatfacto), gsplat",
-           "the same cameras with Table I's triangulated points, coloured; images: views/"),
+           "the same cameras with Table I's triangulated points, coloured, filtered at "
+           "COLMAP's 4 px; images: views/"),
     Export("calibration/gaussian_splatting", "gaussian_splatting",
            "3D Gaussian splatting (graphdeco-inria)",
            "images/ cropped about each view's principal point, and sparse/0/",

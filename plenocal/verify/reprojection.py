@@ -336,23 +336,49 @@ def triangulated_stats(cameras: Mapping[str, PinholeCamera], database: str | Pat
                  stats["num_observations"], stats["mean_px"] or float("nan"),
                  stats["median_px"] or float("nan"))
         if model_dir is not None:
-            write_points_model(rec, model_dir, images, tmp)
+            write_points_model(rec, model_dir, images, tmp,
+                               max_error_px=track_error_px, min_angle_deg=min_angle_deg)
         return stats
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
+def filter_for_export(rec, max_error_px: float, min_angle_deg: float) -> tuple[int, int]:
+    """Filter ``rec``'s points in place as COLMAP's mapper leaves its own models: every
+    observation that reprojects farther than ``max_error_px`` or lies behind its camera
+    removed, then every point whose views meet at less than ``min_angle_deg`` or that is
+    left with fewer than two observations (pycolmap's ``filter_all_points3D``). Table I
+    measures every observation up to ``sfm.reprojection.max_error_px`` (100 px: module
+    docstring); a trainer that starts from the points wants COLMAP's 4 px instead, or a
+    mismatch becomes a floater tens of centimetres off the scene. Returns the points and
+    the observations removed."""
+    import pycolmap  # noqa: PLC0415
+
+    points, observations = rec.num_points3D(), rec.compute_num_observations()
+    pycolmap.ObservationManager(rec).filter_all_points3D(float(max_error_px),
+                                                         float(min_angle_deg))
+    return (points - rec.num_points3D(), observations - rec.compute_num_observations())
+
+
 def write_points_model(rec, model_dir: str | Path,
                        images: Mapping[str, str | Path] | None = None,
-                       work_dir: str | Path | None = None) -> None:
+                       work_dir: str | Path | None = None, *,
+                       max_error_px: float = _REPROJ["track_error_px"],
+                       min_angle_deg: float = _REPROJ["min_angle_deg"]) -> None:
     """``rec`` (the triangulation of :func:`triangulated_stats`: every view a camera of its
     own, set to the calibration, its pose the calibration's; the 3-D points with their
-    tracks) written as a COLMAP binary model into ``model_dir`` (atomically), each point
+    tracks), filtered as COLMAP filters its models (:func:`filter_for_export`: at
+    ``max_error_px``, COLMAP's 4 px, and Table I's ``min_angle_deg``; ``rec`` is changed),
+    written as a COLMAP binary model into ``model_dir`` (atomically), each point
     coloured by the mean of its observations in ``images`` (view key -> image file; the
     model's image names are ``<key>.png``). Gaussian-splatting trainers that start from
     COLMAP's points read it with the views as its images folder (README)."""
     from plenocal.io.files import atomic_write_dir  # noqa: PLC0415
 
+    points, observations = filter_for_export(rec, max_error_px, min_angle_deg)
+    log.info("points model: %d points and %d observations past %.1f px or %.2f deg left out "
+             "(COLMAP's filter), %d points kept", points, observations, max_error_px,
+             min_angle_deg, rec.num_points3D())
     if images is not None:
         root = Path(tempfile.mkdtemp(prefix="plenocal_colours_", dir=work_dir))
         try:
