@@ -17,17 +17,22 @@ One default differs from the workflow's: the command line prefilters the frame
 (``blend.prefilter`` 0.1, :data:`CLI_CONVERT_DEFAULTS`; ``--set blend.prefilter=0`` gives
 the workflow's views to the bit).
 Progress goes to stderr; errors (a missing file, a malformed calib.xml, a bad option or
-key) print one line naming the file or key and exit with status 2.
+key, a full disk) print one line naming the file or key and exit with status 2. A stop
+(Ctrl-C, or SIGTERM from ``kill`` or a cluster) prints one line and exits with status 130;
+either way the output folder is left as it was (:func:`plenocal.io.files.staged_outputs`).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import errno
 import logging
 import os
+import signal
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor
@@ -53,6 +58,12 @@ from plenocal.io.yuv import (
 from plenocal.versions import version_text
 
 EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130  # a shell's status for a process stopped by Ctrl-C (128 + SIGINT)
+#: the most views a side: 99 x 99 views; each is a viewpoint within one micro image's
+#: safe diameter, tens of pixels wide on every camera measured, so more gives only copies
+MAX_VIEWS = 99
+#: convert keys a set-up (--setup) decides for every frame: given with it, refused
+SETUP_KEYS = ("mla", "tile_size", "grid", "safe_diameter", "upsample", "border_cut")
 
 CONVERT_HELP = """\
 Convert one lenslet image into its N x N subaperture views (the RLC of the paper,
@@ -101,24 +112,30 @@ def _set_key(cfg: dict, dotted: str, value) -> None:
     node[keys[-1]] = value
 
 
-def _auto_or_int(parser: argparse.ArgumentParser, flag: str, help_text: str) -> None:
-    """An option that takes ``auto`` or a whole number, left to the converter's default
-    when not given."""
-    parser.add_argument(flag, type=_int_or_auto, default=None, metavar="auto|N",
+def _auto_or_int(parser: argparse.ArgumentParser, flag: str, help_text: str, lo: int,
+                 hi: int | None = None) -> None:
+    """An option that takes ``auto`` or a whole number in ``lo..hi``, left to the
+    converter's default when not given."""
+    parser.add_argument(flag, type=_int_or_auto(lo, hi), default=None, metavar="auto|N",
                         help=help_text + ". Default: the converter's default")
 
 
-def _int_or_auto(text: str) -> str | int:
-    """``auto`` or a whole number >= 1 (argparse names the option in its message)."""
-    if text == "auto":
-        return "auto"
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'auto' or a whole number, not {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1 (got {v})")
-    return v
+def _int_or_auto(lo: int, hi: int | None):
+    """The argparse type of ``auto`` or a whole number in ``lo..hi`` (argparse names the
+    option in its message)."""
+    def parse(text: str) -> str | int:
+        if text == "auto":
+            return "auto"
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"'auto' or a whole number, not {text!r}"
+                                             ) from None
+        if v < lo or (hi is not None and v > hi):
+            span = f">= {lo}" if hi is None else f"{lo}..{hi}"
+            raise argparse.ArgumentTypeError(f"'auto' or a whole number {span} (got {v})")
+        return v
+    return parse
 
 
 class _VersionAction(argparse.Action):
@@ -161,7 +178,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "e.g. the views of another --views, is refused before the work)")
     c.add_argument("--views", type=int, default=stage_defaults("dataset")["views"], metavar="N",
                    help="N x N views (default %(default)s, a dataset's in config.schema.yaml, "
-                        "as TLCT); N odd (the centre is a view), N >= 1")
+                        f"as TLCT); N odd (the centre is a view), 1..{MAX_VIEWS}")
     kind = c.add_mutually_exclusive_group()
     kind.add_argument("--galilean", action="store_const", const="galilean", dest="mla",
                       help="the MLA is Galilean (micro images upright: a point moves away "
@@ -174,7 +191,7 @@ def build_parser() -> argparse.ArgumentParser:
                            "says what it finds on real cameras)")
     _auto_or_int(c, "--tile-size",
                  "output pixels per micro-image pitch (convert.tile_size): auto (from the "
-                 "patch sizes: the views' natural resolution) or a number")
+                 "patch sizes: the views' natural resolution) or a number >= 2", lo=2)
     c.add_argument("--grid", choices=("file", "refine", "auto"), default=None,
                    help="microlens grid (convert.grid): file (calib.xml as it is), refine "
                         "(fit the lattice to the micro-image centres in the image), auto "
@@ -191,7 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "warned of)")
     _auto_or_int(c, "--bit-depth",
                  "significant bits of a 16-bit image (convert.bit_depth): auto (10, 12 or "
-                 "14 bits recognised from the maximum) or 8..16")
+                 "14 bits recognised from the maximum) or 8..16", lo=8, hi=16)
     c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="any other key of the config's convert block (config.schema.yaml), "
                         "dotted for nested ones (e.g. --set upsample=1.5 --set "
@@ -327,9 +344,13 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
     from plenocal.convert import ConvertSettings, convert_files  # noqa: PLC0415
 
     t0 = time.perf_counter()
-    if args.views < 1 or args.views % 2 == 0:
-        raise ConvertError(f"--views: an odd number >= 1, so that the central view is one "
-                           f"of them (got {args.views})")
+    if args.views < 1 or args.views % 2 == 0 or args.views > MAX_VIEWS:
+        raise ConvertError(f"--views: an odd number 1..{MAX_VIEWS}, so that the central view "
+                           f"is one of them (got {args.views})")
+    if not str(args.out).strip():
+        raise ConvertError("-o: an empty path; name the output folder (an unset variable?)")
+    if args.setup is not None:
+        _refuse_setup_overrides(args)
     block = validate_convert_block(convert_config(args))
     settings = ConvertSettings.from_config(block)
     for path, what in ((args.lenslet, "lenslet image"), (args.calib, "calib.xml"),
@@ -370,8 +391,14 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
         raise ConvertError(f"{out}: cannot write to the output folder ({exc.strerror or exc}):"
                            " choose another with -o") from None
     if not video:  # a recording's frames are known once the file is (convert_recording)
-        check_output_folder(out, still_claims(args.views),
-                            f"{args.views} x {args.views} views of one image")
+        claims = still_claims(args.views)
+        for path in (args.lenslet, args.calib, args.setup):
+            if (path is not None and Path(path).resolve().parent == out.resolve()
+                    and claims(Path(path).name)):
+                raise ConvertError(f"{path}: an input where the conversion writes one of its "
+                                   f"outputs ({Path(path).name}): it would be replaced. Move "
+                                   "it, or choose another folder with -o")
+        check_output_folder(out, claims, f"{args.views} x {args.views} views of one image")
     try:
         if video:
             run_convert_video(args, settings, block, log)
@@ -385,6 +412,20 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
         if made and not any(out.iterdir()):
             out.rmdir()  # an input the conversion refused leaves no empty folder behind
         raise
+
+
+def _refuse_setup_overrides(args: argparse.Namespace) -> None:
+    """ConvertError where an option sets what ``--setup`` decides (:data:`SETUP_KEYS`): the
+    set-up would win without a word."""
+    given = [flag for flag, value in (("--mla", args.mla), ("--tile-size", args.tile_size),
+                                      ("--grid", args.grid)) if value is not None]
+    given += [f"--set {item}" for item in args.set
+              if item.partition("=")[0].strip().split(".")[0] in SETUP_KEYS]
+    if given:
+        raise ConvertError(f"{' and '.join(given)} with --setup {args.setup}: the set-up "
+                           f"decides {', '.join(SETUP_KEYS)} for every frame; leave "
+                           f"{'them' if len(given) > 1 else 'it'} out, or leave --setup out to "
+                           "decide on this frame")
 
 
 def _write_conversion(args: argparse.Namespace, shot, out: Path, threads: int, settings,
@@ -491,13 +532,39 @@ def main(argv: list[str] | None = None) -> int:
     # pages numpy asks for, that took 15-30 % of a 12-MP frame's time (plenocal.malloc)
     no_huge_pages()
 
+    # a stop by the cluster or `kill` runs the clean-up as Ctrl-C does: the staging
+    # folder and a folder this run made are removed (plenocal.io.files.staged_outputs)
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminated) if main_thread else None
     try:
         if args.command == "convert":
             run_convert(args, log)
+    except KeyboardInterrupt:
+        print(f"plenocal {args.command}: stopped; nothing of this run was kept in "
+              f"{args.out}", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except (ConvertError, CalibError, ConfigError, YuvError, OSError) as exc:
-        print(f"plenocal {args.command}: error: {exc}", file=sys.stderr)
+        print(f"plenocal {args.command}: error: {_error_text(exc, args)}", file=sys.stderr)
         return EXIT_USAGE
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
     return 0
+
+
+def _terminated(signum: int, frame) -> None:
+    """SIGTERM as a KeyboardInterrupt: the same clean-up and message as Ctrl-C."""
+    raise KeyboardInterrupt
+
+
+def _error_text(exc: Exception, args: argparse.Namespace) -> str:
+    """The one line an error prints: a full disk or quota names the output folder and the
+    remedy, where the system's own words name nothing."""
+    if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        where = exc.filename or args.out
+        return (f"{where}: {exc.strerror} while writing the outputs; free space there or choose "
+                f"another folder with -o (nothing of this run was kept in {args.out})")
+    return str(exc)
 
 
 if __name__ == "__main__":

@@ -341,3 +341,124 @@ def test_another_cameras_calib_xml_on_a_frame_the_check_cannot_read_stops(tmp_pa
     assert (tmp_path / "warn" / "0_0.png").is_file()
     assert main(["convert", frame, str(FRAMES / "R42_klein_crop.xml"), "-o",
                  str(tmp_path / "own"), *args]) == 0
+
+
+def _setup_file(folder: Path, lenslet: Path, calib: Path, **edits) -> Path:
+    """The set-up ``plenocal convert`` would decide on ``lenslet`` (as rule convert_setup
+    writes it), with ``edits`` made to its keys, written into ``folder``."""
+    from plenocal.convert.setup import decide_setup  # noqa: PLC0415
+    from plenocal.convert.shot import ConvertSettings  # noqa: PLC0415
+
+    setup, _ = decide_setup(read_image(lenslet), read_calib(calib), 3,
+                            ConvertSettings(mla="keplerian", tile_size=6), str(lenslet))
+    doc = {**setup.to_dict(), **edits}
+    path = folder / f"setup{len(list(folder.glob('setup*.json')))}.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_a_setup_of_another_frame_size_or_edited_out_of_range_is_refused(tmp_path, shot):
+    """--setup with a frame of another size than the one it was decided on (a crop, another
+    camera) converted into a mosaic of wrong lenses without a word: now refused, naming the
+    set-up and both sizes; so are a negative or oversized D', a tile under 2 and an unknown
+    MLA kind, naming the file and the key; and the options the set-up decides. Nothing is
+    written; an option it does not decide (the blend's prefilter) still converts."""
+    lenslet, calib = shot
+    setup = _setup_file(tmp_path, lenslet, calib)
+    crop = tmp_path / "crop.png"
+    write_image(crop, read_image(lenslet)[:360, :440])
+    out = tmp_path / "o"
+    r = _cli("convert", str(crop), str(calib), "-o", str(out), "--views", "3", "--setup",
+             str(setup))
+    assert r.returncode == 2 and not out.exists()
+    assert f"{setup}: decided on a 480x400 frame" in r.stderr
+    assert f"{crop} is 440x360" in r.stderr
+    for edits, words in (({"safe_diameter_px": -3.0}, "safe_diameter_px = -3.0: a number > 0"),
+                         ({"safe_diameter_px": 500.0}, "safe_diameter_px = 500, wider than"),
+                         ({"q_px": 0.0}, "q_px = 0.0: a number > 0"),
+                         ({"tile": 0}, "tile = 0: a whole number >= 2"),
+                         ({"mla": "foo"}, "mla = 'foo': one of keplerian, galilean")):
+        bad = _setup_file(tmp_path, lenslet, calib, **edits)
+        r = _cli("convert", str(lenslet), str(calib), "-o", str(out), "--views", "3",
+                 "--setup", str(bad))
+        assert r.returncode == 2 and not out.exists(), edits
+        assert f"{bad}: {words}" in r.stderr, r.stderr
+    for option in (["--tile-size", "5"], ["--mla", "galilean"], ["--grid", "refine"],
+                   ["--set", "safe_diameter=10"], ["--set", "upsample=2"]):
+        r = _cli("convert", str(lenslet), str(calib), "-o", str(out), "--views", "3",
+                 "--setup", str(setup), *option)
+        assert r.returncode == 2 and not out.exists(), option
+        assert f"with --setup {setup}: the set-up decides" in r.stderr, r.stderr
+    assert main(["convert", str(lenslet), str(calib), "-o", str(out), "--views", "3",
+                 "--setup", str(setup), "--set", "blend.prefilter=0", "-q"]) == 0
+    assert json.loads((out / "disparity.json").read_text())["tile"] == 6
+
+
+def test_an_input_where_an_output_goes_an_empty_path_and_bad_numbers_are_refused(
+        tmp_path, shot):
+    """A lenslet image inside the output folder under a view's name was replaced by that
+    view; ``-o ''`` (an unset variable) wrote into the working folder; --views 20001 ran
+    out of memory listing names; --tile-size 1 and --bit-depth 7 were told of config keys.
+    Each now stops at once with a line naming the option or file."""
+    lenslet, calib = shot
+    out = tmp_path / "o"
+    out.mkdir()
+    inside = out / "1_1.png"
+    inside.write_bytes(lenslet.read_bytes())
+    r = _cli("convert", str(inside), str(calib), "-o", str(out), "--views", "3")
+    assert r.returncode == 2
+    assert f"{inside}: an input where the conversion writes one of its outputs" in r.stderr
+    assert inside.read_bytes() == lenslet.read_bytes() and len(list(out.iterdir())) == 1
+    r = _cli("convert", str(lenslet), str(calib), "-o", "")
+    assert r.returncode == 2 and "-o: an empty path" in r.stderr
+    r = _cli("convert", str(lenslet), str(calib), "-o", str(tmp_path / "n"), "--views", "101")
+    assert r.returncode == 2 and "--views: an odd number 1..99" in r.stderr
+    for option, words in ((["--tile-size", "1"], "--tile-size: 'auto' or a whole number >= 2"),
+                          (["--bit-depth", "7"], "--bit-depth: 'auto' or a whole number 8..16")):
+        r = _cli("convert", str(lenslet), str(calib), "-o", str(tmp_path / "n"), *option)
+        assert r.returncode == 2 and words in r.stderr, r.stderr
+    assert not (tmp_path / "n").exists()
+
+
+def test_a_stop_or_a_full_disk_leaves_nothing_and_says_so(tmp_path, shot):
+    """SIGTERM (a cluster's or kill's stop) and Ctrl-C in the middle of writing the views:
+    exit 130 with one line, no traceback, and nothing of the run left (no staging folder,
+    no folder it made); a full disk names the output folder and the remedy, where the
+    system's words name nothing."""
+    lenslet, calib = shot
+    for how in ("SIGTERM", "SIGINT"):
+        out = tmp_path / how
+        code = (
+            "import os, signal, sys\n"
+            "import plenocal.io.files as f\n"
+            "from plenocal.cli import main\n"
+            "real = f.write_image\n"
+            "def stop(path, img, *a, **k):\n"
+            "    real(path, img, *a, **k)\n"
+            "    if path.name == '1_1.png':\n"
+            f"        os.kill(os.getpid(), signal.{how})\n"
+            "f.write_image = stop\n"
+            f"sys.exit(main(['convert', {str(lenslet)!r}, {str(calib)!r}, '-o', "
+            f"{str(out)!r}, '--views', '3', '--mla', 'keplerian', '--threads', '1']))\n")
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                           timeout=120)
+        assert r.returncode == 130, (how, r.stderr)
+        assert f"stopped; nothing of this run was kept in {out}" in r.stderr
+        assert "Traceback" not in r.stderr
+        assert not out.exists(), sorted(p.name for p in out.rglob("*"))
+    out = tmp_path / "full"
+    code = (
+        "import errno, sys\n"
+        "import plenocal.io.files as f\n"
+        "from plenocal.cli import main\n"
+        "def full(path, img, *a, **k):\n"
+        "    raise OSError(errno.ENOSPC, 'No space left on device')\n"
+        "f.write_image = full\n"
+        f"sys.exit(main(['convert', {str(lenslet)!r}, {str(calib)!r}, '-o', {str(out)!r}, "
+        "'--views', '3', '--mla', 'keplerian', '--threads', '1']))\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 2, r.stderr
+    assert (f"{out}: No space left on device while writing the outputs; free space there or "
+            "choose another folder with -o") in r.stderr
+    assert not out.exists()

@@ -21,8 +21,9 @@ from plenocal.convert.prefilter import prefilter
 AUTO_DEPTHS = (10, 12, 14, 16)
 
 
-def significant_bits(image: np.ndarray, setting: int | str = "auto") -> int:
-    """Bits of data in ``image`` (uint8: 8; uint16: see the module docstring)."""
+def significant_bits(image: np.ndarray, setting: int | str = "auto", source: str = "") -> int:
+    """Bits of data in ``image`` (uint8: 8; uint16: see the module docstring); ``source``:
+    the image's file, for the message where ``setting`` is too small for it."""
     if image.dtype == np.uint8:
         return 8
     if image.dtype != np.uint16:
@@ -31,7 +32,8 @@ def significant_bits(image: np.ndarray, setting: int | str = "auto") -> int:
     if setting != "auto":
         bits = int(setting)
         if peak > (1 << bits) - 1:
-            raise ConvertError(f"convert.bit_depth: {bits} bits, but the image holds values up "
+            raise ConvertError(f"{source + ': ' if source else ''}convert.bit_depth "
+                               f"(--bit-depth): {bits} bits, but the image holds values up "
                                f"to {peak}: set a larger bit depth or 'auto'")
         return bits
     return next(b for b in AUTO_DEPTHS if peak <= (1 << b) - 1)

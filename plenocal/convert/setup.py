@@ -56,6 +56,7 @@ from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_json, write_json
 from plenocal.io.raytrix import RayCalib
 from plenocal.rounding import round_floats
+from plenocal.viewgeom import MLA_KINDS
 
 # 2: safe_diameter_px, q_px and the safe-diameter measure; 3: pitch_px; 4: least_reach;
 # 5: border_cut
@@ -96,6 +97,56 @@ class ConverterSetup:
     # the border lenses the main lens cuts, left out of every shot's views
     # (plenocal.convert.bordercut; none where convert.border_cut is off)
     border_cut: BorderCut = dataclasses.field(default_factory=BorderCut)
+    # the file it was read from, for messages (not written: :meth:`to_dict`)
+    source: str = dataclasses.field(default="", compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        """ConvertError naming the set-up and the key where a decision is out of its
+        range (a hand-edited file): a negative D' or spacing would give flat views."""
+        where = self.source or "convert_setup.json"
+        remedy = ("make the set-up again (rule convert_setup, or plenocal convert without "
+                  "--setup), or edit the key back")
+        bad = None
+        if self.mla not in MLA_KINDS:
+            bad = ("mla", self.mla, f"one of {', '.join(MLA_KINDS)}")
+        elif self.tile < 2:
+            bad = ("tile", self.tile, "a whole number >= 2")
+        elif self.least_reach < 0:
+            bad = ("least_reach", self.least_reach, ">= 0")
+        else:
+            for key in ("safe_diameter_px", "q_px", "pitch_px"):
+                value = getattr(self, key)
+                if value is not None and not (np.isfinite(value) and value > 0):
+                    bad = (key, value, "a number > 0, or null")
+                    break
+        if bad is None and self.lattice is not None and not np.isfinite(
+                np.array([self.lattice[0], *self.lattice[1]], dtype=float)).all():
+            bad = ("lattice", self.lattice, "finite numbers")
+        if bad is not None:
+            key, value, want = bad
+            raise ConvertError(f"{where}: {key} = {value!r}: {want}; {remedy}")
+
+    def check_frame(self, width: int, height: int, frame: str, calib: RayCalib) -> None:
+        """ConvertError where ``frame`` (``width`` x ``height``) is not of the size the
+        set-up was decided on (``grid_check``'s ``width`` and ``height``): its grid, D' and
+        tile belong to that sensor readout, and another size, a crop or another camera,
+        converts into a mosaic of wrong lenses without a word. Nor may its D' exceed the
+        micro-image diameter of ``calib``."""
+        d = self.safe_diameter_px
+        if d is not None and d > calib.diameter + 1e-6:
+            raise ConvertError(
+                f"{self.source or 'the set-up'}: safe_diameter_px = {d:g}, wider than the "
+                f"micro images of {calib.source} (D = {calib.diameter:g} px); the set-up "
+                "belongs to another camera, or was edited: make it again on this camera's "
+                "frame (leave --setup out)")
+        w, h = self.grid_check.get("width"), self.grid_check.get("height")
+        if w is None or h is None or (int(w), int(h)) == (int(width), int(height)):
+            return
+        raise ConvertError(
+            f"{self.source or 'the set-up'}: decided on a {w}x{h} frame (grid_check width "
+            f"and height), but {frame} is {width}x{height}: the set-up's grid and patch "
+            "settings belong to that readout. Give the set-up of this camera and frame size, "
+            "or leave --setup out to decide it on this frame")
 
     def settings(self, base: ConvertSettings) -> ConvertSettings:
         """``base`` with the decided MLA kind and tile (nothing left ``auto``)."""
@@ -110,6 +161,7 @@ class ConverterSetup:
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
+        del d["source"]
         d["border_cut"] = self.border_cut.to_dict()
         d[WARNINGS_KEY] = warning_list(self.warnings)
         d["lattice"] = None if self.lattice is None else {
@@ -139,7 +191,7 @@ class ConverterSetup:
                                           else dict(d["safe_diameter_measure"])),
                    pitch_px=_float_or_none(d["pitch_px"]),
                    least_reach=int(d["least_reach"]),
-                   border_cut=BorderCut.from_dict(d["border_cut"]))
+                   border_cut=BorderCut.from_dict(d["border_cut"]), source=source)
 
 
 def _float_or_none(value) -> float | None:
@@ -425,7 +477,7 @@ def read_setup(path: str | Path) -> ConverterSetup:
         raise ConvertError(f"{path}: convert_setup.json without its key {exc.args[0]!r}; "
                            f"{remedy}") from None
     except (TypeError, ValueError, AttributeError) as exc:
-        if str(path) in str(exc):  # its own checks (format, version, warnings) name the file
+        if str(path) in str(exc):  # its own checks (format, version, values) name the file
             raise
         raise ConvertError(f"{path}: a value in convert_setup.json is not of its kind ({exc}); "
                            f"{remedy}") from None

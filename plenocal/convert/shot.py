@@ -205,8 +205,9 @@ def load_lenslet(path: str | Path, sensor_size: tuple[int, int] | None = None,
     except TruncatedImageError as exc:
         raise ConvertError(f"cannot read the lenslet image: {exc}") from None
     except (OSError, FileNotFoundError) as exc:
-        raise ConvertError(f"{path}: cannot read the lenslet image ({exc}); is it a PNG?") \
-            from None
+        why = str(exc).removeprefix(f"{path}: ")
+        raise ConvertError(f"{path}: cannot read the lenslet image ({why}); copy or make it "
+                           "again, or give the frame as a PNG") from None
     if img.ndim not in (2, 3) or img.dtype not in (np.uint8, np.uint16) or min(img.shape[:2]) < 8:
         raise ConvertError(f"{path}: not a usable lenslet image (shape {img.shape}, "
                            f"{img.dtype}); need an 8- or 16-bit grey or RGB PNG")
@@ -352,7 +353,7 @@ class ShotConversion:
             raise ConvertError(f"{source}: the grid was built for {grid.width}x{grid.height}, "
                                f"the image is {W}x{H}")
         self.grid = grid if grid is not None else build_grid(calib, W, H)
-        self.bits = significant_bits(image, st.bit_depth)
+        self.bits = significant_bits(image, st.bit_depth, source)
         if image.dtype == np.uint16 and log_bits:
             log.info("%s: 16-bit image with %d significant bits (max %d)", source, self.bits,
                      int(image.max()))
@@ -817,6 +818,7 @@ def convert_files(lenslet: str | Path, calib_xml: str | Path, camera_yaml: str |
     H, W = image.shape[:2]
     if setup_json is not None:
         setup = read_setup(setup_json)
+        setup.check_frame(W, H, str(lenslet), calib)
         shot = ShotConversion(image, calib, n_views, setup.settings(settings),
                               source=str(lenslet), grid=setup.grid(calib, W, H),
                               analysis=analysis, check_mla=False,

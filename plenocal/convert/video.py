@@ -435,6 +435,8 @@ def convert_recording(path: str | Path, calib: RayCalib, out: str | Path, n_view
     if setup is not None and setup_frame is not None:
         raise ConvertError(f"--setup-frame {setup_frame} with --setup: the set-up is read from "
                            "the file, not decided on a frame; give one of the two")
+    if setup is not None:
+        setup.check_frame(fmt.width, fmt.height, path.name, calib)
     from plenocal.convert.renderkernels import warm_in_background  # noqa: PLC0415
 
     warm_in_background()  # numba's set-up while the first frame is read and analysed

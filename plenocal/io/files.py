@@ -250,9 +250,12 @@ def read_image(path: str | Path) -> np.ndarray:
     if cut is not None:
         raise TruncatedImageError(f"{path}: a truncated PNG, {cut}: the file was not "
                                   "copied or written whole; copy or make it again")
+    if path.stat().st_size == 0:
+        raise OSError(f"{path}: an empty file")
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
-        raise OSError(f"{path}: not a readable image")
+        raise OSError(f"{path}: not a readable image: OpenCV decodes PNG, TIFF and JPEG, and "
+                      "a damaged file fails so too")
     if img.ndim == 3 and img.shape[2] == 4:
         return np.ascontiguousarray(img[:, :, 2::-1])
     if img.ndim == 3:  # BGR -> RGB in place: no second copy of a 40-MP frame
