@@ -113,6 +113,16 @@ def test_format_errors_name_the_file_and_the_remedy(tmp_path):
     named = tmp_path / "x_64x48_10bit.yuv"
     named.write_bytes(bytes(64 * 48 * 3))
     assert resolve_format(named) == YuvFormat(64, 48, 10)
+    # a name that states two sizes or two depths says so, and --size / --bit-depth settle it
+    two = tmp_path / "x_64x48_32x24_8bit_10bit.yuv"
+    two.write_bytes(bytes(64 * 48 * 3 // 2 * 3))
+    with pytest.raises(YuvError, match=r"x_64x48_32x24_8bit_10bit\.yuv: its name states two "
+                                       r"sizes \(32x24 and 64x48\) and two bit depths \(8 and "
+                                       r"10\): pass the right one"):
+        resolve_format(two)
+    with pytest.raises(YuvError, match=r"states two bit depths \(8 and 10\)"):
+        resolve_format(two, (64, 48))
+    assert resolve_format(two, (64, 48), 8) == YuvFormat(64, 48, 8)
     # the command line says it as one line with status 2
     r = _cli("convert", str(raw), str(raw), "-o", str(tmp_path / "o"))
     assert r.returncode == 2 and "recording.yuv" in r.stderr and "--size" in r.stderr

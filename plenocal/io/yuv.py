@@ -115,6 +115,15 @@ def resolve_format(path: str | Path, size: tuple[int, int] | None = None,
     bits = bits or named_bits
     missing = [what for what, v in (("size (--size WxH)", size), ("bit depth (--bit-depth 8 "
                                     "or 10)", bits)) if v is None]
+    name = path.name
+    sizes = sorted({f"{w}x{h}" for w, h in _SIZE.findall(name)})
+    depths = sorted({int(b) for b in _BITS.findall(name)}
+                    | {int(b) if b else 8 for b in _PIXFMT.findall(name)})
+    both = [f"{what} ({' and '.join(map(str, v))})" for what, v, given in (
+        ("sizes", sizes, size), ("bit depths", depths, bits)) if len(v) > 1 and given is None]
+    if both:
+        raise YuvError(f"{path}: its name states two {' and two '.join(both)}: pass the right "
+                       "one with --size / --bit-depth, or rename the file")
     if missing:
         raise YuvError(f"{path}: the {' and the '.join(missing)} of this raw YUV 4:2:0 file "
                        "is neither in its name nor given: pass it on the command line, or name "
