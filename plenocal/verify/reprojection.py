@@ -344,14 +344,16 @@ def triangulated_stats(cameras: Mapping[str, PinholeCamera], database: str | Pat
 
 
 def filter_for_export(rec, max_error_px: float, min_angle_deg: float) -> tuple[int, int]:
-    """Filter ``rec``'s points in place as COLMAP's mapper leaves its own models: every
-    observation that reprojects farther than ``max_error_px`` or lies behind its camera
-    removed, then every point whose views meet at less than ``min_angle_deg`` or that is
-    left with fewer than two observations (pycolmap's ``filter_all_points3D``). Table I
-    measures every observation up to ``sfm.reprojection.max_error_px`` (100 px: module
-    docstring); a trainer that starts from the points wants COLMAP's 4 px instead, or a
-    mismatch becomes a floater tens of centimetres off the scene. Returns the points and
-    the observations removed."""
+    """Filter ``rec``'s points in place with COLMAP's filter of its own models
+    (pycolmap's ``filter_all_points3D``): every observation that reprojects farther than
+    ``max_error_px`` or lies behind its camera removed, then every point whose views meet
+    at less than ``min_angle_deg`` or that is left with fewer than two observations.
+    Table I measures every observation up to ``sfm.reprojection.max_error_px`` (100 px:
+    module docstring); a trainer that starts from the points wants COLMAP's 4 px instead,
+    or a mismatch becomes a floater metres off the scene. The angle stays Table I's
+    (0.1 deg): COLMAP's 1.5 deg drops the points seen within one shot only, about half of
+    them (BENCHMARKS.md, "The points model filtered at COLMAP's 4 px"). Returns the points
+    and the observations removed."""
     import pycolmap  # noqa: PLC0415
 
     points, observations = rec.num_points3D(), rec.compute_num_observations()
@@ -367,8 +369,8 @@ def write_points_model(rec, model_dir: str | Path,
                        min_angle_deg: float = _REPROJ["min_angle_deg"]) -> None:
     """``rec`` (the triangulation of :func:`triangulated_stats`: every view a camera of its
     own, set to the calibration, its pose the calibration's; the 3-D points with their
-    tracks), filtered as COLMAP filters its models (:func:`filter_for_export`: at
-    ``max_error_px``, COLMAP's 4 px, and Table I's ``min_angle_deg``; ``rec`` is changed),
+    tracks), filtered with COLMAP's filter (:func:`filter_for_export`: at ``max_error_px``,
+    COLMAP's 4 px, and Table I's ``min_angle_deg``; ``rec`` is changed),
     written as a COLMAP binary model into ``model_dir`` (atomically), each point
     coloured by the mean of its observations in ``images`` (view key -> image file; the
     model's image names are ``<key>.png``). Gaussian-splatting trainers that start from
