@@ -12,8 +12,10 @@ from plenocal.io.files import (
     STAGE_PREFIX,
     TruncatedImageError,
     read_image,
+    read_json,
     staged_outputs,
     write_image,
+    write_json,
 )
 from plenocal.io.png import truncation as png_truncation
 
@@ -99,3 +101,37 @@ def test_png_truncation_is_found_wherever_the_file_stops(tmp_path: Path):
         with pytest.raises(OSError, match="an empty file" if not other
                            else "not a readable image"):
             read_image(cut)
+
+
+def test_an_empty_or_cut_json_file_is_named_with_its_remedy(tmp_path: Path):
+    """An intermediate cut short or emptied by hand is newer than its inputs, so Snakemake
+    does not make it again, and its reader stopped with json's bare "Expecting value":
+    now the file and the remedy are named."""
+    doc = tmp_path / "cameras.json"
+    write_json(doc, {"cameras": {"a": [1, 2, 3]}})
+    assert read_json(doc) == {"cameras": {"a": [1, 2, 3]}}
+    text = doc.read_text()
+    doc.write_text("")
+    with pytest.raises(ValueError, match=rf"{doc}: an empty file; if the workflow wrote it, "
+                                         "delete it and run again"):
+        read_json(doc)
+    doc.write_text(text[: len(text) // 2])
+    with pytest.raises(ValueError, match=rf"{doc}: not valid JSON \(.*line \d+ column \d+\)"):
+        read_json(doc)
+
+
+def test_a_view_emptied_or_cut_is_named_before_it_is_copied(tmp_path: Path):
+    """SIFT's jobs copy the views into a temporary folder; an emptied view failed there,
+    named by its temporary copy. Now the view itself is named, with the remedy."""
+    from plenocal.calib.reg_a.colmap import stage_images  # noqa: PLC0415
+
+    view = tmp_path / "views" / "x00_y00" / "0_0.png"
+    view.parent.mkdir(parents=True)
+    write_image(view, np.full((20, 30, 3), 90, np.uint8))
+    assert stage_images({"x00_y00/0_0": view}, tmp_path / "a") == ["x00_y00/0_0.png"]
+    whole = view.read_bytes()
+    for cut, words in ((b"", "is empty"), (whole[:-20], "is cut short")):
+        view.write_bytes(cut)
+        with pytest.raises(OSError, match=rf"{view}: the image of view 'x00_y00/0_0' "
+                                          rf"{words}.*delete it and run again"):
+            stage_images({"x00_y00/0_0": view}, tmp_path / "b")

@@ -174,8 +174,17 @@ def file_sha256(path: str | Path) -> str:
 
 
 def read_json(path: str | Path) -> Any:
+    """The JSON document in ``path``; ValueError naming the file and the remedy where it is
+    empty or not JSON (a file cut short or edited: Snakemake does not notice, as its time
+    is newer than its inputs')."""
     with open(path) as fh:
-        return json.load(fh)
+        try:
+            return json.load(fh)
+        except json.JSONDecodeError as exc:
+            what = "an empty file" if not exc.doc.strip() else (
+                f"not valid JSON ({exc.msg}, line {exc.lineno} column {exc.colno})")
+            raise ValueError(f"{path}: {what}; if the workflow wrote it, delete it and run "
+                             "again to make it anew") from None
 
 
 def write_npy(path: str | Path, array: np.ndarray) -> None:

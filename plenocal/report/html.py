@@ -937,7 +937,8 @@ def build_report(results: str | Path, out_path: str | Path, dataset: str, *,
                    "patch-size previews",
                    note="Each lens's patch size P by colour, with its scale in px on the bar "
                         "at the right of each picture (readable in the file: click a "
-                        "preview).")
+                        "preview). Lenses drawn darker than the bar's colours had nothing "
+                        "to match and took their size from their neighbours.")
     items = [(f"depth/{reg}/{c}.png", f"{c} ({reg.upper()})") for c in cams for reg in "ab"]
     section_thumbs(page, "depth", "Depth of the central views (registrations A and B)",
                    items, "depth", "depth previews",
