@@ -90,11 +90,18 @@ def parse_name(path: str | Path) -> tuple[tuple[int, int] | None, int | None]:
     ``<W>x<H>`` anywhere in the name; ``<b>bit`` (``8bit``, ``10bit``) or FFmpeg's pixel
     format (``yuv420p`` = 8 bits, ``yuv420p10le`` = 10). A name that states two different
     sizes or depths states neither (None)."""
+    sizes, bits = name_states(path)
+    return (sizes.pop() if len(sizes) == 1 else None), (bits.pop() if len(bits) == 1 else None)
+
+
+def name_states(path: str | Path) -> tuple[set[tuple[int, int]], set[int]]:
+    """Every (width, height) and every bit depth the file name of ``path`` states
+    (:func:`parse_name` takes one of each)."""
     name = Path(path).name
     sizes = {(int(w), int(h)) for w, h in _SIZE.findall(name)}
     bits = {int(b) for b in _BITS.findall(name)}
     bits |= {int(b) if b else 8 for b in _PIXFMT.findall(name)}
-    return (sizes.pop() if len(sizes) == 1 else None), (bits.pop() if len(bits) == 1 else None)
+    return sizes, bits
 
 
 def resolve_format(path: str | Path, size: tuple[int, int] | None = None,
@@ -115,12 +122,10 @@ def resolve_format(path: str | Path, size: tuple[int, int] | None = None,
     bits = bits or named_bits
     missing = [what for what, v in (("size (--size WxH)", size), ("bit depth (--bit-depth 8 "
                                     "or 10)", bits)) if v is None]
-    name = path.name
-    sizes = sorted({f"{w}x{h}" for w, h in _SIZE.findall(name)})
-    depths = sorted({int(b) for b in _BITS.findall(name)}
-                    | {int(b) if b else 8 for b in _PIXFMT.findall(name)})
-    both = [f"{what} ({' and '.join(map(str, v))})" for what, v, given in (
-        ("sizes", sizes, size), ("bit depths", depths, bits)) if len(v) > 1 and given is None]
+    sizes, depths = name_states(path)
+    both = [f"{what} ({' and '.join(v)})" for what, v, given in (
+        ("sizes", sorted(f"{w}x{h}" for w, h in sizes), size),
+        ("bit depths", [str(b) for b in sorted(depths)], bits)) if len(v) > 1 and given is None]
     if both:
         raise YuvError(f"{path}: its name states two {' and two '.join(both)}: pass the right "
                        "one with --size / --bit-depth, or rename the file")
