@@ -155,6 +155,31 @@ def test_a_cut_recording(tmp_path: Path):
         scan(d, video_block(frame=0))
 
 
+def test_a_recording_of_another_bit_depth_than_its_name(tmp_path: Path):
+    """Three 10-bit frames are six 8-bit ones to the byte, and four 8-bit frames two
+    10-bit ones: the size check passes, and the workflow stopped a job later with a message
+    about the command line's --bit-depth. The start-up check reads the named frame's middle
+    and names the dataset's key."""
+    d = tmp_path / "lenslet"
+    d.mkdir()
+    recording(d / f"x00_y00_{W}x{H}_8bit.yuv")  # 10-bit words, named 8-bit
+    with pytest.raises(CaptureError, match=r"x00_y00_24x16_8bit.yuv: frame 1 reads as 16-bit "
+                                           r"little-endian words.*Check the bit depth in its "
+                                           r"name or datasets.d.video.bit_depth"):
+        scan(d, video_block(frame=1))
+    (d / f"x00_y00_{W}x{H}_8bit.yuv").unlink()
+    eight = YuvFormat(W, H, 8)
+    rng = np.random.default_rng(1)
+    (d / f"x00_y00_{W}x{H}_10bit.yuv").write_bytes(
+        rng.integers(16, 236, size=4 * eight.frame_samples).astype(np.uint8).tobytes())
+    with pytest.raises(CaptureError, match=r"frame 0 holds samples up to \d+, which do not fit "
+                                           r"10 bits: is the file 8-bit"):
+        scan(d, video_block(frame=0))
+    (d / f"x00_y00_{W}x{H}_10bit.yuv").unlink()
+    recording(d / f"x00_y00_{W}x{H}_10bit.yuv")  # named as it is
+    assert scan(d, video_block(frame=1))
+
+
 @pytest.mark.parametrize("video, needle", [
     ({"frame": -1}, "datasets.d.video.frame = -1: must be >= 0"),
     ({"frame": 1.5}, "datasets.d.video.frame = 1.5: must be of type"),

@@ -302,6 +302,12 @@ def scan_lenslet_folder(folder: str | Path, dataset: str, video: dict | None,
             raise CaptureError(
                 f"config: {key}.{sub} = {frame}: {path} holds {count} frame"
                 f"{'s' if count != 1 else ''} (0..{count - 1}): give an index below {count}")
+        from plenocal.io.yuv import YuvError, probe_depth  # noqa: PLC0415 - see the imports
+
+        try:  # 10-bit words named 8bit (or the other way) can be a whole number of frames
+            probe_depth(path, fmt, frame, f"Check the bit depth in its name or {key}.bit_depth")
+        except YuvError as exc:
+            raise CaptureError(str(exc)) from None
         if sensor_size is not None and (fmt.width, fmt.height) != tuple(sensor_size):
             raise CaptureError(
                 f"{path}: its frames are {fmt.width}x{fmt.height} pixels but camera.yaml "

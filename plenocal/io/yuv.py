@@ -175,25 +175,46 @@ def read_frame(path: str | Path, fmt: YuvFormat, index: int
             a[ny + nc:].reshape(ch, cw))
 
 
-def check_depth(path: str | Path, fmt: YuvFormat, index: int, samples: np.ndarray) -> None:
+#: the remedy :func:`check_depth` names by default: the command line's
+DEPTH_REMEDY = "Check --bit-depth (or the bit depth in the name)"
+#: luma samples :func:`probe_depth` reads from the middle of a frame
+PROBE_SAMPLES = 1 << 16
+
+
+def check_depth(path: str | Path, fmt: YuvFormat, index: int, samples: np.ndarray,
+                remedy: str = DEPTH_REMEDY) -> None:
     """Raise :class:`YuvError` where frame ``index``'s ``samples`` (the whole frame as
-    read) cannot be of ``fmt``'s bit depth: 9-15-bit samples at or over ``2^bits`` (8-bit
-    data, or big-endian words, read as ``yuv420p<b>le``), or an 8-bit frame whose every
-    second luma byte is at most 3 while others are not (little-endian 10-16-bit words read
-    as bytes: no picture's luma is that dark in every other column)."""
+    read, or luma samples from an even offset: :func:`probe_depth`) cannot be of ``fmt``'s
+    bit depth: 9-15-bit samples at or over ``2^bits`` (8-bit data, or big-endian words, read
+    as ``yuv420p<b>le``), or an 8-bit frame whose every second luma byte is at most 3 while
+    others are not (little-endian 10-16-bit words read as bytes: no picture's luma is that
+    dark in every other column). ``remedy``: what the message tells the user to check."""
     if 8 < fmt.bits < 16:
         top = int(samples.max())
         if top >= 1 << fmt.bits:
             raise YuvError(f"{path}: frame {index} holds samples up to {top}, which do not fit "
-                           f"{fmt.bits} bits: is the file 8-bit, or big-endian? Check "
-                           "--bit-depth (or the bit depth in the name)")
+                           f"{fmt.bits} bits: is the file 8-bit, or big-endian? {remedy}")
     elif fmt.bits == 8:
         luma = samples[:fmt.width * fmt.height]
         high, low = luma[1::2], luma[0::2]
         if high.size and int(high.max()) <= 3 < int(low.max()):
             raise YuvError(f"{path}: frame {index} reads as 16-bit little-endian words (every "
                            "second byte is 0..3), not as 8-bit samples: is the file 10-bit? "
-                           "Check --bit-depth (or the bit depth in the name)")
+                           f"{remedy}")
+
+
+def probe_depth(path: str | Path, fmt: YuvFormat, index: int,
+                remedy: str = DEPTH_REMEDY) -> None:
+    """:func:`check_depth` on :data:`PROBE_SAMPLES` luma samples from the middle rows of
+    frame ``index`` (the frame's centre, where a lenslet image is lit): a start-up check
+    that reads 64 K samples, not the whole frame."""
+    start = (fmt.height // 2) * fmt.width  # an even sample offset: the byte pairs aligned
+    count = min(PROBE_SAMPLES, fmt.width * fmt.height - start)
+    with open(path, "rb") as fh:
+        fh.seek(index * fmt.frame_bytes + start * fmt.dtype.itemsize)
+        data = fh.read(count * fmt.dtype.itemsize)
+    samples = np.frombuffer(data, dtype=fmt.dtype)
+    check_depth(path, fmt, index, samples, remedy)
 
 
 def write_frame(fh: BinaryIO, planes: tuple[np.ndarray, np.ndarray, np.ndarray],
