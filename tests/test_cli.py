@@ -430,6 +430,8 @@ def test_a_stop_or_a_full_disk_leaves_nothing_and_says_so(tmp_path, shot):
         out = tmp_path / how
         code = (
             "import os, signal, sys\n"
+            # as in a terminal: a test runner's worker may hand its children SIGINT ignored
+            "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
             "import plenocal.io.files as f\n"
             "from plenocal.cli import main\n"
             "real = f.write_image\n"
