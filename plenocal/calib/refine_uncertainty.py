@@ -43,8 +43,8 @@ length's standard deviation"): the refined focal length's error against the trut
 this standard deviation has an RMS of 1.09, at most 2.24 (small-turned-s49); the estimate
 is 0.08-0.14 % on the ``small`` geometry, 0.04-0.05 % on the default and Raytrix-like
 ones. Held out (twelve captures of four geometries made after that, on another CPU):
-RMS 0.95, at most 1.91, all within 2; thinned, on seeds 101-109 of thirteen
-geometries (81 captures): RMS 0.91, at most 1.96, all within 2. Scaled by the median error
+RMS 0.95, at most 1.91, all within 2; thinned, on seeds 101-110 of thirteen
+geometries (85 captures): RMS 0.89, at most 1.96, all within 2. Scaled by the median error
 instead, it was 3-5x
 too small: the tail that the Cauchy loss damps still carries the focal length's noise.
 """
