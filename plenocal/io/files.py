@@ -250,17 +250,17 @@ def read_image(path: str | Path) -> np.ndarray:
     """Read a PNG as stored (uint8 or uint16; RGB order for colour)."""
     import cv2  # noqa: PLC0415
 
-    from plenocal.io.png import truncation  # noqa: PLC0415
+    from plenocal.io.png import EMPTY, damage  # noqa: PLC0415
 
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: image not found")
-    cut = truncation(path)  # before libpng, which prints its own "Read Error" first
+    cut = damage(path)  # before libpng, which prints its own "Read Error" first
+    if cut == EMPTY:
+        raise OSError(f"{path}: an empty file")
     if cut is not None:
         raise TruncatedImageError(f"{path}: a truncated PNG, {cut}: the file was not "
                                   "copied or written whole; copy or make it again")
-    if path.stat().st_size == 0:
-        raise OSError(f"{path}: an empty file")
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise OSError(f"{path}: not a readable image: OpenCV decodes PNG, TIFF and JPEG, and "

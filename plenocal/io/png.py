@@ -130,6 +130,16 @@ def encode_png(image: np.ndarray, level: int = 1) -> bytes:
 _END = b"".join(chunk(b"IEND", b""))
 
 
+#: what :func:`damage` says of a file of no bytes
+EMPTY = "empty"
+
+
+def damage(path: str | Path) -> str | None:
+    """What makes the image file at ``path`` unreadable before any decoder sees it:
+    :data:`EMPTY`, where a PNG is cut short (:func:`truncation`), or None."""
+    return EMPTY if Path(path).stat().st_size == 0 else truncation(path)
+
+
 def truncation(path: str | Path) -> str | None:
     """Where a PNG file is cut short, or None when its chunks run to IEND (or it is no PNG).
 

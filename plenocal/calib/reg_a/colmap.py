@@ -27,7 +27,7 @@ import numpy as np
 from plenocal.camera import PinholeCamera, invert_pose, k_from_colmap, k_to_colmap
 from plenocal.config import stage_defaults
 from plenocal.gpu import resolve_device
-from plenocal.io.png import truncation
+from plenocal.io.png import damage
 
 log = logging.getLogger(__name__)
 
@@ -43,7 +43,7 @@ def stage_images(images: Mapping[str, str | Path], folder: str | Path,
         if not src.is_file():
             raise FileNotFoundError(f"{src}: image of view {name!r} not found; run the "
                                     "convert stage first (or check the dataset folder)")
-        cut = "empty" if src.stat().st_size == 0 else truncation(src)
+        cut = damage(src)
         if cut is not None:  # named here: the copy that fails to decode is a temporary one
             raise OSError(f"{src}: the image of view {name!r} is {cut}; delete it and run "
                           "again to make it anew (a view changed by hand is not noticed)")
