@@ -73,6 +73,38 @@ def test_push_pull_fills_holes():
     assert np.all(np.isfinite(out)) and out[:, 8:].min() > 0.99
 
 
+def test_push_pull_by_hand():
+    """A 4 x 4 image known at two pixels: (0, 0) = 1 and (3, 3) = 0. The first push level
+    (2 x 2 blocks) holds the means 1 and 0 in the diagonal blocks and nothing in the
+    others; the top level holds (1 + 0) / 2. Pulling down, the empty blocks take the top's
+    0.5 and each hole its own block's mean: a pyramid, not the mean of all known pixels
+    (0.5 everywhere) nor the nearest known pixel."""
+    v = np.zeros((4, 4, 3), np.float32)
+    w = np.zeros((4, 4), np.float32)
+    v[0, 0], w[0, 0] = (1.0, 0.25, 0.5), 1.0
+    v[3, 3], w[3, 3] = (0.0, 0.75, 0.5), 1.0
+    v[1, 2] = (9.0, 9.0, 9.0)  # a hole's value is never read
+    out = push_pull(v, w)
+    expected = np.empty_like(v)
+    expected[:2, :2] = (1.0, 0.25, 0.5)
+    expected[2:, 2:] = (0.0, 0.75, 0.5)
+    expected[:2, 2:] = expected[2:, :2] = (0.5, 0.5, 0.5)
+    np.testing.assert_array_equal(out, expected)
+    # one level deeper: an 8 x 8 image known in its top-left 4 x 4 block alone (value 2)
+    # and at (7, 7) (value 0): the top level's mean is (16 * 2 + 0) / 17 = 32 / 17, which
+    # the two empty 4 x 4 blocks take; the bottom-right block's holes take the mean of
+    # their own 2 x 2 block (0) where it has weight, else that block's 4 x 4 mean (0)
+    v = np.zeros((8, 8), np.float32)
+    w = np.zeros((8, 8), np.float32)
+    v[:4, :4], w[:4, :4] = 2.0, 1.0
+    w[7, 7] = 1.0
+    out = push_pull(v, w)
+    np.testing.assert_array_equal(out[:4, :4], 2.0)
+    np.testing.assert_allclose(out[:4, 4:], 32 / 17, rtol=1e-6)
+    np.testing.assert_allclose(out[4:, :4], 32 / 17, rtol=1e-6)
+    np.testing.assert_array_equal(out[4:, 4:], 0.0)
+
+
 def test_soft_z_test_keeps_near_input_against_distant_too_near_depth(texture):
     """A distant input whose depth is 4 % too near (as estimated depth is) must not
     replace the nearest input's correct samples: the soft z-test blends both (the

@@ -268,6 +268,27 @@ def test_depth16_files(tmp_path):
     np.testing.assert_array_equal(raw[:35].reshape(5, 7), img)
 
 
+def test_texture_yuv420_layout_and_chroma_by_hand():
+    """Four distinct pixels per 2 x 2 block: Y in row order, one pixel each; U and V the
+    rounded mean of each block's four (not any one of them); an odd last column and row
+    dropped from the chroma planes."""
+    rgb = np.array([[[255, 0, 0], [0, 0, 255], [10, 20, 30], [200, 100, 50], [7, 7, 7]],
+                    [[0, 255, 0], [255, 255, 0], [90, 80, 70], [0, 0, 0], [9, 9, 9]],
+                    [[1, 2, 3], [4, 5, 6], [7, 8, 9], [10, 11, 12], [13, 14, 15]]],
+                   np.uint8)  # 5 x 3: chroma of the two 2 x 2 blocks of rows 0-1
+    raw = depthmaps.texture_yuv420(rgb)
+    assert len(raw) == 15 + 2 + 2
+    yuv = {(r, c): cv2.cvtColor(rgb[r:r + 1, c:c + 1], cv2.COLOR_RGB2YUV)[0, 0].astype(float)
+           for r in range(3) for c in range(5)}
+    assert list(raw[:15]) == [int(round(yuv[r, c][0])) for r in range(3) for c in range(5)]
+    for plane, channel in ((raw[15:17], 1), (raw[17:19], 2)):
+        for block, got in enumerate(plane):
+            four = [yuv[r, 2 * block + c][channel] for r in (0, 1) for c in (0, 1)]
+            assert got == int(np.rint(sum(four) / 4))
+            # the four differ by more than rounding: no one pixel's value passes for the mean
+            assert all(abs(got - x) > 1 for x in four)
+
+
 @pytest.mark.parametrize("size", [(6, 4), (7, 5)])
 def test_texture_yuv420(tmp_path, size):
     w, h = size

@@ -46,7 +46,10 @@ def test_eq6_by_hand():
     np.testing.assert_allclose(c.K, K)
     # the central view of registration B is the identity: M_i,centre = scaled M_i^A
     cams = merge.merge_cameras({"x00_y00": M_A}, {"2_2": (K, np.eye(4))}, 0.02, 301, 225)
-    np.testing.assert_allclose(cams["x00_y00/2_2"].cam_to_world, merge.scaled_pose(M_A, 0.02))
+    expected = np.eye(4)
+    expected[:3, :3] = R_A  # the rotation kept, the centre scaled by hand
+    expected[:3, 3] = (0.02, -0.04, 0.01)
+    np.testing.assert_allclose(cams["x00_y00/2_2"].cam_to_world, expected, atol=1e-15)
     with pytest.raises(ValueError, match="scale"):
         merge.merge_cameras({"x00_y00": M_A}, {"2_2": (K, np.eye(4))}, 0.0, 301, 225)
 

@@ -38,6 +38,13 @@ def test_baseline_registers_remaining_views(sets, tmp_path):
     # registration A was the truth: the registered views land on their true centres
     err = max(np.linalg.norm(cameras[k].centre - vs[k].centre) for k in vs)
     assert err < 1e-3
+    # and the views' spacing within each shot: 1_0 to 1_2, 6 mm in the truth (the sets'
+    # 3-mm baseline), measured 5.87-6.08 mm; a baseline a third short would pass the
+    # centres' 1 mm above, not this
+    for k in sub:
+        span = np.linalg.norm(cameras[f"{k}/1_2"].centre - cameras[f"{k}/1_0"].centre)
+        truth = np.linalg.norm(vs[f"{k}/1_2"].centre - vs[f"{k}/1_0"].centre)
+        assert truth == pytest.approx(0.006) and span == pytest.approx(truth, rel=0.05)
     for k in sub:  # A's views stay where A put them
         np.testing.assert_allclose(cameras[f"{k}/1_1"].cam_to_world,
                                    vs[f"{k}/1_1"].cam_to_world, atol=1e-9)
