@@ -55,7 +55,11 @@ def test_profiles_use_known_options_and_no_site_settings():
         unknown = sorted(set(profile) - options)
         assert not unknown, f"{path}: unknown options {unknown}"
         site = SITE_RESOURCES & set(profile.get("default-resources") or {})
-        assert not site, f"{path}: site settings {site} belong to the user's profile"
+        assert not site, (f"{path}: site settings {site} belong on the command line "
+                          "(--default-resources) or in the user's copy of the profile")
+        # a constant disk_mb: Snakemake's default is a coroutine that `snakemake --report`
+        # never awaits, one RuntimeWarning per job kind
+        assert isinstance((profile.get("default-resources") or {}).get("disk_mb"), int), path
     # ... and nor does the workflow
     for smk in [ROOT / "Snakefile", *sorted((ROOT / "rules").glob("*.smk"))]:
         for name in SITE_RESOURCES:

@@ -320,8 +320,8 @@ def test_page_content_and_determinism(tmp_path):
         assert f"<td>{paper}</td>" in html
     assert "0.702 / 0.812 = <b>0.865</b>" in html  # complete / baseline, target 0.9
     assert re.search(r'id="gt-a_focal_pct".*?0\.2500.*?pass', html)
-    assert "0.30 dB lost to calibration (vs ground-truth cameras, 2 views)" in html
-    assert "0.20 dB lost to calibration (vs ground-truth cameras, 50 views)" in html
+    assert "0.30 dB lost over the whole view (vs ground-truth cameras, 2 views)" in html
+    assert "0.20 dB lost over the whole view (vs ground-truth cameras, 50 views)" in html
     assert html.count("<svg") == 3 + 2 + 1 + 4  # array x3, exp1 x2, exp2, exp3 x4
     assert "Exp. 3 (checks A+B), lateral inputs (ground-truth cameras)" in html
     assert 'href="../eval/reprojection.json"' in html
@@ -456,6 +456,39 @@ def test_exp1_without_a_shot_to_synthesise_says_why(tmp_path):
         assert said in "".join(page.parts), (cols, rows, page.parts)
 
 
+def test_the_synthesis_verdict_follows_the_surfaces_where_they_are_scored(tmp_path):
+    """Exp. 1's complete calibration 2 dB under the ground-truth cameras over the whole view
+    (where a renderer's choices at occlusion edges favour exactly aligned cameras) but 0.25
+    dB on the surfaces: the card passes, on the surfaces' figure, and shows both."""
+    from plenocal.artifacts.results import read_synthesis
+    from plenocal.report.html import Page, _psnr_section
+
+    res = make_results(tmp_path)
+    rel = res / "eval" / "synthesis_exp1.json"
+    doc = json.loads(rel.read_text())
+    for t in doc["tables"]:
+        whole = 30.0 if t["cameras"] == "complete" else 32.0
+        surface = 40.0 if t["cameras"] == "complete" else 40.25
+        t["psnr_db"] = {k: whole for k in t["psnr_db"]}
+        t["surface_psnr_db"] = {k: surface for k in t["psnr_db"]}
+    write_json(rel, doc)
+    page = Page(res, "fake")
+    _psnr_section(page, "exp1", read_synthesis(rel), "", N, COLS, ROWS)
+    html = "".join(page.parts)
+    card = html.split('id="kpi-exp1-complete')[1].split("</span>")[0:3]
+    card = "</span>".join(card)
+    assert "2.00 dB lost over the whole view (vs ground-truth cameras, 2 views)" in card
+    assert "0.25 dB lost to calibration on the surfaces (2 views" in card
+    assert "pass" in card and "FAIL" not in card
+    # without surface figures the whole view's is judged
+    for t in doc["tables"]:
+        t["surface_psnr_db"] = {}
+    write_json(rel, doc)
+    page = Page(res, "fake")
+    _psnr_section(page, "exp1", read_synthesis(rel), "", N, COLS, ROWS)
+    assert "FAIL" in "".join(page.parts)
+
+
 def test_the_calibration_files_for_other_tools_are_listed_as_the_run_made_them(tmp_path):
     """Section "files": every export (exports.EXPORTS) with its tools; the ones the run made
     linked, an asked-for one that is gone said absent, the others named with their rule and
@@ -552,7 +585,8 @@ def test_first_screen_says_real_or_synthetic_and_what_was_not_checked(tmp_path):
     html = out.read_text()
     first = html[:html.index('id="table1"')]
     assert "Real capture" in first and 'id="not-checked"' in first
-    for what in ("ideal renders", "focal length", "scale r", "0.3 mm", "dB lost"):
+    for what in ("ideal renders", "focal length", "scale r", "centres (0.1 mm)", "(0.02 deg)",
+                 "dB lost"):
         assert what in first, what
     # absent ground truth is expected here, not reported as a missing output
     assert "Not produced" not in html.split('id="patch"')[0]

@@ -120,6 +120,14 @@ def table1_rows(table: ReprojectionTable) -> list[Table1Row]:
         if registered is not None:
             notes.append(f"{registered}{f' of {n_img}' if n_img is not None else ''} views "
                          "registered")
+        focal = _num(entry.get("focal_px"))
+        if key == "sfm_scratch" and focal is not None:
+            # plain SfM of every view (plenocal.verify.sfm_baselines.scratch_sfm): no error
+            # is scored for it, but its focal length says how far from the calibration's it
+            # landed
+            notes.append(f"plain SfM from COLMAP's default focal guess, one shared camera: "
+                         f"its focal length {focal:.1f} px (the calibration's: section "
+                         "Calibration summary)")
         images = _image_count(entry)
         if key == "reg_b" and n_img is not None and images == str(n_img):
             images = f"{n_img} per set"
