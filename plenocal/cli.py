@@ -360,6 +360,8 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
                                "file a command: convert a folder's frames one by one)")
         if path is not None and not Path(path).is_file():
             raise ConvertError(f"{path}: {what} not found")
+    if args.setup is not None:
+        _refuse_other_views(args)
     if args.png_bits is not None and args.out_format != "png":
         raise ConvertError(f"--png-bits {args.png_bits} with --format {args.out_format}: the "
                            "PNG views' bits; the YUV videos are of the input's bit depth")
@@ -412,6 +414,20 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
         if made and not any(out.iterdir()):
             out.rmdir()  # an input the conversion refused leaves no empty folder behind
         raise
+
+
+def _refuse_other_views(args: argparse.Namespace) -> None:
+    """ConvertError where ``--views`` is not the N the ``--setup`` was decided for
+    (:func:`plenocal.convert.setup.views_decided`): its views would be other cameras than
+    the calibration's, under the same names."""
+    from plenocal.convert.setup import read_setup, views_decided  # noqa: PLC0415
+
+    n = views_decided(read_setup(args.setup))
+    if n is not None and n != args.views:
+        raise ConvertError(f"--views {args.views} with --setup {args.setup}: the set-up was "
+                           f"decided for {n} x {n} views (its view spacing is D' sin 45 deg / "
+                           f"{n}), and views of another number are other cameras than the "
+                           f"calibration's; give --views {n}, or leave --setup out")
 
 
 def _refuse_setup_overrides(args: argparse.Namespace) -> None:

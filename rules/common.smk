@@ -16,6 +16,7 @@ from plenocal.io.lenslet import (
     CaptureError,
     VideoShot,
     check_capture,
+    check_simulated_folder,
     scan_lenslet_folder,
 )
 from plenocal.io.raytrix import CalibError, read_calib
@@ -174,6 +175,11 @@ def check_real_dataset(dataset):
 for _d in DATASETS:
     if _d not in SYNTHETIC:
         check_real_dataset(_d)
+    else:  # never over a capture's own files
+        try:
+            check_simulated_folder(Path("data") / _d, _d)
+        except CaptureError as err:
+            raise ValueError(str(err)) from None
 
 #: the datasets with shots given as videos (rule lenslet_frame's), and those shots
 VIDEO = "|".join(re.escape(d) for d in DATASETS if video_shots(d)) or "^$"

@@ -389,9 +389,19 @@ def test_a_setup_of_another_frame_size_or_edited_out_of_range_is_refused(tmp_pat
                  "--setup", str(setup), *option)
         assert r.returncode == 2 and not out.exists(), option
         assert f"with --setup {setup}: the set-up decides" in r.stderr, r.stderr
+    # views of another number than the set-up's are other cameras under the same names
+    r = _cli("convert", str(lenslet), str(calib), "-o", str(out), "--views", "5",
+             "--setup", str(setup))
+    assert r.returncode == 2 and not out.exists()
+    assert (f"--views 5 with --setup {setup}: the set-up was decided for 3 x 3 views"
+            in r.stderr), r.stderr
     assert main(["convert", str(lenslet), str(calib), "-o", str(out), "--views", "3",
                  "--setup", str(setup), "--set", "blend.prefilter=0", "-q"]) == 0
     assert json.loads((out / "disparity.json").read_text())["tile"] == 6
+    # a view spacing set by hand (convert.view_spacing_px) says nothing of the number
+    spaced = _setup_file(tmp_path, lenslet, calib, q_px=2.5)
+    assert main(["convert", str(lenslet), str(calib), "-o", str(tmp_path / "q"), "--views",
+                 "5", "--setup", str(spaced), "-q"]) == 0
 
 
 def test_an_input_where_an_output_goes_an_empty_path_and_bad_numbers_are_refused(

@@ -347,16 +347,28 @@ def test_an_overexposed_frame_is_warned_about():
     assert note.startswith("s: 35% of the frame is clipped at full scale")
 
 
-def test_a_camera_setup_carries_the_mla_warning():
+def test_a_camera_setup_carries_the_mla_warning_and_the_workflow_stops_on_it():
     """In the workflow the kind is checked once, on the shot that decides the camera's
-    set-up (rule convert_setup), whose warnings reach the report."""
+    set-up (rule convert_setup): a kind set in the config that the image clearly
+    contradicts stops there (mla_setting_error), naming the frame and the keys; the right
+    kind, or one read from the image, does not."""
+    from plenocal.convert.setup import mla_setting_error
+
     calib = calib_for_optics(small_optics())
     grid = MicrolensGrid(calib, 400, 300)
     img = lenslet_from_patch_size(grid, 5.0, random_texture(512, 1.5, 8), mla="galilean")
-    setup, _ = decide_setup(img, calib, 5, replace(FIXED_TILE, mla="keplerian"), "x03_y01")
+    setup, shot = decide_setup(img, calib, 5, replace(FIXED_TILE, mla="keplerian"), "x03_y01")
     assert [w for w in setup.warnings
             if w.startswith("x03_y01: convert.mla = keplerian, but the image matches as")]
     assert setup.mla == "keplerian" and setup.mla_source == "setting"
+    error = mla_setting_error(setup, shot, "data/d/lenslet/x03_y01.png")
+    assert error.startswith("data/d/lenslet/x03_y01.png: convert.mla = keplerian, but the "
+                            "image matches as galilean")
+    assert "convert.mla or the dataset's mla" in error
+    setup, shot = decide_setup(img, calib, 5, replace(FIXED_TILE, mla="galilean"), "x03_y01")
+    assert mla_setting_error(setup, shot, "x") is None
+    setup, shot = decide_setup(img, calib, 5, replace(FIXED_TILE, mla="auto"), "x03_y01")
+    assert setup.mla == "galilean" and mla_setting_error(setup, shot, "x") is None
 
 
 def test_galilean_disparity_has_the_other_sign():

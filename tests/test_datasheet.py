@@ -208,3 +208,14 @@ def test_micro_image_pitch_against_calib_xml():
     for d in (0.949 * lo, 1.051 * hi):
         with pytest.raises(DatasheetError, match="23.64 to 26.00 px apart"):
             check_micro_image_pitch(no_f, d)
+
+
+def test_a_missing_datasheet_says_what_it_needs_and_where_a_template_comes_from(tmp_path):
+    """No camera.yaml: the message lists the required keys (from the schema) and how to get
+    the simulator's as a template."""
+    with pytest.raises(FileNotFoundError) as exc:
+        load_datasheet(tmp_path / "camera.yaml")
+    text = str(exc.value)
+    for words in ("camera datasheet not found", "pixel_size_mm", "mla: pitch_mm, f_numbers, k",
+                  "--until simulate_setup", "data/synthetic/camera.yaml"):
+        assert words in text, (words, text)

@@ -258,3 +258,34 @@ def test_each_png_is_read_as_far_as_its_header(tmp_path: Path):
     shots["hand00"].write_bytes(b"\xff\xd8\xff\xe0" + bytes(40))  # a JPEG renamed
     with pytest.raises(CaptureError, match=r"hand00\.png: not a PNG image"):
         check_capture(shots, "d", d, (W, H))
+
+
+def test_a_simulated_dataset_never_writes_over_a_capture(tmp_path: Path):
+    """check_simulated_folder: a capture's calib.xml, camera.yaml or lenslet images with
+    no truth/scene.json beside them stop a simulated dataset; the simulator's own files
+    (truth/scene.json there), an empty lenslet folder or no folder at all do not."""
+    from plenocal.io.lenslet import check_simulated_folder
+
+    d = tmp_path / "data" / "cap"
+    check_simulated_folder(d, "cap")  # nothing there yet
+    (d / "lenslet").mkdir(parents=True)
+    check_simulated_folder(d, "cap")  # an empty folder holds nothing to lose
+    (d / "lenslet" / "x00_y00.png").write_bytes(b"png")
+    (d / "calib.xml").write_text("<RayCalibData/>")
+    with pytest.raises(CaptureError, match=r"already holds calib\.xml, lenslet that the "
+                       r"simulator did not write .*datasets\.cap"):
+        check_simulated_folder(d, "cap")
+    (d / "truth").mkdir()
+    (d / "truth" / "scene.json").write_text("{}")
+    check_simulated_folder(d, "cap")  # the simulator's own run
+
+
+def test_a_link_to_no_file(tmp_path: Path):
+    """A shot linked to a file that is not there (an unmounted disk) is named with its
+    target, not met as a bare FileNotFoundError in a job."""
+    lenslet = tmp_path / "lenslet"
+    lenslet.mkdir()
+    (lenslet / "hand01.png").symlink_to("/nonexistent/disk/hand01.png")
+    with pytest.raises(CaptureError, match=r"hand01\.png in .*lenslet/ is a link to no file "
+                       r"\(/nonexistent/disk/hand01\.png\): mount or copy"):
+        scan_lenslet_folder(lenslet, "cap", None)

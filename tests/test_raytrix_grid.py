@@ -94,6 +94,13 @@ GOOD = (FIXTURES / "Fujita2.xml").read_text() if FIXTURES.is_dir() else ""
     (lambda s: s.replace("<rotation units=\"rad\">1.570796370506</rotation>",
                          "<rotation units=\"rad\">nan</rotation>"), "rotation"),
     (lambda s: s.replace("<max>3.200000047684</max>", ""), "depth_range"),
+    # written in degrees (90) under units="rad", and a diameter in millimetres
+    (lambda s: s.replace("<rotation units=\"rad\">1.570796370506</rotation>",
+                         "<rotation units=\"rad\">90.0</rotation>"), "rotation: 90.0 rad is "
+     "more than a full turn: degrees?"),
+    (lambda s: s.replace("<diameter units=\"pix\">23.202295303345</diameter>",
+                         "<diameter units=\"mm\">0.1276</diameter>"), "diameter: units='mm', "
+     "where RayCalibData gives 'pix'"),
     (lambda s: s.replace("</RayCalibData>", ""), "malformed"),
     (lambda s: s.replace("RayCalibData", "Other"), "RayCalibData"),
     (lambda s: s.replace("<lens_base_y units=\"lens\">\n    <x>0.866025388241</x>",

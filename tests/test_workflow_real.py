@@ -180,6 +180,28 @@ def test_bad_input_stops_before_any_job(real_run: Path, tmp_path: Path):
     assert "calib.xml: <document>: malformed XML" in out, out[-2000:]
 
 
+def test_a_simulate_block_never_overwrites_a_capture(real_run: Path, tmp_path: Path):
+    """A 'simulate' block added to a real capture's dataset: the simulator would write
+    calib.xml, camera.yaml and the lenslet images over the capture's. The run stops before
+    any job, naming what is there, and every file keeps its bytes."""
+    work = workflow_copy(tmp_path / "w")
+    shutil.copytree(real_run / "data" / NAME, work / "data" / NAME)
+    before = {p: p.read_bytes() for p in sorted((work / "data" / NAME).rglob("*"))
+              if p.is_file()}
+    cfg = yaml.safe_load((real_run / "config.yaml").read_text())
+    cfg["datasets"][NAME]["simulate"] = {}
+    (work / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    proc = snakemake(work, "--until", "simulate_setup")
+    out = proc.stdout + proc.stderr
+    assert proc.returncode != 0
+    assert (f"data/{NAME}/ already holds calib.xml, camera.yaml, lenslet that the simulator "
+            "did not write") in out, out[-2000:]
+    assert f"Remove the 'simulate' block from datasets.{NAME}" in out, out[-2000:]
+    after = {p: p.read_bytes() for p in sorted((work / "data" / NAME).rglob("*"))
+             if p.is_file()}
+    assert after == before
+
+
 # --- shots given as videos (README, "Bringing a real capture") ------------------------
 
 #: the shots given as 10-bit YUV recordings, and the frame to calibrate on: the shot that

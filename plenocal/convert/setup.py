@@ -51,10 +51,11 @@ from plenocal.convert.gridcheck import (
     grid_for_mode,
 )
 from plenocal.convert.levels import OVEREXPOSED_SHARE, clipped_share
-from plenocal.convert.shot import ConvertSettings, ShotConversion, build_grid
+from plenocal.convert.shot import ConvertSettings, ShotConversion, build_grid, mla_contradiction
 from plenocal.grid import MicrolensGrid
 from plenocal.io.files import read_json, write_json
 from plenocal.io.raytrix import RayCalib
+from plenocal.optics import view_spacing
 from plenocal.rounding import round_floats
 from plenocal.viewgeom import MLA_KINDS
 
@@ -397,6 +398,32 @@ def unmatched_frame_error(check: GridCheck, scores: dict[str, float] | None,
             "--setup-frame K). The views would be a mosaic of misplaced patches. To "
             "convert all the same: convert.grid_foreign: warn (plenocal convert: --set "
             "grid_foreign=warn)" + overexposure_hint(image))
+
+
+def views_decided(setup: ConverterSetup) -> int | None:
+    """The N of the N x N views ``setup`` was decided for, where its view spacing is the
+    default ``q = D' sin(45 deg) / N`` (:func:`plenocal.optics.view_spacing`) to the
+    written digits; None where ``convert.view_spacing_px`` set ``q`` (or the set-up holds
+    no ``q``). The views of another N are other cameras than the calibration's."""
+    if not setup.q_px or not setup.safe_diameter_px:
+        return None
+    n = view_spacing(setup.safe_diameter_px, 1) / setup.q_px
+    k = round(n)
+    return k if k >= 1 and abs(n - k) <= 1e-6 * k else None
+
+
+def mla_setting_error(setup: ConverterSetup, shot: ShotConversion, source: str
+                      ) -> str | None:
+    """The workflow's stop for an MLA kind set in the config (``mla_source`` "setting")
+    that the set-up frame ``source`` clearly contradicts
+    (:func:`plenocal.convert.shot.mla_contradiction`: the other kind matches better by
+    :data:`~plenocal.convert.shot.MLA_CONTRADICTION` or more), or None. Converted so,
+    every view would be a mosaic of misplaced patches, and in a workflow the warning
+    would reach a log only."""
+    if setup.mla_source != "setting" or not shot.match_scores:
+        return None
+    note = mla_contradiction(setup.mla, shot.match_scores)
+    return None if note is None else f"{source}: {note}"
 
 
 def decide_setup(image: np.ndarray, calib: RayCalib, n_views: int, settings: ConvertSettings,

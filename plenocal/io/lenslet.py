@@ -227,6 +227,32 @@ def check_capture(sources: dict[str, Path | VideoShot], dataset: str, folder: st
             raise CaptureError(sensor_mismatch(path, size, sensor_size))
 
 
+#: what a simulated dataset's rules write into ``data/<dataset>/`` (rules/simulate.smk),
+#: and the file whose presence says the simulator wrote them
+SIMULATED_FILES = ("calib.xml", "camera.yaml", "lenslet")
+SIMULATOR_MARK = Path("truth") / "scene.json"
+
+
+def check_simulated_folder(folder: str | Path, dataset: str) -> None:
+    """A dataset with a ``simulate`` block is generated into ``folder`` (``data/<d>/``):
+    CaptureError where ``folder`` already holds a capture's files there (calib.xml,
+    camera.yaml or lenslet images) that the simulator did not write (no ``truth/scene.json``
+    beside them), which its rules would overwrite."""
+    folder = Path(folder)
+    if (folder / SIMULATOR_MARK).is_file():
+        return
+    found = [name for name in SIMULATED_FILES if (folder / name).exists()
+             and not ((folder / name).is_dir() and not any((folder / name).iterdir()))]
+    if found:
+        raise CaptureError(
+            f"dataset {dataset!r} has a 'simulate' block, so the simulator writes "
+            f"{folder}/, but {folder}/ already holds {', '.join(found)} that the simulator "
+            f"did not write (no {SIMULATOR_MARK} beside them): a real capture's files, which "
+            f"a run would overwrite. Remove the 'simulate' block from datasets.{dataset} to "
+            "calibrate that capture, or give the simulated dataset another name; to have "
+            f"a simulation made again, delete {folder}/ yourself")
+
+
 def scan_lenslet_folder(folder: str | Path, dataset: str, video: dict | None,
                         sensor_size: tuple[int, int] | None = None
                         ) -> dict[str, Path | VideoShot]:
@@ -240,8 +266,16 @@ def scan_lenslet_folder(folder: str | Path, dataset: str, video: dict | None,
         raise CaptureError(
             f"dataset {dataset!r}: {folder}/ does not exist; put the lenslet images "
             "there (x00_y00.png ... and hand00.png ..., or recordings x00_y00_<W>x<H>_"
-            "<b>bit.yuv ...) or give the dataset a 'simulate' block")
+            "<b>bit.yuv ...; README, 'Bringing a real capture'). A simulated dataset "
+            "instead has a 'simulate' block, and its files are written there")
     entries = sorted(p for p in folder.iterdir() if not p.name.startswith("."))
+    dangling = [p for p in entries if p.is_symlink() and not p.exists()]
+    if dangling:
+        raise CaptureError(
+            f"dataset {dataset!r}: {', '.join(p.name for p in dangling)} in {folder}/ "
+            f"{'is a link' if len(dangling) == 1 else 'are links'} to no file ("
+            + ", ".join(str(p.readlink()) for p in dangling)
+            + "): mount or copy what the link points to, or link the shot again")
     bad = _bad_names(entries)
     if bad:
         raise CaptureError(

@@ -116,6 +116,22 @@ def _vec(root: Element, name: str, source: str, required: bool = True,
     return (a, b)
 
 
+#: the units RayCalibData writes for the values the converter reads, where a file names
+#: them (a file that names none is read as these)
+UNITS = {"diameter": "pix", "lens_border": "pix", "rotation": "rad", "offset": "pix"}
+
+
+def _check_units(root: Element, source: str) -> None:
+    """CalibError where a value of :data:`UNITS` names another unit than RayCalibData's
+    (a diameter in mm, a rotation in deg): it would be read as pixels or radians."""
+    for name, unit in UNITS.items():
+        el = root.find(name)
+        given = None if el is None else el.get("units")
+        if given is not None and given.strip().lower() != unit:
+            raise _err(source, name, f"units={given!r}, where RayCalibData gives {unit!r}: "
+                       f"convert the value to {unit} and write units=\"{unit}\"")
+
+
 def parse_calib(text: str | bytes, source: str = "<string>") -> RayCalib:
     """Parse RayCalibData XML text. Raises :class:`CalibError` naming ``source``."""
     try:
@@ -130,6 +146,7 @@ def parse_calib(text: str | bytes, source: str = "<string>") -> RayCalib:
                 "Boys2_TSPC_corners_calib.xml)" if root.tag == "TSPCCalibData" else "")
         raise _err(source, "<root>", f"expected <RayCalibData>, found <{root.tag}>{hint}")
 
+    _check_units(root, source)
     diameter = _number(root, "diameter", source)
     assert diameter is not None
     if diameter <= 2.0:
@@ -140,6 +157,9 @@ def parse_calib(text: str | bytes, source: str = "<string>") -> RayCalib:
         raise _err(source, "lens_border", f"must be in [0, diameter/2) (got {lens_border})")
     rotation = _number(root, "rotation", source)
     assert rotation is not None
+    if abs(rotation) > 2 * math.pi:
+        raise _err(source, "rotation", f"{rotation} rad is more than a full turn: degrees? "
+                   "RayCalibData gives the grid's rotation in radians (90 deg: 1.5708)")
     offset = _vec(root, "offset", source)
     bx = _vec(root, "lens_base_x", source)
     by = _vec(root, "lens_base_y", source)

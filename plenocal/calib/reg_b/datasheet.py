@@ -423,8 +423,14 @@ def load_datasheet(path: str | Path) -> dict:
     """Read and validate ``camera.yaml`` (see :data:`SCHEMA`)."""
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: camera datasheet not found (camera.yaml is written "
-                                "by the simulator, or put next to a real capture's calib.xml)")
+        keys = ", ".join(f"{k}: {', '.join(v['required'])}" if "required" in v else k
+                         for k, v in SCHEMA["properties"].items()
+                         if k in SCHEMA.get("required", ()))
+        raise FileNotFoundError(
+            f"{path}: camera datasheet not found (camera.yaml is written by the simulator, "
+            "or put next to a real capture's calib.xml; it needs " + keys + ". A template: "
+            "`snakemake -j1 --until simulate_setup` writes data/synthetic/camera.yaml; "
+            "README, 'Bringing a real capture')")
     try:
         doc = load_yaml_unique(path.read_text(), path)
     except yaml.YAMLError as exc:
