@@ -619,6 +619,34 @@ def test_stage_warnings_reach_the_first_screen(tmp_path):
             "-1.0 % (tolerance 5 %); check those distances and the datasheet") in box
 
 
+def test_a_shot_out_of_step_with_the_others_is_named(tmp_path):
+    """A shot whose lenses matched far less than the others' (a frame of another camera,
+    which only the set-up frame's check would catch) is named on the first screen with the
+    shares; a capture whose shots differ as simulated ones do (0.74-1.0 of the median) is
+    not."""
+    from plenocal.report.sources import shots_out_of_step
+
+    res = make_results(tmp_path)
+
+    def shares(values):
+        for cam, v in zip(CAMS, values, strict=True):
+            write_json(res / "views" / cam / "disparity.json", {
+                "format": DISPARITY_FORMAT, "version": DISPARITY_VERSION, "D_min": 1.0,
+                "D_max": 2.0, "patch_size_px": {"confident_share": v}})
+
+    shares([0.68] * (len(CAMS) - 1) + [0.01])
+    (w,) = shots_out_of_step(res, CAMS)
+    assert w.source == "views/hand00/disparity.json"
+    assert w.message.startswith("hand00: 1 % of its lenses matched, against a median of 68 % "
+                                f"over the {len(CAMS)} shots: a frame of another camera")
+    box = re.search(r'<div class="warnbox" id="warnings">.*?</div>', build(res),
+                    flags=re.S).group(0)
+    assert "hand00: 1 % of its lenses matched" in box
+    shares([0.68, 0.5, 0.7, 0.62, 0.43, 0.66, 0.7][: len(CAMS) - 1] + [0.55]
+           + [0.6] * max(0, len(CAMS) - 8))
+    assert shots_out_of_step(res, CAMS) == []
+
+
 def test_stage_warnings_of_another_shape_are_named_not_guessed(tmp_path):
     """A warnings list of another shape, or rig.json's check with a renamed key, is not
     read as well as it can be (nor dropped): the box says which file, which key and what
