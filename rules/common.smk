@@ -2,6 +2,8 @@
 paths, and per-stage config slices (passed as ``params`` so that a change of one
 stage's settings reruns that stage and what depends on it, nothing else)."""
 
+import base64
+import json
 import os
 import re
 from pathlib import Path
@@ -141,6 +143,17 @@ def lenslet_image(dataset, cam):
     return data(dataset, "lenslet", f"{cam}.png")
 
 
+def written_by_simulator(path):
+    """Whether Snakemake's record of the job that wrote ``path`` (its metadata under
+    .snakemake/, kept until the folder is cleaned) names rule simulate_setup: a simulated
+    dataset whose truth/ was deleted, which is made again, not a capture to protect."""
+    record = Path(".snakemake", "metadata", base64.b64encode(str(path).encode()).decode())
+    try:
+        return json.loads(record.read_text()).get("rule") == "simulate_setup"
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
 def check_real_dataset(dataset):
     """A real capture's files, checked before any job: the lenslet folder (its shots, and
     its recordings against config datasets.<d>.video), calib.xml (parsed), and camera.yaml
@@ -177,7 +190,7 @@ for _d in DATASETS:
         check_real_dataset(_d)
     else:  # never over a capture's own files
         try:
-            check_simulated_folder(Path("data") / _d, _d)
+            check_simulated_folder(Path("data") / _d, _d, written_by_simulator)
         except CaptureError as err:
             raise ValueError(str(err)) from None
 

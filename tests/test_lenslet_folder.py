@@ -275,6 +275,11 @@ def test_a_simulated_dataset_never_writes_over_a_capture(tmp_path: Path):
     with pytest.raises(CaptureError, match=r"already holds calib\.xml, lenslet that the "
                        r"simulator did not write .*datasets\.cap"):
         check_simulated_folder(d, "cap")
+    # the workflow's record says the simulator wrote calib.xml: its truth/ was deleted,
+    # and is made again
+    check_simulated_folder(d, "cap", lambda path: path == d / "calib.xml")
+    with pytest.raises(CaptureError):
+        check_simulated_folder(d, "cap", lambda path: False)
     (d / "truth").mkdir()
     (d / "truth" / "scene.json").write_text("{}")
     check_simulated_folder(d, "cap")  # the simulator's own run

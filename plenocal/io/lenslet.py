@@ -22,6 +22,7 @@ first bytes: a :class:`CaptureError` names the file, the config key and the reme
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -233,13 +234,20 @@ SIMULATED_FILES = ("calib.xml", "camera.yaml", "lenslet")
 SIMULATOR_MARK = Path("truth") / "scene.json"
 
 
-def check_simulated_folder(folder: str | Path, dataset: str) -> None:
+def check_simulated_folder(folder: str | Path, dataset: str,
+                           written_by_simulator: Callable[[Path], bool] | None = None
+                           ) -> None:
     """A dataset with a ``simulate`` block is generated into ``folder`` (``data/<d>/``):
     CaptureError where ``folder`` already holds a capture's files there (calib.xml,
     camera.yaml or lenslet images) that the simulator did not write (no ``truth/scene.json``
-    beside them), which its rules would overwrite."""
+    beside them, and ``written_by_simulator``, the workflow's own record of the job that
+    wrote a file, does not name the simulator for calib.xml), which its rules would
+    overwrite. A simulated dataset whose ``truth/`` was deleted is made again."""
     folder = Path(folder)
     if (folder / SIMULATOR_MARK).is_file():
+        return
+    calib = folder / "calib.xml"
+    if written_by_simulator is not None and calib.is_file() and written_by_simulator(calib):
         return
     found = [name for name in SIMULATED_FILES if (folder / name).exists()
              and not ((folder / name).is_dir() and not any((folder / name).iterdir()))]
