@@ -151,3 +151,15 @@ def test_canonical_sorts_mappings_and_keeps_lists():
     assert repr(canonical({"y": 1, "x": 2})) == repr(canonical({"x": 2, "y": 1}))
     same = canonicalize(cfg)
     assert same is cfg and list(cfg) == ["a", "b"]
+
+
+def test_a_dataset_may_read_its_mla_kind_from_the_image_whatever_convert_mla_says():
+    """datasets.<d>.mla: auto undoes a global convert.mla for one dataset (a real capture
+    beside simulated ones); another word is refused, naming the key."""
+    c = _cfg()
+    c["convert"]["mla"] = "keplerian"
+    c["datasets"]["synthetic"]["mla"] = "auto"
+    assert validate_config(c)["datasets"]["synthetic"]["mla"] == "auto"
+    c["datasets"]["synthetic"]["mla"] = "Auto"
+    with pytest.raises(ConfigError, match=r"datasets\.synthetic\.mla"):
+        validate_config(c)

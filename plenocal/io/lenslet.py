@@ -353,8 +353,10 @@ def scan_lenslet_folder(folder: str | Path, dataset: str, video: dict | None,
         if sensor_size is not None and (fmt.width, fmt.height) != tuple(sensor_size):
             raise CaptureError(
                 f"{path}: its frames are {fmt.width}x{fmt.height} pixels but camera.yaml "
-                f"says the sensor is {sensor_size[0]}x{sensor_size[1]}: the frames must be "
-                "the full, uncropped sensor readout (or correct the size in the name, "
-                f"{key}.size or camera.yaml)")
+                f"says the sensor is {sensor_size[0]}x{sensor_size[1]}: every frame is one "
+                "sensor readout of that size (correct the size in the name, "
+                f"{key}.size or camera.yaml; for a crop, give camera.yaml's "
+                "sensor_width_px / sensor_height_px the crop's size and calib.xml its offset "
+                "moved with the crop)")
         out[shot] = VideoShot(path, fmt, frame, count, video["matrix"], video["range"])
     return dict(sorted(out.items()))
