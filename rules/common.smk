@@ -147,7 +147,9 @@ def written_by_simulator(path):
     """Whether Snakemake's record of the job that wrote ``path`` (its metadata under
     .snakemake/, kept until the folder is cleaned) names simulate_setup, the rule: then
     it is a simulated dataset whose truth/ was deleted, made again, not a capture."""
-    record = Path(".snakemake", "metadata", base64.b64encode(str(path).encode()).decode())
+    record = Path(
+        ".snakemake", "metadata", base64.b64encode(str(path).encode()).decode()
+    )
     try:
         return json.loads(record.read_text()).get("rule") == "simulate_setup"
     except (OSError, ValueError, AttributeError):
