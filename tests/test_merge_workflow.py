@@ -40,6 +40,10 @@ def test_rig_scale_merge_rules(tmp_path):
         "rig": {"model": "exact"}, "scale": {}}
     (tmp_path / "config.yaml").write_text(yaml.safe_dump(cfg))
     (tmp_path / "data/synthetic").mkdir(parents=True)
+    # camera.yaml stands in for the simulator's, as its truth/ mark says (a simulated
+    # dataset's folder holding a capture's files is refused: common.smk)
+    (tmp_path / "data/synthetic/truth").mkdir()
+    (tmp_path / "data/synthetic/truth/scene.json").write_text("{}")
     (tmp_path / "data/synthetic/camera.yaml").write_text(yaml.safe_dump({
         "pixel_size_mm": 0.0055, "sensor_width_px": 2048, "sensor_height_px": 1536,
         "main_lens": {"focus_distance_mm": 600.0, "focal_length_mm": 35.0},
