@@ -326,7 +326,24 @@ def _check_semantics(config: dict) -> None:
     c = config["convert"]
     if c["view_spacing_px"] is not None and c["view_spacing_px"] <= 0:
         raise _fail("convert.view_spacing_px", c["view_spacing_px"], "must be > 0")
+    b = c["blend"]
+    if b["wider_slots"] < b["wide_slots"]:
+        raise _fail("convert.blend.wider_slots", b["wider_slots"],
+                    f"must be at least convert.blend.wide_slots ({b['wide_slots']}): the "
+                    "views that reach farther blend at least as many lenses")
     s = config["scale"]
     if not s["low_percentile"] < s["high_percentile"]:
         raise _fail("scale.low_percentile", s["low_percentile"],
                     f"must be less than scale.high_percentile ({s['high_percentile']})")
+    for key, block in (("depth", config["depth"]), ("depth.sgm", config["depth"]["sgm"])):
+        if block["min_depths"] > block["max_depths"]:
+            raise _fail(f"{key}.min_depths", block["min_depths"],
+                        f"must be at most {key}.max_depths ({block['max_depths']})")
+    v = config["verify"]
+    if v["renderer"] == "rvs":
+        if not v["rvs_binary"]:
+            raise _fail("verify.renderer", "rvs", "needs verify.rvs_binary, the path of an "
+                        "RVS 4.0 binary (README, 'MPEG exports and RVS'), or renderer: dibr")
+        if not Path(v["rvs_binary"]).expanduser().is_file():
+            raise _fail("verify.rvs_binary", v["rvs_binary"], "no such file: give the path "
+                        "of an RVS 4.0 binary (README, 'MPEG exports and RVS')")

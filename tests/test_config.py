@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 from pathlib import Path
 
 import pytest
@@ -162,4 +163,29 @@ def test_a_dataset_may_read_its_mla_kind_from_the_image_whatever_convert_mla_say
     assert validate_config(c)["datasets"]["synthetic"]["mla"] == "auto"
     c["datasets"]["synthetic"]["mla"] = "Auto"
     with pytest.raises(ConfigError, match=r"datasets\.synthetic\.mla"):
+        validate_config(c)
+
+
+@pytest.mark.parametrize("change, key, why", [
+    ({"verify": {"renderer": "rvs"}}, "verify.renderer", "needs verify.rvs_binary"),
+    ({"verify": {"renderer": "rvs", "rvs_binary": "/nonexistent/RVS"}}, "verify.rvs_binary",
+     "no such file"),
+    ({"depth": {"min_depths": 100, "max_depths": 50}}, "depth.min_depths",
+     r"must be at most depth\.max_depths \(50\)"),
+    ({"depth": {"sgm": {"min_depths": 300}}}, "depth.sgm.min_depths",
+     r"must be at most depth\.sgm\.max_depths \(256\)"),
+    ({"convert": {"blend": {"wider_slots": 2}}}, "convert.blend.wider_slots",
+     r"at least convert\.blend\.wide_slots \(4\)"),
+])
+def test_settings_that_contradict_each_other_are_refused_before_any_job(change, key, why):
+    """A renderer that cannot run (found only in a synthesis job, after the calibration)
+    and bounds given the wrong way round are refused at start-up, naming the key."""
+    c = _cfg()
+    for block, values in change.items():
+        for k, v in values.items():
+            if isinstance(v, dict):
+                c.setdefault(block, {}).setdefault(k, {}).update(v)
+            else:
+                c.setdefault(block, {})[k] = v
+    with pytest.raises(ConfigError, match=rf"{re.escape(key)} = .*{why}"):
         validate_config(c)
