@@ -93,6 +93,22 @@ def _changed_schema(schema: dict) -> dict:
                 walk(v)
 
     walk(out)
+
+    def keep_order(node):
+        """The cross-key rules of validate_config kept: wide_slots <= wider_slots, and
+        the rvs renderer only with a binary (none here: the renderer stays dibr)."""
+        if isinstance(node, dict):
+            props = node.get("properties", {})
+            if "wide_slots" in props and "wider_slots" in props:
+                wide, wider = props["wide_slots"], props["wider_slots"]
+                if wide["default"] > wider["default"]:
+                    wide["default"] = wider["default"] - 1
+            if "renderer" in props and "rvs_binary" in props:
+                props["renderer"]["default"] = "dibr"
+            for v in node.values():
+                keep_order(v)
+
+    keep_order(out)
     return out
 
 
