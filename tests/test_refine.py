@@ -623,3 +623,16 @@ def test_track_sets_written_and_read_back_give_the_same_bytes(capture, tmp_path)
     (tmp_path / "views" / "elements.npy").unlink()
     with pytest.raises(ValueError, match="elements.npy.*rerun rule refine_tracks"):
         at.read_tracks(tmp_path / "views")
+
+
+def test_the_scale_source_says_what_set_the_written_scale():
+    """refine.json's scale_source: under refine.scale: merge, the merge's r (Eq. 5's or the
+    stage's step, as rule scale chose), not "Eq. 5" where the merge took the step."""
+    from plenocal.calib.refine import RefineSettings, scale_source
+
+    merge = RefineSettings.from_config({"scale": "merge"}, seed=0)
+    text = scale_source(merge, None)
+    assert text.startswith("the merge's r") and "merge/scale.json's chosen" in text
+    step = {"step_m": 0.01, "n_shots": 6}
+    auto = RefineSettings.from_config({"scale": "auto"}, seed=0)
+    assert scale_source(auto, step).startswith("the stage's step (10 mm) fitted to the 6 ")

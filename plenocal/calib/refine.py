@@ -713,7 +713,10 @@ def scale_source(settings: RefineSettings, step_fit: dict | None) -> str:
     if step_fit is not None:
         return (f"the stage's step ({1000.0 * step_fit['step_m']:g} mm) fitted to the "
                 f"{step_fit['n_shots']} refined array shots (refine.scale: auto)")
-    return "Eq. 5 (the result scaled to Eq. 6's spread, the rig with it)"
+    # refine.scale: merge - Eq. 6's r, which rule scale took from Eq. 5 or from the stage's
+    # step (scale.reference; merge/scale.json says which)
+    return ("the merge's r (the result scaled to Eq. 6's spread, the rig with it: Eq. 5's "
+            "r or the stage's step, as merge/scale.json's chosen says)")
 
 
 def loss_scale_of(settings: RefineSettings, before: np.ndarray) -> float:
