@@ -143,3 +143,10 @@ def read_disparity_warnings(path: str | Path) -> tuple[str, ...]:
     ``disparity.json``, this version only): for the report's first screen."""
     return decode(path, FORMAT, VERSION, "disparity.json", REMEDY,
                   lambda doc: warnings_of(doc, path, REMEDY))
+
+
+def read_confident_share(path: str | Path) -> float:
+    """The share of the shot's lenses whose patch size was measured, not filled
+    (``patch_size_px.confident_share`` of ``disparity.json``, this version only)."""
+    return decode(path, FORMAT, VERSION, "disparity.json", REMEDY,
+                  lambda doc: float(doc["patch_size_px"]["confident_share"]))

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from plenocal.artifacts.disparity import read_disparity_warnings
+from plenocal.artifacts.disparity import read_confident_share, read_disparity_warnings
 from plenocal.artifacts.results import PsnrTable, ReprojectionTable
 from plenocal.artifacts.rig import InverseCheck, read_rig
 from plenocal.artifacts.stage_warnings import read_warnings
@@ -369,8 +369,7 @@ def shots_out_of_step(results: Path, cams: Sequence[str]) -> list[StageWarning]:
     shares = {}
     for cam in cams:
         try:
-            doc = read_json(results / "views" / cam / "disparity.json")
-            shares[cam] = float(doc["patch_size_px"]["confident_share"])
+            shares[cam] = read_confident_share(results / "views" / cam / "disparity.json")
         except (OSError, ValueError, KeyError, TypeError):
             continue
     if len(shares) < 3:
