@@ -213,9 +213,59 @@ def _path(error: jsonschema.ValidationError) -> str:
     return ".".join(parts) if parts else "<top level>"
 
 
-def _reason(error: jsonschema.ValidationError) -> str:
+#: a pattern of named words only (``^auto$``, ``^(auto|file)$``): the words a string may be
+_WORDS = re.compile(r"^\^\(?([A-Za-z0-9_]+(?:\|[A-Za-z0-9_]+)*)\)?\$$")
+_BOUND = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=", "exclusiveMaximum": "<"}
+
+
+def _bounds(schema: dict) -> str:
+    if "minimum" in schema and "maximum" in schema:
+        return f" from {schema['minimum']} to {schema['maximum']}"
+    parts = [f"{word} {schema[k]}" for k, word in _BOUND.items() if k in schema]
+    return f" {' and '.join(parts)}" if parts else ""
+
+
+def _accepted(schema: dict, root: dict) -> list[str]:
+    """What ``schema`` accepts, one short phrase per alternative ("a number > 0", "auto",
+    "a whole number >= 2 and <= 128", "null"), for an error that must say what to write
+    rather than which of JSON schema's rules failed."""
+    schema = _resolve(schema, root) if isinstance(schema, dict) else {}
+    for key in ("oneOf", "anyOf"):
+        if key in schema:
+            return [a for sub in schema[key] for a in _accepted(sub, root)]
+    if "const" in schema:
+        return [str(schema["const"])]
+    if "enum" in schema:
+        return [str(x) for x in schema["enum"]]
+    types = schema.get("type")
+    out = []
+    for t in [types] if isinstance(types, str) else (types or []):
+        if t == "string":
+            words = _WORDS.match(schema.get("pattern", ""))
+            out += words.group(1).split("|") if words else ["a string"]
+        elif t in ("integer", "number"):
+            out.append(("a whole number" if t == "integer" else "a number") + _bounds(schema))
+        elif t == "null":
+            out.append("null")
+        elif t == "boolean":
+            out.append("true or false")
+        else:
+            out.append(f"a{'n' if t[0] in 'aeiou' else ''} {t}")
+    return out
+
+
+def _one_of(phrases: list[str]) -> str:
+    return phrases[0] if len(phrases) == 1 else f"{', '.join(phrases[:-1])}, or {phrases[-1]}"
+
+
+def _reason(error: jsonschema.ValidationError, root: dict | None = None) -> str:
     v = error.validator
     s = error.schema if isinstance(error.schema, dict) else {}
+    accepted = _accepted(s, root or {}) if v in ("oneOf", "anyOf", "type", "pattern") else []
+    if v in ("oneOf", "anyOf") and accepted:
+        return f"must be {_one_of(accepted)}"
+    if v == "pattern" and isinstance(s.get("type"), list) and accepted:
+        return f"must be {_one_of(accepted)}"
     if v == "not" and s.get("not", {}).get("multipleOf") == 2:
         return "must be an odd number"
     if v == "additionalProperties":
@@ -223,11 +273,14 @@ def _reason(error: jsonschema.ValidationError) -> str:
         allowed = ", ".join(sorted(s.get("properties", {}))) or "none"
         return f"unknown key(s) {', '.join(extra)} (allowed: {allowed})"
     if v == "type":
-        if (error.validator_value == "integer" and isinstance(error.instance, float)
-                and error.instance.is_integer()):
+        expected = error.validator_value
+        if ("integer" in ([expected] if isinstance(expected, str) else expected)
+                and isinstance(error.instance, float) and error.instance.is_integer()):
             return (f"must be a whole number: write {int(error.instance)}, not "
                     f"{error.instance!r}")
-        return f"must be of type {error.validator_value}"
+        if isinstance(expected, list) and accepted:
+            return f"must be {_one_of(accepted)}"
+        return f"must be of type {expected}"
     if v in ("minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum"):
         word = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=",
                 "exclusiveMaximum": "<"}[v]
@@ -261,7 +314,7 @@ def validate_config(config: dict, schema_path: str | Path | None = None) -> dict
         # the deepest error is the most specific one
         err = max(errors, key=lambda e: len(e.absolute_path))
         raise _fail(_path(err), err.instance if not isinstance(err.instance, dict) else "{...}",
-                    _reason(err))
+                    _reason(err, schema))
     _check_semantics(config)
     return config
 

@@ -53,14 +53,23 @@ def test_tiny_config_valid():
     (("datasets", "synthetic", "simulate", "handheld", "count"), 0,
      "datasets.synthetic.simulate.handheld.count", "needs hand-held shots"),
     (("sfm", "mapper"), "magic", "sfm.mapper", "one of"),
-    (("convert", "tile_size"), 1.5, "convert.tile_size", "integer"),
+    (("convert", "tile_size"), 1.5, "convert.tile_size",
+     "must be a whole number from 2 to 128, or auto"),
+    # JSON schema's own words named its rules, not what to write ("0 is not valid under any
+    # of the given schemas", "must be of type ['integer', 'string']")
+    (("convert", "tile_size"), 6.0, "convert.tile_size", "write 6, not 6.0"),
+    (("convert", "tile_size"), "big", "convert.tile_size",
+     "must be a whole number from 2 to 128, or auto"),
+    (("refine", "loss_scale_px"), 0, "refine.loss_scale_px", "must be a number > 0, or auto"),
+    (("convert", "view_spacing_px"), "wide", "convert.view_spacing_px",
+     "must be a number > 0, or null"),
     (("scale", "low_percentile"), 95, "scale.low_percentile", "high_percentile"),
 ])
 def test_bad_values_name_key_and_reason(path, value, key, why):
     c = _cfg()
     node = c
     for p in path[:-1]:
-        node = node[p]
+        node = node.setdefault(p, {})  # a block config.yaml leaves to its defaults
     node[path[-1]] = value
     with pytest.raises(ConfigError) as exc:
         validate_config(c)
