@@ -400,3 +400,30 @@ def _check_semantics(config: dict) -> None:
         if not Path(v["rvs_binary"]).expanduser().is_file():
             raise _fail("verify.rvs_binary", v["rvs_binary"], "no such file: give the path "
                         "of an RVS 4.0 binary (README, 'MPEG exports and RVS')")
+    _check_refine(config["refine"])
+
+
+def _check_refine(r: Mapping[str, Any]) -> None:
+    """refine: keys set away from their default where the other keys leave them nothing to
+    do - the run would ignore them without a word (a config review's finding)."""
+    if not r["enabled"]:
+        return  # the paper's method alone: every other refine key is left unused, knowingly
+    default = stage_defaults("refine")
+
+    def unused(key: str, why: str, remedy: str) -> None:
+        if r[key] != default[key]:
+            raise _fail(f"refine.{key}", r[key], f"has no effect {why}; {remedy}")
+
+    if r["rig"] == "hold" and r["frames"] == "refine":
+        unused("scale", "with refine.rig = hold, where the held rig's metric baselines give "
+               "the result's scale", "remove it, or choose a refine.rig that keeps the "
+               "merge's scale (scale, scale_pp, free)")
+    if r["tracks"] == "central":
+        unused("matches", "with refine.tracks = central (the central views' own matches; "
+               "refine.matches chooses among every view's, rule view_matches)",
+               "remove it, or set refine.tracks to views or both")
+    if r["tracks"] == "views":
+        for key in ("carry_every", "central_contrast"):
+            unused(key, "with refine.tracks = views (it sets how the central views' points "
+                   "are found and carried, a track set views does not use)",
+                   "remove it, or set refine.tracks to central or both")

@@ -198,3 +198,34 @@ def test_settings_that_contradict_each_other_are_refused_before_any_job(change, 
                 c.setdefault(block, {})[k] = v
     with pytest.raises(ConfigError, match=rf"{re.escape(key)} = .*{why}"):
         validate_config(c)
+
+
+@pytest.mark.parametrize("refine, key, why", [
+    ({"rig": "hold", "scale": "merge"}, "refine.scale = 'merge'",
+     "has no effect with refine.rig = hold"),
+    ({"tracks": "central", "matches": "across"}, "refine.matches = 'across'",
+     "has no effect with refine.tracks = central"),
+    ({"tracks": "views", "carry_every": 1}, "refine.carry_every = 1",
+     "has no effect with refine.tracks = views"),
+    ({"tracks": "views", "central_contrast": 0.01}, "refine.central_contrast = 0.01",
+     "has no effect with refine.tracks = views"),
+])
+def test_a_refine_key_the_others_leave_unused_is_refused(refine, key, why):
+    """A refine key set where the other keys make the run ignore it stops the run naming
+    both (before, the run went on without a word)."""
+    c = _cfg()
+    c["refine"] = refine
+    with pytest.raises(ConfigError) as exc:
+        validate_config(c)
+    assert f"config: {key}: {why}" in str(exc.value), exc.value
+
+
+@pytest.mark.parametrize("refine", [
+    {"rig": "hold", "scale": "merge", "frames": "hold"},  # held frames keep Eq. 5's scale
+    {"tracks": "views"}, {"tracks": "central", "carry_every": 1},
+    {"enabled": False, "tracks": "views", "carry_every": 1},  # the paper's method alone
+])
+def test_refine_keys_in_use_pass(refine):
+    c = _cfg()
+    c["refine"] = refine
+    validate_config(c)
