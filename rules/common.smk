@@ -553,23 +553,45 @@ SYNTHESIS_DEPTH_KEYS = ("synthesis_method", "views", "sgm")
 REGISTRATION_DEPTH_KEYS = ("registration_downsample",)
 
 
+# the keys the registrations' depth maps read by COLMAP's patch-match stereo
+# (plenocal.depth.shot: the sources, the bounds, the reduction and the colmap block; none of
+# the plane sweep's)
+COLMAP_DEPTH_KEYS = (
+    "backend",
+    "sources_a",
+    "sources_b",
+    "bounds_margin",
+    "registration_downsample",
+    "colmap",
+)
+
+
 def registration_depth_config():
     """The depth settings the registrations' depth maps read: a change to the synthesis
-    depth maps' settings does not rerun them (nor the scale and merge)."""
-    return {
+    depth maps' settings does not rerun them (nor the scale and merge), nor one to the
+    backend they do not use (the colmap block under the plane sweep, the plane sweep's
+    keys under colmap; auto takes either where it runs, so both)."""
+    cfg = {
         k: v for k, v in stage_config("depth").items() if k not in SYNTHESIS_DEPTH_KEYS
     }
+    if cfg["backend"] == "planesweep":
+        cfg.pop("colmap")
+    elif cfg["backend"] == "colmap":
+        cfg = {k: cfg[k] for k in COLMAP_DEPTH_KEYS}
+    return cfg
 
 
 def synthesis_depth_config():
     """The depth settings that depth_view reads - its method's (the plane-sweep ones only
-    when it is the plane sweep) and the bounds."""
+    when it is the plane sweep: never the registrations' backend, its colmap block or
+    their sources) and the bounds."""
+    COLMAP_ONLY = ("backend", "colmap", "sources_a", "sources_b")
     cfg = stage_config("depth")
     if cfg["synthesis_method"] == "planesweep":
         return {
             k: v
             for k, v in cfg.items()
-            if k not in ("views", "sgm", *REGISTRATION_DEPTH_KEYS)
+            if k not in ("views", "sgm", *REGISTRATION_DEPTH_KEYS, *COLMAP_ONLY)
         }
     return {k: cfg[k] for k in ("synthesis_method", "sgm", "bounds_margin")}
 
@@ -700,12 +722,16 @@ def refine_inputs(wildcards):
     return out
 
 
-def track_config():
-    """The refine keys that a track set depends on (the params of rule refine_tracks); a
-    change to the adjustments' own (the loss, the passes, the rig's and the focal length's
-    modes) remakes no track set."""
+def track_config(source):
+    """The refine keys that the track set of ``source`` depends on (the params of rule
+    refine_tracks); a change to the adjustments' own (the loss, the passes, the rig's and
+    the focal length's modes) remakes no track set, nor one to the other source's own keys
+    (SOURCE_ONLY_TRACK_KEYS)."""
     cfg = stage_config("refine")
-    return {k: cfg[k] for k in TRACK_KEYS if k in cfg}
+    other = {
+        k for s, keys in SOURCE_ONLY_TRACK_KEYS.items() if s != source for k in keys
+    }
+    return {k: cfg[k] for k in TRACK_KEYS if k in cfg and k not in other}
 
 
 #: the refine: keys of :func:`track_config` (plenocal.calib.track_sets.make_track_set)
@@ -717,6 +743,16 @@ TRACK_KEYS = (
     "min_angle_deg",
     "align",
 )
+#: the TRACK_KEYS that one source's set alone reads: how the central views' points are
+#: carried into the other views, and which of every view's matches are kept
+SOURCE_ONLY_TRACK_KEYS = {"central": ("carry_every",), "views": ("matches",)}
+
+
+def refine_config():
+    """The refine block as the refine job reads it - all but its thread count (the job's
+    threads: the same cameras to the bit for any number, BENCHMARKS.md, "The refine job's
+    threads"), so that a change to num_threads reruns nothing."""
+    return {k: v for k, v in stage_config("refine").items() if k != "num_threads"}
 
 
 def refine_tracks_inputs(wildcards):

@@ -28,7 +28,7 @@ rule refine_tracks:
         mem_mb=refine_tracks_mem_mb,
         runtime=30,
     params:
-        refine=lambda wc: track_config(),
+        refine=lambda wc: track_config(wc.source),
         sfm=lambda wc: sfm_params(),
     script:
         "../scripts/refine_tracks.py"
@@ -62,7 +62,7 @@ rule refine:
         mem_mb=refine_mem_mb,
         runtime=30,
     params:
-        refine=lambda wc: stage_config("refine"),
+        refine=lambda wc: refine_config(),
         sfm=lambda wc: sfm_params(),
         hold_shot=lambda wc: full_set_cam(wc.dataset),
     script:

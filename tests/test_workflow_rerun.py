@@ -96,6 +96,28 @@ def test_verification_change_reruns_only_verification(complete_run: Path, tmp_pa
     assert not jobs & {"synthesis_exp1", "synthesis_exp3_part", "synthesis_exp3"}, jobs
 
 
+def test_a_key_a_job_does_not_read_reruns_nothing_of_it(complete_run: Path, tmp_path: Path):
+    """The refine job's thread count (the same cameras to the bit for any number), the
+    colmap block under the plane sweep, and one track set's own keys: each reran every job
+    it reached (the refinement, the synthesis depth maps and the experiments: 24 jobs; the
+    registrations' depth maps on: 33) because the rules were given whole config blocks."""
+    work = clone(complete_run, tmp_path / "w")
+    edit_config(work, lambda c: c["refine"].update(num_threads=2))
+    assert planned(work) == {}
+    edit_config(work, lambda c: c["depth"].update(colmap={"window_radius": 7}))
+    assert depth_backend(work) == "planesweep" and planned(work) == {}
+    # carry_every is the central views' set's, matches every view's: one set each
+    edit_config(work, lambda c: c["refine"].update(carry_every=2))
+    jobs = planned(work)
+    assert jobs.get("refine_tracks") == 1 and "refine" in jobs, jobs
+    assert not {"match_central", "view_matches", "merge"} & set(jobs), jobs
+
+
+def depth_backend(work: Path) -> str:
+    """The tiny config's depth backend (the test above needs the plane sweep)."""
+    return yaml.safe_load((work / "config.yaml").read_text())["depth"]["backend"]
+
+
 def test_conversion_change_reruns_conversion_and_downstream(complete_run: Path,
                                                            tmp_path: Path):
     work = clone(complete_run, tmp_path / "w")
