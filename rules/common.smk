@@ -1110,15 +1110,29 @@ SYNTHESIS_UNREAD = {
 }
 
 
+#: the verify settings of the real RVS only: a synthesis job that renders with the
+#: project's DIBR (verify.renderer: dibr) reads none of them
+RVS_ONLY_VERIFY_KEYS = ("rvs_binary", "rvs_blending_factor", "rvs_compare_dibr")
+
+
+def synthesis_verify_config(unread):
+    """The verify block but the keys in ``unread`` and, with the DIBR as the renderer,
+    the RVS's own."""
+    cfg = stage_config("verify")
+    skip = set(unread) | (
+        set(RVS_ONLY_VERIFY_KEYS) if cfg["renderer"] == "dibr" else set()
+    )
+    return {k: v for k, v in cfg.items() if k not in skip}
+
+
 def synthesis_params(exp, part=False):
     """The params of scripts/synthesis.py for synthesis_exp<exp> (``part``: its _part
-    jobs): the verify settings that the job reads (SYNTHESIS_UNREAD)."""
+    jobs): the verify settings that the job reads (SYNTHESIS_UNREAD, RVS_ONLY_VERIFY_KEYS).
+    """
     unread = SYNTHESIS_UNREAD[f"{exp}_part" if part else str(exp)]
     return {
         "experiment": exp,
-        "verify": lambda wc: {
-            k: v for k, v in stage_config("verify").items() if k not in unread
-        },
+        "verify": lambda wc: synthesis_verify_config(unread),
         "depth": lambda wc: synthesis_depth_config(),
         "views_dir": lambda wc: res(wc.dataset, "views"),
         "array_cams": lambda wc: array_cams(wc.dataset),

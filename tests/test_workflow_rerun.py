@@ -98,7 +98,8 @@ def test_verification_change_reruns_only_verification(complete_run: Path, tmp_pa
 
 def test_a_key_a_job_does_not_read_reruns_nothing_of_it(complete_run: Path, tmp_path: Path):
     """The refine job's thread count (the same cameras to the bit for any number), the
-    colmap block under the plane sweep, and one track set's own keys: each reran every job
+    colmap block under the plane sweep, one track set's own keys and RVS's settings under
+    the DIBR: each reran every job
     it reached (the refinement, the synthesis depth maps and the experiments: 24 jobs; the
     registrations' depth maps on: 33) because the rules were given whole config blocks."""
     work = clone(complete_run, tmp_path / "w")
@@ -111,6 +112,11 @@ def test_a_key_a_job_does_not_read_reruns_nothing_of_it(complete_run: Path, tmp_
     jobs = planned(work)
     assert jobs.get("refine_tracks") == 1 and "refine" in jobs, jobs
     assert not {"match_central", "view_matches", "merge"} & set(jobs), jobs
+    # RVS's blending factor under the project's DIBR: the MPEG exports carry it, the
+    # experiments (rendered by the DIBR) do not read it
+    work = clone(complete_run, tmp_path / "w2")
+    edit_config(work, lambda c: c.setdefault("verify", {}).update(rvs_blending_factor=6.0))
+    assert planned(work) == {"mpeg_views": 1, "report": 1, "all": 1}
 
 
 def depth_backend(work: Path) -> str:
