@@ -452,6 +452,10 @@ def convert_settings(dataset, setup=False, shots=()):
     out = dict(stage_config("convert"))
     if ds_config(dataset).get("mla") is not None:
         out["mla"] = ds_config(dataset)["mla"]
+    if out["tile_size"] != "auto":
+        # upsample sets an automatic tile only (plenocal.convert.shot.resolve_tile): with a
+        # tile given it changes no view (it reran all 59 jobs of the tiny config)
+        out.pop("upsample")
     if not setup:
         for key in SETUP_ONLY_CONVERT_KEYS:
             out.pop(key, None)

@@ -97,14 +97,18 @@ def test_verification_change_reruns_only_verification(complete_run: Path, tmp_pa
 
 
 def test_a_key_a_job_does_not_read_reruns_nothing_of_it(complete_run: Path, tmp_path: Path):
-    """The refine job's thread count (the same cameras to the bit for any number), the
-    colmap block under the plane sweep, one track set's own keys and RVS's settings under
+    """The refine job's thread count (the same cameras to the bit for any number),
+    convert.upsample under a given tile, the colmap block under the plane sweep, one track set's own keys and RVS's settings under
     the DIBR: each reran every job
     it reached (the refinement, the synthesis depth maps and the experiments: 24 jobs; the
     registrations' depth maps on: 33) because the rules were given whole config blocks."""
     work = clone(complete_run, tmp_path / "w")
     edit_config(work, lambda c: c["refine"].update(num_threads=2))
     assert planned(work) == {}
+    # the tiny config gives the tile: upsample sets an automatic one only
+    edit_config(work, lambda c: c["convert"].update(upsample=2.0))
+    assert isinstance(yaml.safe_load((work / "config.yaml").read_text())["convert"]
+                      ["tile_size"], int) and planned(work) == {}
     edit_config(work, lambda c: c["depth"].update(colmap={"window_radius": 7}))
     assert depth_backend(work) == "planesweep" and planned(work) == {}
     # carry_every is the central views' set's, matches every view's: one set each
