@@ -98,10 +98,11 @@ def test_verification_change_reruns_only_verification(complete_run: Path, tmp_pa
 
 def test_a_key_a_job_does_not_read_reruns_nothing_of_it(complete_run: Path, tmp_path: Path):
     """The refine job's thread count (the same cameras to the bit for any number),
-    convert.upsample under a given tile, the colmap block under the plane sweep, one track set's own keys and RVS's settings under
-    the DIBR: each reran every job
-    it reached (the refinement, the synthesis depth maps and the experiments: 24 jobs; the
-    registrations' depth maps on: 33) because the rules were given whole config blocks."""
+    convert.upsample under a given tile, the colmap block under the plane sweep, one track
+    set's own keys and RVS's settings under the DIBR: each reran every job it reached (the
+    refinement, the synthesis depth maps and the experiments: 24 jobs; the registrations'
+    depth maps on: 33; the conversion on: 59) because the rules were given whole config
+    blocks."""
     work = clone(complete_run, tmp_path / "w")
     edit_config(work, lambda c: c["refine"].update(num_threads=2))
     assert planned(work) == {}
