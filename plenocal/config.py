@@ -418,6 +418,10 @@ def _check_refine(r: Mapping[str, Any]) -> None:
         unused("scale", "with refine.rig = hold, where the held rig's metric baselines give "
                "the result's scale", "remove it, or choose a refine.rig that keeps the "
                "merge's scale (scale, scale_pp, free)")
+    if r["focal"] == "hold":
+        unused("final_iterations", "with refine.focal = hold (the final pass follows the "
+               "focal pass, which a held focal length does not run; max_iterations caps the "
+               "one pass)", "remove it, or set refine.focal to refine")
     if r["tracks"] == "central":
         unused("matches", "with refine.tracks = central (the central views' own matches; "
                "refine.matches chooses among every view's, rule view_matches)",

@@ -207,6 +207,8 @@ def test_settings_that_contradict_each_other_are_refused_before_any_job(change, 
      "has no effect with refine.tracks = central"),
     ({"tracks": "views", "carry_every": 1}, "refine.carry_every = 1",
      "has no effect with refine.tracks = views"),
+    ({"focal": "hold", "final_iterations": 6}, "refine.final_iterations = 6",
+     "has no effect with refine.focal = hold"),
     ({"tracks": "views", "central_contrast": 0.01}, "refine.central_contrast = 0.01",
      "has no effect with refine.tracks = views"),
 ])
