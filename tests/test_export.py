@@ -164,7 +164,19 @@ def test_camera_file_of_another_version_or_shape_is_refused(tmp_path):
     for change, match in ((lambda d: d.pop("format"), "version 1"),
                           (lambda d: d.update(version=2), "version 1"),
                           (lambda d: d.update(units="mm"), "units 'mm'"),
-                          (lambda d: d["cameras"]["hand01/2_2"].pop("K"), "'K'")):
+                          (lambda d: d["cameras"]["hand01/2_2"].pop("K"), "'K'"),
+                          # each of these was a bare TypeError / ValueError / AttributeError
+                          # without the file, or was read without a word (a review's finding)
+                          (lambda d: d["cameras"]["hand01/2_2"]["K"][0].__setitem__(0, "abc"),
+                           "camera 'hand01/2_2'.*'abc'"),
+                          (lambda d: d["cameras"]["hand01/2_2"].update(width=None),
+                           "camera 'hand01/2_2'.*width None: a whole number"),
+                          (lambda d: d["cameras"]["hand01/2_2"].update(width=310.7),
+                           "width 310.7: a whole number"),
+                          (lambda d: d.update(cameras=[1]), "'cameras' holds a list"),
+                          (lambda d: d.update(cameras={}), "'cameras' holds an empty mapping"),
+                          (lambda d: d["cameras"].update(badname=d["cameras"]["hand01/2_2"]),
+                           "camera 'badname'.*not a view key")):
         bad = json.loads(json.dumps(doc))
         change(bad)
         p = tmp_path / "bad.json"
@@ -305,3 +317,16 @@ def test_texture_yuv420(tmp_path, size):
                      u.reshape(h // 2, w // 2), v.reshape(h // 2, w // 2)])
     back = cv2.cvtColor(yuv, cv2.COLOR_YUV2RGB)  # what RVS does with it
     assert np.abs(back.astype(int) - rgb[: 2 * (h // 2): 2, : 2 * (w // 2): 2]).max() <= 2
+
+
+@pytest.mark.parametrize("far", [math.inf, 1000.0, 2000.0])
+def test_mpeg_file_refuses_a_far_plane_rvs_reads_as_infinity(tmp_path, far):
+    """An infinite far plane was written as JSON's null, which RVS and TMIV cannot read;
+    1000 m or more RVS reads as infinity (its depth maps then decode with 1/far = 0) or
+    refuses. Nothing is written."""
+    path = tmp_path / "mpeg.json"
+    with pytest.raises(ValueError, match="as infinity"):
+        mpeg.write_mpeg(path, cameras(), (0.4, far))
+    assert not path.exists()
+    mpeg.write_mpeg(path, cameras(), (0.4, 999.0))
+    assert json.loads(path.read_text())["cameras"][0]["Depth_range"] == [0.4, 999.0]

@@ -58,11 +58,39 @@ def read_cameras(path: str | Path) -> dict[str, PinholeCamera]:
     """The cameras of a camera file (this version only), by ``"<cam>/<view>"``."""
     def build(doc: dict) -> dict[str, PinholeCamera]:
         _units(doc, path)
-        cams = {k: PinholeCamera.from_dict(v) for k, v in doc["cameras"].items()}
+        entries = doc["cameras"]
+        if not isinstance(entries, Mapping) or not entries:
+            raise ValueError(f"{path}: key 'cameras' holds {_what(entries)}: expected a "
+                             f"mapping of '<cam>/<view>' to cameras; {REMEDY}")
+        cams = {}
+        for key, entry in entries.items():
+            try:
+                split_key(key)
+                cams[key] = _camera(entry)
+            except (TypeError, ValueError, AttributeError) as err:
+                raise ValueError(f"{path}: camera {key!r} (key 'cameras'): {err}; "
+                                 f"{REMEDY}") from None
         check_cameras(cams, str(path), REMEDY, skew=True)
         return cams
 
     return decode(path, FORMAT, VERSION, NAME, REMEDY, build)
+
+
+def _what(value: object) -> str:
+    return "an empty mapping" if isinstance(value, Mapping) else f"a {type(value).__name__}"
+
+
+def _camera(entry: object) -> PinholeCamera:
+    """One camera of the file, its image size a whole number of pixels (``int()`` would
+    take 310.7 as 310 without a word) and its matrices numbers."""
+    if not isinstance(entry, Mapping):
+        raise ValueError(f"{_what(entry)}, not a mapping of K, cam_to_world, width, height")
+    for side in ("width", "height"):
+        size = entry[side]
+        if isinstance(size, bool) or not (isinstance(size, int) or (
+                isinstance(size, float) and size.is_integer())):
+            raise ValueError(f"{side} {size!r}: a whole number of pixels")
+    return PinholeCamera.from_dict(entry)
 
 
 def _units(doc: dict, path: str | Path) -> str:

@@ -127,10 +127,20 @@ def mpeg_document(cameras: Mapping[str, PinholeCamera], depth_range: tuple[float
     }
 
 
+#: RVS 4.0's infinity: a far plane of this or more decodes its depth maps with 1/far = 0
+#: (image_loading.cpp), and one beyond it is refused (Parameters.cpp)
+RVS_MAX_FAR_M = 1000.0
+
+
 def write_mpeg(path: str | Path, cameras: Mapping[str, PinholeCamera],
                depth_range: tuple[float, float], content_name: str = "plenocal",
                bit_depth_color: int = 8) -> None:
     near, far = depth_range
     if not 0 < near < far:
         raise ValueError(f"depth range must satisfy 0 < near < far (got {near}, {far})")
+    if not far < RVS_MAX_FAR_M:
+        raise ValueError(f"{path}: depth range far {far} m: RVS reads a far plane of "
+                         f"{RVS_MAX_FAR_M:g} m or more as infinity (its depth maps' 1/far "
+                         "then 0, not ours) and refuses one beyond; JSON has no infinity: "
+                         f"give a far plane under {RVS_MAX_FAR_M:g} m")
     write_json(path, mpeg_document(cameras, depth_range, content_name, bit_depth_color))
