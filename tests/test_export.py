@@ -164,7 +164,8 @@ def test_camera_file_of_another_version_or_shape_is_refused(tmp_path):
     for change, match in ((lambda d: d.pop("format"), "version 1"),
                           (lambda d: d.update(version=2), "version 1"),
                           (lambda d: d.update(units="mm"), "units 'mm'"),
-                          (lambda d: d["cameras"]["hand01/2_2"].pop("K"), "'K'"),
+                          (lambda d: d["cameras"]["hand01/2_2"].pop("K"),
+                           "camera 'hand01/2_2'.*without key.*'K'"),
                           # each of these was a bare TypeError / ValueError / AttributeError
                           # without the file, or was read without a word (a review's finding)
                           (lambda d: d["cameras"]["hand01/2_2"]["K"][0].__setitem__(0, "abc"),

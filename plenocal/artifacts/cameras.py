@@ -85,6 +85,9 @@ def _camera(entry: object) -> PinholeCamera:
     take 310.7 as 310 without a word) and its matrices numbers."""
     if not isinstance(entry, Mapping):
         raise ValueError(f"{_what(entry)}, not a mapping of K, cam_to_world, width, height")
+    missing = [k for k in ("K", "cam_to_world", "width", "height") if k not in entry]
+    if missing:
+        raise ValueError(f"without key(s) {', '.join(repr(k) for k in missing)}")
     for side in ("width", "height"):
         size = entry[side]
         if isinstance(size, bool) or not (isinstance(size, int) or (
