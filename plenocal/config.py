@@ -249,6 +249,10 @@ def _accepted(schema: dict, root: dict) -> list[str]:
             out.append("null")
         elif t == "boolean":
             out.append("true or false")
+        elif t == "object":
+            out.append("a mapping")
+        elif t == "array":
+            out.append("a list")
         else:
             out.append(f"a{'n' if t[0] in 'aeiou' else ''} {t}")
     return out

@@ -182,7 +182,7 @@ def test_a_recording_of_another_bit_depth_than_its_name(tmp_path: Path):
 
 @pytest.mark.parametrize("video, needle", [
     ({"frame": -1}, "datasets.d.video.frame = -1: must be >= 0"),
-    ({"frame": 1.5}, "datasets.d.video.frame = 1.5: must be of type"),
+    ({"frame": 1.5}, "datasets.d.video.frame = 1.5: must be a whole number >= 0, or a mapping"),
     ({"frame": {"cam1": 2}}, "datasets.d.video.frame"),
     ({"frame": {"x00_y00": -2}}, "datasets.d.video.frame.x00_y00 = -2: must be >= 0"),
     ({}, "'frame' is a required property"),
