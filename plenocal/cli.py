@@ -67,7 +67,7 @@ SETUP_KEYS = ("mla", "tile_size", "grid", "safe_diameter", "upsample", "border_c
 
 CONVERT_HELP = """\
 Convert one lenslet image into its N x N subaperture views (the RLC of the paper,
-Fig. 1 (a)). DIR receives what the workflow's rule `convert` writes (the frame
+Fig. 1 (a)). DIR receives what the workflow's conversion stage writes for a shot (the frame
 prefiltered against bilinear sampling's blur, blend.prefilter 0.1, where the workflow's
 views for the calibration are not; --set blend.prefilter=0 gives those):
 

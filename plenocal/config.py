@@ -405,6 +405,19 @@ def _check_semantics(config: dict) -> None:
             raise _fail("verify.rvs_binary", v["rvs_binary"], "no such file: give the path "
                         "of an RVS 4.0 binary (README, 'MPEG exports and RVS')")
     _check_refine(config["refine"])
+    m = config["sfm"]["view_matching"]
+    if m["within_shot"] != "grid":
+        _unused("sfm.view_matching", m, "view_radius", f"with sfm.view_matching.within_shot "
+                f"= {m['within_shot']} (each view is matched with its shot's central view; "
+                "view_radius sets which views grid matches)",
+                "remove it, or set within_shot to grid")
+
+
+def _unused(block: str, cfg: Mapping[str, Any], key: str, why: str, remedy: str) -> None:
+    """Refuse ``block.key`` set away from its schema default where ``why`` says the other
+    keys leave it nothing to do (the run would ignore it without a word)."""
+    if cfg[key] != stage_defaults(block)[key]:
+        raise _fail(f"{block}.{key}", cfg[key], f"has no effect {why}; {remedy}")
 
 
 def _check_refine(r: Mapping[str, Any]) -> None:
@@ -412,11 +425,8 @@ def _check_refine(r: Mapping[str, Any]) -> None:
     do - the run would ignore them without a word (a config review's finding)."""
     if not r["enabled"]:
         return  # the paper's method alone: every other refine key is left unused, knowingly
-    default = stage_defaults("refine")
-
     def unused(key: str, why: str, remedy: str) -> None:
-        if r[key] != default[key]:
-            raise _fail(f"refine.{key}", r[key], f"has no effect {why}; {remedy}")
+        _unused("refine", r, key, why, remedy)
 
     if r["rig"] == "hold" and r["frames"] == "refine":
         unused("scale", "with refine.rig = hold, where the held rig's metric baselines give "

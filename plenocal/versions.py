@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import sys
 
-#: the libraries whose versions decide the outputs' bytes, named beside plenocal's
-VERSIONED = ("numpy", "opencv-python-headless", "pycolmap", "scipy", "numba", "snakemake")
+#: the libraries whose versions decide the outputs' bytes, named beside plenocal's (deflate:
+#: every PNG's stream; scikit-image: the photographs the simulator's textures are cut from)
+VERSIONED = ("numpy", "opencv-python-headless", "pycolmap", "scipy", "numba", "deflate",
+             "scikit-image", "snakemake")
 
 
 def installed_version(name: str) -> str:

@@ -231,3 +231,16 @@ def test_refine_keys_in_use_pass(refine):
     c = _cfg()
     c["refine"] = refine
     validate_config(c)
+
+
+def test_view_radius_without_the_grid_is_refused():
+    """sfm.view_matching.view_radius sets which views of a shot the grid matches: under
+    within_shot centre (the default) it was accepted and ignored (a README review's
+    finding)."""
+    c = _cfg()
+    c.setdefault("sfm", {})["view_matching"] = {"view_radius": 2}
+    with pytest.raises(ConfigError, match=r"sfm.view_matching.view_radius = 2: has no effect "
+                       r"with sfm.view_matching.within_shot = centre"):
+        validate_config(c)
+    c["sfm"]["view_matching"] = {"view_radius": 2, "within_shot": "grid"}
+    validate_config(c)
