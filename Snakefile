@@ -36,6 +36,10 @@ include: "rules/report.smk"
 include: "rules/stages.smk"
 
 
+# every script rule's package code as a param: a change to it reruns that rule
+add_code_params()
+
+
 onstart:
     warn_stale_shot_folders()
 

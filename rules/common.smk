@@ -302,6 +302,23 @@ def sfm_params(*sections):
     return {k: cfg[k] for k in (*SFM_CORE, *sections)}
 
 
+def add_code_params():
+    """Give each script's job the param ``code`` - the hash of the package's modules
+    that its script imports (plenocal.codehash). Snakemake's own code trigger
+    sees the script only, so a new version of the package's logic (Eq. 5, say) left the
+    old outputs in place; now the params trigger reruns the jobs whose modules changed,
+    and only those. Called by the Snakefile once every rule file is read."""
+    from plenocal.codehash import script_code
+
+    for r in workflow.rules:
+        if r.script is not None:
+            r.set_params(
+                code=script_code(
+                    r.basedir.join(r.script).get_path_or_uri(secret_free=True)
+                )
+            )
+
+
 # The targets of the default target: each stage adds its final outputs once it is real.
 TARGETS = []
 

@@ -76,6 +76,28 @@ def test_complete_run_report_reads_every_stage_record(complete_run: Path):
     assert "unreadable" not in (results / "report/index.html").read_text()
 
 
+def test_every_script_job_records_the_code_it_ran(complete_run: Path):
+    """Snakemake's record of each job that ran a script holds, among its params, the hash
+    of the package modules that script imports (plenocal.codehash, rules/common.smk's
+    add_code_params): a later version of one of them reruns the job."""
+    import base64  # noqa: PLC0415
+    import json  # noqa: PLC0415
+
+    from plenocal.codehash import script_code  # noqa: PLC0415
+
+    scripts = Path(__file__).resolve().parents[1] / "scripts"
+    checked = set()
+    for record in (complete_run / ".snakemake" / "metadata").iterdir():
+        meta = json.loads(record.read_text())
+        m = re.search(r"scripts/(\w+\.py)", meta.get("code") or "")
+        if not m:
+            continue
+        out = base64.b64decode(record.name.replace("@", "/")).decode()
+        assert repr(script_code(scripts / m.group(1))) in meta["params"], (out, meta["rule"])
+        checked.add(m.group(1))
+    assert {"simulate.py", "convert.py", "merge.py", "refine.py", "report.py"} <= checked
+
+
 def test_verification_change_reruns_only_verification(complete_run: Path, tmp_path: Path):
     """How the views are scored (the PSNR's border) reruns the experiments' scoring but
     not Exp. 3's renders, whose parts keep each target's errors per ring of pixels; how
