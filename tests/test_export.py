@@ -331,3 +331,31 @@ def test_mpeg_file_refuses_a_far_plane_rvs_reads_as_infinity(tmp_path, far):
     assert not path.exists()
     mpeg.write_mpeg(path, cameras(), (0.4, 999.0))
     assert json.loads(path.read_text())["cameras"][0]["Depth_range"] == [0.4, 999.0]
+
+
+def test_the_mpeg_views_of_a_failed_export_are_not_left_half_written(tmp_path):
+    """A view whose image cannot be read stops the export; the views exported before it
+    are not left beside the MPEG file (they were: depth/ and texture/ of the first view,
+    an exports review's finding). The same call with every image writes them all."""
+    from plenocal.export.mpeg_views import export_views  # noqa: PLC0415
+
+    cams = {k: PinholeCamera(c.K, c.cam_to_world, 300, 224) for k, c in cameras().items()}
+    keys = sorted(cams)[:2]
+    mpeg.write_mpeg(tmp_path / "cameras.json", cams, (0.4, 0.9))
+    depth = {k: np.full((224, 300), 0.6, np.float32) for k in keys}
+    images = {keys[0]: np.full((224, 300, 3), 128, np.uint8)}
+
+    def image(key):
+        if key not in images:
+            raise FileNotFoundError(f"no view image for {key}")
+        return images[key]
+
+    with pytest.raises(FileNotFoundError, match=keys[1]):
+        export_views(tmp_path, tmp_path / "cameras.json", keys, depth.__getitem__, image, {})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cameras.json"]
+    images[keys[1]] = images[keys[0]]
+    written = export_views(tmp_path, tmp_path / "cameras.json", keys, depth.__getitem__,
+                           image, {"exp1": (keys[:1], keys[1:])})
+    assert len(written) == 7 and all((tmp_path / f).is_file() for f in written)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cameras.json", "depth", "rvs",
+                                                          "texture"]
