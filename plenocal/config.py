@@ -227,7 +227,7 @@ def _bounds(schema: dict) -> str:
 
 def _accepted(schema: dict, root: dict) -> list[str]:
     """What ``schema`` accepts, one short phrase per alternative ("a number > 0", "auto",
-    "a whole number >= 2 and <= 128", "null"), for an error that must say what to write
+    "a whole number from 2 to 128", "null"), for an error that must say what to write
     rather than which of JSON schema's rules failed."""
     schema = _resolve(schema, root) if isinstance(schema, dict) else {}
     for key in ("oneOf", "anyOf"):
@@ -425,6 +425,7 @@ def _check_refine(r: Mapping[str, Any]) -> None:
     do - the run would ignore them without a word (a config review's finding)."""
     if not r["enabled"]:
         return  # the paper's method alone: every other refine key is left unused, knowingly
+
     def unused(key: str, why: str, remedy: str) -> None:
         _unused("refine", r, key, why, remedy)
 
