@@ -145,10 +145,11 @@ def lenslet_image(dataset, cam):
 
 def written_by_simulator(path):
     """Whether Snakemake's record of the job that wrote ``path`` (its metadata under
-    .snakemake/, kept until the folder is cleaned) names simulate_setup, the rule: then
+    .snakemake/, named as Snakemake names it: the path's URL-safe base64; kept until the
+    folder is cleaned) names simulate_setup, the rule: then
     it is a simulated dataset whose truth/ was deleted, made again, not a capture."""
     record = Path(
-        ".snakemake", "metadata", base64.b64encode(str(path).encode()).decode()
+        ".snakemake", "metadata", base64.urlsafe_b64encode(str(path).encode()).decode()
     )
     try:
         return json.loads(record.read_text()).get("rule") == "simulate_setup"
@@ -570,8 +571,15 @@ def depth_groups(dataset):
 
 # depth settings of the synthesis depth maps only (rule depth_view)
 SYNTHESIS_DEPTH_KEYS = ("synthesis_method", "views", "sgm")
-# the keys only the registrations' depth maps read (depth_view leaves them out)
-REGISTRATION_DEPTH_KEYS = ("registration_downsample",)
+# the keys only the registrations' depth maps read (depth_view leaves them out): their
+# reduction, their backend with its colmap block, and their sources
+REGISTRATION_DEPTH_KEYS = (
+    "registration_downsample",
+    "backend",
+    "colmap",
+    "sources_a",
+    "sources_b",
+)
 
 
 # the keys the registrations' depth maps read by COLMAP's patch-match stereo
@@ -604,15 +612,13 @@ def registration_depth_config():
 
 def synthesis_depth_config():
     """The depth settings that depth_view reads - its method's (the plane-sweep ones only
-    when it is the plane sweep: never the registrations' backend, its colmap block or
-    their sources) and the bounds."""
-    COLMAP_ONLY = ("backend", "colmap", "sources_a", "sources_b")
+    when it is the plane sweep, none of REGISTRATION_DEPTH_KEYS) and the bounds."""
     cfg = stage_config("depth")
     if cfg["synthesis_method"] == "planesweep":
         return {
             k: v
             for k, v in cfg.items()
-            if k not in ("views", "sgm", *REGISTRATION_DEPTH_KEYS, *COLMAP_ONLY)
+            if k not in ("views", "sgm", *REGISTRATION_DEPTH_KEYS)
         }
     return {k: cfg[k] for k in ("synthesis_method", "sgm", "bounds_margin")}
 
