@@ -42,12 +42,14 @@ class PackageCode:
         for path in (self.root / name).rglob("*.py"):
             parts = path.relative_to(self.root).with_suffix("").parts
             self.files[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+        self._read: dict[Path, tuple[str, frozenset[str]]] = {}
 
-    @functools.cache  # noqa: B019 - one instance per package, held as long as the run
     def _source(self, path: Path) -> tuple[str, frozenset[str]]:
-        """(sha1 of the file, the package's modules it imports)."""
-        src = path.read_bytes()
-        return hashlib.sha1(src).hexdigest(), frozenset(self.imports(src))
+        """(sha1 of the file, the package's modules it imports), each file read once."""
+        if path not in self._read:
+            src = path.read_bytes()
+            self._read[path] = hashlib.sha1(src).hexdigest(), frozenset(self.imports(src))
+        return self._read[path]
 
     def imports(self, source: bytes) -> set[str]:
         """The package's modules that ``source`` imports, with their enclosing packages."""
@@ -58,8 +60,8 @@ class PackageCode:
                 continue
             module = m.group(1).decode()
             found.add(module)
-            for name in re.findall(r"\w+(?:\s+as\s+\w+)?", m.group(2).decode()):
-                sub = f"{module}.{name.split()[0]}"
+            for name in re.findall(r"(\w+)(?:\s+as\s+\w+)?", m.group(2).decode()):
+                sub = f"{module}.{name}"
                 if sub in self.files:
                     found.add(sub)
         out = set()
