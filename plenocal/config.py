@@ -285,9 +285,8 @@ def _reason(error: jsonschema.ValidationError, root: dict | None = None) -> str:
         if isinstance(expected, list) and accepted:
             return f"must be {_one_of(accepted)}"
         return f"must be of type {expected}"
-    if v in ("minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum"):
-        word = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=",
-                "exclusiveMaximum": "<"}[v]
+    if v in _BOUND:
+        word = _BOUND[v]
         # x-why: the reason for the lower bound (views: N >= 3), not for an upper one
         why = (error.schema.get("x-why") if isinstance(error.schema, dict)
                and v in ("minimum", "exclusiveMinimum") else None)
