@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import operator
 import re
+from collections.abc import Iterable
 from pathlib import PurePath
 
 # ASCII digits only ([0-9], not \d: Python's \d also matches the digits of other scripts,
@@ -107,6 +108,19 @@ def view_names(n: int) -> list[str]:
 def central_view(n: int) -> str:
     h = (n - 1) // 2
     return view_name(h, h)
+
+
+def middle_view(views: Iterable[str]) -> str:
+    """The view nearest the centre of the rows and columns that ``views`` span: a shot's
+    central view when they are its N x N set, the one view of a hand-held shot. By number,
+    not as text, where ``10_10`` sorts before ``2_2``."""
+    names = sorted(views, key=parse_view)
+    if not names:
+        raise BadName("no view names to take the central view of")
+    rc = [parse_view(v) for v in names]
+    rm = (min(r for r, _ in rc) + max(r for r, _ in rc)) / 2
+    cm = (min(c for _, c in rc) + max(c for _, c in rc)) / 2
+    return min(names, key=lambda v: abs(parse_view(v)[0] - rm) + abs(parse_view(v)[1] - cm))
 
 
 def view_key(shot: str, view: str) -> str:

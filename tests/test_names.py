@@ -24,6 +24,16 @@ def test_shots_are_spelled_with_two_digits_row_major():
         names.array_position("x1_y0")
 
 
+def test_the_middle_view_is_taken_by_number_not_as_text():
+    # as text, "10_x" sorts before "2_x": the middle of 11 x 11 sorted names is 4_4
+    for n, centre in ((3, "1_1"), (5, "2_2"), (11, "5_5"), (13, "6_6"), (15, "7_7")):
+        assert names.middle_view(names.view_names(n)) == centre
+        assert names.middle_view(reversed(names.view_names(n))) == centre
+    assert names.middle_view(["2_2"]) == "2_2"  # a hand-held shot's one view
+    with pytest.raises(names.BadName):
+        names.middle_view([])
+
+
 def test_views_and_keys_round_trip():
     assert names.view_names(3)[:4] == ["0_0", "0_1", "0_2", "1_0"]
     assert names.central_view(5) == "2_2"

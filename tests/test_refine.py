@@ -636,3 +636,21 @@ def test_the_scale_source_says_what_set_the_written_scale():
     step = {"step_m": 0.01, "n_shots": 6}
     auto = RefineSettings.from_config({"scale": "auto"}, seed=0)
     assert scale_source(auto, step).startswith("the stage's step (10 mm) fitted to the 6 ")
+
+
+def test_the_rig_read_from_cameras_is_centred_on_the_central_view_of_any_size():
+    """11 x 11 views (the schema allows 15): the identity sensor is 5_5, not the middle of
+    the names sorted as text (4_4)."""
+    from plenocal.camera import PinholeCamera
+    from plenocal.names import view_names
+
+    K = np.array([[100.0, 0, 50], [0, 100.0, 40], [0, 0, 1]])
+    cams = {}
+    for v in view_names(11):
+        r, c = map(int, v.split("_"))
+        M = np.eye(4)
+        M[:3, 3] = [(c - 5) * 1e-3, (r - 5) * 1e-3, 0.0]
+        cams[f"x00_y00/{v}"] = PinholeCamera(K, M, 100, 80)
+    poses = rm.rig_views_from_cameras(cams, "x00_y00")
+    assert np.array_equal(poses["5_5"], np.eye(4))
+    assert np.allclose(poses["0_0"][:3, 3], [-5e-3, -5e-3, 0.0])

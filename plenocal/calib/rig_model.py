@@ -29,7 +29,7 @@ import numpy as np
 
 from plenocal.calib.reg_a import colmap as cm
 from plenocal.camera import PinholeCamera, invert_pose, k_to_colmap
-from plenocal.names import split_key
+from plenocal.names import middle_view, split_key
 
 if TYPE_CHECKING:
     from pycolmap import Reconstruction, Rigid3d, sensor_t
@@ -298,10 +298,10 @@ def rig_views_from_model(rec: Reconstruction, model: RigModel) -> dict[str, np.n
 def rig_views_from_cameras(cameras: Mapping[str, PinholeCamera], shot: str,
                            central: str | None = None) -> dict[str, np.ndarray]:
     """The rig as a calibration places one shot's views: view -> cam_to_central (the
-    central view ``central``, by default the middle of the shot's N x N names)."""
+    central view ``central``, by default the centre of the shot's N x N names)."""
     names = sorted(split_key(k)[1] for k in cameras if split_key(k)[0] == shot)
     if not names:
         raise ValueError(f"no view of shot {shot}")
-    c = central or names[len(names) // 2]
+    c = central or middle_view(names)
     inv = invert_pose(cameras[f"{shot}/{c}"].cam_to_world)
     return {v: inv @ cameras[f"{shot}/{v}"].cam_to_world for v in names}

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from plenocal.names import key_shot
+from plenocal.names import key_shot, middle_view, split_key
 
 # Viridis at 9 evenly spaced stops (sRGB): interpolated linearly in between.
 _VIRIDIS = np.array([
@@ -250,10 +250,8 @@ def camera_array_svg(cameras: Mapping[str, object], truth: Mapping[str, object] 
         by_shot: dict[str, list[str]] = {}
         for k in keys:
             by_shot.setdefault(key_shot(k), []).append(k)
-        frustum_views = set()
-        for s in shots:
-            vs = sorted(by_shot[s])
-            frustum_views.add(vs[len(vs) // 2])
+        frustum_views = {f"{s}/{middle_view(split_key(k)[1] for k in by_shot[s])}"
+                         for s in shots}
     centre_dist = np.linalg.norm(C - C.mean(axis=0), axis=1)
     extent = float(max(centre_dist.max(), 1e-9))
     flen = 0.18 * extent
