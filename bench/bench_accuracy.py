@@ -13,7 +13,7 @@ runs the workflow on every capture of a set and reports, per capture,
 * the Exp. 1 PSNR with our own depth (the complete calibration, and the ground-truth
   cameras with the same depth);
 * where the complete calibration's error comes from (gt_errors' ``sources``: registration
-  A's focal length and shot poses, the hand-held shots, the scale of Eq. 5 and the rig),
+  A's focal length and shot poses, the hand-held shots, the merge's scale and the rig),
 
 then the median and the worst case of every column, and per geometry. ``--collect-only
 --kept`` reads every capture kept of the geometries, whatever its seed (the union of the
@@ -471,7 +471,7 @@ SOURCE_COLUMNS = [
     ("a_array_centre_mm", "A array centres mm", "{:.3f}"),
     ("a_hand_centre_mm", "A hand-held centres mm", "{:.3f}"),
     ("a_rot_deg", "A rot. deg", "{:.4f}"),
-    ("scale_pct", "Eq. 5 r %", "{:+.3f}"),
+    ("scale_pct", "merge r %", "{:+.3f}"),  # the r Eq. 6 used: Eq. 5's or the step's
     ("only_a_poses_mm", "only A poses: centres mm", "{:.3f}"),
     ("only_scale_mm", "only scale: centres mm", "{:.3f}"),
     ("only_rig_mm", "only rig: centres mm", "{:.4f}"),

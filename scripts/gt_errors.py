@@ -41,7 +41,7 @@ if refine.get("enabled"):
 sigma = (reg_a.stats["focal_std_px"] if "focal_std_px" in reg_a.stats
          else focal_std_px(snakemake.input.model))
 out["sources"] = error_sources(truth, reg_a, {v: M for v, (_, M) in rig.view_poses().items()},
-                               r, out, focal_std_px=sigma)
+                               r, out, focal_std_px=sigma, scale_source=scale.chosen)
 s_ = out["sources"]
 log.info("error sources: A focal %+.4f %% (std %s %%), only A poses %.4f mm, only scale "
          "%.4f mm, only rig %.4f mm: dominant %s", s_["a_focal_pct"],

@@ -49,7 +49,7 @@ def test_refinement_keeps_every_view_and_does_not_raise_the_errors(tiny_complete
     assert array and max_rotation_deg(refined, truth, array) < 0.1
     # the refinement's scale against Eq. 5's and the truth, and where Eq. 6's error lies
     assert gt.refinement["rig_scale_err_pct"] is not None
-    assert gt.sources["dominant"] in ("registration A's poses", "the scale of Eq. 5",
+    assert gt.sources["dominant"] in ("registration A's poses", "the merge's scale",
                                       "the rig")
     rows = read_reprojection_table(res / "eval" / "reprojection.json").rows
     assert rows["complete"]["mean_px"] <= rows["eq6"]["mean_px"]

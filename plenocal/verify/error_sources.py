@@ -1,6 +1,7 @@
 """Where the complete calibration's error comes from (issue 32): the paper's Eq. 6 result,
-``M_ij = M_i^A M_j^B`` with M_i^A scaled by Eq. 5's r, split into its sources by putting
-the truth in place of all but one of them.
+``M_ij = M_i^A M_j^B`` with M_i^A scaled by the merge's r (Eq. 5's, or the stage's step
+where ``scale.reference`` chose it: ``scale.json``'s ``chosen``), split into its sources by
+putting the truth in place of all but one of them.
 
 The sources:
 
@@ -15,8 +16,9 @@ registration A's focal length
 registration A's poses
     The shots' centres and orientations, after A's own similarity to the truth, for the
     array and the hand-held shots apart.
-the scale of Eq. 5
-    r against the true r.
+the merge's scale
+    the r the merge used (Eq. 5's or the step's) against the true r; ``scale_source``
+    names which. Eq. 5's own r is judged apart (``gt_errors``' ``scale.r_eq5_err_pct``).
 the rig (registration B)
     Every view's place in its set against the true set.
 
@@ -100,9 +102,10 @@ def handheld_geometry(truth: Mapping[str, PinholeCamera], n_views: int) -> dict:
 
 def error_sources(truth: Mapping[str, PinholeCamera], reg_a: RegistrationA,
                   rig_views: Mapping[str, np.ndarray], r: float, gt: Mapping,
-                  focal_std_px: float | None = None) -> dict:
+                  focal_std_px: float | None = None, scale_source: str = "eq5") -> dict:
     """The split of the Eq. 6 result's error (module docstring). ``rig_views``: view ->
-    cam_to_central of registration B; ``r``: Eq. 5's scale; ``gt``: the document of
+    cam_to_central of registration B; ``r``: the scale the merge used, ``scale_source``
+    which one (``scale.json``'s ``chosen``: ``eq5`` or ``array_step``); ``gt``: the document of
     :func:`plenocal.verify.gt_errors.gt_errors` (its registration A and scale figures);
     ``focal_std_px``: registration A's focal length's standard deviation, where known."""
     a = gt["registration_a"]
@@ -157,12 +160,13 @@ def error_sources(truth: Mapping[str, PinholeCamera], reg_a: RegistrationA,
         "a_rot_deg": float(a["rotation_err_deg"]["max"]),
         "handheld": handheld_geometry(truth, n),
         "scale_pct": 100.0 * eps,
+        "scale_source": scale_source,
         "rig_centre_mm": only["rig"]["centre_rmse_mm"],
         "only_a_poses_mm": only["a_poses"]["centre_rmse_mm"],
         "only_scale_mm": only["scale"]["centre_rmse_mm"],
         "only_rig_mm": only["rig"]["centre_rmse_mm"],
         "only": only,
-        "dominant": {"a_poses": "registration A's poses", "scale": "the scale of Eq. 5",
+        "dominant": {"a_poses": "registration A's poses", "scale": "the merge's scale",
                      "rig": "the rig"}[dominant],
         "central_view": c,
         "what": "only_<source>: the Eq. 6 result built from the truth with that source as "

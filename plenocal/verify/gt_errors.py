@@ -260,6 +260,9 @@ def complete_errors(calib: Mapping[str, PinholeCamera],
         # the same errors with their signs (``focal_err_pct`` holds their absolute values)
         "focal_err_signed_pct": float(np.mean(f_err)) if f_err else None,
         "pp_err_px": _stats(pp_err),
+        # the scale a similarity still applies to bring the calibration onto the truth,
+        # minus 1: NEGATIVE where the calibration is too large (+0.1 % too large reads
+        # -0.0999); the report shows 1 / (1 + x) - 1, the sign of its other scale errors
         "residual_scale_err_pct": 100.0 * (s_sim - 1.0),
     }
 
