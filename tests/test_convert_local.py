@@ -123,6 +123,15 @@ def test_worst_tile_sees_a_local_honeycomb_that_the_whole_view_hides():
     found2 = tile_ssim(ref2, ours2, mask)
     assert not found2["textured"][0, 1]
     assert found2["worst"] > 0.95
+    # a dark subject's texture (grey std 2.5 % of full range: hair on black) is texture,
+    # and a honeycomb over it is seen
+    ref3 = ref.copy()
+    ref3[box] = 0.08 + (ref[box] - ref[box].mean()) * (0.025 / ref[box].std())
+    ours3 = flatten_cells(ref3.copy(), cell, box)
+    found3 = tile_ssim(ref3, ours3, mask)
+    assert found3["textured"][0, 1] and found3["worst_tile"] == (0, 1)
+    assert found3["worst"] < 0.9  # the clean tiles read 0.97 or more
+    assert not tile_ssim(ref3, ours3, mask, texture_std=0.03)["textured"][0, 1]
 
 
 def test_worst_tile_takes_each_tiles_own_subpixel_shift():

@@ -103,7 +103,7 @@ def fine_detail(img: np.ndarray, mask: np.ndarray, sigma: float = DETAIL_SIGMA) 
 
 
 def compare_to_reference(ours_img: np.ndarray, ref_img: np.ndarray) -> dict:
-    """SSIM on the overlap after similarity alignment and the sharpness ratio (see the
+    """SSIM on the overlap after the affine alignment and the sharpness ratio (see the
     module docstring), with the sizes, the alignment and the verdicts."""
     ours, ref = grey(ours_img), grey(ref_img)
     M, inliers = alignment(ours, ref)

@@ -46,7 +46,14 @@ from plenocal.convert.compare import alignment, grey, onto_reference
 from plenocal.convert.errors import ConvertError
 
 GRID = 6  # tiles per side of the worst-tile grid
-TEXTURE_STD = 0.03  # grey std (0..1) of the reference tile that counts as texture
+#: grey std (0..1) of the reference tile that counts as texture: 1.5 % of full range
+#: (3.8 of 255 grey levels), so that a dark subject's texture counts (a doll's hair on
+#: black at 2.5 %); at that contrast SSIM still parts a wrong tile from a right one (a
+#: tile of no common structure reads at most C2 / (2 var + C2) = 0.67 in its structure
+#: term), and a view's noise (1-2 grey levels in TLCT's dark tiles) stays under it. On
+#: the nine reference frames of shared/real the tiles between 1.5 and 3 % read 0.97 or
+#: more, so the worst tiles there are those of the earlier 3 % (BENCHMARKS.md)
+TEXTURE_STD = 0.015
 MIN_COVER = 0.8  # share of a tile that the aligned view must cover
 PEAK_BINS = 1.5  # radius (FFT bins) searched around each lattice frequency
 RING_WIDTH = 0.08  # relative half width of the ring that gives the background power
