@@ -56,7 +56,8 @@ def test_simulator_datasheet_passes(tmp_path: Path):
     ("pixel_size_mm", "5.5 um", ["pixel_size_mm", "plain number", "millimetres"]),
     ("pixel_size_mm", math.nan, ["pixel_size_mm", "finite"]),
     ("mla.k", 1.0, ["mla.k", "> 1"]),
-    ("mla.k", 0.5, ["mla.k", "> 1"]),
+    ("mla.k", 0.5, ["mla.k", "> 1"]),  # with GOOD's s > f: a Keplerian MLA's
+    ("mla.k", 0.0, ["mla.k", "> 0"]),
     ("mla.f_numbers", [], ["mla.f_numbers", "empty"]),
     ("mla.f_numbers", [2.8, "f/4"], ["mla.f_numbers"]),
     ("mla", [0.13, 2.8, 5.0], ["mla", "mapping", "list"]),
@@ -219,3 +220,24 @@ def test_a_missing_datasheet_says_what_it_needs_and_where_a_template_comes_from(
     for words in ("camera datasheet not found", "pixel_size_mm", "mla: pitch_mm, f_numbers, k",
                   "--until simulate_setup", "data/synthetic/camera.yaml"):
         assert words in text, (words, text)
+
+
+def test_a_galilean_mla_may_have_k_up_to_1():
+    """s = k f / (k + 1) behind a Galilean MLA holds for any k > 0: k = 0.8 (the sharp
+    virtual plane 0.8 f behind the MLA) is read, with its s or without; the paper model
+    refuses it for a Keplerian MLA, naming the key."""
+    from plenocal.calib.reg_b import paper_model
+    from plenocal.calib.reg_b.datasheet import mla_kind
+
+    f = 2.8 * 0.13
+    doc = _with("mla.k", 0.8)
+    doc["mla"]["sensor_distance_mm"] = 0.8 * f / 1.8
+    assert mla_kind(doc) == "galilean"
+    check_datasheet(doc)
+    del doc["mla"]["sensor_distance_mm"]
+    assert mla_kind(doc) == "galilean"
+    check_datasheet(doc)
+    assert mla_kind(GOOD) == "keplerian"
+    assert paper_model.sensor_distance(0.8, f, "galilean") == pytest.approx(0.8 * f / 1.8)
+    with pytest.raises(ValueError, match="mla.k = 0.8"):
+        paper_model.sensor_distance(0.8, f, "keplerian")

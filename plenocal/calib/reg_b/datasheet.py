@@ -73,9 +73,10 @@ SCHEMA: dict = {
                                    "x-range": [0.5, 64.0]}},
                     ],
                 },
-                "k": {"type": "number", "exclusiveMinimum": 1, "x-range": [1.0, 1000.0],
-                      "description": "the paper's k: s = k f / (k - 1); k <= 1 puts the "
-                                     "sensor at or inside the microlens focal length"},
+                "k": {"type": "number", "exclusiveMinimum": 0, "x-range": [0.0, 1000.0],
+                      "description": "the paper's k: s = k f / (k - 1) behind a Keplerian "
+                                     "MLA (k > 1), s = k f / (k + 1) behind a Galilean one "
+                                     "(any k > 0: the sharp virtual plane k f behind it)"},
                 "sensor_distance_mm": _mm(0.01, 20.0, "s, MLA-sensor distance (optional)"),
             },
         },
@@ -211,12 +212,20 @@ def _check_sensor_distance(doc: Mapping, source: str | Path) -> None:
     fns = mla["f_numbers"] if isinstance(mla["f_numbers"], list) else [mla["f_numbers"]]
     F_n, D, k = middle_f_number(fns), mla["pitch_mm"], mla["k"]
     f = F_n * D
-    kepler, galilei = k * f / (k - 1.0), k * f / (k + 1.0)
+    galilei = k * f / (k + 1.0)
+    if s > f and k <= 1:
+        raise _fail(source, "mla.k", k,
+                    f"must be > 1 with mla.sensor_distance_mm = {s:g} mm: s beyond f = F_n D "
+                    f"= {f:.4g} mm is a Keplerian MLA's, s = k f / (k - 1); k <= 1 is a "
+                    f"Galilean one's (k f / (k + 1) = {galilei:.4g} mm)")
+    kepler = k * f / (k - 1.0) if k > 1 else None  # k <= 1: Galilean only
     s_k = kepler if s > f else galilei
     if abs(s - s_k) > SENSOR_DISTANCE_TOLERANCE * s_k:
+        either = ("" if kepler is None
+                  else f"s = k f / (k - 1) = {kepler:.4g} mm (Keplerian MLA) or ")
         raise _fail(source, "mla.sensor_distance_mm", s,
                     f"contradicts mla.k = {k:g}: with f = F_n D = {F_n:g} x {D:g} = {f:.4g} mm, "
-                    f"k gives s = k f / (k - 1) = {kepler:.4g} mm (Keplerian MLA) or "
+                    f"k gives {either}"
                     f"k f / (k + 1) = {galilei:.4g} mm (Galilean), {100 * (s / s_k - 1):+.1f} % "
                     "off; registration B would take sensor_distance_mm and ignore k: correct "
                     "one of them, or give only one")
@@ -263,9 +272,9 @@ def _schema_message(err: jsonschema.ValidationError) -> str:
             return "the F-number list is empty: give the microlens F-number(s), e.g. [2.8]"
         return "must be a number or a non-empty list of positive numbers (e.g. [2.8])"
     if v == "exclusiveMinimum" and key.endswith(".k"):
-        return ("must be > 1: the MLA-sensor distance s = k f / (k - 1) lies beyond the "
-                "microlens focal length f only for k > 1 (k <= 1: no focused plenoptic "
-                "camera); typical values are 3-10")
+        return ("must be > 0: the MLA-sensor distance is s = k f / (k - 1) behind a "
+                "Keplerian MLA (k > 1) and k f / (k + 1) behind a Galilean one (k > 0), f "
+                "the microlens focal length; typical values are 3-10")
     if v in ("minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum"):
         word = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=",
                 "exclusiveMaximum": "<"}[v]
@@ -334,7 +343,7 @@ def check_datasheet(doc: Any, source: str | Path = "camera.yaml") -> dict:
     if near is not None and far is not None and not near < far:
         raise _fail(source, "scene.near_mm", near, f"must be less than scene.far_mm ({far})")
     if F is not None and near is not None and far is not None:
-        optics = _optics(doc)
+        optics = _optics(doc, mla_kind(doc))
         why = virtual_depth_problem(optics, near / 1000.0, far / 1000.0)
         if why:
             raise _fail(source, "main_lens.focus_distance_mm", X_o, why)
@@ -364,7 +373,7 @@ def check_micro_image_pitch(doc: Mapping, diameter_px: float,
     of the wrong size without a word. Raises :class:`DatasheetError` naming both files."""
     D, p = doc["mla"]["pitch_mm"], doc["pixel_size_mm"]
     if doc["main_lens"].get("focal_length_mm") is not None:
-        lo = hi = _optics(doc).micro_image_pitch_px
+        lo = hi = _optics(doc, mla_kind(doc)).micro_image_pitch_px
         how = "D (L + s) / (L p)"
     else:
         lo, hi = D / p, (1.0 + MICRO_IMAGE_SPREAD_MAX) * D / p
@@ -406,7 +415,22 @@ def virtual_depth_problem(optics, near_m: float, far_m: float) -> str | None:
     return None
 
 
-def _optics(doc: Mapping):
+def mla_kind(doc: Mapping) -> str:
+    """The MLA kind a checked datasheet implies, for its own checks (the workflow's kind is
+    the converter's, ``disparity.json``): by ``mla.sensor_distance_mm`` against
+    ``f = F_n D`` where given (``s > f``: Keplerian), Galilean where ``k <= 1`` (no Keplerian
+    MLA has it), else Keplerian, the paper's."""
+    from plenocal.optics import middle_f_number  # noqa: PLC0415
+
+    mla = doc["mla"]
+    fns = mla["f_numbers"] if isinstance(mla["f_numbers"], list) else [mla["f_numbers"]]
+    s = mla.get("sensor_distance_mm")
+    if s is not None:
+        return "keplerian" if s > middle_f_number(fns) * mla["pitch_mm"] else "galilean"
+    return "galilean" if mla["k"] <= 1 else "keplerian"
+
+
+def _optics(doc: Mapping, kind: str = "keplerian"):
     """The thin-lens optics the datasheet describes (metres), for the checks above."""
     from plenocal.optics import PlenopticOptics, middle_f_number  # noqa: PLC0415
 
@@ -416,7 +440,7 @@ def _optics(doc: Mapping):
         focal_length=ml["focal_length_mm"] / 1000.0, focus_distance=ml["focus_distance_mm"]
         / 1000.0, mla_pitch=mla["pitch_mm"] / 1000.0, mla_f_number=middle_f_number(fns),
         k=mla["k"], pixel_size=doc["pixel_size_mm"] / 1000.0, width=doc["sensor_width_px"],
-        height=doc["sensor_height_px"])
+        height=doc["sensor_height_px"], kind=kind)
 
 
 def load_datasheet(path: str | Path) -> dict:

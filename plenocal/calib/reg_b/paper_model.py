@@ -57,6 +57,10 @@ def sensor_distance(k: float, f: float, mla: str) -> float:
         if k <= 0:
             raise ValueError(f"camera.yaml: mla.k = {k}: must be > 0")
         return k * f / (k + 1.0)
+    if k <= 1:
+        raise ValueError(f"camera.yaml: mla.k = {k:g}: a Keplerian MLA (the converter's "
+                         "disparity.json) needs k > 1 (s = k f / (k - 1)); k <= 1 is a "
+                         "Galilean MLA's: check mla.k, or the dataset's mla kind")
     return o.mla_sensor_distance(k, f)
 
 
