@@ -102,7 +102,8 @@ CAMERA_YAML_HEADER = """\
 # main_lens.focus_distance_mm: X_o, from the main lens; focal_length_mm: nominal only
 #   (registration B derives F from registration A's focal length, as the paper does).
 # mla.pitch_mm: physical microlens pitch D; f_numbers: microlens F-number(s) (the paper
-#   uses the middle one); k: the paper's k (s = k f / (k - 1)); sensor_distance_mm: s.
+#   uses the middle one); k: the paper's k (s = k f / (k - 1) behind a Keplerian MLA,
+#   k f / (k + 1) behind a Galilean one); sensor_distance_mm: s.
 # array.step_mm: stage step between array shots.
 # scene.near_mm / far_mm: measured nearest / farthest object distances (Eqs. 2-3 check).
 """
