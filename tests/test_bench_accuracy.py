@@ -198,3 +198,14 @@ def test_the_refined_focal_lengths_deviation_is_judged_against_its_error():
     assert rows[4].endswith("| - | - |") and rows[5].endswith("| - | - |")
     assert rows[6].endswith("| Eq. 6 (refine off) | - | - |")
     assert ba.sd_summary({"d-s1": capture(0.2, None)}) is None
+
+
+def test_table_i_ratios_say_where_the_naive_sfm_left_views_out():
+    rows = ba.ratio_rows({
+        "a": {"table_truth": 1.0, "table_complete": 1.01, "table_naive": 1.2,
+              "naive_views": 700, "complete_views": 700},
+        "b": {"table_truth": 1.0, "table_complete": 1.01, "table_naive": 1.1,
+              "naive_views": 688, "complete_views": 700},
+    })
+    assert rows[2].endswith("| 0.8417 |")
+    assert rows[3].endswith("| 0.9182 (naive: 688 of 700 views) |")
