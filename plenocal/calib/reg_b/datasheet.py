@@ -430,7 +430,7 @@ def mla_kind(doc: Mapping) -> str:
     return "galilean" if mla["k"] <= 1 else "keplerian"
 
 
-def _optics(doc: Mapping, kind: str = "keplerian"):
+def _optics(doc: Mapping, kind: str):
     """The thin-lens optics the datasheet describes (metres), for the checks above."""
     from plenocal.optics import PlenopticOptics, middle_f_number  # noqa: PLC0415
 
