@@ -114,13 +114,13 @@ def middle_view(views: Iterable[str]) -> str:
     """The view nearest the centre of the rows and columns that ``views`` span: a shot's
     central view when they are its N x N set, the one view of a hand-held shot. By number,
     not as text, where ``10_10`` sorts before ``2_2``."""
-    names = sorted(views, key=parse_view)
-    if not names:
+    rc = {v: parse_view(v) for v in views}
+    if not rc:
         raise BadName("no view names to take the central view of")
-    rc = [parse_view(v) for v in names]
-    rm = (min(r for r, _ in rc) + max(r for r, _ in rc)) / 2
-    cm = (min(c for _, c in rc) + max(c for _, c in rc)) / 2
-    return min(names, key=lambda v: abs(parse_view(v)[0] - rm) + abs(parse_view(v)[1] - cm))
+    rows, cols = [r for r, _ in rc.values()], [c for _, c in rc.values()]
+    rm, cm = (min(rows) + max(rows)) / 2, (min(cols) + max(cols)) / 2
+    return min(sorted(rc, key=rc.__getitem__),
+               key=lambda v: abs(rc[v][0] - rm) + abs(rc[v][1] - cm))
 
 
 def view_key(shot: str, view: str) -> str:
