@@ -285,6 +285,22 @@ def test_compare_with_truth_finds_the_paper_errors():
     assert c["rotation_max_deg"] > 0.01
 
 
+def test_compare_with_truth_takes_the_worse_axis():
+    """A truth whose views lie 1 % farther apart in x and 1 % nearer in y: the mean of
+    the two axes' baselines is the rig's, yet the baseline is 1 % off in each."""
+    opt = optics()
+    ds, conv, F_m = true_inputs(opt)
+    exact = rig.build_rig(ds, [conv], F_m, 5, model="exact")
+    truth = {}
+    for k, (K, M) in RigB(exact).view_poses().items():
+        M = M.copy()
+        M[:2, 3] *= (1.01, 0.99)
+        truth[k] = PinholeCamera(K, M, 301, 225)
+    c = compare_with_truth(exact, truth)
+    assert c["rel_err_B_xy"] == pytest.approx([1 / 1.01 - 1, 1 / 0.99 - 1], rel=1e-6)
+    assert c["rel_err_B"] == pytest.approx(1 / 0.99 - 1, rel=1e-6)
+
+
 def test_rig_json_from_files(tmp_path):
     opt = optics()
     ds, conv, F_m = true_inputs(opt)
