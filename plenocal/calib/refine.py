@@ -37,8 +37,10 @@ relative to the held one (:func:`shot_groups`, :func:`place_groups`; refine.json
 registration B's rig is ``refine.rig`` (:data:`RIG_MODES`):
 
 ``hold``
-    nothing: the sensors keep B's poses bit for bit, and their metric baselines fix the
-    scale of the result, independently of Eq. 5;
+    nothing: the sensors keep B's poses (bit for bit under ``focal: hold``; with the focal
+    length refined, B's rig as its model gives it at the refined focal length, whose
+    baselines follow the focal length), and their metric baselines fix the scale of the
+    result, independently of Eq. 5;
 ``scale``
     the rig's size (B's baseline): its shape held, the result (frames, points and rig
     together, a gauge of this problem) scaled so that the shots' centres spread as Eq. 6's
@@ -761,7 +763,11 @@ def shot_shifts(eq6: Mapping[str, PinholeCamera], refined: Mapping[str, PinholeC
                 min_tie_points: int = _REFINE["min_tie_points"]) -> dict:
     """How far the refinement moved each shot from Eq. 6 (its central view's centre, mm,
     and orientation, deg), after the rigid motion that best maps the Eq. 6 shots onto the
-    refined ones (the gauge), and whether that is to be trusted.
+    refined ones (the gauge), and whether that is to be trusted. A change of scale is not
+    taken out: where the result's scale rightly differs from Eq. 6's (B's baselines under
+    ``rig: hold``, the stage's step under ``scale: auto``), it reads as shifts that grow
+    with a shot's distance from the middle (1 % as up to 0.9 mm on default-s111, past the
+    default gate; under the defaults the two scales agree to 3e-5).
 
     A shot that moved more than ``max_shift_pct`` % of the array's size (the RMS distance
     of the shots from their mean) is a correction of Eq. 6 where at least
