@@ -198,19 +198,24 @@ def _check_unknown_keys(doc: Any, schema: Mapping, path: tuple, source: str | Pa
                              f"{_dotted(near)}? ({hint}{takes})")
 
 
+def _middle_f_number(mla: Mapping) -> float:
+    """The middle of ``mla.f_numbers`` (one number or a list), the paper's."""
+    from plenocal.optics import middle_f_number  # noqa: PLC0415
+
+    fns = mla["f_numbers"]
+    return middle_f_number(fns if isinstance(fns, list) else [fns])
+
+
 def _check_sensor_distance(doc: Mapping, source: str | Path) -> None:
     """``mla.sensor_distance_mm`` and ``mla.k`` must agree: registration B takes ``s``
     where it is given and ignores ``k``, so a contradiction would pass unnoticed. ``k``
     gives ``s = k f / (k - 1)`` (Keplerian, ``s > f``) or ``k f / (k + 1)`` (Galilean,
     ``s < f``), ``f = F_n D`` with the middle F-number (the paper's)."""
-    from plenocal.optics import middle_f_number  # noqa: PLC0415
-
     mla = doc["mla"]
     s = mla.get("sensor_distance_mm")
     if s is None:
         return
-    fns = mla["f_numbers"] if isinstance(mla["f_numbers"], list) else [mla["f_numbers"]]
-    F_n, D, k = middle_f_number(fns), mla["pitch_mm"], mla["k"]
+    F_n, D, k = _middle_f_number(mla), mla["pitch_mm"], mla["k"]
     f = F_n * D
     galilei = k * f / (k + 1.0)
     if s > f and k <= 1:
@@ -420,25 +425,21 @@ def mla_kind(doc: Mapping) -> str:
     the converter's, ``disparity.json``): by ``mla.sensor_distance_mm`` against
     ``f = F_n D`` where given (``s > f``: Keplerian), Galilean where ``k <= 1`` (no Keplerian
     MLA has it), else Keplerian, the paper's."""
-    from plenocal.optics import middle_f_number  # noqa: PLC0415
-
     mla = doc["mla"]
-    fns = mla["f_numbers"] if isinstance(mla["f_numbers"], list) else [mla["f_numbers"]]
     s = mla.get("sensor_distance_mm")
     if s is not None:
-        return "keplerian" if s > middle_f_number(fns) * mla["pitch_mm"] else "galilean"
+        return "keplerian" if s > _middle_f_number(mla) * mla["pitch_mm"] else "galilean"
     return "galilean" if mla["k"] <= 1 else "keplerian"
 
 
 def _optics(doc: Mapping, kind: str):
     """The thin-lens optics the datasheet describes (metres), for the checks above."""
-    from plenocal.optics import PlenopticOptics, middle_f_number  # noqa: PLC0415
+    from plenocal.optics import PlenopticOptics  # noqa: PLC0415
 
     mla, ml = doc["mla"], doc["main_lens"]
-    fns = mla["f_numbers"] if isinstance(mla["f_numbers"], list) else [mla["f_numbers"]]
     return PlenopticOptics(
         focal_length=ml["focal_length_mm"] / 1000.0, focus_distance=ml["focus_distance_mm"]
-        / 1000.0, mla_pitch=mla["pitch_mm"] / 1000.0, mla_f_number=middle_f_number(fns),
+        / 1000.0, mla_pitch=mla["pitch_mm"] / 1000.0, mla_f_number=_middle_f_number(mla),
         k=mla["k"], pixel_size=doc["pixel_size_mm"] / 1000.0, width=doc["sensor_width_px"],
         height=doc["sensor_height_px"], kind=kind)
 
