@@ -144,6 +144,47 @@ def test_a_wrong_rig_is_pulled_back_towards_the_truth_when_refined(capture):
         {v: B for v, (_, B) in wrong.view_poses().items()})
 
 
+def test_a_held_focal_length_is_registration_as_bit_for_bit(capture):
+    """``focal: hold``: every view keeps Eq. 6's focal length (registration A's) to the
+    bit, while the shots still move towards the truth."""
+    views, rig, db = capture
+    eq6 = eq6_of(views, rig)
+    out = rf.refine_calibration(eq6, rig, db, settings(focal="hold"), hold_shot="x00_y00")
+    assert sorted(out.cameras) == sorted(eq6)
+    assert all(out.cameras[k].K[0, 0] == eq6[k].K[0, 0] and
+               out.cameras[k].K[1, 1] == eq6[k].K[1, 1] for k in eq6)
+    assert "focal" not in out.report["passes"]
+    before, after = complete_errors(eq6, views), complete_errors(out.cameras, views)
+    assert after["centre_rmse_mm"] < 0.5 * before["centre_rmse_mm"]
+
+
+def test_held_frames_keep_every_shots_pose_as_eq6_gives_it(capture):
+    """``frames: hold``: every shot's central view stays where Eq. 6 put it (only what
+    refine.rig frees and the points move), and no view is lost."""
+    views, rig, db = capture
+    eq6 = eq6_of(views, rig)
+    out = rf.refine_calibration(eq6, rig, db, settings(frames="hold", focal="hold"),
+                                hold_shot="x00_y00")
+    assert sorted(out.cameras) == sorted(eq6)
+    for shot in SHOTS:
+        moved = out.cameras[f"{shot}/1_1"].cam_to_world - eq6[f"{shot}/1_1"].cam_to_world
+        assert np.abs(moved).max() < 1e-12, shot
+
+
+def test_a_free_rig_moves_its_sensors_and_the_shots_towards_the_truth(capture):
+    """``rig: free``: each sensor's pose is refined (they leave B's), every view is kept,
+    and the shots' centres and turns come nearer the truth than Eq. 6's."""
+    views, rig, db = capture
+    eq6 = eq6_of(views, rig)
+    out = rf.refine_calibration(eq6, rig, db, settings(rig="free"), hold_shot="x00_y00")
+    assert sorted(out.cameras) == sorted(eq6)
+    assert any(not np.array_equal(out.sensors_before[k], out.sensors_after[k])
+               for k in out.sensors_before)
+    before, after = complete_errors(eq6, views), complete_errors(out.cameras, views)
+    assert after["centre_rmse_mm"] < 0.5 * before["centre_rmse_mm"]
+    assert after["rotation_err_deg"]["max"] < 0.5 * before["rotation_err_deg"]["max"]
+
+
 def test_settings_are_checked():
     with pytest.raises(ValueError, match="refine.rig"):
         rf.RefineSettings(rig="loose")
