@@ -285,6 +285,26 @@ def stage_config(name):
     return config[name]
 
 
+def sole_target_threads(rule, threads):
+    """A job's threads: ``threads``, or every core of a local run (``workflow.cores``)
+    where this rule's job is the run's only target, as in the calibration alone
+    (``snakemake -j2 results/<dataset>/calibration/cameras.json``): every other job of that
+    run comes before it, so no job could use a core beside it, and it would otherwise run
+    on one while the other idles. For rules whose outputs are the same bytes on any number
+    of threads (refine's cameras: BENCHMARKS.md, "The refine job's threads: the same bytes for
+    any number"). Evaluated once the run's targets are known; a cluster run keeps
+    ``threads`` (its profile sets them), as does ``--set-threads``."""
+    dag = workflow.dag
+    if (
+        dag is None
+        or not workflow.local_exec
+        or len(dag.targetjobs) != 1
+        or next(iter(dag.targetjobs)).rule.name != rule
+    ):
+        return threads
+    return max(threads, workflow.cores or 1)
+
+
 def gpus(stage, key):
     """A rule's ``gpu`` resource: 1 where config ``<stage>.<key>`` asks for COLMAP's CUDA
     code by name (``cuda``, ``colmap``), so that a cluster sends the job to a GPU node;

@@ -56,8 +56,10 @@ rule refine:
     # refine.num_threads (1): the same bytes for any number (BENCHMARKS.md, "The refine job's
     # threads: the same bytes for any number"). With -j2, a two-thread job waits until both
     # cores are free at once, and the verification's one-thread jobs keep one busy (the full
-    # run 430 s against 377 s); profiles/slurm gives it 2, where jobs do not share cores
-    threads: lambda wc: stage_config("refine")["num_threads"]
+    # run 430 s against 377 s); profiles/slurm gives it 2, where jobs do not share cores.
+    # Every core where it is the run's only target (the calibration alone), since nothing
+    # can run beside it then
+    threads: lambda wc: sole_target_threads("refine", stage_config("refine")["num_threads"])
     resources:
         mem_mb=refine_mem_mb,
         runtime=30,

@@ -260,3 +260,25 @@ def test_the_memory_requests_grow_with_the_match_databases(tiny_complete_run: Pa
         sum(f.stat().st_size for f in tracks.parent.parent.glob("*/*"))) >= 3500
     assert _mem_mb(out, "reprojection_complete") == job_memory.reprojection_mem_mb(
         view_db) == 2600
+
+
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="needs two cores for -j2")
+def test_the_refine_job_takes_every_core_only_where_it_is_the_runs_sole_target(tmp_path):
+    """The calibration alone (its cameras the only target) gives rule refine both cores of
+    -j2, since every other job comes before it; the full run, where the verification's
+    jobs can run beside it, keeps refine.num_threads (1), as does --set-threads."""
+    work = tiny_workflow(tmp_path / "run")
+    target = "results/tiny/calibration/cameras.json"
+
+    def refine_threads(*args: str) -> int:
+        # a dry run counts one core unless told (Snakemake's -j is --cores only when jobs run)
+        dry = snakemake(work, "-n", "--cores", "2", *args)
+        out = dry.stdout + dry.stderr
+        assert dry.returncode == 0, out[-3000:]
+        block = out[out.index("\nrule refine:"):].split("\n\n", 1)[0]
+        m = re.search(r"^\s+threads: (\d+)$", block, re.M)
+        return int(m.group(1)) if m else 1
+
+    assert refine_threads(target) == 2
+    assert refine_threads() == 1
+    assert refine_threads(target, "--set-threads", "refine=1") == 1
