@@ -366,6 +366,10 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
         raise ConvertError(f"--png-bits {args.png_bits} with --format {args.out_format}: the "
                            "PNG views' bits; the YUV videos are of the input's bit depth")
     video = Path(args.lenslet).suffix.lower() == ".yuv"
+    if args.out_format == "yuv" and not settings.even_size:
+        raise ConvertError("--format yuv with convert.even_size false: YUV 4:2:0 videos need "
+                           "views of even width and height (the codecs, TMIV and RVS read "
+                           "no other); leave even_size as it is, or write PNGs")
     if not video:
         given = [flag for flag, value in (("--size", args.size), ("--frames", args.frames),
                                           ("--setup-frame", args.setup_frame),

@@ -19,6 +19,7 @@ import pytest
 from test_convert_real import REAL, crop
 
 from plenocal.convert import ConvertSettings
+from plenocal.convert.setup import read_setup
 from plenocal.convert.video import VideoConverter, VideoSettings, lenslet_frame, parse_frames
 from plenocal.io.files import read_image, write_image
 from plenocal.io.raytrix import write_calib
@@ -99,6 +100,51 @@ def test_names_give_size_and_depth():
     assert parse_name("recording.yuv") == (None, None)
     # two different sizes state neither
     assert parse_name("c_10x20_8bit_30x40.yuv") == (None, 8)
+
+
+@pytest.mark.parametrize("name", ["seq_64x64_8bit_yuv444p.yuv", "seq_64x64_yuv422p10le.yuv",
+                                  "seq_64x64_10bit_444p.yuv", "seq_64x64_nv12.yuv",
+                                  "seq_64x64_yuv420p10be.yuv", "seq_64x64_p010le.yuv"])
+def test_a_name_of_another_pixel_format_is_refused(tmp_path, name):
+    """A 4:4:4 file of two frames is as many bytes as a 4:2:0 file of four: read as 4:2:0
+    it was four frames of noise, without a word (a review's finding). The name says it."""
+    raw = tmp_path / name
+    raw.write_bytes(bytes(64 * 64 * 3 * 2))
+    with pytest.raises(YuvError, match=rf"{name}: its name states the pixel format .*"
+                                       r"planar YUV 4:2:0.*ffmpeg"):
+        resolve_format(raw)
+    # the 4:2:0 names, and other words beside them, stay readable
+    for ok in ("seq_64x64_8bit_yuv420p.yuv", "seq_64x64_yuv420p10le.yuv",
+               "take422_64x64_8bit.yuv"):
+        (tmp_path / ok).write_bytes(bytes(64 * 64 * 3 // 2 * (2 if "10" in ok else 1)))
+        resolve_format(tmp_path / ok)
+
+
+def test_odd_sizes_sample_chroma_as_the_even_frame_one_smaller():
+    """An odd width or height's chroma planes (this reader's, as RVS's: rounded down) are
+    upsampled by exactly 2, as an even frame's: the first W - 1 columns and H - 1 rows of
+    a 65 x 49 frame are the 64 x 48 frame's with the same planes, bit for bit (resized to
+    the frame's size instead, the chroma drifted up to a pixel by the far edges: -1.7
+    levels on a ramp)."""
+    rng = np.random.default_rng(5)
+    y = rng.integers(0, 1024, (49, 65)).astype(np.uint16)
+    cb, cr = (rng.integers(0, 1024, (24, 32)).astype(np.uint16) for _ in range(2))
+    odd = yuv_to_rgb((y, cb, cr), 10)
+    even = yuv_to_rgb((np.ascontiguousarray(y[:48, :64]), cb, cr), 10)
+    assert odd.shape == (49, 65, 3)
+    assert np.array_equal(odd[:48, :64], even)
+
+
+def test_yuv_views_of_odd_size_are_refused(tmp_path):
+    """--format yuv with convert.even_size false wrote odd-sized 4:2:0 videos that FFmpeg
+    and this reader lay out differently: refused before any work, saying why."""
+    clip, xml = tmp_path / "c_64x64_8bit.yuv", tmp_path / "calib.xml"
+    clip.write_bytes(bytes(64 * 64 * 3 // 2))
+    xml.write_text("<RayCalibData/>")
+    r = _cli("convert", str(clip), str(xml), "-o", str(tmp_path / "o"), "--format", "yuv",
+             "--set", "even_size=false")
+    assert r.returncode == 2 and "even_size false" in r.stderr and "even width" in r.stderr
+    assert not (tmp_path / "o").exists()
 
 
 def test_format_errors_name_the_file_and_the_remedy(tmp_path):
@@ -687,10 +733,21 @@ def test_a_rerun_replaces_its_views_videos_and_chunks_share_a_folder(tmp_path):
             doc["views"]["files"].values())
     assert sizes[0] != sizes[1]
     out = tmp_path / "png"
-    for frames in ("0:1", "1:2"):
+    video_mod.convert_recording(clip, calib, out, 3, ConvertSettings(mla="galilean"),
+                                frames="0:1")
+    first = (out / "convert_setup.json").read_text()
+    # the next chunk decides its own set-up on frame 1 (another safe diameter here): two
+    # set-ups in one folder, the first no longer recorded, so it is refused and says how
+    with pytest.raises(video_mod.ConvertError, match=r"frame_00000 were converted with .*"
+                                                     r"convert_setup.json.*pass --setup"):
         video_mod.convert_recording(clip, calib, out, 3, ConvertSettings(mla="galilean"),
-                                    frames=frames)
+                                    frames="1:2")
+    assert (out / "convert_setup.json").read_text() == first
+    assert sorted(p.name for p in out.glob("frame_*")) == ["frame_00000"]
+    video_mod.convert_recording(clip, calib, out, 3, ConvertSettings(mla="galilean"),
+                                frames="1:2", setup=read_setup(out / "convert_setup.json"))
     assert sorted(p.name for p in out.glob("frame_*")) == ["frame_00000", "frame_00001"]
+    assert (out / "convert_setup.json").read_text() == first
     with pytest.raises(video_mod.ConvertError, match=r"frame_00000 \(3 x 3 views\)"):
         video_mod.convert_recording(clip, calib, out, 5, ConvertSettings(mla="galilean"),
                                     frames="1:2")

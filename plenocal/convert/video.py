@@ -57,7 +57,7 @@ from plenocal.convert.shot import ConvertSettings, ShotConversion, frame_gray
 from plenocal.convert.threads import map_threads
 from plenocal.convert.vignetting import lens_type_profiles
 from plenocal.grid import MicrolensGrid
-from plenocal.io.files import staged_outputs, write_images, write_json
+from plenocal.io.files import dumps_json, staged_outputs, write_images, write_json
 from plenocal.io.png import view_dtype
 from plenocal.io.raytrix import RayCalib
 from plenocal.io.yuv import (
@@ -471,6 +471,8 @@ def _convert_recording(path: Path, fmt: YuvFormat, count: int, chosen: range,
                  "%.2f px); %.2f s", path.name, k, conv.setup.mla, conv.setup.tile,
                  conv.setup.safe_diameter_px or float("nan"), time.perf_counter() - t0)
     assert conv.setup is not None
+    if out_format == "png":
+        _check_chunk_setup(out, conv.setup, chosen)
     if conv.setup.border_cut.any:
         log.info("%s: %s", path.name, conv.setup.border_cut.summary())
     out.mkdir(parents=True, exist_ok=True)
@@ -484,6 +486,27 @@ def _convert_recording(path: Path, fmt: YuvFormat, count: int, chosen: range,
             old.unlink()
             log.info("%s: removed, an earlier run's video of the same view", old.name)
     return doc
+
+
+def _check_chunk_setup(out: Path, setup: ConverterSetup, chosen: range) -> None:
+    """A recording converted in chunks of ``--frames`` into one folder: the frame folders
+    an earlier chunk left there were made with the set-up in its ``convert_setup.json``.
+    A chunk that decided its own set-up on another frame (no ``--setup``) may differ (the
+    safe diameter, so the views' spacing, read 15.48 px on one frame and 15.04 on the next)
+    and would put two set-ups in one folder, the earlier one no longer recorded: refused
+    unless the two are the same."""
+    old = out / "convert_setup.json"
+    own = {frame_folder(k) for k in chosen}
+    kept = sorted(p.name for p in out.glob("frame_*") if p.is_dir() and p.name not in own)
+    if not kept or not old.is_file():
+        return
+    if old.read_text() == dumps_json(setup.to_dict()):
+        return
+    raise ConvertError(
+        f"{out}: {', '.join(kept[:3])}{' ...' if len(kept) > 3 else ''} were converted with "
+        f"{old}, and this run decided another set-up on its own frame: pass --setup {old} "
+        "to convert the recording's further frames with the same set-up, or write them to "
+        "another folder")
 
 
 def _convert_frames(path: Path, fmt: YuvFormat, count: int, chosen: range,

@@ -83,6 +83,13 @@ class YuvFormat:
 _SIZE = re.compile(r"(?<![0-9])([0-9]{2,5})x([0-9]{2,5})(?![0-9])")
 _BITS = re.compile(r"(?<![0-9a-z])([0-9]{1,2})[-_]?bits?(?![a-z])", re.IGNORECASE)
 _PIXFMT = re.compile(r"yuv420p(?:([0-9]{1,2})(?:le))?(?![0-9a-z])", re.IGNORECASE)
+#: pixel formats other than planar 4:2:0 little-endian that a name may state (FFmpeg's
+#: names, and the bare subsampling with its ``p``): read as 4:2:0, a 4:4:4 file of 2 frames
+#: passed for 4 frames of noise
+_OTHER_PIXFMT = re.compile(
+    r"(?<![0-9a-z])(?:yuva?(?:444|422|440|411|410)p?|(?:444|422|440|411|410)p|yuv420p[0-9]{1,2}be"
+    r"|nv12|nv21|nv16|p010|p016|gray|rgb24|bgr24)(?:[0-9]{1,2})?(?:le|be)?(?![0-9a-z])",
+    re.IGNORECASE)
 
 
 def parse_name(path: str | Path) -> tuple[tuple[int, int] | None, int | None]:
@@ -111,6 +118,11 @@ def resolve_format(path: str | Path, size: tuple[int, int] | None = None,
     naming the file and the remedy where neither gives them, or where the file is not a
     whole number of frames of that format."""
     path = Path(path)
+    other = _OTHER_PIXFMT.search(path.name)
+    if other:
+        raise YuvError(f"{path}: its name states the pixel format {other.group(0)}; plenocal "
+                       "reads planar YUV 4:2:0 (yuv420p, yuv420p10le): convert the file first "
+                       "(e.g. ffmpeg -pix_fmt yuv420p10le), or rename it if the name is wrong")
     named_size, named_bits = parse_name(path)
     if size is not None and named_size is not None and tuple(size) != named_size:
         raise YuvError(f"{path}: its name states {named_size[0]}x{named_size[1]}, --size says "
@@ -271,12 +283,18 @@ def yuv_to_rgb(planes: tuple[np.ndarray, np.ndarray, np.ndarray], bits: int,
     # row needs its own chroma rows and one on either side
     exact = H == 2 * ch and W == 2 * cb.shape[1] and a % 2 == 0
     lo, hi = (max(a // 2 - 1, 0), min((b + 1) // 2 + 1, ch)) if exact else (0, ch)
-    up_h, top = (2 * (hi - lo), a - 2 * lo) if exact else (H, a)
+    top = a - 2 * lo if exact else a
 
     def chroma(p: np.ndarray) -> np.ndarray:
         c = (p[lo:hi].astype(np.float32) - np.float32(zero)) * np.float32(1.0 / cspan)
-        # centred siting: output pixel x samples chroma at (x + 0.5) / 2 - 0.5
-        return cv2.resize(c, (W, up_h), interpolation=cv2.INTER_LINEAR)[top:top + b - a]
+        # centred siting: output pixel x samples chroma at (x + 0.5) / 2 - 0.5, an exact 2x
+        # upsampling; an odd size's last row or column repeats the one before it (resized
+        # to the frame's size instead, the chroma drifted up to a pixel by the far edges)
+        up = cv2.resize(c, (2 * c.shape[1], 2 * c.shape[0]), interpolation=cv2.INTER_LINEAR)
+        short = (max(top + b - a - up.shape[0], 0), max(W - up.shape[1], 0))
+        if any(short):
+            up = np.pad(up, ((0, short[0]), (0, short[1])), mode="edge")
+        return up[top:top + b - a, :W]
 
     Cb, Cr = chroma(cb), chroma(cr)
     R = Y + np.float32(2 * (1 - kr)) * Cr
