@@ -671,6 +671,20 @@ def depth_view_path(dataset, key, ext="npy"):
     return res(dataset, "depth", "views", cam, f"{view}.{ext}")
 
 
+def depth_view_truth_path(dataset, key):
+    """A view's depth map estimated with the ground-truth cameras (rule depth_view_truth)."""
+    cam, view = names.split_key(key)
+    return res(dataset, "depth", "views_truth", cam, f"{view}.npy")
+
+
+def depth_view_truth_inputs(wildcards):
+    """depth_view's inputs with the ground-truth cameras in place of the calibration."""
+    return {
+        **depth_view_inputs(wildcards),
+        "calibration": res(wildcards.dataset, "ground_truth", "cameras.json"),
+    }
+
+
 def depth_view_inputs(wildcards):
     d = wildcards.dataset
     return {
@@ -886,7 +900,7 @@ STAGE_RULES = {
     "depth": r"depth_a(_other)?(_\d+)?|depth_b(_other)?(_\d+){1,2}",
     "verify": (
         r"view_features(_\d+){1,2}|view_matches|reprojection(_calib|_complete)?"
-        r"|baseline_(sfm|scratch)|depth_view|synthesis_exp\d+(_part)?|mpeg_views"
+        r"|baseline_(sfm|scratch)|depth_view(_truth)?|synthesis_exp\d+(_part)?|mpeg_views"
         r"|gt_errors|convert_quality|gaussian_splatting"
     ),
     # a stage's jobs of one kind, by the name their rules share (the README's second
@@ -1120,6 +1134,10 @@ def synthesis_exp_inputs(wildcards, exp):
     out["depth"] = [depth_view_path(d, k) for k in keys]
     if is_synthetic(d):
         out["true_depth"] = [true_depth_path(d, k) for k in keys]
+        # the ground-truth cameras' runs with estimated depth read maps made with them (an
+        # Exp. 3 part of the complete calibration reads none)
+        if getattr(wildcards, "cameras", "ground_truth") == "ground_truth":
+            out["truth_depth"] = [depth_view_truth_path(d, k) for k in keys]
         if exp in (1, 2):
             # the targets' true depth, where rendered: their surface pixels (the dB lost
             # to calibration without the renderer's choices at occlusion edges)
@@ -1209,6 +1227,7 @@ def synthesis_exp_join_inputs(wildcards, exp):
     out = synthesis_exp_inputs(wildcards, exp)
     if exp in SPLIT_EXPERIMENTS:
         del out["view_sets"]
+        out.pop("truth_depth", None)
         out.update(synthesis_parts(wildcards, exp))
     return out
 

@@ -1,8 +1,8 @@
 """View-synthesis experiments of Section III (Figs. 6-9): the inputs' depth maps
 (rule depth_view, complete calibration) rendered by the project's DIBR or by RVS
 (verify.renderer) with the complete calibration and, on synthetic data, with the
-ground-truth cameras (same depth: the dB lost to calibration) and with the true depth
-(the dB lost to depth)."""
+ground-truth cameras on the maps estimated with them (rule depth_view_truth), and both
+with the true depth (the dB lost to calibration, and to depth)."""
 
 from functools import partial
 

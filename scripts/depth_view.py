@@ -1,6 +1,7 @@
-"""Rule depth_view: the dense z-depth map of one view of the complete calibration for
-view synthesis and the MPEG exports (SGM over the multi-view plane-sweep cost volume
-by default). See plenocal.depth.views."""
+"""Rules depth_view and depth_view_truth: the dense z-depth map of one view for view
+synthesis and the MPEG exports (SGM over the multi-view plane-sweep cost volume by
+default), with the complete calibration, or with the ground-truth cameras for their own
+synthesis runs. See plenocal.depth.views."""
 
 import time
 from pathlib import Path
@@ -47,4 +48,4 @@ write_image(snakemake.output.preview, preview(depth))
 write_json(snakemake.output.info, {"method": cfg["synthesis_method"], "near": near,
                                    "far": far, "units": "m", "sources": srcs,
                                    "valid_share": valid, "view": key,
-                                   "calibration": "complete"})
+                                   "calibration": str(snakemake.params.cameras)})

@@ -43,6 +43,11 @@ if snakemake.input.get("true_depth"):
     depths["true"] = load_depths(snakemake.input.true_depth)
     # the targets' true depth (Exps. 1 and 2): their surface pixels
     depths["true"].update(load_depths(snakemake.input.get("true_depth_targets", [])))
+# each camera set's runs with estimated depth on maps made with its own cameras: the
+# ground-truth cameras' from rule depth_view_truth (plenocal.verify.synthesis)
+own_depths = {}
+if snakemake.input.get("truth_depth"):
+    own_depths["ground_truth"] = load_depths(snakemake.input.truth_depth)
 cameras = {"complete": read_cameras(snakemake.input.calibration)}
 if snakemake.input.get("truth"):
     cameras["ground_truth"] = read_cameras(snakemake.input.truth)
@@ -58,7 +63,7 @@ if snakemake.rule.endswith("_part"):
     part = snakemake.wildcards.cameras
     write_synthesis_runs(snakemake.output.runs, snakemake.output.kept, synthesis_runs(
         experiment, {part: cameras[part]}, depths, image_path, layout, near, far, cfg,
-        int(snakemake.threads)))
+        int(snakemake.threads), own_depths))
 else:
     synth_dir = Path(snakemake.output.synth)
     rel = Path(os.path.relpath(synth_dir, Path(snakemake.output.json).parent)).as_posix()
@@ -71,7 +76,7 @@ else:
         result, files = synthesis_result(runs, depths, near, far, cfg, rel)
     else:
         result, files = synthesis_job(experiment, cameras, depths, image_path, layout, near,
-                                      far, cfg, int(snakemake.threads), rel)
+                                      far, cfg, int(snakemake.threads), rel, own_depths)
     for name, img in files.items():
         write_image(synth_dir / name, to_uint8(img))
     synth_dir.mkdir(parents=True, exist_ok=True)

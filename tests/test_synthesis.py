@@ -168,6 +168,28 @@ def test_plan_and_shared_depth(dataset):
             (np.mean(p), min(p), max(p), len(p)), abs=1e-12)
 
 
+def test_each_camera_set_reads_its_own_estimated_depth_where_given(dataset):
+    """``own_depths``: the ground-truth cameras' runs with estimated depth read the maps
+    made with their own cameras (rule depth_view_truth), the complete calibration's those
+    of rule depth_view; the true depth stays one for both. Before, both sets read the
+    complete calibration's maps, which fit its geometry and scored the truth on them."""
+    root, cams = dataset
+    layout = layout_from_cams(sorted({k.split("/")[0] for k in cams}), N)
+    plane = fronto_plane(0.6, 0.8, photo_texture(384, noise=0.005), 20.0)
+    keys = experiment_input_views(layout, 1)
+    true = {k: render_plane(cams[k], plane)[1] for k in keys}
+    wrong = {k: z * 1.05 for k, z in true.items()}  # depth fitted to other cameras
+    path = lambda c, v: str(root / c / f"{v}.png")  # noqa: E731
+    sets = {"complete": cams, "ground_truth": cams}
+    runs = synthesis.synthesis_runs(1, sets, {"estimated": true, "true": true}, path,
+                                    layout, 0.45, 0.8, CFG,
+                                    own_depths={"ground_truth": wrong}).runs
+    same = runs[("dibr", "true", "ground_truth")]
+    assert _psnrs(runs[("dibr", "estimated", "complete")]) == _psnrs(same)
+    own = _psnrs(runs[("dibr", "estimated", "ground_truth")])
+    assert all(own[t] < p - 1.0 for t, p in _psnrs(same).items()), (own, _psnrs(same))
+
+
 def test_threads_render_the_same_images(dataset):
     """The job's cores share the targets (config ``threads``): the same images and PSNR,
     bit for bit, as one thread."""

@@ -113,7 +113,7 @@ def test_verification_change_reruns_only_verification(complete_run: Path, tmp_pa
     jobs = set(planned(work))
     # every set's views: their depth maps, ideal renders and MPEG exports are new jobs
     assert "synthesis_exp2" in jobs and jobs <= VERIFY_RULES | {
-        "depth_view", "ground_truth_render", "mpeg_views"}, jobs
+        "depth_view", "depth_view_truth", "ground_truth_render", "mpeg_views"}, jobs
     assert not jobs & {"synthesis_exp1", "synthesis_exp3_part", "synthesis_exp3"}, jobs
 
 

@@ -482,7 +482,8 @@ def _psnr_section(page: Page, key: str, result: SynthesisResult | None, paper: s
     page.add(f"<p class=note>{escape(paper)} Target: at most 0.5 dB lost to calibration "
              "(the same experiment with ground-truth cameras), judged on the surfaces where "
              "they are scored. Tables named <code>true_depth/...</code> render with the "
-             "simulator's true depth maps, the others with our estimated depth.</p>")
+             "simulator's true depth maps, the others with our estimated depth, each "
+             "camera set on the maps estimated with its own cameras.</p>")
     for t, name in zip(tables, names, strict=True):
         g = src.layout(t, n_views, cols, rows)
         labels = None
