@@ -11,7 +11,8 @@ runs the workflow on every capture of a set and reports, per capture,
 * Table I on the same matches: the complete calibration, the paper's Eq. 6 result, the
   naive A+SfM and the ground-truth cameras (mean px, and the ratio to the ground truth's);
 * the Exp. 1 PSNR with our own depth (the complete calibration, and the ground-truth
-  cameras with the same depth);
+  cameras on depth estimated with them: rule depth_view_truth; until 188156d on the
+  complete calibration's maps);
 * where the complete calibration's error comes from (gt_errors' ``sources``: registration
   A's focal length and shot poses, the hand-held shots, the merge's scale and the rig),
 
