@@ -11,8 +11,8 @@ runs the workflow on every capture of a set and reports, per capture,
 * Table I on the same matches: the complete calibration, the paper's Eq. 6 result, the
   naive A+SfM and the ground-truth cameras (mean px, and the ratio to the ground truth's);
 * the Exp. 1 PSNR with our own depth (the complete calibration, and the ground-truth
-  cameras on depth estimated with them: rule depth_view_truth; until 188156d on the
-  complete calibration's maps);
+  cameras on depth estimated with them: verify.ground_truth_own_depth, set here; until
+  188156d on the complete calibration's maps);
 * where the complete calibration's error comes from (gt_errors' ``sources``: registration
   A's focal length and shot poses, the hand-held shots, the merge's scale and the rig),
 
@@ -177,6 +177,8 @@ def capture_config(geometry: str, seed: int, changes: dict | None = None) -> dic
     sim = deep_update(ds["simulate"], GEOMETRIES[geometry])
     sim["seed"] = seed
     cfg["datasets"] = {DATASET: {**ds, "simulate": sim}}
+    # Exp. 1's true-cameras column: those cameras on depth estimated with them
+    cfg.setdefault("verify", {})["ground_truth_own_depth"] = True
     return deep_update(cfg, changes or {})
 
 

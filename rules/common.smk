@@ -1134,9 +1134,12 @@ def synthesis_exp_inputs(wildcards, exp):
     out["depth"] = [depth_view_path(d, k) for k in keys]
     if is_synthetic(d):
         out["true_depth"] = [true_depth_path(d, k) for k in keys]
-        # the ground-truth cameras' runs with estimated depth read maps made with them (an
-        # Exp. 3 part of the complete calibration reads none)
-        if getattr(wildcards, "cameras", "ground_truth") == "ground_truth":
+        # the ground-truth cameras' runs with estimated depth, where asked for, on maps
+        # made with them (an Exp. 3 part of the complete calibration reads none)
+        if (
+            stage_config("verify")["ground_truth_own_depth"]
+            and getattr(wildcards, "cameras", "ground_truth") == "ground_truth"
+        ):
             out["truth_depth"] = [depth_view_truth_path(d, k) for k in keys]
         if exp in (1, 2):
             # the targets' true depth, where rendered: their surface pixels (the dB lost

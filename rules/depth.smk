@@ -136,10 +136,10 @@ rule depth_view:
         "../scripts/depth_view.py"
 
 
-# On synthetic data, the same depth maps estimated with the ground-truth cameras: the
-# synthesis scores each camera set on depth made with its own cameras, so neither is
-# scored on depth fitted to the other's geometry (with depth_view's maps for both, a
-# calibration rotated 0.15 deg read 2.2 dB better than the truth)
+# On synthetic data with verify.ground_truth_own_depth, the same depth maps estimated with
+# the ground-truth cameras: the synthesis scores those cameras on depth made with them, not
+# on depth fitted to the complete calibration's geometry (with depth_view's maps for both,
+# a calibration rotated 0.15 deg read 2.2 dB better than the truth)
 rule depth_view_truth:
     input:
         unpack(depth_view_truth_inputs),

@@ -1,8 +1,9 @@
 """View-synthesis experiments of Section III (Figs. 6-9): the inputs' depth maps
 (rule depth_view, complete calibration) rendered by the project's DIBR or by RVS
 (verify.renderer) with the complete calibration and, on synthetic data, with the
-ground-truth cameras on the maps estimated with them (rule depth_view_truth), and both
-with the true depth (the dB lost to calibration, and to depth)."""
+ground-truth cameras with the true depth, as the complete calibration too (the dB lost to
+calibration, and to depth), and, with verify.ground_truth_own_depth, on maps estimated
+with them (rule depth_view_truth)."""
 
 from functools import partial
 

@@ -172,7 +172,8 @@ def test_each_camera_set_reads_its_own_estimated_depth_where_given(dataset):
     """``own_depths``: the ground-truth cameras' runs with estimated depth read the maps
     made with their own cameras (rule depth_view_truth), the complete calibration's those
     of rule depth_view; the true depth stays one for both. Before, both sets read the
-    complete calibration's maps, which fit its geometry and scored the truth on them."""
+    complete calibration's maps, which fit its geometry and scored the truth on them;
+    without maps of its own a set other than the complete calibration has no such run."""
     root, cams = dataset
     layout = layout_from_cams(sorted({k.split("/")[0] for k in cams}), N)
     plane = fronto_plane(0.6, 0.8, photo_texture(384, noise=0.005), 20.0)
@@ -188,6 +189,12 @@ def test_each_camera_set_reads_its_own_estimated_depth_where_given(dataset):
     assert _psnrs(runs[("dibr", "estimated", "complete")]) == _psnrs(same)
     own = _psnrs(runs[("dibr", "estimated", "ground_truth")])
     assert all(own[t] < p - 1.0 for t, p in _psnrs(same).items()), (own, _psnrs(same))
+    # without maps of its own (verify.ground_truth_own_depth off) the ground-truth cameras
+    # render with the true depth only: never on the complete calibration's maps
+    runs = synthesis.synthesis_runs(1, sets, {"estimated": true, "true": true}, path,
+                                    layout, 0.45, 0.8, CFG).runs
+    assert set(runs) == {("dibr", "estimated", "complete"), ("dibr", "true", "complete"),
+                         ("dibr", "true", "ground_truth")}
 
 
 def test_threads_render_the_same_images(dataset):
@@ -259,10 +266,14 @@ def test_exp3_by_camera_set_joins_to_the_same_result(dataset, tmp_path):
     def path(c, v):
         return str(root / c / f"{v}.png")
 
-    whole, whole_files = synthesis_job(3, sets, depths, path, layout, 0.45, 0.8, cfg)
+    # the ground-truth cameras on maps of their own (verify.ground_truth_own_depth)
+    own = {"ground_truth": {k: z * 0.99 for k, z in true.items()}}
+    whole, whole_files = synthesis_job(3, sets, depths, path, layout, 0.45, 0.8, cfg,
+                                       own_depths=own)
     parts = []
     for name in sets:
-        runs = synthesis_runs(3, {name: sets[name]}, depths, path, layout, 0.45, 0.8, cfg)
+        runs = synthesis_runs(3, {name: sets[name]}, depths, path, layout, 0.45, 0.8, cfg,
+                              own_depths=own)
         write_synthesis_runs(tmp_path / f"{name}.json", tmp_path / f"{name}.npz", runs)
         parts.append(read_synthesis_runs(tmp_path / f"{name}.json", tmp_path / f"{name}.npz"))
     joined, files = synthesis_result(parts[0].joined(parts[1]), depths, 0.45, 0.8, cfg)

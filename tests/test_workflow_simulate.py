@@ -236,3 +236,27 @@ def test_two_datasets_each_get_their_own_rules(tmp_path: Path):
     assert seen == set(own)
     n2 = other["views"]
     assert f"results/tiny2/views/x00_y00/{n2 - 1}_{n2 - 1}.png" in out
+
+
+def test_the_truth_cameras_own_depth_maps_only_where_asked_for(tmp_path):
+    """verify.ground_truth_own_depth (off by default: 12 depth maps, about 75 s, on the
+    default run) plans rule depth_view_truth for every map rule depth_view makes, and the
+    synthesis reads them; off, none is planned."""
+    work = tiny_workflow(tmp_path / "run")
+
+    def planned() -> dict[str, int]:
+        dry = snakemake(work, "-n")
+        out = dry.stdout + dry.stderr
+        assert dry.returncode == 0, out[-3000:]
+        table = out[out.index("Job stats:"):].splitlines()[3:]
+        return {m.group(1): int(m.group(2)) for m in
+                map(re.compile(r"^(\w+)\s+(\d+)$").match, table) if m}
+
+    off = planned()
+    assert "depth_view_truth" not in off and off["depth_view"] > 0
+    cfg = yaml.safe_load((work / "config.yaml").read_text())
+    cfg.setdefault("verify", {})["ground_truth_own_depth"] = True
+    (work / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    on = planned()
+    assert on["depth_view_truth"] == on["depth_view"] == off["depth_view"]
+    assert on["total"] == off["total"] + on["depth_view_truth"]

@@ -311,9 +311,11 @@ def synthesis_job(exp: int, cameras: dict[str, dict[str, PinholeCamera]],
     lost to depth), by the configured renderer (``config["renderer"]``; RVS with the
     project's DIBR beside it unless ``rvs_compare_dibr`` is false). ``own_depths``:
     camera set -> its own estimated maps (``ground_truth``: rule depth_view_truth's, made
-    with the true cameras), which its ``estimated`` runs read instead of ``depths``':
-    depth estimated with one set's cameras fits that set's geometry, and scored the other
-    set on it (a calibration rotated 0.15 deg read 2.2 dB better than the truth).
+    with the true cameras, where verify.ground_truth_own_depth asks for them), which its
+    ``estimated`` runs read; a set other than ``complete`` without its own maps renders
+    with the true depth only. Depth estimated with one set's cameras fits that set's
+    geometry, and scored another set on it (a calibration rotated 0.15 deg read 2.2 dB
+    better than the truth on its maps).
     ``config``: the verify settings with the depth settings under ``"depth"``;
     ``threads``: the job's cores.
 
@@ -370,7 +372,10 @@ def synthesis_runs(exp: int, cameras: dict[str, dict[str, PinholeCamera]],
         for dname, dmaps in depths.items():
             for cname, cams in cameras.items():
                 t0 = time.perf_counter()
-                # a camera set's estimated depth made with its own cameras, where given
+                # a camera set's estimated depth made with its own cameras: the estimated
+                # maps are the complete calibration's, and no other set is scored on them
+                if dname == "estimated" and cname != "complete" and cname not in own:
+                    continue
                 maps = own[cname] if dname == "estimated" and cname in own else dmaps
                 res, kept = run_experiment(exp, cams, image_path, layout, near, far,
                                            {**config, "renderer": renderer,
