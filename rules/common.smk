@@ -671,6 +671,21 @@ def depth_view_path(dataset, key, ext="npy"):
     return res(dataset, "depth", "views", cam, f"{view}.{ext}")
 
 
+def depth_view_params(cameras):
+    """The params of scripts/depth_view.py: rule depth_view's (``complete``) and rule
+    depth_view_truth's (``ground_truth``), the camera set the maps are made with."""
+    return {
+        "depth": lambda wc: synthesis_depth_config(),
+        "verify": lambda wc: {
+            k: stage_config("verify")[k]
+            for k in ("depth_sources_shots", "depth_sources_set")
+        },
+        "views_dir": lambda wc: res(wc.dataset, "views"),
+        "n_views": lambda wc: n_views(wc.dataset),
+        "cameras": cameras,
+    }
+
+
 def depth_view_truth_path(dataset, key):
     """A view's depth map estimated with the ground-truth cameras (rule depth_view_truth)."""
     cam, view = names.split_key(key)

@@ -124,14 +124,7 @@ rule depth_view:
         mem_mb=3000,
         runtime=30,
     params:
-        depth=lambda wc: synthesis_depth_config(),
-        verify=lambda wc: {
-            k: stage_config("verify")[k]
-            for k in ("depth_sources_shots", "depth_sources_set")
-        },
-        views_dir=lambda wc: res(wc.dataset, "views"),
-        n_views=lambda wc: n_views(wc.dataset),
-        cameras="complete",
+        **depth_view_params("complete"),
     script:
         "../scripts/depth_view.py"
 
@@ -140,7 +133,7 @@ rule depth_view:
 # the ground-truth cameras: the synthesis scores those cameras on depth made with them, not
 # on depth fitted to the complete calibration's geometry (with depth_view's maps for both,
 # a calibration rotated 0.15 deg read 2.2 dB better than the truth)
-rule depth_view_truth:
+use rule depth_view as depth_view_truth with:
     input:
         unpack(depth_view_truth_inputs),
     output:
@@ -151,23 +144,5 @@ rule depth_view_truth:
         log_path("depth_view_truth", "{cam}_{view}"),
     benchmark:
         bench_path("depth_view_truth", "{cam}_{view}")
-    wildcard_constraints:
-        view=names.VIEW_PATTERN,
-    priority: PRIORITY["synthesis"]
-    conda:
-        "../envs/plenocal.yaml"
-    threads: 1
-    resources:
-        mem_mb=3000,
-        runtime=30,
     params:
-        depth=lambda wc: synthesis_depth_config(),
-        verify=lambda wc: {
-            k: stage_config("verify")[k]
-            for k in ("depth_sources_shots", "depth_sources_set")
-        },
-        views_dir=lambda wc: res(wc.dataset, "views"),
-        n_views=lambda wc: n_views(wc.dataset),
-        cameras="ground_truth",
-    script:
-        "../scripts/depth_view.py"
+        **depth_view_params("ground_truth"),
