@@ -224,8 +224,8 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--frames", default=None, metavar="A:B",
                    help="the frames to convert, a Python slice of the file's frames: A:B is A "
                         "up to B with B excluded (0:10 = the first ten), A:, :B, A:B:STEP, "
-                        "negatives count from the end; a single number is that frame. "
-                        "Default: all")
+                        "negatives count from the end; a single number is that frame; a "
+                        "bound past the file is refused, not clamped. Default: all")
     v.add_argument("--format", choices=("png", "yuv"), default="png", dest="out_format",
                    help="png (default): a folder of PNG views per frame; yuv: one YUV 4:2:0 "
                         "video per view, of the input's bit depth")

@@ -249,6 +249,17 @@ def test_frames_are_python_slices():
         parse_frames("5:2", 10)
 
 
+def test_frames_past_the_file_are_refused_not_clamped():
+    assert list(parse_frames("0:3", 3)) == [0, 1, 2]  # the end may be the frame count
+    assert list(parse_frames("-3:", 3)) == [0, 1, 2]
+    assert list(parse_frames("2", 3)) == [2]
+    for bad, word in (("0:300", "end 300"), ("3", "frame 3"), ("5:", "frame 5"),
+                      ("-4:", "frame -4"), ("0:-4", "end -4")):
+        with pytest.raises(Exception, match=rf"'{bad}': {word} is past the file's 3 frames "
+                                            r"\(0\.\.2\); give A:"):
+            parse_frames(bad, 3)
+
+
 def test_yuv_round_trip_and_rvs_layout(tmp_path):
     """Flat colours survive RGB -> YUV -> RGB to the 10-bit step; the bytes are where
     RVS's reader looks for them (frame 1's planes at 1.5 x 2 x W x H bytes)."""

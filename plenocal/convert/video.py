@@ -321,11 +321,28 @@ def parse_frames(text: str | None, count: int, source: str = "--frames") -> rang
     except (ValueError, TypeError):
         raise ConvertError(f"{source} {text!r}: expected A:B (Python slice, end excluded), "
                            "A:B:STEP or one frame number") from None
+    _check_bounds(text, parts, count, source)
     if len(chosen) == 0:
         raise ConvertError(f"{source} {text!r}: selects none of the file's {count} frames "
                            f"(0..{count - 1}; A:B is A up to B, B excluded, so B must come "
                            "after A)")
     return chosen
+
+
+def _check_bounds(text: str, parts: list[int | None], count: int, source: str) -> None:
+    """Refuse a bound of ``--frames`` past the file's ``count`` frames: a Python slice
+    would clamp it, and ``0:300`` on a 3-frame file would convert 3 frames without a
+    word. An open end (``A:``) takes the file's last frame as it is."""
+    bounds = parts[:2] if len(parts) > 1 else parts
+    for i, k in enumerate(bounds):
+        if k is None:
+            continue
+        is_end = len(parts) > 1 and i == 1
+        if k > (count if is_end else count - 1) or k < -count:
+            raise ConvertError(
+                f"{source} {text!r}: {'end' if is_end else 'frame'} {k} is past the file's "
+                f"{count} frames (0..{count - 1}); give A: to convert up to the last frame "
+                "or check --size and the bit depth, which set the frame count")
 
 
 class ViewVideos:
