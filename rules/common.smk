@@ -1099,6 +1099,15 @@ def setup_config(wildcards):
     return {k: v for k, v in sim.items() if k != "render"}
 
 
+def lenslet_sim_config(dataset):
+    """The simulate slice the lenslet renders read: everything but the ideal renders'
+    supersampling (``render.ideal_supersample``, rules ground_truth_render*), whose
+    change re-renders the ideal views alone."""
+    sim = ds_config(dataset)["simulate"]
+    render = {k: v for k, v in sim["render"].items() if k != "ideal_supersample"}
+    return {**sim, "render": render}
+
+
 def view_geometry(wildcards):
     """The convert settings that fix the view geometry (never the image content)."""
     conv = stage_config("convert")

@@ -53,7 +53,7 @@ for _i, _d in enumerate(SYNTHETIC):
             mem_mb=3000,
             runtime=60,
         params:
-            sim=ds_config(_d)["simulate"],
+            sim=lenslet_sim_config(_d),
         script:
             "../scripts/simulate.py"
 

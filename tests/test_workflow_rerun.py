@@ -138,6 +138,13 @@ def test_a_key_a_job_does_not_read_reruns_nothing_of_it(complete_run: Path, tmp_
     jobs = planned(work)
     assert jobs.get("refine_tracks") == 1 and "refine" in jobs, jobs
     assert not {"match_central", "view_matches", "merge"} & set(jobs), jobs
+    # the ideal renders' supersampling: the lenslet images do not read it (it reran the
+    # simulation and every job after it: 60)
+    edit_config(work, lambda c: c["datasets"]["tiny"]["simulate"].setdefault(
+        "render", {}).update(ideal_supersample=3))
+    jobs = planned(work)
+    assert "ground_truth_render" in jobs, jobs
+    assert not {"simulate", "simulate_setup", "convert", "map_a", "merge"} & set(jobs), jobs
     # RVS's blending factor under the project's DIBR: the MPEG exports carry it, the
     # experiments (rendered by the DIBR) do not read it
     work = clone(complete_run, tmp_path / "w2")
