@@ -5,11 +5,10 @@ beside calibration/mpeg/cameras.json. See plenocal.export.mpeg_views."""
 from pathlib import Path
 
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
-import numpy as np
 
 from plenocal.convert.viewset import view_set_files
 from plenocal.export.mpeg_views import export_views
-from plenocal.io.files import read_image
+from plenocal.io.files import read_image, read_npy
 from plenocal.names import file_key
 from plenocal.rulelog import rule_logger
 from plenocal.verify.experiments import experiment_plan, layout_from_cams
@@ -27,7 +26,7 @@ for exp in (1, 2, 3):
     plans.update(experiment_plan(layout, exp, sets, int(verify["exp3_view_stride"])))
 out_dir = Path(snakemake.input.mpeg).parent
 written = export_views(out_dir, snakemake.input.mpeg, sorted(depth_files),
-                       lambda k: np.load(depth_files[k]), lambda k: read_image(view_files[k]),
+                       lambda k: read_npy(depth_files[k]), lambda k: read_image(view_files[k]),
                        plans, float(verify["rvs_blending_factor"]))
 for name in ("depth", "texture", "rvs"):
     (out_dir / name).mkdir(parents=True, exist_ok=True)

@@ -7,7 +7,6 @@ import os
 from pathlib import Path
 
 import cv2  # first: see DESIGN.md on cv2/pycolmap
-import numpy as np
 
 from plenocal.artifacts.cameras import read_cameras
 from plenocal.artifacts.results import (
@@ -17,7 +16,7 @@ from plenocal.artifacts.results import (
 )
 from plenocal.artifacts.rig import read_rig
 from plenocal.depth.inputs import rig_bounds
-from plenocal.io.files import to_uint8, write_image
+from plenocal.io.files import read_npy, to_uint8, write_image
 from plenocal.names import file_key
 from plenocal.rulelog import rule_logger
 from plenocal.verify.experiments import layout_from_cams
@@ -35,7 +34,7 @@ near, far = rig_bounds(read_rig(snakemake.input.rig), float(cfg["depth"]["bounds
 
 def load_depths(paths):
     """{"<cam>/<view>": z-depth} of results/.../<cam>/<view>.npy files."""
-    return {file_key(p): np.load(p) for p in paths}
+    return {file_key(p): read_npy(p) for p in paths}
 
 
 depths = {"estimated": load_depths(snakemake.input.depth)}

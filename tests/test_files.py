@@ -13,6 +13,8 @@ from plenocal.io.files import (
     TruncatedImageError,
     read_image,
     read_json,
+    read_npy,
+    read_npz,
     staged_outputs,
     write_image,
     write_json,
@@ -118,6 +120,28 @@ def test_an_empty_or_cut_json_file_is_named_with_its_remedy(tmp_path: Path):
     doc.write_text(text[: len(text) // 2])
     with pytest.raises(ValueError, match=rf"{doc}: not valid JSON \(.*line \d+ column \d+\)"):
         read_json(doc)
+
+
+def test_a_numpy_file_cut_or_overwritten_is_named_with_its_remedy(tmp_path: Path):
+    """A depth map, a track set's array or an analysis cut short gave numpy's bare
+    "Failed to read all data" or zipfile's "File is not a zip file", naming neither the
+    file nor what to do."""
+    npy, npz = tmp_path / "x01_y00.npy", tmp_path / "analysis.npz"
+    a = np.arange(12, dtype=np.float32).reshape(3, 4)
+    np.save(npy, a)
+    np.savez(npz, a=a, b=a[:1])
+    assert np.array_equal(read_npy(npy), a)
+    assert set(read_npz(npz)) == {"a", "b"} and np.array_equal(read_npz(npz)["b"], a[:1])
+    remedy = "if the workflow wrote it, delete it and run again to make it anew"
+    for path, read in ((npy, read_npy), (npz, read_npz)):
+        data = path.read_bytes()
+        for damaged in (data[: len(data) // 2], b"", b"not numpy at all" * 10):
+            path.write_bytes(damaged)
+            with pytest.raises(ValueError, match=rf"{path}: not a readable numpy file "
+                                                 rf"\(.*\); {remedy}"):
+                read(path)
+    with pytest.raises(FileNotFoundError):
+        read_npy(tmp_path / "missing.npy")
 
 
 def test_a_view_emptied_or_cut_is_named_before_it_is_copied(tmp_path: Path):

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from plenocal.artifacts.versioned import decode
-from plenocal.io.files import atomic_write_bytes, write_json
+from plenocal.io.files import atomic_write_bytes, read_npz, write_json
 
 # ---------------------------------------------------------------------------
 # Table I: eval/reprojection.json
@@ -484,8 +484,7 @@ def read_synthesis_runs(json_path: str | Path, npz_path: str | Path) -> Synthesi
     remedy = "rerun rule synthesis_exp3_part"
 
     def build(doc: dict) -> SynthesisRuns:
-        with np.load(npz_path) as npz:
-            z = {k: npz[k] for k in npz.files}
+        z = read_npz(npz_path)
         kept = {(str(e["cameras"]), str(e["key"])): z[f"image{i}"]
                 for i, e in enumerate(doc["kept"])}
         return SynthesisRuns(int(doc["experiment"]), tuple(doc["renderers"]),

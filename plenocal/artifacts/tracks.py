@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocal.artifacts.versioned import decode
-from plenocal.io.files import atomic_write_dir, dumps_json, write_npy
+from plenocal.io.files import atomic_write_dir, dumps_json, read_npy, write_npy
 
 FORMAT = "plenocal.tracks"
 VERSION = 1
@@ -113,7 +113,7 @@ def read_tracks(folder: str | Path) -> StoredTracks:
         if missing:
             raise ValueError(f"{folder}: track set without {', '.join(missing)}.npy; the "
                              f"folder is damaged: {_REMEDY}")
-        a = {k: np.load(folder / f"{k}.npy", allow_pickle=False) for k in _ARRAYS}
+        a = {k: read_npy(folder / f"{k}.npy") for k in _ARRAYS}
         kp_names = list(doc["keypoint_images"])
         counts = a["keypoint_counts"]
         lengths = a["track_lengths"]

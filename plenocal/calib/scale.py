@@ -23,6 +23,7 @@ import numpy as np
 
 from plenocal.artifacts.scale import ScaleResult
 from plenocal.config import stage_defaults
+from plenocal.io.files import read_npy
 from plenocal.names import array_position
 
 _SCALE = stage_defaults("scale")  # the defaults below: config.schema.yaml's scale block
@@ -86,7 +87,7 @@ def load_depth(path: str | Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: depth map not found; run the depth rule first")
-    d = np.load(path, allow_pickle=False)
+    d = read_npy(path)
     if d.ndim != 2:
         raise ValueError(f"{path}: a depth map must be 2-D (got shape {d.shape})")
     return d

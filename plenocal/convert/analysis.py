@@ -27,7 +27,7 @@ import numpy as np
 from plenocal.artifacts.versioned import check_versioned
 from plenocal.convert.errors import ConvertError
 from plenocal.convert.patchsize import PatchSizeResult
-from plenocal.io.files import atomic_write_bytes
+from plenocal.io.files import atomic_write_bytes, read_npz
 
 FORMAT = "plenocal.convert_analysis"
 VERSION = 1
@@ -76,8 +76,7 @@ def read_analysis(path: str | Path) -> ConvertAnalysis:
     if not path.is_file():
         raise ConvertError(f"{path}: conversion analysis not found; {_REMEDY}")
     try:
-        with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
+        arrays = read_npz(path)
         meta = json.loads(str(arrays.pop("meta")))
     except (OSError, ValueError, KeyError) as exc:
         raise ConvertError(f"{path}: not a readable conversion analysis ({exc}); {_REMEDY}") \

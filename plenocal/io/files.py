@@ -13,6 +13,7 @@ import io
 import json
 import os
 import tempfile
+import zipfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -191,6 +192,41 @@ def write_npy(path: str | Path, array: np.ndarray) -> None:
     buf = io.BytesIO()
     np.save(buf, np.ascontiguousarray(array), allow_pickle=False)
     atomic_write_bytes(path, buf.getvalue())
+
+
+#: what numpy raises on a .npy or .npz cut short or overwritten (a truncated .npy: a
+#: ValueError; a truncated .npz: zipfile.BadZipFile; a bad header: ValueError / EOFError)
+_NPY_DAMAGE = (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile)
+
+
+def _npy_error(path: str | Path, exc: Exception) -> ValueError:
+    return ValueError(f"{path}: not a readable numpy file ({type(exc).__name__}: {exc}); "
+                      "if the workflow wrote it, delete it and run again to make it anew")
+
+
+def read_npy(path: str | Path) -> np.ndarray:
+    """The array in the ``.npy`` file ``path`` (no pickles); FileNotFoundError where it
+    is missing, ValueError naming the file and the remedy where it is damaged (cut short
+    or overwritten in place: Snakemake does not notice, as its time is newer than its
+    inputs')."""
+    try:
+        return np.load(path, allow_pickle=False)
+    except FileNotFoundError:
+        raise
+    except _NPY_DAMAGE as exc:
+        raise _npy_error(path, exc) from None
+
+
+def read_npz(path: str | Path) -> dict[str, np.ndarray]:
+    """Every array of the ``.npz`` file ``path``, read in full (no pickles); errors as
+    :func:`read_npy`'s."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
+    except FileNotFoundError:
+        raise
+    except _NPY_DAMAGE as exc:
+        raise _npy_error(path, exc) from None
 
 
 #: compression level of every PNG the workflow writes (:func:`write_image`): libdeflate's
