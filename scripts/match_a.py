@@ -1,9 +1,10 @@
 """Rule match_a: exhaustive matching and geometric verification of registration A."""
 import shutil
+from pathlib import Path
 
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md, Known traps)
 
-from plenocal.calib.reg_a.colmap import resolve_sfm_device
+from plenocal.calib.reg_a.colmap import check_database, resolve_sfm_device
 from plenocal.calib.reg_a.sfm import match_a
 from plenocal.io.files import write_json
 from plenocal.rulelog import log_to_file
@@ -12,9 +13,13 @@ log_to_file(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821
 cfg = sm.params.sfm
 use_gpu, _ = resolve_sfm_device(cfg)  # sfm.device
+check_database(sm.input.db, "delete it and run again: rule features_a makes it anew")
 # matches go into a copy: the features database stays the input it was
-tmp = sm.output.db + ".part"
-shutil.copyfile(sm.input.db, tmp)
-info = match_a(tmp, seed=cfg["seed"], num_threads=sm.threads, use_gpu=use_gpu)
-shutil.move(tmp, sm.output.db)
+tmp = Path(sm.output.db + ".part")
+try:
+    shutil.copyfile(sm.input.db, tmp)
+    info = match_a(tmp, seed=cfg["seed"], num_threads=sm.threads, use_gpu=use_gpu)
+    shutil.move(tmp, sm.output.db)
+finally:  # a failed match leaves no copy beside the outputs
+    tmp.unlink(missing_ok=True)
 write_json(sm.output.info, info)

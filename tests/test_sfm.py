@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 from synth.scenes import default_scene, render, rig_cameras
 
-from plenocal.calib.reg_a.sfm import RegistrationError, check_shots, features_a, map_a, match_a
+from plenocal.calib.reg_a.colmap import check_database
+from plenocal.calib.reg_a.sfm import (
+    RegistrationError,
+    check_models,
+    check_shots,
+    features_a,
+    map_a,
+    match_a,
+)
 from plenocal.calib.reg_a.uncertainty import focal_std_px
 from plenocal.camera import rotation_angle_deg, umeyama
 from plenocal.io.files import dumps_json, write_image, write_json
@@ -96,6 +104,25 @@ def test_map_a_leaves_its_input_database_untouched(capture, registered, tmp_path
     assert db.read_bytes() == before
 
 
+def test_a_damaged_database_is_named_with_its_remedy(capture, registered, tmp_path):
+    """A features or matches database cut short gave pycolmap's "No registered database
+    factory succeeded", naming neither the file nor the remedy, and rule match_a left its
+    copy (database.db.part) behind."""
+    ra, _ = registered
+    good = (ra / "database.db").read_bytes()
+    db = tmp_path / "features.db"
+    db.write_bytes(good)
+    assert check_database(db, "run features_a") == len(capture[1])
+    assert db.read_bytes() == good  # opened read-only: not even its change counter moves
+    for damaged in (good[: len(good) // 3], b"", b"SQLite format 3\0" + bytes(200)):
+        db.write_bytes(damaged)
+        with pytest.raises(ValueError, match=rf"{db}: (not a readable|a damaged) COLMAP "
+                                             r"database \(.*\); run features_a"):
+            check_database(db, "run features_a")
+    with pytest.raises(FileNotFoundError, match="COLMAP database not found; run it"):
+        check_database(tmp_path / "missing.db", "run it")
+
+
 def test_global_mapper(capture, registered, tmp_path):
     _, cams, _ = capture
     ra, _ = registered
@@ -118,6 +145,32 @@ def test_unregistered_view_is_named(capture, tmp_path):
     match_a(tmp_path / "database.db")
     with pytest.raises(RegistrationError, match=r"did not register hand07;.*hand-held"):
         map_a(tmp_path / "database.db", tmp_path / "images", tmp_path / "model")
+
+
+class _Model:
+    """A reconstruction as check_models reads one: its registered images' names."""
+
+    def __init__(self, names):
+        self.names = list(names)
+
+    def num_reg_images(self):
+        return len(self.names)
+
+    def reg_image_ids(self):
+        return list(range(len(self.names)))
+
+    def image(self, j):
+        return type("Image", (), {"name": self.names[j]})()
+
+
+def test_a_split_registration_names_the_shots_in_no_model():
+    """The split's error listed each model's shots but not those in none of them."""
+    names = [f"{c}.png" for c in ("hand00", "hand01", "hand02", "x00_y00", "x01_y00")]
+    recs = {0: _Model(["x00_y00.png", "x01_y00.png"]), 1: _Model(["hand00.png"])}
+    with pytest.raises(RegistrationError, match=r"split the scene into 2 models \(model 0: "
+                                                r"x00_y00, x01_y00; model 1: hand00; in none: "
+                                                r"hand01, hand02\); try:"):
+        check_models(recs, names, "incremental")
 
 
 def test_array_alone_is_refused():

@@ -385,6 +385,30 @@ def _match_per_image(database: Path, pairs: Iterable[tuple[str, str]], *, seed: 
             path.unlink(missing_ok=True)
 
 
+def check_database(database: str | Path, remedy: str) -> int:
+    """The number of images in the COLMAP database ``database``, opened read-only; an
+    error naming the file and ``remedy`` where it is missing, cut short or not a COLMAP
+    database (pycolmap's own answer, "No registered database factory succeeded", names
+    neither)."""
+    import contextlib  # noqa: PLC0415
+    import sqlite3  # noqa: PLC0415
+
+    path = Path(database)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: COLMAP database not found; {remedy}")
+    try:
+        uri = path.resolve().as_uri() + "?mode=ro"
+        with contextlib.closing(sqlite3.connect(uri, uri=True)) as con:
+            state = con.execute("PRAGMA quick_check").fetchone()[0]
+            images = int(con.execute("SELECT count(*) FROM images").fetchone()[0])
+    except sqlite3.DatabaseError as exc:
+        raise ValueError(f"{path}: not a readable COLMAP database ({exc}); {remedy}") \
+            from None
+    if state != "ok":
+        raise ValueError(f"{path}: a damaged COLMAP database ({state}); {remedy}")
+    return images
+
+
 def _one_camera_per_image(con) -> None:
     """Rewrite an open COLMAP database (sqlite3 connection) so that every image has a
     camera of its own, a copy of its camera (camera id = image id), in a rig and a frame

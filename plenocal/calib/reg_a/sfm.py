@@ -199,8 +199,11 @@ def check_models(recs: dict, all_names: list[str], mapper: str) -> object:
         f"model {i}: " + ", ".join(sorted(r.image(j).name[:-4] for j in r.reg_image_ids()))
         for i, r in enumerate(models))
     if len(models) > 1 and models[0].num_reg_images() < len(all_names):
+        anywhere = {r.image(j).name for r in models for j in r.reg_image_ids()}
+        nowhere = sorted(n[:-4] for n in all_names if n not in anywhere)
+        unplaced = f"; in none: {', '.join(nowhere)}" if nowhere else ""
         raise RegistrationError(f"registration A ({mapper}) split the scene into "
-                                f"{len(models)} models ({parts}); {hint}")
+                                f"{len(models)} models ({parts}{unplaced}); {hint}")
     if len(models) > 1:
         # COLMAP may start a second model from views that are already in the first one
         # (leftover pairs); the first holds every view and is the registration
