@@ -382,6 +382,11 @@ def _check_semantics(config: dict) -> None:
     c = config["convert"]
     if c["view_spacing_px"] is not None and c["view_spacing_px"] <= 0:
         raise _fail("convert.view_spacing_px", c["view_spacing_px"], "must be > 0")
+    lo, hi = c["disparity_percentiles"]
+    if not lo < hi:
+        raise _fail("convert.disparity_percentiles", c["disparity_percentiles"],
+                    "the low percentile first, below the high one (e.g. [2, 98]); "
+                    "reversed, D_min and D_max swap places")
     b = c["blend"]
     if b["wider_slots"] < b["wide_slots"]:
         raise _fail("convert.blend.wider_slots", b["wider_slots"],

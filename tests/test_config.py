@@ -185,6 +185,11 @@ def test_a_dataset_may_read_its_mla_kind_from_the_image_whatever_convert_mla_say
      r"must be at most depth\.sgm\.max_depths \(256\)"),
     ({"convert": {"blend": {"wider_slots": 2}}}, "convert.blend.wider_slots",
      r"at least convert\.blend\.wide_slots \(4\)"),
+    # reversed, D_min and D_max of every disparity.json swapped places without a word
+    ({"convert": {"disparity_percentiles": [98, 2]}}, "convert.disparity_percentiles",
+     r"the low percentile first, below the high one"),
+    ({"convert": {"disparity_percentiles": [50, 50]}}, "convert.disparity_percentiles",
+     r"the low percentile first"),
 ])
 def test_settings_that_contradict_each_other_are_refused_before_any_job(change, key, why):
     """A renderer that cannot run (found only in a synthesis job, after the calibration)

@@ -438,6 +438,10 @@ def test_settings_errors_name_the_key():
         ConvertSettings.from_config({"mla": "plenoptic"})
     with pytest.raises(ConvertError, match="convert.bit_depth"):
         ConvertSettings.from_config({"bit_depth": 20})
+    # the command line's --set reaches the converter without the workflow's validation
+    with pytest.raises(ConvertError, match=r"convert.disparity_percentiles = \[98, 2\]: "
+                                           "the low percentile first"):
+        ConvertSettings.from_config({"disparity_percentiles": [98, 2]})
 
 
 # ---------------------------------------------------------------------------

@@ -140,6 +140,11 @@ class ConvertSettings:
         b = self.bit_depth
         if not (b == "auto" or (isinstance(b, int) and 8 <= b <= 16)):
             raise ConvertError(f"convert.bit_depth: 'auto' or 8..16, not {b!r}")
+        lo, hi = self.percentiles
+        if not lo < hi:
+            raise ConvertError(f"convert.disparity_percentiles = [{lo:g}, {hi:g}]: the low "
+                               "percentile first, below the high one (e.g. [2, 98]); "
+                               "reversed, D_min and D_max swap places")
         if self.bayer not in ("none", *BAYER_PATTERNS):
             raise ConvertError(f"convert.bayer: none or a colour filter array of "
                                f"{', '.join(BAYER_PATTERNS)}, not {self.bayer!r}")
