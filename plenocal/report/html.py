@@ -489,10 +489,10 @@ def _psnr_section(page: Page, key: str, result: SynthesisResult | None, paper: s
     page.add("<div>" + "".join(kpis) + "</div>")
     page.add(f"<p class=note>{escape(paper)} Target: at most 0.5 dB lost to calibration "
              "(the same experiment with ground-truth cameras), judged with the true depth, "
-             "on the surfaces where they are scored. Tables named <code>true_depth/...</code> render with the "
-             "simulator's true depth maps, the others with our estimated depth (the "
-             "ground-truth cameras only where verify.ground_truth_own_depth made maps "
-             "with them).</p>")
+             "on the surfaces where they are scored. Tables named "
+             "<code>true_depth/...</code> render with the simulator's true depth maps, "
+             "the others with our estimated depth (the ground-truth cameras only where "
+             "verify.ground_truth_own_depth made maps with them).</p>")
     for t, name in zip(tables, names, strict=True):
         g = src.layout(t, n_views, cols, rows)
         labels = None
