@@ -114,6 +114,7 @@ def test_a_damaged_database_is_named_with_its_remedy(capture, registered, tmp_pa
     db.write_bytes(good)
     assert check_database(db, "run features_a") == len(capture[1])
     assert db.read_bytes() == good  # opened read-only: not even its change counter moves
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["features.db"]  # no -wal, -shm
     for damaged in (good[: len(good) // 3], b"", b"SQLite format 3\0" + bytes(200)):
         db.write_bytes(damaged)
         with pytest.raises(ValueError, match=rf"{db}: (not a readable|a damaged) COLMAP "

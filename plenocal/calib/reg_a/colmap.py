@@ -386,10 +386,11 @@ def _match_per_image(database: Path, pairs: Iterable[tuple[str, str]], *, seed: 
 
 
 def check_database(database: str | Path, remedy: str) -> int:
-    """The number of images in the COLMAP database ``database``, opened read-only; an
-    error naming the file and ``remedy`` where it is missing, cut short or not a COLMAP
-    database (pycolmap's own answer, "No registered database factory succeeded", names
-    neither)."""
+    """The number of images in the COLMAP database ``database``, opened as immutable (a
+    read-only connection to COLMAP's WAL-mode file leaves ``-wal`` and ``-shm`` files
+    beside a rule's input); an error naming the file and ``remedy`` where it is missing,
+    cut short or not a COLMAP database (pycolmap's own answer, "No registered database
+    factory succeeded", names neither)."""
     import contextlib  # noqa: PLC0415
     import sqlite3  # noqa: PLC0415
 
@@ -397,7 +398,7 @@ def check_database(database: str | Path, remedy: str) -> int:
     if not path.is_file():
         raise FileNotFoundError(f"{path}: COLMAP database not found; {remedy}")
     try:
-        uri = path.resolve().as_uri() + "?mode=ro"
+        uri = path.resolve().as_uri() + "?immutable=1"
         with contextlib.closing(sqlite3.connect(uri, uri=True)) as con:
             state = con.execute("PRAGMA quick_check").fetchone()[0]
             images = int(con.execute("SELECT count(*) FROM images").fetchone()[0])
