@@ -253,11 +253,18 @@ def test_frames_past_the_file_are_refused_not_clamped():
     assert list(parse_frames("0:3", 3)) == [0, 1, 2]  # the end may be the frame count
     assert list(parse_frames("-3:", 3)) == [0, 1, 2]
     assert list(parse_frames("2", 3)) == [2]
+    # backwards: the end one past the first frame is -4 (-count - 1), the mirror of 0:3
+    assert list(parse_frames("2:-4:-1", 3)) == [2, 1, 0]
+    assert list(parse_frames("::-1", 3)) == [2, 1, 0]
     for bad, word in (("0:300", "end 300"), ("3", "frame 3"), ("5:", "frame 5"),
-                      ("-4:", "frame -4"), ("0:-4", "end -4")):
+                      ("-4:", "frame -4"), ("0:-4", "end -4"), ("2:-5:-1", "end -5"),
+                      ("2:3:-1", "end 3"), ("3::-1", "frame 3")):
         with pytest.raises(Exception, match=rf"'{bad}': {word} is past the file's 3 frames "
-                                            r"\(0\.\.2\); give A:"):
+                                            r"\(0\.\.2\); leave the bound open"):
             parse_frames(bad, 3)
+    with pytest.raises(Exception, match=r"'0:2:-1': selects none.*with a negative STEP, B "
+                                        "must come before A"):
+        parse_frames("0:2:-1", 3)
 
 
 def test_yuv_round_trip_and_rvs_layout(tmp_path):

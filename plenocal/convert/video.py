@@ -323,26 +323,33 @@ def parse_frames(text: str | None, count: int, source: str = "--frames") -> rang
                            "A:B:STEP or one frame number") from None
     _check_bounds(text, parts, count, source)
     if len(chosen) == 0:
+        order = ("B must come after A" if len(parts) < 3 or (parts[2] or 1) > 0
+                 else "with a negative STEP, B must come before A")
         raise ConvertError(f"{source} {text!r}: selects none of the file's {count} frames "
-                           f"(0..{count - 1}; A:B is A up to B, B excluded, so B must come "
-                           "after A)")
+                           f"(0..{count - 1}; A:B is A up to B, B excluded, so {order})")
     return chosen
 
 
 def _check_bounds(text: str, parts: list[int | None], count: int, source: str) -> None:
     """Refuse a bound of ``--frames`` past the file's ``count`` frames: a Python slice
     would clamp it, and ``0:300`` on a 3-frame file would convert 3 frames without a
-    word. An open end (``A:``) takes the file's last frame as it is."""
-    bounds = parts[:2] if len(parts) > 1 else parts
-    for i, k in enumerate(bounds):
+    word. A frame (a single number, or A) lies in ``-count..count - 1``; the end B, one
+    past the last frame taken, in ``-count..count`` (with a negative STEP,
+    ``-count - 1..count - 1``). An open bound (``A:``, ``:B``) is the file's own."""
+    backwards = len(parts) == 3 and (parts[2] or 1) < 0
+    for i, k in enumerate(parts[:2]):
         if k is None:
             continue
         is_end = len(parts) > 1 and i == 1
-        if k > (count if is_end else count - 1) or k < -count:
+        low, high = -count, count - 1
+        if is_end:
+            low, high = (low - 1, high) if backwards else (low, high + 1)
+        if not low <= k <= high:
+            what = "end" if is_end else "frame"
             raise ConvertError(
-                f"{source} {text!r}: {'end' if is_end else 'frame'} {k} is past the file's "
-                f"{count} frames (0..{count - 1}); give A: to convert up to the last frame "
-                "or check --size and the bit depth, which set the frame count")
+                f"{source} {text!r}: {what} {k} is past the file's {count} frames "
+                f"(0..{count - 1}); leave the bound open (A: or :B) to reach the file's "
+                "end, or check --size and the bit depth, which set the frame count")
 
 
 class ViewVideos:
