@@ -115,6 +115,13 @@ def test_a_damaged_database_is_named_with_its_remedy(capture, registered, tmp_pa
     assert check_database(db, "run features_a") == len(capture[1])
     assert db.read_bytes() == good  # opened read-only: not even its change counter moves
     assert sorted(p.name for p in tmp_path.iterdir()) == ["features.db"]  # no -wal, -shm
+    # writes not folded in (a COLMAP still writing, or killed): the immutable open would
+    # read the main file alone
+    (tmp_path / "features.db-wal").write_bytes(b"\0" * 64)
+    with pytest.raises(ValueError, match=rf"{db}: holds writes not yet folded in "
+                                         r"\(features\.db-wal beside it.*\); run features_a"):
+        check_database(db, "run features_a")
+    (tmp_path / "features.db-wal").unlink()
     for damaged in (good[: len(good) // 3], b"", b"SQLite format 3\0" + bytes(200)):
         db.write_bytes(damaged)
         with pytest.raises(ValueError, match=rf"{db}: (not a readable|a damaged) COLMAP "

@@ -388,7 +388,8 @@ def _match_per_image(database: Path, pairs: Iterable[tuple[str, str]], *, seed: 
 def check_database(database: str | Path, remedy: str) -> int:
     """The number of images in the COLMAP database ``database``, opened as immutable (a
     read-only connection to COLMAP's WAL-mode file leaves ``-wal`` and ``-shm`` files
-    beside a rule's input); an error naming the file and ``remedy`` where it is missing,
+    beside a rule's input; immutable reads the main file alone, so one with a ``-wal``
+    file of its own is refused); an error naming the file and ``remedy`` where it is missing,
     cut short or not a COLMAP database (pycolmap's own answer, "No registered database
     factory succeeded", names neither)."""
     import contextlib  # noqa: PLC0415
@@ -397,6 +398,11 @@ def check_database(database: str | Path, remedy: str) -> int:
     path = Path(database)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: COLMAP database not found; {remedy}")
+    wal = Path(f"{path}-wal")
+    if wal.is_file() and wal.stat().st_size > 0:
+        # writes not folded into the file yet: a COLMAP still writing it, or one killed
+        raise ValueError(f"{path}: holds writes not yet folded in ({wal.name} beside it: "
+                         f"a COLMAP still writing it, or one stopped); {remedy}")
     try:
         uri = path.resolve().as_uri() + "?immutable=1"
         with contextlib.closing(sqlite3.connect(uri, uri=True)) as con:

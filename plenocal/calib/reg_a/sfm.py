@@ -112,12 +112,15 @@ def features_a(views: Mapping[str, str | Path], image_dir: str | Path,
 
 
 def match_a(database: str | Path, *, seed: int = cm.DEFAULT_SEED,
-            num_threads: int = cm.DEFAULT_THREADS, use_gpu: bool = False) -> dict:
-    """Exhaustive matching (on the GPU with ``use_gpu``) with geometric verification."""
+            num_threads: int = cm.DEFAULT_THREADS, use_gpu: bool = False,
+            name: str | Path | None = None) -> dict:
+    """Exhaustive matching (on the GPU with ``use_gpu``) with geometric verification.
+    ``name``: the database its errors name (rule match_a matches in a copy of its input,
+    removed on failure)."""
     n = cm.match(database, None, seed=seed, num_threads=num_threads, use_gpu=use_gpu)
     if n == 0:
-        raise RegistrationError(f"{database}: no image pair passed geometric verification; "
-                                "the views need more texture or overlap")
+        raise RegistrationError(f"{name or database}: no image pair passed geometric "
+                                "verification; the views need more texture or overlap")
     return {"num_verified_pairs": n, "device": "cuda" if use_gpu else "cpu"}
 
 
