@@ -142,6 +142,8 @@ def test_a_numpy_file_cut_or_overwritten_is_named_with_its_remedy(tmp_path: Path
                 read(path)
     with pytest.raises(FileNotFoundError):
         read_npy(tmp_path / "missing.npy")
+    with pytest.raises(IsADirectoryError):  # not damage: no "delete it" advice
+        read_npz(tmp_path)
 
 
 def test_a_view_emptied_or_cut_is_named_before_it_is_copied(tmp_path: Path):

@@ -195,8 +195,9 @@ def write_npy(path: str | Path, array: np.ndarray) -> None:
 
 
 #: what numpy raises on a .npy or .npz cut short or overwritten (a truncated .npy: a
-#: ValueError; a truncated .npz: zipfile.BadZipFile; a bad header: ValueError / EOFError)
-_NPY_DAMAGE = (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile)
+#: ValueError; a truncated .npz: zipfile.BadZipFile; a bad header: ValueError / EOFError);
+#: an OSError (no permission, a folder) is not damage and passes as it is
+_NPY_DAMAGE = (ValueError, EOFError, KeyError, zipfile.BadZipFile)
 
 
 def _npy_error(path: str | Path, exc: Exception) -> ValueError:
@@ -211,8 +212,6 @@ def read_npy(path: str | Path) -> np.ndarray:
     inputs')."""
     try:
         return np.load(path, allow_pickle=False)
-    except FileNotFoundError:
-        raise
     except _NPY_DAMAGE as exc:
         raise _npy_error(path, exc) from None
 
@@ -223,8 +222,6 @@ def read_npz(path: str | Path) -> dict[str, np.ndarray]:
     try:
         with np.load(path, allow_pickle=False) as z:
             return {k: z[k] for k in z.files}
-    except FileNotFoundError:
-        raise
     except _NPY_DAMAGE as exc:
         raise _npy_error(path, exc) from None
 
