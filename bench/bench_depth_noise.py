@@ -12,7 +12,8 @@ For each finished synthetic run given (a Snakemake working folder of
 ``verify.ground_truth_own_depth: true``), every ground-truth camera is moved by a
 negligible amount (its centre by ``--move-um`` micrometres and its axes by
 ``--turn-deg`` degrees, each in a random direction, seeded per draw; 1 um and 1e-4 deg are
-7-20x below the calibration's own errors on every capture measured), the inputs' depth
+7-45x below the calibrations' own centre and rotation errors on the four captures
+measured), the inputs' depth
 maps are estimated again with the moved cameras as rule ``depth_view_truth`` makes them,
 and Exp. 1 is rendered with the unmoved true cameras on them, by the project's DIBR,
 scored over the whole views (border ``verify.psnr_border_px``) and over their surface
