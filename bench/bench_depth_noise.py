@@ -40,17 +40,21 @@ import numpy as np
 import yaml
 
 from plenocal.artifacts.cameras import read_cameras
+from plenocal.artifacts.results import PsnrTable, read_synthesis
 from plenocal.artifacts.rig import read_rig
 from plenocal.camera import PinholeCamera
 from plenocal.config import with_defaults
 from plenocal.depth.inputs import rig_bounds
 from plenocal.depth.views import estimate_view_depth
-from plenocal.io.files import read_image, read_json, read_npy
+from plenocal.io.files import read_image, read_npy
 from plenocal.names import is_array_shot, split_key
 from plenocal.verify.experiments import experiment_plan, layout_from_cams
-from plenocal.verify.scores import psnr_from_rings
-from plenocal.verify.surface import psnr_of_error
-from plenocal.verify.synthesis import run_experiment, surface_masks, synthesis_config
+from plenocal.verify.synthesis import (
+    psnr_tables,
+    run_experiment,
+    surface_masks,
+    synthesis_config,
+)
 
 DATASET = "synthetic"
 
@@ -73,23 +77,17 @@ def moved(cams: dict[str, PinholeCamera], seed: int, move_m: float, turn_deg: fl
     return out
 
 
-def mean_psnr(errors: dict, border: int) -> tuple[float, float]:
-    """(whole-view, surface) PSNR averaged over the targets, as the result file's tables
-    give them per target."""
-    whole = [psnr_from_rings(np.asarray(e["sse"]), tuple(e["shape"]), border)
-             for e in errors.values()]
-    surf = [psnr_of_error(*e["surface"]) for e in errors.values()]
-    return float(np.mean(whole)), float(np.mean(surf))
+def table_means(table: PsnrTable) -> tuple[float, float]:
+    """(whole-view, surface) PSNR of a table, each averaged over its targets."""
+    return table.mean_db, float(np.mean(list(table.surface_psnr_db.values())))
 
 
 def run_figures(path: Path) -> dict[tuple[str, str], tuple[float, float]]:
     """(cameras, depth) -> (whole, surface) mean PSNR of the run's own DIBR tables."""
     out = {}
-    for t in read_json(path)["tables"]:
-        key = (t["cameras"], t["depth"])
-        if t["renderer"] == "dibr" and key not in out:
-            out[key] = (float(np.mean(list(t["psnr_db"].values()))),
-                        float(np.mean(list(t["surface_psnr_db"].values()))))
+    for t in read_synthesis(path).tables:
+        if t.renderer == "dibr" and (t.cameras, t.depth) not in out:
+            out[t.cameras, t.depth] = table_means(t)
     return out
 
 
@@ -134,10 +132,12 @@ def capture_noise(work: Path, draws: int, move_m: float, turn_deg: float, thread
         maps = {k: estimate_view_depth(k, cams, image, near, far, n, depth_cfg,
                                        int(verify["depth_sources_shots"]),
                                        int(verify["depth_sources_set"]))[0] for k in inputs}
-        errors, _ = run_experiment(1, truth, image_path, layout, near, far,
+        result, _ = run_experiment(1, truth, image_path, layout, near, far,
                                    {**verify, "renderer": "dibr", "threads": threads}, maps,
                                    images, masks)
-        rows.append(mean_psnr(errors["errors"], border))
+        table, = psnr_tables(1, {("dibr", "estimated", "ground_truth"): result}, ["dibr"],
+                             border)
+        rows.append(table_means(table))
         print(f"  {work.name}: draw {seed}: {rows[-1][0]:.3f} / {rows[-1][1]:.3f} dB "
               f"({time.perf_counter() - t0:.0f} s)", flush=True)
     own = figures[("ground_truth", "estimated")]

@@ -10,8 +10,13 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 import bench_depth_noise as dn  # noqa: E402
 
+from plenocal.artifacts.results import (  # noqa: E402
+    PsnrTable,
+    SynthesisResult,
+    SynthesisSetup,
+    write_synthesis,
+)
 from plenocal.camera import PinholeCamera, rotation_angle_deg  # noqa: E402
-from plenocal.io.files import write_json  # noqa: E402
 
 
 def _cams() -> dict[str, PinholeCamera]:
@@ -37,13 +42,13 @@ def test_every_camera_moves_by_the_amounts_given_and_a_seed_is_one_draw():
 
 def test_the_runs_figures_are_the_dibr_tables_means(tmp_path: Path):
     def table(cameras, depth, whole, surface, renderer="dibr"):
-        return {"cameras": cameras, "depth": depth, "renderer": renderer,
-                "psnr_db": {"a": whole, "b": whole + 1.0},
-                "surface_psnr_db": {"a": surface, "b": surface + 2.0}}
+        return PsnrTable(renderer, depth, cameras, "", ("c/1_1",), {"a": whole, "b": whole + 1.0},
+                         {"a": surface, "b": surface + 2.0})
 
     path = tmp_path / "synthesis_exp1.json"
-    write_json(path, {"tables": [table("complete", "estimated", 30.0, 40.0),
-                                 table("complete", "estimated", 1.0, 1.0, "rvs"),
-                                 table("ground_truth", "true", 33.0, 44.0)]})
+    write_synthesis(path, SynthesisResult(1, "dibr", (
+        table("complete", "estimated", 30.0, 40.0),
+        table("complete", "estimated", 1.0, 1.0, "rvs"),
+        table("ground_truth", "true", 33.0, 44.0)), SynthesisSetup(0.4, 0.8, 8, "sgm", {})))
     assert dn.run_figures(path) == {("complete", "estimated"): (30.5, 41.0),
                                     ("ground_truth", "true"): (33.5, 45.0)}
