@@ -32,6 +32,8 @@ import cv2
 import numpy as np
 from benchmd import Lines, update_sections
 
+from plenocal.io.files import read_npy
+
 ROOT = Path(__file__).resolve().parent / "out" / "accuracy"
 SECTION = "Central views against the true pinhole renders (issue 32)"
 
@@ -94,7 +96,7 @@ def capture_figures(folder: Path, central: str = "2_2") -> dict:
         if true is None or ours is None or true.shape != ours.shape:
             raise SystemExit(f"{folder}: {shot}/{central}: the render and our view are "
                              "missing or of different sizes (run bench_accuracy.py first)")
-        depth = np.load(res / "ground_truth" / "depth" / shot / f"{central}.npy")
+        depth = read_npy(res / "ground_truth" / "depth" / shot / f"{central}.npy")
         mask = usable(true, depth.astype(np.float64))
         s, k = fit_scale(flow_field(true, ours), depth.astype(np.float64), mask)
         z10, z90 = np.percentile(depth[mask], [10.0, 90.0])

@@ -55,7 +55,7 @@ from plenocal.depth.planesweep import (  # noqa: E402
 from plenocal.depth.quality import depth_quality  # noqa: E402
 from plenocal.depth.sgbm import sgbm_depth  # noqa: E402
 from plenocal.depth.sgm import SgmOptions, sgm_depth  # noqa: E402
-from plenocal.io.files import read_image, read_json  # noqa: E402
+from plenocal.io.files import read_image, read_json, read_npy  # noqa: E402
 from plenocal.names import file_key  # noqa: E402
 
 
@@ -133,7 +133,7 @@ def synthesis_figures(root: Path, out: Lines) -> None:
         gt = root / "ground_truth" / "depth" / p.parent.name / p.name
         if not gt.is_file():
             continue
-        q = depth_quality(np.load(p), np.load(gt), 0.01, border=8)
+        q = depth_quality(read_npy(p), read_npy(gt), 0.01, border=8)
         info = read_json(p.with_suffix(".json"))
         out.say(f"depth {key:14s} {info['method']:10s} valid {q['valid_share']:6.1%}  "
                 f"within 1% {q['within_share']:6.1%}  median rel {q['median_rel_error']:.4f}")
@@ -184,7 +184,7 @@ def measure(a, out: Lines) -> None:
         cam = a.cam or shots[len(shots) // 2]
         ref_key = f"{cam}/{cv}"
         img = read_image(Path("results") / a.dataset / "views" / cam / f"{cv}.png")
-        gt = np.load(gt_dir / "depth" / cam / f"{cv}.npy")
+        gt = read_npy(gt_dir / "depth" / cam / f"{cv}.npy")
 
         def load(k):
             c, v = k.split("/")

@@ -55,6 +55,7 @@ from benchmd import Lines, update_sections  # noqa: E402
 
 from plenocal.artifacts.cameras import read_cameras  # noqa: E402
 from plenocal.calib.reg_a.colmap import opencv_sift  # noqa: E402
+from plenocal.io.files import read_npy  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 RENDERS = ROOT / "bench" / "out" / "feature_truth"
@@ -140,7 +141,7 @@ def pair_observations(tracks, point_ids: list[int], database_kp: dict, renders: 
         n += len(idx)
         kp = database_kp[name][idx]
         grey = cv2.imread(str(renders / f"{_flat(key)}.png"), cv2.IMREAD_GRAYSCALE)
-        depth = np.load(renders / f"{_flat(key)}.npy")
+        depth = read_npy(renders / f"{_flat(key)}.npy")
         tk = opencv_sift(grey, 8192)[0].astype(np.float64)
         nn = cv2.flann_Index(tk[:, :2].astype(np.float32), {"algorithm": 1, "trees": 4})
         j, d2 = nn.knnSearch(kp[:, :2].astype(np.float32), 1, params={"checks": 64})

@@ -35,6 +35,8 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_workflow import ROOT, make_copy, rule_benchmarks, snakemake  # noqa: E402
 
+from plenocal.io.files import read_npy  # noqa: E402
+
 #: the rules whose device or backend the two runs change
 CHANGED = ("features_a", "match_a", "view_features", "view_matches", "depth_a", "depth_b")
 RUNS = {
@@ -58,7 +60,7 @@ def depth_scores(results: Path, reg: str) -> dict:
         cam, view = info["reference"].split("/")
         truth = results / "ground_truth" / "depth" / cam / f"{view}.npy"
         if truth.is_file():
-            pairs.append((np.load(info_path.with_suffix(".npy")), np.load(truth), info))
+            pairs.append((read_npy(info_path.with_suffix(".npy")), read_npy(truth), info))
     if not pairs:
         return {}
     ratios = np.concatenate([gt[(d > 0) & (gt > 0)] / d[(d > 0) & (gt > 0)]

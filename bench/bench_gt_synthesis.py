@@ -37,7 +37,7 @@ from plenocal.artifacts.cameras import read_cameras
 from plenocal.artifacts.rig import read_rig
 from plenocal.camera import PinholeCamera
 from plenocal.depth.inputs import rig_bounds
-from plenocal.io.files import read_image, to_float
+from plenocal.io.files import read_image, read_npy, to_float
 from plenocal.verify.experiments import experiment_plan, layout_from_cams
 from plenocal.verify.surface import masked_error, psnr_of_error, surface_mask
 from plenocal.verify.synthesis import SynthesisContext, synthesis_config
@@ -76,7 +76,7 @@ def main() -> None:
 
     def depth(key: str) -> np.ndarray:
         cam, view = key.split("/")
-        return np.load(res / "ground_truth" / "depth" / cam / f"{view}.npy")
+        return read_npy(res / "ground_truth" / "depth" / cam / f"{view}.npy")
 
     folders = {"converted": res / "views", "ideal": res / "ground_truth" / "renders"}
     renderers = ["dibr"] + (["rvs"] if args.rvs else [])

@@ -30,6 +30,7 @@ import cv2
 import numpy as np
 
 from plenocal.artifacts.cameras import read_cameras
+from plenocal.io.files import read_npy
 from plenocal.names import split_key
 from plenocal.verify import view_geometry as vg
 
@@ -69,7 +70,7 @@ def measure(capture: str, step: int, set_stride: int) -> dict:
         the prediction's derivative in the focal-length change."""
         c1, c2 = truth[f"{s1}/{v1}"], truth[f"{s2}/{v2}"]
         if (s1, v1) not in depths:
-            depths[(s1, v1)] = np.load(d / "ground_truth" / "depth" / s1 / f"{v1}.npy")
+            depths[(s1, v1)] = read_npy(d / "ground_truth" / "depth" / s1 / f"{v1}.npy")
         depth = depths[(s1, v1)]
         img = grey(s1, v1)
         uv = _grid(img.shape, step, 16)

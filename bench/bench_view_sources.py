@@ -58,6 +58,7 @@ from benchmd import Lines  # noqa: E402
 from plenocal.artifacts.cameras import read_cameras  # noqa: E402
 from plenocal.config import validate_config  # noqa: E402
 from plenocal.convert.viewset import read_view_set, view_set_files  # noqa: E402
+from plenocal.io.files import read_npy  # noqa: E402
 from plenocal.names import central_view, view_key  # noqa: E402
 from plenocal.simulate.groundtruth import render_views  # noqa: E402
 
@@ -202,7 +203,7 @@ def rerender_with_oracle(work: Path, cfg: dict) -> list[float]:
                                  setup_json=res / "views" / "convert_setup.json", analysis=a)
 
         layout = shot_conversion(analysis).layout
-        depth = np.load(res / "ground_truth" / "depth" / shot / f"{centre}.npy")
+        depth = read_npy(res / "ground_truth" / "depth" / shot / f"{centre}.npy")
         true = oracle_patch(layout, depth, truth[f"{shot}/{centre}"], truth[f"{shot}/{right}"])
         patch = analysis.patch.patch.copy()
         est = patch[layout.lens_index].astype(float)
