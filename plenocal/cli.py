@@ -358,8 +358,11 @@ def run_convert(args: argparse.Namespace, log: logging.Logger) -> None:
         if path is not None and Path(path).is_dir():
             raise ConvertError(f"{path}: a folder, where the {what} file is asked for (one "
                                "file a command: convert a folder's frames one by one)")
-        if path is not None and not Path(path).is_file():
+        if path is not None and not Path(path).exists():
             raise ConvertError(f"{path}: {what} not found")
+        if path is not None and not Path(path).is_file():
+            raise ConvertError(f"{path}: not a regular file (a device or a pipe), where the "
+                               f"{what} file is asked for: save it to a file and name that")
     if args.setup is not None:
         _refuse_other_views(args)
     if args.png_bits is not None and args.out_format != "png":

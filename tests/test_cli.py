@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -81,6 +82,10 @@ def test_missing_file_and_malformed_xml_exit_2(tmp_path, shot):
     r = _cli("convert", str(lenslet.parent), str(calib), "-o", str(tmp_path / "o"))
     assert r.returncode == 2
     assert f"{lenslet.parent}: a folder, where the lenslet image file is asked for" in r.stderr
+    # a device that exists (it was called "not found")
+    r = _cli("convert", str(lenslet), os.devnull, "-o", str(tmp_path / "o"))
+    assert r.returncode == 2
+    assert f"{os.devnull}: not a regular file (a device or a pipe), where the calib.xml" in r.stderr
     bad = tmp_path / "bad.xml"
     bad.write_text("<RayCalibData><diameter>23")
     r = _cli("convert", str(lenslet), str(bad), "-o", str(tmp_path / "o"))

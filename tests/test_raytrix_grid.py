@@ -162,3 +162,46 @@ def test_external_entity_refused(tmp_path: Path):
 def test_missing_file_is_a_clear_error(tmp_path: Path):
     with pytest.raises(CalibError, match="cannot read"):
         read_calib(tmp_path / "nope.xml")
+
+
+@pytest.mark.parametrize("encoding", ["Shift_JIS", "GBK", "EUC-JP", "ISO-8859-1"])
+def test_a_declared_encoding_that_python_reads_is_read(tmp_path: Path, encoding: str):
+    """A declaration of a multi-byte encoding (a file saved on a Japanese or Chinese
+    system) gave XML's parser's bare ValueError "multi-byte encodings are not supported",
+    outside the CalibError that the converter and the workflow name: it is read by
+    Python's codec, a comment in that encoding included, to the same values."""
+    body = GOOD.split("?>", 1)[1] if GOOD.lstrip().startswith("<?xml") else GOOD
+    p = tmp_path / "calib.xml"
+    comment = "<!-- 名古屋 -->\n" if encoding != "ISO-8859-1" else "<!-- Zürich -->\n"
+    p.write_bytes(f'<?xml version="1.0" encoding="{encoding}"?>\r\n{comment}{body}'
+                  .encode(encoding))
+    assert read_calib(p) == parse_calib(GOOD)
+
+
+@pytest.mark.parametrize("encoding", ["utf8x", "unicode"])
+def test_a_declared_encoding_nobody_knows_names_file_and_remedy(tmp_path: Path,
+                                                                encoding: str):
+    """An encoding that neither XML's parser nor Python knows gave a bare LookupError."""
+    body = GOOD.split("?>", 1)[1] if GOOD.lstrip().startswith("<?xml") else GOOD
+    p = tmp_path / "calib.xml"
+    p.write_text(f'<?xml version="1.0" encoding="{encoding}"?>\n{body}')
+    with pytest.raises(CalibError, match=rf"calib\.xml: <document>: .*'{encoding}'.*save the "
+                                         r"file as UTF-8"):
+        read_calib(p)
+
+
+@pytest.mark.parametrize("element, extra", [
+    ("<diameter", '<diameter units="pix">30.0</diameter>'),
+    ("<rotation", '<rotation units="rad">0.5</rotation>'),
+    ("<offset", '<offset units="pix"><x>0.0</x><y>0.0</y></offset>'),
+    ("<lens_border", '<lens_border units="pix">2.0</lens_border>'),
+])
+def test_an_element_given_twice_is_refused(tmp_path: Path, element: str, extra: str):
+    """A second copy of an element was ignored without a word (the first one read): a
+    file with two diameters or two offsets converted on whichever came first."""
+    i = GOOD.index(element)
+    p = tmp_path / "calib.xml"
+    p.write_text(GOOD[:i] + extra + GOOD[i:])
+    key = element.lstrip("<")
+    with pytest.raises(CalibError, match=rf"calib\.xml: {key}: given 2 times .*keep the one"):
+        read_calib(p)

@@ -27,8 +27,10 @@ entity declarations, external entities and DTD tricks.
 
 from __future__ import annotations
 
+import codecs
 import copy
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from xml.etree.ElementTree import Element, SubElement, tostring
@@ -77,8 +79,20 @@ def _err(source: str, key: str, why: str) -> CalibError:
     return CalibError(f"{source}: {key}: {why}")
 
 
+def _single(root: Element, path: str, source: str) -> Element | None:
+    """The one element at ``path`` (None where absent); CalibError where the file gives it
+    more than once: which copy the camera's software meant cannot be told."""
+    found = root.findall(path)
+    if len(found) > 1:
+        texts = ", ".join(repr(" ".join(t.strip() for t in e.itertext() if t.strip()))
+                          for e in found)
+        raise _err(source, path.replace("/", "."), f"given {len(found)} times ({texts}): "
+                   "keep the one that is this camera's and delete the others")
+    return found[0] if found else None
+
+
 def _number(root: Element, path: str, source: str, required: bool = True) -> float | None:
-    el = root.find(path)
+    el = _single(root, path, source)
     if el is None:
         if required:
             raise _err(source, path.replace("/", "."), "missing")
@@ -95,7 +109,7 @@ def _number(root: Element, path: str, source: str, required: bool = True) -> flo
 
 def _flag(root: Element, path: str, source: str) -> int | None:
     """An optional 0 / 1 flag (``isReal``); None where absent or empty."""
-    el = root.find(path)
+    el = _single(root, path, source)
     if el is None or not (el.text or "").strip():
         return None
     value = _number(root, path, source)
@@ -106,7 +120,7 @@ def _flag(root: Element, path: str, source: str) -> int | None:
 
 def _vec(root: Element, name: str, source: str, required: bool = True,
          keys: tuple[str, str] = ("x", "y")) -> tuple[float, float] | None:
-    if root.find(name) is None:
+    if _single(root, name, source) is None:
         if required:
             raise _err(source, name, "missing")
         return None
@@ -132,10 +146,39 @@ def _check_units(root: Element, source: str) -> None:
                        f"convert the value to {unit} and write units=\"{unit}\"")
 
 
+#: the encoding an XML declaration names
+_DECLARED_ENCODING = re.compile(
+    rb"""^(?:\xef\xbb\xbf)?\s*<\?xml[^>]*?encoding\s*=\s*["']([^"']+)["']""")
+
+
+def _decoded(data: bytes, source: str) -> str:
+    """``data`` decoded by the encoding its XML declaration names, for the encodings that
+    Python reads and XML's parser does not (multi-byte ones: Shift_JIS, GBK, EUC-JP);
+    CalibError where the declaration names none that Python knows."""
+    m = _DECLARED_ENCODING.match(data)
+    name = m.group(1).decode("ascii", "replace") if m else "?"
+    try:
+        codecs.lookup(name)
+        return data.decode(name)
+    except (LookupError, UnicodeDecodeError) as exc:
+        raise _err(source, "<document>", f"cannot be read as the encoding its XML "
+                   f"declaration names ({name!r}: {exc}): save the file as UTF-8 and write "
+                   'encoding="UTF-8" in its first line') from None
+
+
 def parse_calib(text: str | bytes, source: str = "<string>") -> RayCalib:
     """Parse RayCalibData XML text. Raises :class:`CalibError` naming ``source``."""
     try:
-        root = SafeET.fromstring(text, forbid_dtd=True)
+        try:
+            root = SafeET.fromstring(text, forbid_dtd=True)
+        except DefusedXmlException:
+            raise
+        except (ValueError, LookupError):
+            # XML's parser reads no multi-byte encoding a declaration names ("multi-byte
+            # encodings are not supported") nor one it does not know: Python's codecs do
+            if not isinstance(text, bytes):
+                raise
+            root = SafeET.fromstring(_decoded(text, source), forbid_dtd=True)
     except DefusedXmlException as exc:
         raise _err(source, "<document>", f"refused unsafe XML ({type(exc).__name__})") from None
     except SafeET.ParseError as exc:
@@ -201,8 +244,8 @@ def parse_calib(text: str | bytes, source: str = "<string>") -> RayCalib:
     if len(types) > 1 and sub is None:
         raise _err(source, "sub_grid_base", "missing although several lens types are given")
     is_real = _flag(root, "isReal", source)
-    dist = root.find("distortion")
-    kmat = root.find("k_matrix")
+    dist = _single(root, "distortion", source)
+    kmat = _single(root, "k_matrix", source)
     return RayCalib(
         diameter=diameter, offset=offset, rotation=rotation, lens_border=lens_border,
         lens_base_x=bx, lens_base_y=by, lens_types=tuple(sorted(types, key=lambda t: t.id)),
