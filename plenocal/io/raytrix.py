@@ -22,7 +22,10 @@ Conventions (shared with PlenopticToolbox 2.0 and the MPEG reference software): 
 image centre is ((W-1)/2, (H-1)/2) with pixel centres at integers; the file's ``y``
 axis points up, so the grid origin in image coordinates is
 ``(cx + offset.x, cy - offset.y)``. Parsing uses :mod:`defusedxml`, which refuses
-entity declarations, external entities and DTD tricks.
+entity declarations, external entities and DTD tricks. A file is read in the encoding its
+XML declaration names (multi-byte ones such as Shift_JIS by Python's codec, which XML's
+parser lacks); an element the reader uses that is given twice is refused, not read from
+its first copy.
 """
 
 from __future__ import annotations
