@@ -45,23 +45,32 @@ def update_sections(path: str | Path, sections: dict[str, list[str]],
     read into a dict by heading lost the first of two sections that a person had given
     the same heading (BENCHMARKS.md's hand-kept "Full run: earlier runs"). Where a
     heading of ``sections`` stands more than once, its first section is replaced and the
-    others are kept."""
+    others are kept. The text outside the replaced sections is written back byte for
+    byte (a rewrite once joined the sections again with one blank line each, and so
+    changed the blank lines of sections it did not own)."""
     path = Path(path)
-    old = path.read_text().split("\n## ") if path.exists() else [TITLE]
-    blocks: list[tuple[str, list[str]]] = []
-    for block in old[1:]:
-        heading, _, body = block.partition("\n")
-        blocks.append((heading.strip(), body.rstrip("\n").split("\n")))
+    text = path.read_text() if path.exists() else ""
+    if not text.strip():
+        text = f"{TITLE}\n\n{INTRO}\n"
+    # the raw text of each section, so that those not replaced are written back byte for
+    # byte (their blank lines, two before a heading included): the preamble, then each
+    # "heading\nbody" with the "\n## " that precedes it taken off
+    preamble, *raw = text.split("\n## ")
     todo = dict(sections)
-    for i, (heading, body) in enumerate(blocks):
-        if heading in todo:
-            earlier = body if keep_history else []
-            while earlier and not earlier[0].strip():
-                earlier = earlier[1:]
-            blocks[i] = (heading, ["", *todo.pop(heading), *([""] if earlier else []),
-                                   *earlier])
-    blocks += [(heading, ["", *lines]) for heading, lines in todo.items()]
-    out = [TITLE, "", INTRO]
-    for heading, body in blocks:
-        out += ["", f"## {heading}", *body]
-    path.write_text("\n".join(out).rstrip("\n") + "\n")
+    for i, block in enumerate(raw):
+        heading, _, body = block.partition("\n")
+        if heading.strip() not in todo:
+            continue
+        core = body.rstrip("\n")
+        trail = body[len(core):] or "\n"  # the blank lines before the next heading
+        earlier = core.split("\n") if keep_history else []
+        while earlier and not earlier[0].strip():
+            earlier = earlier[1:]
+        lines = ["", *todo.pop(heading.strip()), *([""] if earlier else []), *earlier]
+        raw[i] = f"{heading.strip()}\n" + "\n".join(lines) + trail
+    out = "\n## ".join([preamble, *raw])
+    if todo:
+        out = out.rstrip("\n") + "\n" + "".join(
+            f"\n## {heading}\n" + "\n".join(["", *lines]) + "\n"
+            for heading, lines in todo.items())
+    path.write_text(out)

@@ -46,3 +46,20 @@ def test_with_the_history_kept_the_new_run_goes_first_and_the_earlier_stay(tmp_p
     assert "### Earlier\n\nolder\n\n## B" in text
     benchmd.update_sections(md, {"Speed": ["| 3 |"]})
     assert "| 3 |" in md.read_text() and "| 2 |" not in md.read_text()
+
+
+def test_a_rewrite_leaves_the_rest_of_the_file_byte_for_byte(tmp_path):
+    # the sections were joined again with one blank line each: a rewrite of one section
+    # took a blank line out of another (two blank lines before a heading), and the preamble
+    # was written anew
+    md = tmp_path / "BENCHMARKS.md"
+    before = ("# Benchmarks\n\nhand-written intro\n\n## A\n\nold a\n\n\n## B\n\nb\n\n\n\n"
+              "## C\n\nc line\n  \n## D\n\nd\n")
+    md.write_text(before)
+    benchmd.update_sections(md, {})
+    assert md.read_text() == before
+    benchmd.update_sections(md, {"C": ["new c"]})
+    assert md.read_text() == before.replace("c line\n  \n", "new c\n\n")
+    benchmd.update_sections(md, {"D": ["new d"], "E": ["e"]})
+    assert md.read_text() == (before.replace("c line\n  \n", "new c\n\n")
+                              .replace("## D\n\nd\n", "## D\n\nnew d\n\n## E\n\ne\n"))
