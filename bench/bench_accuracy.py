@@ -40,7 +40,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import re
@@ -57,6 +56,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from benchmd import Lines, update_sections  # noqa: E402
 
 from plenocal.config import deep_update  # noqa: E402
+from plenocal.io.files import read_json  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "bench" / "out" / "accuracy"
@@ -273,7 +273,7 @@ def run_capture(work: Path, cfg: dict, forcerun: list[str], jobs: int,
 
 
 def _json(work: Path, rel: str) -> dict:
-    return json.loads((work / "results" / DATASET / rel).read_text())
+    return read_json(work / "results" / DATASET / rel)
 
 
 def _psnr(exp: dict, cameras: str, depth: str = "estimated") -> float | None:
@@ -359,7 +359,7 @@ def collect(work: Path, exp1: bool = True) -> dict:
         out["sources"] = gt["sources"]
     rf = work / "results" / DATASET / "calibration" / "refine.json"
     if rf.is_file():
-        out["refine"] = json.loads(rf.read_text())
+        out["refine"] = read_json(rf)
     out["refine_job"] = refine_job(work)
     return out
 

@@ -25,14 +25,13 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import cv2
 import numpy as np
 from benchmd import Lines, update_sections
 
-from plenocal.io.files import read_npy
+from plenocal.io.files import read_json, read_npy
 
 ROOT = Path(__file__).resolve().parent / "out" / "accuracy"
 SECTION = "Central views against the true pinhole renders (issue 32)"
@@ -102,7 +101,7 @@ def capture_figures(folder: Path, central: str = "2_2") -> dict:
         z10, z90 = np.percentile(depth[mask], [10.0, 90.0])
         s_all.append(100.0 * s)
         dm_all.append(100.0 * k * (1.0 / z10 - 1.0 / z90))
-    gt = json.loads((res / "eval" / "gt_errors.json").read_text())
+    gt = read_json(res / "eval" / "gt_errors.json")
     return {"views": len(s_all), "s": float(np.median(s_all)),
             "near_far": float(np.median(dm_all)),
             "a_focal": gt.get("sources", {}).get("a_focal_pct")}

@@ -55,7 +55,7 @@ from benchmd import Lines, update_sections  # noqa: E402
 
 from plenocal.artifacts.cameras import read_cameras  # noqa: E402
 from plenocal.calib.reg_a.colmap import opencv_sift  # noqa: E402
-from plenocal.io.files import read_npy  # noqa: E402
+from plenocal.io.files import read_json, read_npy  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 RENDERS = ROOT / "bench" / "out" / "feature_truth"
@@ -202,9 +202,7 @@ def run(capture: str, within: float, renders_root: Path) -> dict:
 
 
 def _workflow_focal(res: Path) -> float:
-    import json  # noqa: PLC0415
-
-    gt = json.loads((res / "eval" / "gt_errors.json").read_text())
+    gt = read_json(res / "eval" / "gt_errors.json")
     return float(gt["complete"]["focal_err_signed_pct"])
 
 

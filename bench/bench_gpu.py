@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import json
 import shutil
 import sys
 import tempfile
@@ -35,7 +34,7 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_workflow import ROOT, make_copy, rule_benchmarks, snakemake  # noqa: E402
 
-from plenocal.io.files import read_npy  # noqa: E402
+from plenocal.io.files import read_json, read_npy  # noqa: E402
 
 #: the rules whose device or backend the two runs change
 CHANGED = ("features_a", "match_a", "view_features", "view_matches", "depth_a", "depth_b")
@@ -56,7 +55,7 @@ def depth_scores(results: Path, reg: str) -> dict:
     scale (the median ratio over all its maps' valid pixels) brings them to metres."""
     pairs = []
     for info_path in sorted((results / "depth" / reg).glob("x*.json")):
-        info = json.loads(info_path.read_text())
+        info = read_json(info_path)
         cam, view = info["reference"].split("/")
         truth = results / "ground_truth" / "depth" / cam / f"{view}.npy"
         if truth.is_file():
@@ -92,18 +91,18 @@ def one_run(work: Path, config: dict, label: str, jobs: int, ds: str) -> dict:
     # the true depth of the depth maps' reference views (the ideal renders' rule)
     truth = []
     for info_path in sorted((results / "depth").glob("?/x*.json")):
-        cam, view = json.loads(info_path.read_text())["reference"].split("/")
+        cam, view = read_json(info_path)["reference"].split("/")
         truth.append(f"results/{ds}/ground_truth/depth/{cam}/{view}.npy")
     if truth:
         snakemake(work, *sorted(set(truth)), jobs=jobs,
                   log=work / f"snakemake_{label}_truth.log")
     shutil.copytree(results / "logs", work / f"logs_{label}", dirs_exist_ok=True)
-    checks = json.loads((results / "eval" / "gt_errors.json").read_text())["checks"]
+    checks = read_json(results / "eval" / "gt_errors.json")["checks"]
     rules = rule_benchmarks(work)
     return {"wall": wall, "rules": {r: rules[r] for r in CHANGED if r in rules},
             "checks": {c["name"]: c for c in checks},
             "depth": {reg: depth_scores(results, reg) for reg in ("a", "b")},
-            "matches": json.loads((results / "matches" / "matches.json").read_text())}
+            "matches": read_json(results / "matches" / "matches.json")}
 
 
 def report(runs: dict[str, dict], jobs: int) -> list[str]:

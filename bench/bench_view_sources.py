@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import os
 import shutil
 import sys
@@ -58,7 +57,7 @@ from benchmd import Lines  # noqa: E402
 from plenocal.artifacts.cameras import read_cameras  # noqa: E402
 from plenocal.config import validate_config  # noqa: E402
 from plenocal.convert.viewset import read_view_set, view_set_files  # noqa: E402
-from plenocal.io.files import read_npy  # noqa: E402
+from plenocal.io.files import read_json, read_npy  # noqa: E402
 from plenocal.names import central_view, view_key  # noqa: E402
 from plenocal.simulate.groundtruth import render_views  # noqa: E402
 
@@ -76,7 +75,7 @@ def view_files(res: Path) -> dict[str, Path]:
 
 def held_central(res: Path) -> str:
     """The key of the held shot's central view (the shot the refinement holds)."""
-    refine = json.loads((res / "calibration" / "refine.json").read_text())
+    refine = read_json(res / "calibration" / "refine.json")
     n = int(round(len({key.split("/")[1] for key in view_files(res)}) ** 0.5))
     return view_key(refine["hold_shot"], central_view(n))
 
@@ -224,8 +223,8 @@ def rerender_with_oracle(work: Path, cfg: dict) -> list[float]:
 def figures(work: Path) -> dict:
     """The complete calibration's errors against the truth and the refinement's median."""
     res = work / "results" / DATASET
-    g = json.loads((res / "eval" / "gt_errors.json").read_text())["complete"]
-    r = json.loads((res / "calibration" / "refine.json").read_text())
+    g = read_json(res / "eval" / "gt_errors.json")["complete"]
+    r = read_json(res / "calibration" / "refine.json")
     return {"focal": g["focal_err_signed_pct"], "centres": g["centre_rmse_mm"],
             "rotation": g["rotation_err_deg"]["max"],
             "median": r["observations"]["after"]["median_px"], "kept": not r["rejected"]}

@@ -279,9 +279,8 @@ def proposed_vs_naive(work: Path, rules: dict[str, dict[str, float]]) -> list[st
     target needs (:func:`target_seconds`; conversion is common to all and left out, as is
     SfM from scratch, rule baseline_scratch) and Table I's errors (its eq6 row for the
     paper's method, its complete row for the calibration as written)."""
-    import json  # noqa: PLC0415
-
     from plenocal.artifacts.results import read_reprojection_table  # noqa: PLC0415
+    from plenocal.io.files import read_json  # noqa: PLC0415
 
     ds = next(iter(sorted(work.glob("results/*/eval/reprojection.json"))), None)
     if ds is None:
@@ -322,7 +321,7 @@ def proposed_vs_naive(work: Path, rules: dict[str, dict[str, float]]) -> list[st
         lines.append(f"* the ground-truth cameras on the same matches: mean {g['mean_px']:.4f} px,"
                      f" median {g['median_px']:.4f} px")
     if scratch_json.is_file():
-        sc = json.loads(scratch_json.read_text())
+        sc = read_json(scratch_json)
         lines.append(f"* SfM of all views from scratch: {sc['registered_largest_model']} of "
                      f"{sc['num_images']} views in the largest of {sc['num_models']} models, "
                      f"focal {sc.get('focal_px', float('nan')):.1f} px, "
