@@ -372,7 +372,10 @@ def main() -> None:
     ap.add_argument("--skip-full", action="store_true", help="no full run (with --scaling)")
     ap.add_argument("--skip-calibration", action="store_true",
                     help="no separate run of the calibration alone")
-    ap.add_argument("--out", default=str(ROOT / "BENCHMARKS.md"))
+    ap.add_argument("--out", default=str(ROOT / "BENCHMARKS.md"),
+                    help="the Markdown file whose sections this script replaces (default: "
+                         "the repository's own BENCHMARKS.md; give another file to leave it "
+                         "as it is)")
     add_keep_history(ap)
     ap.add_argument("--keep", action="store_true", help="keep the scratch folder")
     ap.add_argument("--from-kept", default=None, metavar="DIR",
