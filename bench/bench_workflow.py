@@ -169,11 +169,24 @@ def startup_env() -> str:
             f"pandas {have('pandas')}")
 
 
+def kept_log(work: Path) -> Path:
+    """The log of the first Snakemake run in ``work``, a full run's folder that ``--keep``
+    kept; ValueError naming the folder and the remedy where it holds none."""
+    logs = sorted((work / ".snakemake" / "log").glob("*.snakemake.log"))
+    if not logs:
+        inner = work / "full"
+        hint = (f" (here: {inner})" if any((inner / ".snakemake" / "log").glob(
+            "*.snakemake.log")) else "")
+        raise ValueError(f"{work}: no kept full run (no Snakemake log in "
+                         f"{work / '.snakemake' / 'log'}): give the folder full/ in the "
+                         f"scratch folder that --keep kept{hint}")
+    return logs[0]
+
+
 def logged_wall(work: Path) -> float:
     """Wall time of the first Snakemake run in ``work`` from its log (start to the
     last job's time stamp)."""
-    log = sorted((work / ".snakemake" / "log").glob("*.snakemake.log"))[0]
-    lines = log.read_text().splitlines()
+    lines = kept_log(work).read_text().splitlines()
     start = next(datetime.strptime(x.split("Date:")[1].strip(), "%Y-%m-%d %H:%M:%S")
                  for x in lines if x.strip().startswith("Date:"))
     end = max(datetime.strptime(x.strip("[]"), "%a %b %d %H:%M:%S %Y")
@@ -379,8 +392,19 @@ def main() -> None:
     add_keep_history(ap)
     ap.add_argument("--keep", action="store_true", help="keep the scratch folder")
     ap.add_argument("--from-kept", default=None, metavar="DIR",
-                    help="summarise a full run kept by --keep (DIR/full) instead of running")
+                    help="instead of a new full run, use the one that --keep kept: DIR is "
+                         "its folder (full/ in the kept scratch folder). Its wall time comes "
+                         "from its Snakemake log, the rules' figures from their benchmark "
+                         "files; the dry runs (no-op, Table I's job seconds) and the two "
+                         "verification-change reruns still run, in DIR (its config.yaml "
+                         "rewritten), and the two calibrations alone from scratch unless "
+                         "--skip-calibration")
     args = ap.parse_args()
+    if args.from_kept:
+        try:
+            kept_log(Path(args.from_kept))
+        except ValueError as exc:
+            ap.error(f"--from-kept {exc}")
     config = yaml.safe_load(Path(args.config).read_text())
     scratch = Path(tempfile.mkdtemp(prefix="plenocal-bench-"))
     sections: dict[str, list[str]] = {}
