@@ -29,7 +29,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))  # synth: test inputs
 
-from benchmd import Lines, update_sections  # noqa: E402
+from benchmd import Lines, positive_int, update_sections  # noqa: E402
 from synth.lenslets import lenslet_from_patch_size, random_texture  # noqa: E402
 
 from plenocal.convert import ShotConversion  # noqa: E402
@@ -70,7 +70,7 @@ def main() -> None:
     ap.add_argument("--size", type=int, default=2048)
     ap.add_argument("--views", type=int, default=5)
     ap.add_argument("--lenslet", default=None)
-    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--repeat", type=positive_int, default=2)
     args = ap.parse_args()
     out = Lines()
     cv2.setNumThreads(1)

@@ -38,6 +38,7 @@ from pathlib import Path
 import cv2  # (first: see DESIGN.md on cv2/pycolmap)
 import numpy as np
 import yaml
+from benchmd import positive_int
 
 from plenocal.artifacts.cameras import read_cameras
 from plenocal.artifacts.results import PsnrTable, read_synthesis
@@ -154,7 +155,7 @@ def spread(values: list[float]) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("captures", nargs="+", type=Path)
-    ap.add_argument("--draws", type=int, default=3)
+    ap.add_argument("--draws", type=positive_int, default=3)
     ap.add_argument("--move-um", type=float, default=1.0)
     ap.add_argument("--turn-deg", type=float, default=1e-4)
     ap.add_argument("--threads", type=int, default=2)

@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))  # synth: test inputs
 
 from bench_real import USER_ENV, measure, plenocal_cmd, png_size  # noqa: E402
-from benchmd import Lines, update_sections  # noqa: E402
+from benchmd import Lines, positive_int, update_sections  # noqa: E402
 
 CALIB = Path("/work/shared/fixtures/raytrix-calib/TempleBoatGiantR32.xml")
 #: the patch size of the frame's one plane (px; the R32 fixture's lenses are about 34 px)
@@ -70,7 +70,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sizes", nargs="+", default=["6464x4852", "7716x5364"],
                     help="frame sizes WxH (default: R32's 31 MP and R42's 41 MP)")
-    ap.add_argument("--rounds", type=int, default=1)
+    ap.add_argument("--rounds", type=positive_int, default=1)
     ap.add_argument("--views", type=int, default=5)
     ap.add_argument("--out", default=None, help="also write the figures into this BENCHMARKS.md")
     args = ap.parse_args()

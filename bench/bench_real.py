@@ -88,7 +88,7 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from benchmd import Lines, add_keep_history, update_sections  # noqa: E402
+from benchmd import Lines, add_keep_history, positive_int, update_sections  # noqa: E402
 
 from plenocal.cli import command_line_block  # noqa: E402
 from plenocal.convert import ConvertSettings, ShotConversion  # noqa: E402
@@ -514,7 +514,8 @@ def main() -> None:
     ap.add_argument("--tlct", default=None, metavar="PATH",
                     help="TLCT's binary: measure speed and peak memory against it instead "
                          "(whole processes, see the docstring)")
-    ap.add_argument("--rounds", type=int, default=3, help="rounds per frame under --tlct")
+    ap.add_argument("--rounds", type=positive_int, default=3,
+                    help="rounds per frame under --tlct")
     ap.add_argument("--ffmpeg", default=None,
                     help="ffmpeg for the yuv input under --tlct (default: imageio-ffmpeg's)")
     args = ap.parse_args()

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from benchmd import positive_int
 
 from plenocal.artifacts.cameras import read_cameras
 from plenocal.io.files import read_npy
@@ -106,7 +107,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("captures", nargs="+", help="kept captures, e.g. dense-s15")
     ap.add_argument("--step", type=int, default=12, help="patch grid step (px)")
-    ap.add_argument("--set-stride", type=int, default=3,
+    ap.add_argument("--set-stride", type=positive_int, default=3,
                     help="every k-th shot's set measured for the parallax within a set")
     args = ap.parse_args()
     print("| capture | focal change the views show, LS / robust % | per-pair median % "

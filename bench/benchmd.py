@@ -5,6 +5,7 @@ and the hand-written paragraphs about them below it."""
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 TITLE = "# Benchmarks"
@@ -24,6 +25,18 @@ class Lines(list):
         """A Markdown table's header and its left-aligned separator row."""
         self.say("| " + " | ".join(columns) + " |")
         self.say("|" + "---|" * len(columns))
+
+
+def positive_int(text: str) -> int:
+    """An ``argparse`` type: a whole number of at least 1 (rounds, repeats, draws, a stride):
+    0 went on to fail far from the option (an empty list's median, a slice step of 0)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value}: give 1 or more")
+    return value
 
 
 def add_keep_history(parser) -> None:
