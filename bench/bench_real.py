@@ -417,6 +417,20 @@ def speed_frame(name: str, tlct: str, rounds: int, views: int, ffmpeg: str, work
             "failed": failed}
 
 
+def tlct_problem(path: Path) -> str | None:
+    """Why ``path`` cannot be TLCT's binary (not a file, not executable), None where it
+    can: checked before any frame, as a run per round reported it only as "failed" (and on
+    a frame without a TLCT cfg not at all)."""
+    if not path.is_file():
+        what = "a folder" if path.is_dir() else "no such file"
+    elif not os.access(path, os.X_OK):
+        what = "not executable"
+    else:
+        return None
+    return (f"{what}; give TLCT's binary (built by shared/tools/tlct/build.sh, its "
+            "README.md)")
+
+
 def speed_main(args: argparse.Namespace, frames: list[str]) -> None:
     tlct = str(Path(args.tlct).resolve())
     ffmpeg = ffmpeg_exe(args.ffmpeg)
@@ -519,6 +533,10 @@ def main() -> None:
     ap.add_argument("--ffmpeg", default=None,
                     help="ffmpeg for the yuv input under --tlct (default: imageio-ffmpeg's)")
     args = ap.parse_args()
+    if args.tlct is not None:
+        problem = tlct_problem(Path(args.tlct))
+        if problem:
+            ap.error(f"--tlct {args.tlct}: {problem}")
     cv2.setNumThreads(1)
     try:
         from plenocal.convert.compare import compare_to_reference as compare  # noqa: PLC0415

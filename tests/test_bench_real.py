@@ -64,3 +64,16 @@ def test_importing_the_bench_leaves_the_process_threads_alone():
     out = subprocess.run([sys.executable, "-c", _IMPORT_AFTER_NUMBA], cwd=root, env=env,
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0 and out.stdout.strip() == "2", out.stderr[-2000:]
+
+
+def test_a_tlct_that_cannot_run_is_refused_before_any_frame(tmp_path):
+    # a missing or non-executable binary showed only as "failed" per round, and on a frame
+    # without a TLCT cfg not at all
+    binary = tmp_path / "tlct"
+    assert "no such file" in bench_real.tlct_problem(binary)
+    assert "a folder" in bench_real.tlct_problem(tmp_path)
+    binary.write_text("#!/bin/sh\nexit 0\n")
+    binary.chmod(0o644)
+    assert "not executable" in bench_real.tlct_problem(binary)
+    binary.chmod(0o755)
+    assert bench_real.tlct_problem(binary) is None
