@@ -434,12 +434,14 @@ def tlct_problem(path: Path) -> str | None:
 def speed_main(args: argparse.Namespace, frames: list[str]) -> None:
     tlct = str(Path(args.tlct).resolve())
     ffmpeg = ffmpeg_exe(args.ffmpeg)
+    # as speed_frame passes it: the table's kind (the MLA column) or none (--mla auto)
+    mla = " --mla KIND" if args.mla == "table" else ""
     out = Lines()
     out.say(f"Whole processes alternating on one machine ({os.cpu_count()} cores, load average "
             f"{os.getloadavg()[0]:.1f} at the start; other jobs share the cores), {args.rounds} "
             f"round(s) per frame of: TLCT v1.6.0 (its cfg and convert.sh arguments from "
             f"shared/tools/tlct, OMP_NUM_THREADS=2, on the frame as raw yuv420p 8-bit made "
-            f"beforehand), `plenocal convert FRAME XML -o DIR --views {args.views} --mla KIND` "
+            f"beforehand), `plenocal convert FRAME XML -o DIR --views {args.views}{mla}` "
             f"(PNG in, PNG out), and the same on TLCT's yuv file with `--format yuv --size WxH "
             f"--bit-depth 8` (YUV in, YUV out), in the user's environment; {args.views} x "
             f"{args.views} views. Time: the median wall time of the process; memory: its peak "
@@ -489,6 +491,16 @@ def speed_main(args: argparse.Namespace, frames: list[str]) -> None:
                 f"{median_ratio('yuv')}; load average {os.getloadavg()[0]:.1f} at the end.")
     if args.out:
         update_sections(args.out, {SPEED_HEADING: list(out)}, keep_history=args.keep_history)
+
+
+def pictures_text(pictures: Path | None) -> str:
+    """The header's words for where the pictures went (``--pictures``)."""
+    if pictures is None:
+        return "none (--pictures '')"
+    shown = pictures.resolve()
+    shown = shown.relative_to(ROOT) if shown.is_relative_to(ROOT) else pictures
+    return (f"{shown}/<frame>.png (raw | ours | reference | patch sizes) and "
+            "<frame>_centre.png")
 
 
 def real_frames(wanted: list[str] | None) -> list[str]:
@@ -560,10 +572,10 @@ def main() -> None:
             "jobs share the cores: times above ~1 per core are inflated accordingly).")
     out.say("Targets (issue 12): at most 3 s per 4 MP for all views on one core; central view "
             "at least the reference's size, SSIM >= 0.85 and sharpness >= 0.8 against it "
-            "(plenocal.convert.compare). Pictures: bench/out/<frame>.png (raw | ours | "
-            "reference | patch sizes) and <frame>_centre.png. Aspect: the central view's x "
-            "scale over its y scale against the frame, both blurred until no micro image is "
-            "left (plenocal.convert.compare.sensor_aspect): 1 for the sensor's square pixels.")
+            f"(plenocal.convert.compare). Pictures: {pictures_text(pictures)}. Aspect: the "
+            "central view's x scale over its y scale against the frame, both blurred until "
+            "no micro image is left (plenocal.convert.compare.sensor_aspect): 1 for the "
+            "sensor's square pixels.")
     if compare is None:
         out.say("(plenocal.convert.compare not present: no comparison with the reference)")
     out.say("")
