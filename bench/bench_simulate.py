@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import argparse
 import copy
+import os
 import resource
-import subprocess
 import sys
 import tempfile
 import time
@@ -119,6 +119,23 @@ def psnr_by_samples(cfg: dict, dataset: str, out: Path, shots: list[str],
     return means
 
 
+def job_peak(cmd: list[str], work: Path) -> tuple[float, float]:
+    """The simulate job ``cmd`` as a process of its own: its wall seconds and peak RSS (MB),
+    measured as ``bench_real.py`` measures a converter (``/usr/bin/time -f %M``).
+    RUSAGE_CHILDREN counted this script's own memory, which a forked child starts with
+    (422 MB against the job's own 287 MB). Imported here, after the warm measure, so that
+    bench_real's imports do not add to this process's peak."""
+    from bench_real import TIME, measure  # noqa: PLC0415
+
+    if not TIME.is_file():
+        print(f"note: no {TIME}: the job's peak RSS is its launcher's child's ru_maxrss "
+              "(bench_real.measure's fallback)", file=sys.stderr)
+    # this checkout's package first, as the job ran from the repository's folder before
+    pypath = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p)
+    wall, peak = measure(cmd, {**os.environ, "PYTHONPATH": pypath}, work)
+    return wall, peak / 2**20
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--config", default=str(ROOT / "config.yaml"))
@@ -146,11 +163,8 @@ def main() -> None:
         render_shot(sim, tmp, "x01_y00", Path(tmp) / "a.png", log=lambda m: None)
         warm = time.perf_counter() - t0
         rss_warm = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-        t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-c", JOB, str(config_file), args.dataset, tmp, "hand00",
-                        str(Path(tmp) / "b.png")], check=True, cwd=ROOT)
-        cold = time.perf_counter() - t0
-        rss_job = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+        cold, rss_job = job_peak([sys.executable, "-c", JOB, str(config_file), args.dataset,
+                                  tmp, "hand00", str(Path(tmp) / "b.png")], Path(tmp))
         if args.psnr_samples:
             counts = sorted(int(k) for k in args.psnr_samples.split(","))
             per_seed = {seed: psnr_by_samples(cfg, args.dataset, Path(tmp) / "psnr",
