@@ -137,7 +137,7 @@ def job_peak(cmd: list[str], work: Path) -> tuple[float, float]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--config", default=str(ROOT / "config.yaml"))
     ap.add_argument("--dataset", default="synthetic")
     ap.add_argument("--simulate", help="YAML file with a `simulate:` block to use instead")
