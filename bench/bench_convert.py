@@ -6,8 +6,9 @@ Without ``--lenslet`` a 2048 x 2048 lenslet image is made on the grid of the giv
 Raytrix calibration (Fujita2 by default: D = 23.2 px, ~9000 lenses) with two textured
 planes (patch sizes 4.5 and 7.5 px; synth.lenslets). Everything runs on
 one thread (OpenCV, OpenMP, numba). Prints the time of each step, the total for all
-N x N views (without and with PNG encoding) and the throughput in megapixels of
-lenslet image per second, and the accuracy of the patch sizes against the truth.
+N x N views without PNG encoding (the PNG encoding's time beside it), the throughput in
+megapixels of lenslet image per second and the best total per 4 megapixels against the
+target, and the accuracy of the patch sizes against the truth.
 """
 
 from __future__ import annotations
@@ -98,8 +99,9 @@ def main() -> None:
               f"= {mp / total:.2f} MP/s; PNG encoding {t3 - t2:.2f} s "
               f"({sum(len(e) for e in encoded) / 1e6:.1f} MB)")
         best = total if best is None else min(best, total)
-    out.say(f"best total {best:.2f} s for {mp:.2f} MP ({mp / best:.2f} MP/s); target <= 3 s: "
-          f"{'met' if best <= 3.0 else 'NOT met'}")
+    per4 = best * 4 / mp  # the target is per 4-megapixel image, as bench_real's "s / 4 MP"
+    out.say(f"best total {best:.2f} s for {mp:.2f} MP ({mp / best:.2f} MP/s), {per4:.2f} s / "
+            f"4 MP; target <= 3 s / 4 MP: {'met' if per4 <= 3.0 else 'NOT met'}")
     L = shot.layout
     out.say(f"views {L.width}x{L.height}, tile {L.tile}, q {L.q:.3f} px, {len(L.lens_index)} used "
           f"lenses of {len(shot.grid)}")
