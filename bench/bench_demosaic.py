@@ -15,14 +15,14 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 import cv2
 import numpy as np
+from bench_real import REAL, real_frames
 
 from plenocal.convert.demosaic import MOSAIC_LIKENESS, demosaic, mosaic, mosaic_likeness
 
-FRAMES = Path(__file__).resolve().parents[1] / ".." / "shared" / "real" / "frames"
+FRAMES = REAL / "frames"
 # OpenCV names a Bayer code by the second row's first two colours (its own convention)
 _OPENCV = {"RGGB": cv2.COLOR_BayerBG2RGB, "GRBG": cv2.COLOR_BayerGB2RGB,
            "GBRG": cv2.COLOR_BayerGR2RGB, "BGGR": cv2.COLOR_BayerRG2RGB}
@@ -36,12 +36,12 @@ def psnr(a: np.ndarray, b: np.ndarray) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--frames", nargs="*", default=None)
-    ap.add_argument("--patterns", nargs="*", default=["RGGB", "GBRG"])
+    ap.add_argument("--frames", nargs="*", default=None, help="frame names (default: all)")
+    ap.add_argument("--patterns", nargs="*", default=["RGGB", "GBRG"], type=str.upper,
+                    choices=sorted(_OPENCV), help="Bayer patterns (any case)")
     args = ap.parse_args()
-    paths = sorted(FRAMES.glob("*.png"))
-    if args.frames:
-        paths = [p for p in paths if p.stem in args.frames]
+    # as bench_real: a frame not there (or no frames at all) stops it, with the names there
+    paths = [FRAMES / f"{name}.png" for name in real_frames(args.frames)]
     print(f"Mosaicked real frames brought back (PSNR dB against the frame); detector "
           f"likeness (a mosaic under {MOSAIC_LIKENESS}):\n")
     print("| frame | MP | pattern | ours dB | OpenCV bilinear dB | ours - OpenCV | ours s "
