@@ -121,7 +121,9 @@ def measure(seq: str, margin: float) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--seq", nargs="+", default=list(CROPS))
+    ap.add_argument("--seq", nargs="+", default=list(CROPS), choices=list(CROPS),
+                    metavar="SEQ", help="the sequences with a crop defined (CROPS): "
+                                        f"{', '.join(CROPS)} (default: all)")
     ap.add_argument("--margin", type=float, default=VideoSettings().hold_margin)
     args = ap.parse_args()
     cv2.setNumThreads(1)
