@@ -58,6 +58,10 @@ from plenocal.depth.sgm import SgmOptions, sgm_depth  # noqa: E402
 from plenocal.io.files import read_image, read_json, read_npy  # noqa: E402
 from plenocal.names import file_key  # noqa: E402
 
+#: the depth bounds (m) searched where there is no ground truth, about the slanted plane
+#: (through 0.6 m, tilted by 30 deg): --near and --far are the ground truth's
+PLANE_BOUNDS = (0.4, 0.9)
+
 
 def run_sweep(out, label, ref, img, srcs, simgs, near, far, gt, opt):
     n = choose_num_depths(ref, srcs, near, far, opt)
@@ -94,15 +98,23 @@ def run_sgbm(out, label, c1, i1, c2, i2, near, far, gt):
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", default=None, help="also write the figures into this BENCHMARKS.md")
-    ap.add_argument("--dataset", default="synthetic")
-    ap.add_argument("--cam", default=None)
-    ap.add_argument("--near", type=float, default=0.47 * 0.85)
-    ap.add_argument("--far", type=float, default=0.74 * 1.15)
+    ap.add_argument("--dataset", default="synthetic",
+                    help="the dataset whose ground truth (results/<dataset>/ground_truth, "
+                         "under the current folder) is the reference; without it the "
+                         "slanted plane is, and --cam, --near and --far do not apply")
+    ap.add_argument("--cam", default=None,
+                    help="with the ground truth: the reference shot (default: the middle one)")
+    ap.add_argument("--near", type=float, default=0.47 * 0.85,
+                    help="with the ground truth: the nearest depth searched (m)")
+    ap.add_argument("--far", type=float, default=0.74 * 1.15,
+                    help="with the ground truth: the farthest depth searched (m)")
     ap.add_argument("--results", default=None,
                     help="results/<dataset> folder with depth_view and synthesis outputs")
     a = ap.parse_args()
+    if a.results and not Path(a.results).is_dir():
+        ap.error(f"--results {a.results}: no such folder (give a run's results/<dataset>)")
     sections = {}
     if not a.results:  # with --results only the figures of that run
         out = Lines()
@@ -113,6 +125,11 @@ def main() -> None:
     else:
         syn = Lines()
         synthesis_figures(Path(a.results), syn)
+        if not syn:  # an empty section must not pass for a measured one
+            sys.exit(f"--results {a.results}: no depth map of rule depth_view with its true "
+                     "depth (depth/views/, ground_truth/depth/) and no "
+                     "eval/synthesis_exp<k>.json: give a run's results/<dataset> whose "
+                     "rules depth_view and synthesis_exp<k> ran")
         sections["Depth for view synthesis and RVS"] = [
             f"`python bench/bench_depth.py --results {a.results}` (rules depth_view and "
             "synthesis_exp<k> of a default run; PSNR in dB, mean over the targets):", "",
@@ -217,7 +234,10 @@ def measure(a, out: Lines) -> None:
         run_sgbm(out, f"StereoSGBM {ref_key} + {right}", cams[ref_key], img, cams[right],
                  load(right), a.near, a.far, gt)
         return
-    out.say("no ground truth under results/: textured slanted plane, 320x240, 2 cm baseline")
+    near, far = PLANE_BOUNDS
+    out.say(f"no ground truth under results/{a.dataset}/: textured slanted plane, 320x240, "
+            f"2 cm baseline, bounds [{near:.3f}, {far:.3f}] m (--cam, --near and --far apply "
+            "to the ground truth only)")
     tex = photo_texture(512)
     plane = fronto_plane(0.6, 0.8, tex, 30.0)
     ref = camera_at([0, 0, 0], 500.0, 320, 240)
@@ -225,12 +245,12 @@ def measure(a, out: Lines) -> None:
             for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy]
     img, gt = render_plane(ref, plane)
     simgs = [render_plane(s, plane)[0] for s in srcs]
-    run_sweep(out, "plane sweep, 8 sources", ref, img, srcs, simgs, 0.4, 0.9, gt, opt)
-    run_sgm(out, "SGM, 8 sources", ref, img, srcs, simgs, 0.4, 0.9, gt, SgmOptions())
+    run_sweep(out, "plane sweep, 8 sources", ref, img, srcs, simgs, near, far, gt, opt)
+    run_sgm(out, "SGM, 8 sources", ref, img, srcs, simgs, near, far, gt, SgmOptions())
     right = srcs[6]  # (+1, 0)
-    run_sweep(out, "plane sweep, same pair as SGBM", ref, img, [right], [simgs[6]], 0.4, 0.9, gt,
-              PlaneSweepOptions(lr_check=False, best_fraction=1.0))
-    run_sgbm(out, "StereoSGBM", ref, img, right, simgs[6], 0.4, 0.9, gt)
+    run_sweep(out, "plane sweep, same pair as SGBM", ref, img, [right], [simgs[6]], near, far,
+              gt, PlaneSweepOptions(lr_check=False, best_fraction=1.0))
+    run_sgbm(out, "StereoSGBM", ref, img, right, simgs[6], near, far, gt)
 
 
 if __name__ == "__main__":
