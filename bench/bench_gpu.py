@@ -137,7 +137,7 @@ def report(runs: dict[str, dict], jobs: int) -> list[str]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--config", default=str(ROOT / "config.yaml"))
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", help="also write the figures (markdown) to this file")
