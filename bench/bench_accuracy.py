@@ -301,6 +301,27 @@ def measured(work: Path) -> bool:
     return (work / "results" / DATASET / "eval" / "gt_errors.json").is_file()
 
 
+def require_kept_capture(work: Path, needs: tuple[str, ...] = ("eval/gt_errors.json",),
+                         remedy: str = "") -> Path:
+    """``work`` where it holds a capture this script kept (its ``config.yaml``) with the
+    files ``needs`` under ``results/<dataset>/``. Otherwise SystemExit naming the folder,
+    what it lacks and the remedy (``remedy`` where the files are not this script's): the
+    benches that read kept captures stopped on the first file they opened, with a remedy
+    meant for a workflow run (rerun a rule)."""
+    if not (work / "config.yaml").is_file():
+        what = "no config.yaml" if work.is_dir() else "no such folder"
+        raise SystemExit(f"{work}: not a kept capture of bench_accuracy.py ({what}): run "
+                         "bench/bench_accuracy.py for it first (it keeps each capture in "
+                         f"{OUT}/<geometry>-s<seed>)")
+    files = [f"results/{DATASET}/{rel}" for rel in needs]
+    missing = [rel for rel in files if not (work / rel).is_file()]
+    if missing:
+        exp1 = " (without --no-exp1: Exp. 1)" if "synthesis_exp1" in missing[0] else ""
+        raise SystemExit(f"{work}: the capture has no {missing[0]} yet: "
+                         + (remedy or f"run bench/bench_accuracy.py for it{exp1}"))
+    return work
+
+
 def kept_captures(geometries: list[str]) -> list[tuple[str, Path]]:
     """Every kept capture of ``geometries`` (``bench/out/accuracy/<geometry>-s<seed>`` with
     its ``gt_errors.json``), by geometry, then seed."""

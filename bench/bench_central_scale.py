@@ -29,6 +29,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from bench_accuracy import require_kept_capture
 from benchmd import Lines, update_sections
 
 from plenocal.io.files import read_json, read_npy
@@ -113,8 +114,12 @@ def main() -> None:
                     help="capture folders under bench/out/accuracy (default: all)")
     ap.add_argument("--out", default=None, help="BENCHMARKS.md to update (its section)")
     args = ap.parse_args()
-    names = args.captures or sorted(p.name for p in ROOT.iterdir()
+    names = args.captures or sorted(p.name for p in (ROOT.iterdir() if ROOT.is_dir() else ())
                                     if (p / "results").is_dir() and "-refine" not in p.name)
+    if not names:
+        raise SystemExit(f"no kept captures in {ROOT}: run bench/bench_accuracy.py first")
+    for name in names:
+        require_kept_capture(ROOT / name)
     lines = Lines()
     lines.say("Each capture's central views (one per shot) against the simulator's ideal "
               "pinhole renders of the same true cameras (bench/bench_central_scale.py): "

@@ -38,6 +38,7 @@ from pathlib import Path
 import cv2  # (first: see DESIGN.md on cv2/pycolmap)
 import numpy as np
 import yaml
+from bench_accuracy import require_kept_capture
 from benchmd import positive_int
 
 from plenocal.artifacts.cameras import read_cameras
@@ -160,6 +161,8 @@ def main() -> None:
     ap.add_argument("--turn-deg", type=float, default=1e-4)
     ap.add_argument("--threads", type=int, default=2)
     args = ap.parse_args()
+    for work in args.captures:
+        require_kept_capture(work, ("eval/synthesis_exp1.json",))
     cv2.setNumThreads(args.threads)
     print(f"Exp. 1 with estimated depth, DIBR, mean PSNR of the targets (dB), whole views / "
           f"surfaces. The true cameras moved by {args.move_um:g} um and {args.turn_deg:g} "

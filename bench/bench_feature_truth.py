@@ -50,6 +50,7 @@ import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_accuracy import require_kept_capture  # noqa: E402
 from bench_focal_information import OUT, _rebuilt, kept_capture, refine_runs  # noqa: E402
 from benchmd import Lines, update_sections  # noqa: E402
 
@@ -215,6 +216,8 @@ def main() -> None:
                     help="cache of the true renders, one folder per capture")
     ap.add_argument("--out", help="write the section into this Markdown file")
     args = ap.parse_args()
+    for capture in args.captures:
+        require_kept_capture(OUT / capture)
     results = {c: run(c, args.within, args.renders) for c in args.captures}
 
     lines = Lines()

@@ -46,6 +46,7 @@ import numpy as np
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_accuracy import require_kept_capture  # noqa: E402
 from benchmd import Lines, update_sections  # noqa: E402
 
 from plenocal.artifacts.cameras import read_cameras  # noqa: E402
@@ -330,6 +331,8 @@ def main() -> None:
     ap.add_argument("--runs", nargs="+", default=list(RUNS), choices=RUNS)
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
+    for capture in args.captures:
+        require_kept_capture(OUT / capture)
     lines = Lines()
     first = OUT / args.captures[0] / "results" / "synthetic" / "ground_truth" / "cameras.json"
     cam = next(iter(read_cameras(first).values()))

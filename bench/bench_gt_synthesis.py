@@ -32,6 +32,7 @@ from pathlib import Path
 import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 import numpy as np
 import yaml
+from bench_accuracy import require_kept_capture
 
 from plenocal.artifacts.cameras import read_cameras
 from plenocal.artifacts.rig import read_rig
@@ -62,6 +63,9 @@ def main() -> None:
     ap.add_argument("workdir", type=Path)
     ap.add_argument("--rvs", help="an RVS 4.0 binary: also render with RVS")
     args = ap.parse_args()
+    require_kept_capture(args.workdir, ("eval/synthesis_exp1.json", "eval/synthesis_exp2.json"),
+                         "bench/bench_accuracy.py runs Exp. 1 (without --no-exp1), not Exp. 2: "
+                         f"run Snakemake on results/{DATASET}/eval/synthesis_exp2.json in it")
     res = args.workdir / "results" / DATASET
     cfg_doc = yaml.safe_load((args.workdir / "config.yaml").read_text()) or {}
     cfg = synthesis_config({**(cfg_doc.get("verify") or {}), "depth": cfg_doc.get("depth")})

@@ -26,6 +26,7 @@ from pathlib import Path
 import cv2  # noqa: F401  (before pycolmap: DESIGN.md)
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_accuracy import require_kept_capture  # noqa: E402
 from benchmd import Lines, update_sections  # noqa: E402
 
 from plenocal.artifacts.cameras import read_cameras  # noqa: E402
@@ -95,6 +96,8 @@ def main() -> None:
     ap.add_argument("--modes", nargs="+", default=list(MODES), choices=sorted(MODES))
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
+    for capture in args.captures:
+        require_kept_capture(OUT / capture)
     results = {c: run(c, args.modes) for c in args.captures}
     lines = Lines()
     lines.say(f"The joint refinement's modes on {len(results)} kept captures of "

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from bench_accuracy import require_kept_capture
 from benchmd import positive_int
 
 from plenocal.artifacts.cameras import read_cameras
@@ -110,6 +111,8 @@ def main() -> None:
     ap.add_argument("--set-stride", type=positive_int, default=3,
                     help="every k-th shot's set measured for the parallax within a set")
     args = ap.parse_args()
+    for cap in args.captures:
+        require_kept_capture(OUT / cap)
     print("| capture | focal change the views show, LS / robust % | per-pair median % "
           "(interquartile) | pairs / patches | parallax within a set, median over views |")
     print("|---|---|---|---|---|")

@@ -51,7 +51,13 @@ import numpy as np
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_accuracy import DATASET, OUT, clone_capture, run_capture  # noqa: E402
+from bench_accuracy import (  # noqa: E402
+    DATASET,
+    OUT,
+    clone_capture,
+    require_kept_capture,
+    run_capture,
+)
 from benchmd import Lines  # noqa: E402
 
 from plenocal.artifacts.cameras import read_cameras  # noqa: E402
@@ -278,13 +284,13 @@ def main() -> None:
     ap.add_argument("captures", nargs="+", help="kept captures of bench_accuracy.py")
     ap.add_argument("--kinds", nargs="+", choices=KINDS, default=list(KINDS))
     a = ap.parse_args()
+    for capture in a.captures:  # all of them before the first one's long runs
+        require_kept_capture(OUT / capture)
     out = Lines()
     out.head("capture", "views", "focal %", "centres mm", "rotation deg",
              "median px after", "note")
     for capture in a.captures:
         res = OUT / capture / "results" / DATASET
-        if not (res / "eval" / "gt_errors.json").is_file():
-            raise SystemExit(f"{OUT / capture}: not a kept capture of bench_accuracy.py")
         key = held_central(res)
         ideal = WORK / f"{capture}-softness.png"  # the held central view's ideal render
         ideal.parent.mkdir(parents=True, exist_ok=True)

@@ -209,3 +209,23 @@ def test_table_i_ratios_say_where_the_naive_sfm_left_views_out():
     })
     assert rows[2].endswith("| 0.8417 |")
     assert rows[3].endswith("| 0.9182 (naive: 688 of 700 views) |")
+
+
+def test_a_missing_or_unmeasured_capture_is_named_with_the_remedy(tmp_path):
+    # the benches that read kept captures stopped on the first file they opened, with a
+    # camera file's remedy ("rerun the rule that wrote it") or a bare FileNotFoundError
+    with pytest.raises(SystemExit, match="nosuch: not a kept capture of bench_accuracy.py "
+                                         r"\(no such folder\): run bench/bench_accuracy.py"):
+        ba.require_kept_capture(tmp_path / "nosuch")
+    cap = tmp_path / "small-s1"
+    (cap / "results" / ba.DATASET / "eval").mkdir(parents=True)
+    with pytest.raises(SystemExit, match=r"\(no config.yaml\)"):
+        ba.require_kept_capture(cap)
+    (cap / "config.yaml").write_text("{}\n")
+    with pytest.raises(SystemExit, match="no results/synthetic/eval/gt_errors.json yet: run "
+                                         "bench/bench_accuracy.py for it$"):
+        ba.require_kept_capture(cap)
+    with pytest.raises(SystemExit, match="synthesis_exp1.json yet: .*without --no-exp1"):
+        ba.require_kept_capture(cap, ("eval/synthesis_exp1.json",))
+    (cap / "results" / ba.DATASET / "eval" / "gt_errors.json").write_text("{}\n")
+    assert ba.require_kept_capture(cap) == cap
