@@ -7,7 +7,9 @@ For each size a frame is made once (not timed) on the grid of the R32 fixture's
 calib.xml (``shared/fixtures/raytrix-calib/TempleBoatGiantR32.xml``: 190-um lenses of
 about 34 px), one textured plane at patch size 7 on every lens (``synth.lenslets``,
 Keplerian micro images), and converted as a user does, whole processes in the user's
-environment (two threads), this checkout first on PYTHONPATH:
+environment with the command line's default threads (the cores the process may use: two on
+the 2-core machine of the published figures; the header says how many), this checkout first
+on PYTHONPATH:
 
 - ``plenocal convert FRAME XML -o DIR --views 5``: the command line's defaults;
 - the same with ``--png-bits 16``: views of twice the bytes;
@@ -41,6 +43,8 @@ sys.path.insert(0, str(ROOT / "tests"))  # synth: test inputs
 from bench_real import USER_ENV, measure, plenocal_cmd, png_size  # noqa: E402
 from benchmd import Lines, positive_int, update_sections  # noqa: E402
 
+from plenocal.cli import default_threads  # noqa: E402
+
 CALIB = Path("/work/shared/fixtures/raytrix-calib/TempleBoatGiantR32.xml")
 #: the patch size of the frame's one plane (px; the R32 fixture's lenses are about 34 px)
 PATCH_PX = 7.0
@@ -66,9 +70,22 @@ def make_frame(size: tuple[int, int], path: Path) -> None:
     cv2.imwrite(str(path), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
 
 
+def frame_size(text: str) -> tuple[int, int]:
+    """An ``argparse`` type: ``WxH`` (e.g. 6464x4852) as (width, height)."""
+    w, sep, h = text.lower().partition("x")
+    try:
+        size = int(w), int(h)
+    except ValueError:
+        size = (0, 0)
+    if not sep or min(size) < 1:
+        raise argparse.ArgumentTypeError(f"WIDTHxHEIGHT, e.g. 6464x4852, not {text!r}")
+    return size
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--sizes", nargs="+", default=["6464x4852", "7716x5364"],
+    ap.add_argument("--sizes", nargs="+", type=frame_size,
+                    default=[(6464, 4852), (7716, 5364)], metavar="WxH",
                     help="frame sizes WxH (default: R32's 31 MP and R42's 41 MP)")
     ap.add_argument("--rounds", type=positive_int, default=1)
     ap.add_argument("--views", type=int, default=5)
@@ -79,18 +96,19 @@ def main() -> None:
     pypath = os.pathsep.join(p for p in (str(ROOT), USER_ENV.get("PYTHONPATH")) if p)
     env = {**USER_ENV, "PYTHONPATH": pypath}
     out = Lines()
-    out.say(f"`python bench/bench_memory.py --sizes {' '.join(args.sizes)} --rounds "
+    sizes = " ".join(f"{w}x{h}" for w, h in args.sizes)
+    out.say(f"`python bench/bench_memory.py --sizes {sizes} --rounds "
             f"{args.rounds}` ({os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at "
             f"the start): `plenocal convert FRAME {CALIB.name} -o DIR --views {args.views}` and "
-            f"its variants, whole processes (two threads). Peak RSS the largest over the "
+            f"its variants, whole processes ({default_threads()} threads: the command "
+            f"line's default, the cores it may use). Peak RSS the largest over the "
             f"rounds, time the median. Ceiling (issue 35): 1 GB on a 31-MP frame.")
     out.say("")
     out.head("frame", "MP", "variant", "s", "peak GB", "central view", "within 1 GB")
     worst = 0
     with tempfile.TemporaryDirectory(prefix="bench_memory_") as tmp:
         work = Path(tmp)
-        for text in args.sizes:
-            W, H = (int(v) for v in text.lower().split("x"))
+        for W, H in args.sizes:
             frame = work / f"frame_{W}x{H}.png"
             t0 = time.perf_counter()
             make_frame((W, H), frame)
