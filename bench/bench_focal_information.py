@@ -375,7 +375,6 @@ def main() -> None:
             lines.say(f"| {cap} | {'hand-held' if kind == 'hand' else 'array'} | "
                       f"{F[:, [1, 2, 4, 5]].max():.4f} | {F[:, 6:8].max():.4f} | "
                       f"{statistics.median(F[:, 8]):.3f} |")
-    print("\n".join(lines))
     if args.out:
         update_sections(args.out, {"How much the captures say about the focal length "
                                    "(issue 32)": list(lines)})
