@@ -12,7 +12,8 @@ binary is given, by RVS, with
   pinhole renders of the ground-truth cameras instead (no converter: the true depth and
   the true cameras are exact for them, so the true cameras must win);
 
-and scores each target over the whole view (the workflow's PSNR, border 8) and over its
+and scores each target over the whole view (the workflow's PSNR: the run's
+``verify.psnr_border_px``, the schema's 8 where its config leaves it out) and over its
 surface pixels (:mod:`plenocal.verify.surface`, as the workflow's ``surface_psnr_db``).
 Near occlusion edges every renderer decides per pixel which surface it shows, and with
 cameras that differ by a fraction of a pixel that decision, not the calibration, moves a
@@ -26,6 +27,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import os
 import zlib
 from pathlib import Path
 
@@ -44,7 +46,6 @@ from plenocal.verify.surface import masked_error, psnr_of_error, surface_mask
 from plenocal.verify.synthesis import SynthesisContext, synthesis_config
 
 DATASET = "synthetic"
-BORDER = 8
 
 
 def jitter(cams: dict[str, PinholeCamera], eps: float) -> dict[str, PinholeCamera]:
@@ -63,6 +64,14 @@ def main() -> None:
     ap.add_argument("workdir", type=Path)
     ap.add_argument("--rvs", help="an RVS 4.0 binary: also render with RVS")
     args = ap.parse_args()
+    if args.rvs:  # before the first DIBR pass, which the missing binary came after
+        rvs = Path(args.rvs)
+        what = ("no such file" if not rvs.is_file() else
+                "not executable" if not os.access(rvs, os.X_OK) else None)
+        if what:
+            ap.error(f"--rvs {args.rvs}: {what}; build RVS 4.0 from its source (README, 'MPEG "
+                     "exports and RVS'): python -m plenocal.verify.rvs <rvs-4.0-src.tar.gz> "
+                     "prints the binary's path")
     require_kept_capture(args.workdir, ("eval/synthesis_exp1.json", "eval/synthesis_exp2.json"),
                          "bench/bench_accuracy.py runs Exp. 1 (without --no-exp1), not Exp. 2: "
                          f"run Snakemake on results/{DATASET}/eval/synthesis_exp2.json in it")
@@ -70,6 +79,7 @@ def main() -> None:
     cfg_doc = yaml.safe_load((args.workdir / "config.yaml").read_text()) or {}
     cfg = synthesis_config({**(cfg_doc.get("verify") or {}), "depth": cfg_doc.get("depth")})
     n = int(cfg_doc["datasets"][DATASET]["views"])
+    border = int(cfg["psnr_border_px"])  # the run's, as its synthesis_exp<k>.json
     truth = read_cameras(res / "ground_truth" / "cameras.json")
     sets = {"complete": read_cameras(res / "calibration" / "cameras.json"),
             "ground_truth": truth, "gt+-1e-4px": jitter(truth, 1e-4)}
@@ -87,7 +97,7 @@ def main() -> None:
     print("mean PSNR (dB) over the targets, true depth: whole view / surface pixels")
     for exp in (1, 2):
         (inputs, targets), = experiment_plan(layout, exp).values()
-        masks = {t: surface_mask(t, inputs, truth, depth, BORDER) for t in targets}
+        masks = {t: surface_mask(t, inputs, truth, depth, border) for t in targets}
         for source, folder in folders.items():
             for renderer in renderers:
                 row = []
@@ -104,7 +114,8 @@ def main() -> None:
                         img = to_float(read_image(folder / t.split("/")[0]
                                                   / f"{t.split('/')[1]}.png"))
                         d2 = ((out[t] - img) ** 2).mean(axis=2)
-                        whole.append(-10 * np.log10(d2[BORDER:-BORDER, BORDER:-BORDER].mean()))
+                        inner = d2[border:-border, border:-border] if border else d2
+                        whole.append(-10 * np.log10(inner.mean()))
                         surf.append(psnr_of_error(*masked_error(out[t], img, masks[t])))
                     row.append(f"{name} {np.mean(whole):.2f} / {np.mean(surf):.2f}")
                 print(f"Exp. {exp}, {source:9s} {renderer:4s}: " + ", ".join(row), flush=True)
