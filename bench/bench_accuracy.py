@@ -13,7 +13,7 @@ runs the workflow on every capture of a set and reports, per capture,
 * the Exp. 1 PSNR with our own depth (the complete calibration, and the ground-truth
   cameras on depth estimated with them: verify.ground_truth_own_depth, set here; until
   188156d on the complete calibration's maps);
-* where the complete calibration's error comes from (gt_errors' ``sources``: registration
+* where the paper's Eq. 6 result's error comes from (gt_errors' ``sources``: registration
   A's focal length and shot poses, the hand-held shots, the merge's scale and the rig),
 
 then the median and the worst case of every column, and per geometry. ``--collect-only
