@@ -11,7 +11,8 @@ each kept capture of ``bench_accuracy.py`` (``bench/out/accuracy/<capture>``):
    cached under ``--renders``), with its z-depth;
 2. the same SIFT as the view database (:func:`plenocal.calib.reg_a.colmap.opencv_sift`)
    runs on each render, and each of the refinement's observations is paired with the
-   render's keypoint nearest to it (within ``--within`` px, the SIFT scales within 20 %);
+   render's keypoint nearest to it (within ``--within`` px, the SIFT scales' ratio within
+   0.82-1.22: ``|log ratio| < 0.2``);
 3. the refinement (the workflow's settings, Eq. 6's cameras as its start) runs on the
    paired observations only, five times:
 
@@ -43,6 +44,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -224,7 +226,9 @@ def main() -> None:
     lines.say(f"`python bench/bench_feature_truth.py --captures {' '.join(args.captures)}` on "
               "the kept captures of `bench_accuracy.py`. The refined focal length's signed "
               "error (%) on the refinement's observations that pair with a keypoint of the "
-              f"true render within {args.within} px (the SIFT scales within 20 %), and the "
+              f"true render within {args.within} px (the SIFT scales' ratio within "
+              f"{math.exp(-SCALE_TOL):.2f}-{math.exp(SCALE_TOL):.2f}: |log ratio| < "
+              f"{SCALE_TOL}), and the "
               "refinement's median reprojection error after it (px):")
     lines.say("")
     lines.head("capture", "the workflow (all observations)", "paired observations",
