@@ -351,15 +351,16 @@ def table(rules: dict[str, dict[str, float]]) -> str:
 
 
 def scaling(config: dict, scratch: Path) -> list[str]:
-    """The calibration (every job up to the merged cameras) for arrays of 3x2, 5x3 and
-    7x3 shots with 5x5 views, and 7x3 with 3x3 views: wall time from scratch."""
+    """The calibration (every job up to the written cameras, the joint refinement
+    included) for arrays of 3x2, 5x3 and 7x3 shots with 5x5 views, and 7x3 with 3x3 views:
+    wall time from scratch."""
     rows = ["Wall time of the calibration from scratch (`snakemake -j2 "
             "results/<d>/calibration/cameras.json`: simulation, conversion, A, B, depth, "
-            "scale, merge; the verification is left out), same config otherwise.", "",
+            "scale, merge, the matching of every view and refine; the verification is left "
+            "out), same config otherwise.", "",
             "| shots (array + hand-held) | views | views in all | wall s | s per view |",
             "|---|---|---:|---:|---:|"]
     ds_name = next(iter(config["datasets"]))
-    base_s = None
     for cols, rows_, n in [(3, 2, 5), (5, 3, 5), (7, 3, 5), (7, 3, 3)]:
         cfg = copy.deepcopy(config)
         ds = cfg["datasets"][ds_name]
@@ -370,7 +371,6 @@ def scaling(config: dict, scratch: Path) -> list[str]:
                             log=scratch / f"scale_{cols}x{rows_}_{n}.log")
         hand = ds["simulate"]["handheld"]["count"]
         n_views = (cols * rows_ + hand) * n * n
-        base_s = base_s or wall
         rows.append(f"| {cols}x{rows_} + {hand} | {n}x{n} | {n_views} | {wall:.1f} | "
                     f"{wall / n_views:.3f} |")
         print(rows[-1], flush=True)
