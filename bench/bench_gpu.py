@@ -141,10 +141,15 @@ def main() -> None:
     ap.add_argument("--config", default=str(ROOT / "config.yaml"))
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", help="also write the figures (markdown) to this file")
-    ap.add_argument("--work", help="work folder (default: a new temporary one)")
+    ap.add_argument("--work", help="work folder (default: a new temporary one, removed at "
+                                   "the end)")
     ap.add_argument("--runs", default=",".join(RUNS),
                     help=f"settings to run, in order (default: {','.join(RUNS)})")
     args = ap.parse_args()
+    labels = args.runs.split(",")
+    unknown = [label for label in labels if label not in RUNS]
+    if unknown:  # before the copy of the workflow and the CUDA check
+        ap.error(f"--runs {','.join(unknown)}: use some of {', '.join(RUNS)}")
     import cv2  # noqa: F401, PLC0415  (before pycolmap)
 
     from plenocal.gpu import cuda_available  # noqa: PLC0415
@@ -154,22 +159,23 @@ def main() -> None:
         sys.exit(f"bench_gpu: COLMAP's CUDA code cannot run here ({why}); see README, GPU")
     config = yaml.safe_load(Path(args.config).read_text())
     ds = next(iter(config["datasets"]))
-    work = make_copy(Path(args.work or tempfile.mkdtemp(prefix="plenocal-gpu-")), config)
-    labels = args.runs.split(",")
-    unknown = [label for label in labels if label not in RUNS]
-    if unknown:
-        sys.exit(f"bench_gpu: --runs {','.join(unknown)}: use some of {', '.join(RUNS)}")
+    scratch = None if args.work else Path(tempfile.mkdtemp(prefix="plenocal-gpu-"))
     runs = {}
-    for label in labels:
-        try:
-            runs[label] = one_run(work, config, label, args.jobs, ds)
-        except RuntimeError as err:  # a failed run is reported; the next ones still run
-            print(f"{label}: FAILED\n{err}", flush=True)
-            continue
-        print(f"{label}: {runs[label]['wall']:.1f} s", flush=True)
-        lines = report(runs, args.jobs)
-        if args.out:
-            Path(args.out).write_text("\n".join(lines) + "\n")
+    try:
+        work = make_copy(Path(args.work) if args.work else scratch, config)
+        for label in labels:
+            try:
+                runs[label] = one_run(work, config, label, args.jobs, ds)
+            except RuntimeError as err:  # a failed run is reported; the next ones still run
+                print(f"{label}: FAILED\n{err}", flush=True)
+                continue
+            print(f"{label}: {runs[label]['wall']:.1f} s", flush=True)
+            lines = report(runs, args.jobs)
+            if args.out:
+                Path(args.out).write_text("\n".join(lines) + "\n")
+    finally:
+        if scratch is not None:  # a full run's gigabytes, not kept where no --work asked
+            shutil.rmtree(scratch, ignore_errors=True)
     print("\n".join(report(runs, args.jobs)) if runs else "bench_gpu: no run finished")
 
 
