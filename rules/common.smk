@@ -22,6 +22,7 @@ from plenocal.io.lenslet import (
     scan_lenslet_folder,
 )
 from plenocal.io.raytrix import CalibError, read_calib
+from plenocal.io.yamlfile import DuplicateKeyError, check_unique_keys
 from plenocal import job_memory, names
 from plenocal.artifacts import tracks as tracks_artifact
 from plenocal.names import central_view, view_names
@@ -35,8 +36,11 @@ from plenocal.report.exports import EXPORTS
 os.environ.setdefault("GLOG_logtostderr", "1")
 
 try:
+    # a key given twice in config.yaml (or a --configfile) is refused: Snakemake's loader
+    # keeps the last one without a word (two frames named for one video shot, two views)
+    check_unique_keys(workflow.configfiles)
     validate_config(config, Path(workflow.basedir) / "config.schema.yaml")
-except ConfigError as err:
+except (ConfigError, DuplicateKeyError) as err:
     raise ValueError(str(err)) from None
 # every config slice the rules get as params in one key order (reordering config.yaml reruns nothing)
 canonicalize(config)

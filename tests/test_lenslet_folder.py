@@ -209,12 +209,13 @@ def test_colour_defaults_are_the_command_lines():
 
 
 def _pngs(d: Path, names: list[str], size=(W, H)) -> dict:
-    """Real PNG headers (blank images of ``size``) for ``names``: {shot: path}."""
+    """Real PNGs (flat grey images of ``size``, each shot its own level: two shots of one
+    file's bytes are refused) for ``names``: {shot: path}."""
     from plenocal.io.files import write_image  # noqa: PLC0415
 
     d.mkdir(exist_ok=True)
-    for n in names:
-        write_image(d / f"{n}.png", np.zeros((size[1], size[0]), np.uint8))
+    for k, n in enumerate(names):
+        write_image(d / f"{n}.png", np.full((size[1], size[0]), 10 + k, np.uint8))
     return {n: d / f"{n}.png" for n in names}
 
 
@@ -294,3 +295,56 @@ def test_a_link_to_no_file(tmp_path: Path):
     with pytest.raises(CaptureError, match=r"hand01\.png in .*lenslet/ is a link to no file "
                        r"\(/nonexistent/disk/hand01\.png\): mount or copy"):
         scan_lenslet_folder(lenslet, "cap", None)
+
+
+def test_shots_that_are_not_one_cameras_readouts(tmp_path: Path):
+    """A review found these converting without a word, or failing one job later: a PNG
+    cut short (its conversion job failed, the console naming only the rule), a palette or
+    1-bit image (read as quantised levels), one grey shot among colour ones (its views grey,
+    the synthesis 4-11 dB down), and a shot that is a copy of another (registration A put
+    both on one spot; the warnings blamed the scale). Each is now named before any job."""
+    from plenocal.io.files import write_image  # noqa: PLC0415
+
+    names = ["x00_y00", "x01_y00", "hand00", "hand01"]
+    rng = np.random.default_rng(1)
+    d = tmp_path / "ok"
+    shots = _pngs(d, names)
+    for n in names:  # colour shots, all different
+        write_image(shots[n], rng.integers(0, 255, (H, W, 3), dtype=np.uint8))
+    check_capture(shots, "d", d, (W, H))
+    # a copy cut short
+    data = shots["x01_y00"].read_bytes()
+    shots["x01_y00"].write_bytes(data[:len(data) // 2])
+    with pytest.raises(CaptureError, match=r"x01_y00\.png: a truncated PNG, cut short .*copy "
+                                           r"it again"):
+        check_capture(shots, "d", d, (W, H))
+    shots["x01_y00"].write_bytes(data)
+    # one grey shot among colour ones, and the reverse
+    grey = rng.integers(0, 255, (H, W), dtype=np.uint8)
+    write_image(shots["hand01"], grey)
+    with pytest.raises(CaptureError, match=r"ok/: hand01 is grey, the other 3 shots colour: "
+                                           r"one camera gives every shot alike"):
+        check_capture(shots, "d", d, (W, H))
+    for n in ("x00_y00", "x01_y00", "hand00"):
+        write_image(shots[n], rng.integers(0, 255, (H, W), dtype=np.uint8))
+    write_image(shots["hand01"], rng.integers(0, 255, (H, W, 3), dtype=np.uint8))
+    with pytest.raises(CaptureError, match=r"hand01 is colour \(RGB\), the other 3 shots grey"):
+        check_capture(shots, "d", d, (W, H))
+    write_image(shots["hand01"], grey)
+    check_capture(shots, "d", d, (W, H))  # all grey: a monochrome or raw Bayer capture
+    # a palette image and a 1-bit one
+    from PIL import Image  # noqa: PLC0415
+
+    keep = shots["hand00"].read_bytes()
+    Image.fromarray(grey).convert("P").save(shots["hand00"])
+    with pytest.raises(CaptureError, match=r"hand00\.png: a palette image, not the camera's"):
+        check_capture(shots, "d", d, (W, H))
+    Image.fromarray(grey).convert("1").save(shots["hand00"])
+    with pytest.raises(CaptureError, match=r"hand00\.png: 1-bit samples"):
+        check_capture(shots, "d", d, (W, H))
+    shots["hand00"].write_bytes(keep)
+    # a copy under a second name
+    shots["x01_y00"].write_bytes(shots["x00_y00"].read_bytes())
+    with pytest.raises(CaptureError, match=r"x01_y00\.png holds the same bytes as "
+                                           r"x00_y00\.png: a copy.*put x01_y00's own"):
+        check_capture(shots, "d", d, (W, H))

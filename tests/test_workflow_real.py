@@ -179,6 +179,24 @@ def test_bad_input_stops_before_any_job(real_run: Path, tmp_path: Path):
     out, _ = _bad(real_run, tmp_path / "g", calib)
     assert "calib.xml: <document>: malformed XML" in out, out[-2000:]
 
+    # a copy cut short passed the dry run and failed in its conversion job (a review)
+    def cut(d: Path):
+        png = d / "lenslet" / "x01_y00.png"
+        png.write_bytes(png.read_bytes()[:5000])
+
+    out, _ = _bad(real_run, tmp_path / "h", cut)
+    assert "x01_y00.png: a truncated PNG, cut short" in out, out[-2000:]
+
+    # a key given twice in config.yaml: Snakemake's loader kept the last one silently
+    def twice(d: Path):
+        config = d.parent.parent / "config.yaml"
+        text = config.read_text()
+        assert "\n    views: 3\n" in text
+        config.write_text(text.replace("\n    views: 3\n", "\n    views: 5\n    views: 3\n"))
+
+    out, _ = _bad(real_run, tmp_path / "i", twice)
+    assert f"config.yaml: datasets.{NAME}.views: given twice (lines" in out, out[-2000:]
+
 
 def test_a_simulate_block_never_overwrites_a_capture(real_run: Path, tmp_path: Path):
     """A 'simulate' block added to a real capture's dataset: the simulator would write

@@ -183,6 +183,89 @@ def png_size(path: str | Path) -> tuple[int, int]:
     return size
 
 
+def png_format(path: str | Path) -> tuple[int, int]:
+    """(bit depth, colour type) of a PNG from its IHDR chunk; CaptureError naming the file
+    where it is a palette image or of fewer than 8 bits a sample, which no camera's
+    readout is and the converter would read as it decodes them (quantised levels)."""
+    with open(path, "rb") as fh:
+        fmt = png.header_format(fh.read(png.FORMAT_BYTES))
+    if fmt is None:
+        raise CaptureError(f"{path}: not a PNG image (no PNG header): put the lenslet image "
+                           "there as a PNG")
+    depth, kind = fmt
+    if kind == png.PALETTE or depth < 8:
+        what = "a palette image" if kind == png.PALETTE else f"{depth}-bit samples"
+        raise CaptureError(f"{path}: {what}, not the camera's readout: save the lenslet "
+                           "image as an 8- or 16-bit grey or RGB PNG, as the camera gave it")
+    return depth, kind
+
+
+def _colour(kind: int) -> bool:
+    return kind in (png.RGB, png.RGB_ALPHA)
+
+
+def check_one_format(kinds: dict[str, bool], folder: str | Path) -> None:
+    """CaptureError where some shots are colour and others grey (``kinds``: shot -> colour):
+    one camera gives every shot alike (a raw Bayer frame grey, which ``convert.bayer``
+    demosaics for every shot; a demosaiced one in colour), and a grey shot among colour
+    ones converts to grey views that the synthesis scores 4-11 dB down, without a word."""
+    colour = sorted(s for s, c in kinds.items() if c)
+    grey = sorted(s for s, c in kinds.items() if not c)
+    if not colour or not grey:
+        return
+    odd, odd_kind, rest_kind = ((grey, "grey", "colour") if len(grey) <= len(colour)
+                                else (colour, "colour (RGB)", "grey"))
+    shown = ", ".join(odd[:8]) + (f" and {len(odd) - 8} more" if len(odd) > 8 else "")
+    raise CaptureError(
+        f"{folder}/: {shown} {'is' if len(odd) == 1 else 'are'} {odd_kind}, the other "
+        f"{len(kinds) - len(odd)} shots {rest_kind}: one camera gives every shot alike (a raw "
+        "Bayer frame grey, which convert.bayer demosaics for every shot; a demosaiced one "
+        f"in colour): save {'it' if len(odd) == 1 else 'them'} as the others are")
+
+
+def _samples(path: Path, size: int, block: int = 1 << 16) -> bytes:
+    """Four blocks of the file (start, thirds, end): enough to tell two recordings apart."""
+    out = []
+    with open(path, "rb") as fh:
+        for at in (0, size // 3, 2 * size // 3, max(0, size - block)):
+            fh.seek(at)
+            out.append(fh.read(block))
+    return b"".join(out)
+
+
+def _same_bytes(a: Path, b: Path, chunk: int = 1 << 22) -> bool:
+    with open(a, "rb") as fa, open(b, "rb") as fb:
+        while True:
+            x, y = fa.read(chunk), fb.read(chunk)
+            if x != y:
+                return False
+            if not x:
+                return True
+
+
+def check_no_copies(files: dict[str, Path], folder: str | Path) -> None:
+    """CaptureError where two shots are the same file's bytes (a copy under a second
+    name): registration A would place the two shots on one spot, and the run's warnings
+    would blame the scale or the datasheet. Files of equal size only are read (two PNGs
+    of different scenes are almost never), and recordings by samples first."""
+    by_size: dict[int, list[str]] = {}
+    for shot, path in files.items():
+        by_size.setdefault(path.stat().st_size, []).append(shot)
+    for size, shots in by_size.items():
+        if len(shots) < 2:
+            continue
+        seen: dict[bytes, str] = {}
+        for shot in sorted(shots):
+            key = _samples(files[shot], size)
+            first = seen.setdefault(key, shot)
+            if first != shot and _same_bytes(files[first], files[shot]):
+                raise CaptureError(
+                    f"{folder}/: {files[shot].name} holds the same bytes as "
+                    f"{files[first].name}: a copy, not a shot of its own (registration A "
+                    f"would put {shot} where {first} is); put {shot}'s own lenslet image "
+                    "there")
+
+
 def check_capture_shots(shots: list[str], dataset: str, folder: str | Path) -> None:
     """The shots a capture needs (before any job runs): array shots ``x<col>_y<row>``
     forming the whole grid from ``x00_y00`` (the array's layout is read from their numbers:
@@ -216,16 +299,29 @@ def check_capture_shots(shots: list[str], dataset: str, folder: str | Path) -> N
 def check_capture(sources: dict[str, Path | VideoShot], dataset: str, folder: str | Path,
                   sensor_size: tuple[int, int]) -> None:
     """What the workflow needs of a capture's shots (:func:`scan_lenslet_folder`'s
-    ``sources``), checked before any job: the shots (:func:`check_capture_shots`), and
-    every PNG a PNG (its header read) of camera.yaml's sensor size ``(width, height)``, as
-    the recordings' frames are. Raises :class:`CaptureError` naming the file."""
+    ``sources``), checked before any job: the shots (:func:`check_capture_shots`); every
+    PNG a PNG (its header read) of camera.yaml's sensor size ``(width, height)``, as the
+    recordings' frames are, of 8 or 16 bits grey or RGB (:func:`png_format`) and whole
+    (:func:`plenocal.io.png.truncation`); all shots grey or all colour
+    (:func:`check_one_format`); no shot a copy of another (:func:`check_no_copies`).
+    Raises :class:`CaptureError` naming the file."""
     check_capture_shots(list(sources), dataset, folder)
-    for path in sources.values():
+    colour: dict[str, bool] = {}
+    for shot, path in sources.items():
         if isinstance(path, VideoShot):
+            colour[shot] = True  # a YUV 4:2:0 recording's frame is RGB
             continue
         size = png_size(path)
         if size != tuple(sensor_size):
             raise CaptureError(sensor_mismatch(path, size, sensor_size))
+        colour[shot] = _colour(png_format(path)[1])
+        cut = png.truncation(path)  # its last 12 bytes, where it is whole
+        if cut is not None:
+            raise CaptureError(f"{path}: a truncated PNG, {cut}: the file was not copied "
+                               "whole; copy it again")
+    check_one_format(colour, folder)
+    check_no_copies({s: p.path if isinstance(p, VideoShot) else p
+                     for s, p in sources.items()}, folder)
 
 
 #: what a simulated dataset's rules write into ``data/<dataset>/`` (rules/simulate.smk),

@@ -95,6 +95,21 @@ def header_size(head: bytes) -> tuple[int, int] | None:
     return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
 
 
+#: the bytes from which :func:`header_format` reads the bit depth and colour type
+FORMAT_BYTES = 26
+
+#: PNG's colour types (the IHDR byte after the bit depth)
+GREY, RGB, PALETTE, GREY_ALPHA, RGB_ALPHA = 0, 2, 3, 4, 6
+
+
+def header_format(head: bytes) -> tuple[int, int] | None:
+    """(bit depth, colour type) from a PNG file's first :data:`FORMAT_BYTES` bytes, without
+    decoding it; None where they are not a PNG's header."""
+    if len(head) < FORMAT_BYTES or header_size(head) is None:
+        return None
+    return head[24], head[25]
+
+
 def encode_png(image: np.ndarray, level: int = 1) -> bytes:
     """The PNG bytes of ``image`` (grey (H, W) or (H, W, 1), or RGB (H, W, 3); uint8 or
     uint16) at ``level`` (module docstring: 0 stored, 1-3 libdeflate's levels). The deflated

@@ -28,6 +28,8 @@ from typing import Any
 import jsonschema
 import yaml
 
+from plenocal.io import yamlfile
+
 
 class DatasheetError(ValueError):
     """A bad ``camera.yaml``; the message names the file, the key and the remedy."""
@@ -463,37 +465,14 @@ def load_datasheet(path: str | Path) -> dict:
     return check_datasheet(doc, path)
 
 
-def _check_duplicates(node: yaml.Node, path: tuple, source: str | Path) -> None:
-    if isinstance(node, yaml.MappingNode):
-        seen: dict[str, int] = {}
-        for key_node, value_node in node.value:
-            key = key_node.value if isinstance(key_node, yaml.ScalarNode) else None
-            if key is not None:
-                line = key_node.start_mark.line + 1
-                if key in seen:
-                    raise DatasheetError(
-                        f"{source}: {_dotted((*path, key))}: given twice (lines {seen[key]} "
-                        f"and {line}); YAML would keep the last one without a word: delete "
-                        "one of them")
-                seen[key] = line
-            _check_duplicates(value_node, (*path, key), source)
-    elif isinstance(node, yaml.SequenceNode):
-        for i, item in enumerate(node.value):
-            _check_duplicates(item, (*path, i), source)
-
-
 def load_yaml_unique(text: str, source: str | Path = "<string>") -> Any:
     """YAML ``text`` parsed safely, refusing a key given twice in one mapping (PyYAML keeps
-    the last one silently): :class:`DatasheetError` naming the key and both lines."""
-    loader = yaml.SafeLoader(text)
+    the last one silently): :class:`DatasheetError` naming the key and both lines
+    (:func:`plenocal.io.yamlfile.load_yaml_unique`)."""
     try:
-        node = loader.get_single_node()
-        if node is None:
-            return None
-        _check_duplicates(node, (), source)
-        return loader.construct_document(node)
-    finally:
-        loader.dispose()
+        return yamlfile.load_yaml_unique(text, source)
+    except yamlfile.DuplicateKeyError as exc:
+        raise DatasheetError(str(exc)) from None
 
 
 # The checked datasheet, typed, as registration B computes with it
