@@ -19,6 +19,7 @@ from plenocal.io.lenslet import (
     VideoShot,
     check_capture,
     check_simulated_folder,
+    fingerprint,
     scan_lenslet_folder,
 )
 from plenocal.io.raytrix import CalibError, read_calib
@@ -204,6 +205,33 @@ for _d in DATASETS:
 #: the datasets with shots given as videos (rule lenslet_frame's), and those shots
 VIDEO = "|".join(re.escape(d) for d in DATASETS if video_shots(d)) or "^$"
 VIDEO_SHOTS = "|".join(sorted({c for d in DATASETS for c in video_shots(d)})) or "^$"
+
+
+_FINGERPRINTS = {}
+
+
+def capture_fingerprints(dataset, shots):
+    """A real capture's files of ``shots`` by their fingerprints (plenocal.io.lenslet.
+    fingerprint): a param of the jobs that read them, so that a shot replaced by an older
+    file is converted again (Snakemake compares time stamps only). A simulated dataset's
+    images are the simulator's outputs, made again by their own rules: none."""
+    if is_synthetic(dataset):
+        return {}
+    out = {}
+    for shot in shots:
+        src = lenslet_sources(dataset)[shot]
+        path = src.path if isinstance(src, VideoShot) else src
+        if path not in _FINGERPRINTS:
+            _FINGERPRINTS[path] = fingerprint(path)
+        out[shot] = _FINGERPRINTS[path]
+    return out
+
+
+def capture_params(dataset, shots):
+    """``{"capture": fingerprints}`` on a real capture, else nothing (a simulated dataset's
+    conversion params stay as they were: its jobs do not rerun for the new key)."""
+    prints = capture_fingerprints(dataset, shots)
+    return {"capture": prints} if prints else {}
 
 
 def lenslet_frame_input(wildcards):

@@ -42,6 +42,7 @@ rule lenslet_frame:
         runtime=5,
     params:
         video=lenslet_frame_params,
+        capture=lambda wc: capture_fingerprints(wc.dataset, [wc.cam]),
     script:
         "../scripts/lenslet_frame.py"
 
@@ -69,6 +70,7 @@ rule convert_setup:
             wc.dataset, setup=True, shots=[full_set_cam(wc.dataset)]
         ),
         views=lambda wc: n_views(wc.dataset),
+        capture=lambda wc: capture_fingerprints(wc.dataset, [full_set_cam(wc.dataset)]),
     script:
         "../scripts/convert_setup.py"
 
@@ -114,6 +116,7 @@ for _i, _d in enumerate(DATASETS):
                 views=n_views(_d),
                 centre=centre(_d),
                 cams=_chunk,
+                **capture_params(_d, _chunk),
             script:
                 "../scripts/convert.py"
 
@@ -155,6 +158,7 @@ for _i, _d in enumerate(DATASETS):
                 cams=_chunk,
                 names=[v for v in views(_d) if v != centre(_d)],
                 all_names=views(_d),
+                **capture_params(_d, _chunk),
             script:
                 "../scripts/convert_views.py"
 

@@ -6,13 +6,16 @@ and the key."""
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 import yaml
-from conftest import ROOT, snakemake, snakemake_each, workflow_copy
+from conftest import ROOT, clone, snakemake, snakemake_each, workflow_copy
 
 from plenocal.artifacts.results import read_reprojection_table
 
@@ -73,6 +76,32 @@ def test_real_capture_runs_the_default_target(real_run: Path):
     assert 'id="warnings"' in first
     # and nothing is left to do
     proc = snakemake(real_run, "-n")
+    assert "Nothing to be done" in proc.stdout + proc.stderr, (proc.stdout + proc.stderr)[-2000:]
+
+
+def test_a_shot_replaced_by_an_older_file_is_converted_again(real_run: Path, tmp_path: Path):
+    """A shot replaced by a file whose time stamp is older than its views (``cp -p``,
+    ``rsync -a``, an unpacked archive) kept the old views: Snakemake compares time stamps.
+    The conversions' params hold each file's fingerprint (plenocal.io.lenslet.fingerprint),
+    so the replaced shot's conversion runs again; a copy of the same bytes, given a new
+    time stamp, is not a change."""
+    work = clone(real_run, tmp_path / "work")
+    shot = work / "data" / NAME / "lenslet" / "x01_y00.png"
+    old = shot.stat()
+    # the shot mirrored, in a process of its own (cv2 before pycolmap: DESIGN.md)
+    subprocess.run([sys.executable, "-c", "import sys, cv2; p = sys.argv[1]; cv2.imwrite(p, "
+                    "cv2.flip(cv2.imread(p, cv2.IMREAD_UNCHANGED), 1))", str(shot)], check=True)
+    os.utime(shot, ns=(old.st_atime_ns, old.st_mtime_ns - 10**12))
+    proc = snakemake(work, "-n")
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 0, out[-3000:]
+    assert re.search(r"views/x01_y00/analysis\.npz(?:.|\n)*?reason: Params have changed", out), \
+        out[-3000:]
+    # the same bytes with a new time stamp in a fresh copy: nothing
+    again = clone(real_run, tmp_path / "again")
+    other = again / "data" / NAME / "lenslet" / "x01_y00.png"
+    os.utime(other, ns=(old.st_atime_ns, old.st_mtime_ns - 10**12))
+    proc = snakemake(again, "-n")
     assert "Nothing to be done" in proc.stdout + proc.stderr, (proc.stdout + proc.stderr)[-2000:]
 
 
