@@ -82,6 +82,13 @@ def test_missing_file_and_malformed_xml_exit_2(tmp_path, shot):
     r = _cli("convert", str(lenslet.parent), str(calib), "-o", str(tmp_path / "o"))
     assert r.returncode == 2
     assert f"{lenslet.parent}: a folder, where the lenslet image file is asked for" in r.stderr
+    # a palette PNG converted without a word (its 256 colours read as the readout)
+    from PIL import Image  # noqa: PLC0415
+
+    Image.new("P", (64, 48)).save(tmp_path / "palette.png")
+    r = _cli("convert", str(tmp_path / "palette.png"), str(calib), "-o", str(tmp_path / "o"))
+    assert r.returncode == 2
+    assert "palette.png: a palette image, not the camera's readout" in r.stderr, r.stderr
     # a device that exists (it was called "not found")
     r = _cli("convert", str(lenslet), os.devnull, "-o", str(tmp_path / "o"))
     assert r.returncode == 2

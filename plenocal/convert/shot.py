@@ -76,8 +76,9 @@ from plenocal.convert.safediameter import SafeDiameter, measure_safe_diameter
 from plenocal.convert.threads import Inline, opencv_threads, run_all
 from plenocal.convert.vignetting import lens_type_profiles
 from plenocal.grid import MicrolensGrid
+from plenocal.io import png
 from plenocal.io.files import TruncatedImageError, read_image
-from plenocal.io.lenslet import sensor_mismatch
+from plenocal.io.lenslet import CaptureError, png_format, sensor_mismatch
 from plenocal.io.raytrix import CalibError, RayCalib, read_calib
 from plenocal.names import parse_view, view_names
 from plenocal.optics import view_spacing
@@ -206,7 +207,11 @@ def load_lenslet(path: str | Path, sensor_size: tuple[int, int] | None = None,
     mosaic: :func:`plenocal.convert.demosaic.mosaic_warning`)."""
     path = Path(path)
     try:
+        if path.is_file() and png.is_png(path):
+            png_format(path)  # a palette or 1-, 2- or 4-bit image: no camera's readout
         img = read_image(path)
+    except CaptureError as exc:
+        raise ConvertError(str(exc)) from None
     except TruncatedImageError as exc:
         raise ConvertError(f"cannot read the lenslet image: {exc}") from None
     except (OSError, FileNotFoundError) as exc:

@@ -95,6 +95,12 @@ def header_size(head: bytes) -> tuple[int, int] | None:
     return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
 
 
+def is_png(path: str | Path) -> bool:
+    """Whether the file at ``path`` starts with PNG's signature."""
+    with open(path, "rb") as fh:
+        return fh.read(len(SIGNATURE)) == SIGNATURE
+
+
 #: the bytes from which :func:`header_format` reads the bit depth and colour type
 FORMAT_BYTES = 26
 
