@@ -43,7 +43,7 @@ sys.path.insert(0, str(ROOT / "tests"))  # synth: test inputs
 from bench_real import USER_ENV, measure, plenocal_cmd, png_size  # noqa: E402
 from benchmd import Lines, positive_int, update_sections  # noqa: E402
 
-from plenocal.cli import default_threads  # noqa: E402
+from plenocal.cli import default_threads, frame_size  # noqa: E402
 
 CALIB = Path("/work/shared/fixtures/raytrix-calib/TempleBoatGiantR32.xml")
 #: the patch size of the frame's one plane (px; the R32 fixture's lenses are about 34 px)
@@ -68,18 +68,6 @@ def make_frame(size: tuple[int, int], path: Path) -> None:
     grid = MicrolensGrid(read_calib(CALIB), *size)
     img = lenslet_from_patch_size(grid, PATCH_PX, random_texture(2048, 1.5, 7))
     cv2.imwrite(str(path), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
-
-
-def frame_size(text: str) -> tuple[int, int]:
-    """An ``argparse`` type: ``WxH`` (e.g. 6464x4852) as (width, height)."""
-    w, sep, h = text.lower().partition("x")
-    try:
-        size = int(w), int(h)
-    except ValueError:
-        size = (0, 0)
-    if not sep or min(size) < 1:
-        raise argparse.ArgumentTypeError(f"WIDTHxHEIGHT, e.g. 6464x4852, not {text!r}")
-    return size
 
 
 def main() -> None:

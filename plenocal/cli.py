@@ -219,7 +219,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "the workflow's results/<dataset>/views/convert_setup.json, or one "
                         "this command wrote for a recording; PNG and YUV input")
     v = c.add_argument_group("raw YUV 4:2:0 input (LENSLET ending in .yuv)")
-    v.add_argument("--size", type=_size, default=None, metavar="WxH",
+    v.add_argument("--size", type=frame_size, default=None, metavar="WxH",
                    help="frame size, where the file name does not state it (e.g. 3976x2956)")
     v.add_argument("--frames", default=None, metavar="A:B",
                    help="the frames to convert, a Python slice of the file's frames: A:B is A "
@@ -275,7 +275,8 @@ def default_threads() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def _size(text: str) -> tuple[int, int]:
+def frame_size(text: str) -> tuple[int, int]:
+    """An ``argparse`` type: ``WxH`` (e.g. 3976x2956) as (width, height), each at least 2."""
     w, sep, h = text.lower().partition("x")
     try:
         size = int(w), int(h)
