@@ -112,11 +112,11 @@ for _i, _d in enumerate(DATASETS):
                 mem_mb=2500,
                 runtime=20,
             params:
+                **capture_params(_d, _chunk),
                 convert=convert_settings(_d, shots=_chunk),
                 views=n_views(_d),
                 centre=centre(_d),
                 cams=_chunk,
-                **capture_params(_d, _chunk),
             script:
                 "../scripts/convert.py"
 
@@ -153,12 +153,12 @@ for _i, _d in enumerate(DATASETS):
                 mem_mb=2500,
                 runtime=20,
             params:
+                **capture_params(_d, _chunk),
                 convert=convert_settings(_d, shots=_chunk),
                 views=n_views(_d),
                 cams=_chunk,
                 names=[v for v in views(_d) if v != centre(_d)],
                 all_names=views(_d),
-                **capture_params(_d, _chunk),
             script:
                 "../scripts/convert_views.py"
 
