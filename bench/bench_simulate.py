@@ -123,8 +123,9 @@ def job_peak(cmd: list[str], work: Path) -> tuple[float, float]:
     """The simulate job ``cmd`` as a process of its own: its wall seconds and peak RSS (MB),
     measured as ``bench_real.py`` measures a converter (``/usr/bin/time -f %M``).
     RUSAGE_CHILDREN counted this script's own memory, which a forked child starts with
-    (422 MB against the job's own 287 MB). Imported here, after the warm measure, so that
-    bench_real's imports do not add to this process's peak."""
+    (in one measurement 501 MB reported for a job whose own peak was 490 MB). Imported
+    here, after the warm measure, so that bench_real's imports do not add to this
+    process's peak."""
     from bench_real import TIME, measure  # noqa: PLC0415
 
     if not TIME.is_file():

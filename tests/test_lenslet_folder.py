@@ -348,3 +348,32 @@ def test_shots_that_are_not_one_cameras_readouts(tmp_path: Path):
     with pytest.raises(CaptureError, match=r"x01_y00\.png holds the same bytes as "
                                            r"x00_y00\.png: a copy.*put x01_y00's own"):
         check_capture(shots, "d", d, (W, H))
+
+
+def test_frames_of_one_recording_are_not_copies(tmp_path: Path):
+    """Hand-held shots taken as other frames of one recording (links to one file) are
+    not copies; the same frame of it under two shots is (a review found the first refused
+    as a copy)."""
+    from plenocal.io.lenslet import check_no_copies  # noqa: PLC0415
+
+    d = tmp_path / "lenslet"
+    d.mkdir()
+    rec = recording(tmp_path / "hand.yuv")
+    for shot in ("hand00", "hand01"):
+        (d / f"{shot}_{W}x{H}_10bit.yuv").symlink_to(rec)
+    files = {s: d / f"{s}_{W}x{H}_10bit.yuv" for s in ("hand00", "hand01")}
+    check_no_copies(files, d, {"hand00": 0, "hand01": 2})
+    with pytest.raises(CaptureError, match=r"holds the same bytes as"):
+        check_no_copies(files, d, {"hand00": 1, "hand01": 1})
+
+
+def test_grey_with_alpha_counts_as_colour(tmp_path: Path):
+    """OpenCV reads a grey PNG with alpha as three channels: among grey shots it is the odd
+    one (it passed as grey and failed its conversion under convert.bayer)."""
+    from PIL import Image  # noqa: PLC0415
+
+    d = tmp_path / "lenslet"
+    shots = _pngs(d, ["x00_y00", "x01_y00", "hand00"])
+    Image.new("LA", (W, H), (40, 255)).save(shots["hand00"])
+    with pytest.raises(CaptureError, match=r"hand00 is colour \(RGB\), the other 2 shots grey"):
+        check_capture(shots, "d", d, (W, H))

@@ -83,8 +83,8 @@ def test_a_shot_replaced_by_an_older_file_is_converted_again(real_run: Path, tmp
     """A shot replaced by a file whose time stamp is older than its views (``cp -p``,
     ``rsync -a``, an unpacked archive) kept the old views: Snakemake compares time stamps.
     The conversions' params hold each file's fingerprint (plenocal.io.lenslet.fingerprint),
-    so the replaced shot's conversion runs again; a copy of the same bytes, given a new
-    time stamp, is not a change."""
+    so the replaced shot's conversion runs again; the same bytes under that older time
+    stamp are not a change."""
     work = clone(real_run, tmp_path / "work")
     shot = work / "data" / NAME / "lenslet" / "x01_y00.png"
     old = shot.stat()
@@ -97,7 +97,8 @@ def test_a_shot_replaced_by_an_older_file_is_converted_again(real_run: Path, tmp
     assert proc.returncode == 0, out[-3000:]
     assert re.search(r"views/x01_y00/analysis\.npz(?:.|\n)*?reason: Params have changed", out), \
         out[-3000:]
-    # the same bytes with a new time stamp in a fresh copy: nothing
+    # the same bytes under the same older time stamp in a fresh copy: nothing (the
+    # fingerprint adds no rerun of its own; a newer time stamp reruns, as Snakemake does)
     again = clone(real_run, tmp_path / "again")
     other = again / "data" / NAME / "lenslet" / "x01_y00.png"
     os.utime(other, ns=(old.st_atime_ns, old.st_mtime_ns - 10**12))

@@ -15,8 +15,9 @@ from the file's name (MPEG style, :func:`plenocal.io.yuv.parse_name`) or from
 :func:`scan_lenslet_folder` reads the folder and checks it before any job (file names,
 one file a shot, the recordings' sizes, the frame index, the frame's size against the
 datasheet's sensor), stat only; :func:`check_capture` then what the workflow needs of the
-shots (the array's grid, the hand-held shots, each PNG's header and size), from their
-first bytes: a :class:`CaptureError` names the file, the config key and the remedy.
+shots (the array's grid, the hand-held shots; each PNG's header, size, format and end; all
+shots grey or all colour; no shot a copy of another): a :class:`CaptureError` names the
+file, the config key and the remedy.
 """
 
 from __future__ import annotations
@@ -201,7 +202,9 @@ def png_format(path: str | Path) -> tuple[int, int]:
 
 
 def _colour(kind: int) -> bool:
-    return kind in (png.RGB, png.RGB_ALPHA)
+    """Whether the converter reads a PNG of colour type ``kind`` as colour: RGB, with or
+    without alpha, and grey with alpha, which OpenCV decodes to three channels."""
+    return kind in (png.RGB, png.RGB_ALPHA, png.GREY_ALPHA)
 
 
 def check_one_format(kinds: dict[str, bool], folder: str | Path) -> None:
@@ -238,8 +241,10 @@ def fingerprint(path: str | Path) -> str:
     thirds, end; a few milliseconds however large the file): the conversions' params on a
     real capture, so that a shot replaced by a file whose time stamp is older than the
     views (``cp -p``, ``rsync -a``, an unpacked archive) is converted again, where
-    Snakemake, which compares time stamps, would keep the old views. A copy of the same
-    file (the same bytes) keeps its fingerprint, so moving a capture reruns nothing."""
+    Snakemake, which compares time stamps, would keep the old views. The same bytes keep
+    their fingerprint: it adds no rerun of its own (a newer time stamp, ``cp`` or ``touch``,
+    reruns the conversion as Snakemake always did; ``mv``, ``cp -p`` or ``rsync -a`` of the
+    same files nothing)."""
     import hashlib  # noqa: PLC0415
 
     path = Path(path)
@@ -257,15 +262,19 @@ def _same_bytes(a: Path, b: Path, chunk: int = 1 << 22) -> bool:
                 return True
 
 
-def check_no_copies(files: dict[str, Path], folder: str | Path) -> None:
+def check_no_copies(files: dict[str, Path], folder: str | Path,
+                    frames: dict[str, int] | None = None) -> None:
     """CaptureError where two shots are the same file's bytes (a copy under a second
     name): registration A would place the two shots on one spot, and the run's warnings
     would blame the scale or the datasheet. Files of equal size only are read (two PNGs
-    of different scenes are almost never), and recordings by samples first."""
-    by_size: dict[int, list[str]] = {}
+    of different scenes are almost never), and recordings by samples first. ``frames``:
+    the frame each recording gives (shots that take other frames of one recording, such
+    as hand-held shots from one video, are not copies)."""
+    frames = frames or {}
+    by_size: dict[tuple[int, int | None], list[str]] = {}
     for shot, path in files.items():
-        by_size.setdefault(path.stat().st_size, []).append(shot)
-    for size, shots in by_size.items():
+        by_size.setdefault((path.stat().st_size, frames.get(shot)), []).append(shot)
+    for (size, _), shots in by_size.items():
         if len(shots) < 2:
             continue
         seen: dict[bytes, str] = {}
@@ -315,9 +324,10 @@ def check_capture(sources: dict[str, Path | VideoShot], dataset: str, folder: st
     """What the workflow needs of a capture's shots (:func:`scan_lenslet_folder`'s
     ``sources``), checked before any job: the shots (:func:`check_capture_shots`); every
     PNG a PNG (its header read) of camera.yaml's sensor size ``(width, height)``, as the
-    recordings' frames are, of 8 or 16 bits grey or RGB (:func:`png_format`) and whole
-    (:func:`plenocal.io.png.truncation`); all shots grey or all colour
-    (:func:`check_one_format`); no shot a copy of another (:func:`check_no_copies`).
+    recordings' frames are, of 8 or 16 bits a sample and no palette (:func:`png_format`;
+    alpha allowed) and whole (:func:`plenocal.io.png.truncation`); all shots grey or all
+    colour as the converter reads them (:func:`check_one_format`); no shot a copy of
+    another (:func:`check_no_copies`; a recording's other frame is no copy).
     Raises :class:`CaptureError` naming the file."""
     check_capture_shots(list(sources), dataset, folder)
     colour: dict[str, bool] = {}
@@ -335,7 +345,8 @@ def check_capture(sources: dict[str, Path | VideoShot], dataset: str, folder: st
                                "whole; copy it again")
     check_one_format(colour, folder)
     check_no_copies({s: p.path if isinstance(p, VideoShot) else p
-                     for s, p in sources.items()}, folder)
+                     for s, p in sources.items()}, folder,
+                    {s: p.frame for s, p in sources.items() if isinstance(p, VideoShot)})
 
 
 #: what a simulated dataset's rules write into ``data/<dataset>/`` (rules/simulate.smk),

@@ -186,8 +186,9 @@ def parse_calib(text: str | bytes, source: str = "<string>") -> RayCalib:
         raise _err(source, "<document>", f"refused unsafe XML ({type(exc).__name__})") from None
     except SafeET.ParseError as exc:
         raise _err(source, "<document>", f"malformed XML: {exc}: a file cut short in a "
-                   "copy, or not a calibration file; take the camera's RayCalibData file as "
-                   "its software wrote it") from None
+                   "copy, saved in another encoding than its first line declares, or not a "
+                   "calibration file; take the camera's RayCalibData file as its software "
+                   "wrote it") from None
     if root.tag != "RayCalibData":
         hint = (": this is the TSPC tools' corner measurements, not the camera's calibration; "
                 "pass the sequence's RayCalibData file (e.g. Boys2.xml beside "

@@ -10,6 +10,9 @@ from typing import Any
 
 import yaml
 
+#: the tag of YAML's merge key ``<<``
+MERGE_TAG = "tag:yaml.org,2002:merge"
+
 
 class DuplicateKeyError(ValueError):
     """A key given twice in one mapping of a YAML file; the message names the file, the
@@ -22,17 +25,20 @@ def _dotted(path: tuple) -> str:
 
 def _check_duplicates(node: yaml.Node, path: tuple, source: str | Path) -> None:
     if isinstance(node, yaml.MappingNode):
-        seen: dict[str, int] = {}
+        seen: dict[tuple[str, str], int] = {}
         for key_node, value_node in node.value:
             key = key_node.value if isinstance(key_node, yaml.ScalarNode) else None
-            if key is not None:
+            # merge keys (<<: *anchor), which YAML merges each of, and keys of other types
+            # (1 and '1') are not one key given twice
+            ident = (key_node.tag, key)
+            if key is not None and key_node.tag != MERGE_TAG:
                 line = key_node.start_mark.line + 1
-                if key in seen:
+                if ident in seen:
                     raise DuplicateKeyError(
-                        f"{source}: {_dotted((*path, key))}: given twice (lines {seen[key]} "
+                        f"{source}: {_dotted((*path, key))}: given twice (lines {seen[ident]} "
                         f"and {line}); YAML would keep the last one without a word: delete "
                         "one of them")
-                seen[key] = line
+                seen[ident] = line
             _check_duplicates(value_node, (*path, key), source)
     elif isinstance(node, yaml.SequenceNode):
         for i, item in enumerate(node.value):
@@ -62,6 +68,6 @@ def check_unique_keys(paths: list[str | Path]) -> None:
         if not path.is_file():
             continue
         try:
-            load_yaml_unique(path.read_text(), path)
-        except yaml.YAMLError:
+            load_yaml_unique(path.read_text(encoding="utf-8"), path)
+        except (yaml.YAMLError, UnicodeDecodeError):
             continue
