@@ -207,9 +207,6 @@ VIDEO = "|".join(re.escape(d) for d in DATASETS if video_shots(d)) or "^$"
 VIDEO_SHOTS = "|".join(sorted({c for d in DATASETS for c in video_shots(d)})) or "^$"
 
 
-_FINGERPRINTS = {}
-
-
 def capture_fingerprints(dataset, shots):
     """A real capture's files of ``shots`` by their fingerprints (plenocal.io.lenslet.
     fingerprint): a param of the jobs that read them, so that a shot replaced by an older
@@ -217,14 +214,13 @@ def capture_fingerprints(dataset, shots):
     images are the simulator's outputs, made again by their own rules: none."""
     if is_synthetic(dataset):
         return {}
-    out = {}
-    for shot in shots:
-        src = lenslet_sources(dataset)[shot]
-        path = src.path if isinstance(src, VideoShot) else src
-        if path not in _FINGERPRINTS:
-            _FINGERPRINTS[path] = fingerprint(path)
-        out[shot] = _FINGERPRINTS[path]
-    return out
+    sources = lenslet_sources(dataset)
+    return {
+        shot: fingerprint(
+            sources[shot].path if isinstance(sources[shot], VideoShot) else sources[shot]
+        )
+        for shot in shots
+    }
 
 
 def capture_params(dataset, shots):

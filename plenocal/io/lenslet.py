@@ -22,6 +22,7 @@ file, the config key and the remedy.
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -244,12 +245,17 @@ def fingerprint(path: str | Path) -> str:
     Snakemake, which compares time stamps, would keep the old views. The same bytes keep
     their fingerprint: it adds no rerun of its own (a newer time stamp, ``cp`` or ``touch``,
     reruns the conversion as Snakemake always did; ``mv``, ``cp -p`` or ``rsync -a`` of the
-    same files nothing)."""
+    same files nothing). Read once a process for a file as it stands (the workflow asks for
+    it in :func:`check_no_copies` and for each job's params)."""
+    st = Path(path).stat()
+    return _fingerprint(str(path), st.st_size, st.st_mtime_ns)
+
+
+@functools.cache
+def _fingerprint(path: str, size: int, mtime_ns: int) -> str:
     import hashlib  # noqa: PLC0415
 
-    path = Path(path)
-    size = path.stat().st_size
-    return f"{size}:{hashlib.sha256(_samples(path, size)).hexdigest()[:16]}"
+    return f"{size}:{hashlib.sha256(_samples(Path(path), size)).hexdigest()[:16]}"
 
 
 def _same_bytes(a: Path, b: Path, chunk: int = 1 << 22) -> bool:
@@ -266,27 +272,20 @@ def check_no_copies(files: dict[str, Path], folder: str | Path,
                     frames: dict[str, int] | None = None) -> None:
     """CaptureError where two shots are the same file's bytes (a copy under a second
     name): registration A would place the two shots on one spot, and the run's warnings
-    would blame the scale or the datasheet. Files of equal size only are read (two PNGs
-    of different scenes are almost never), and recordings by samples first. ``frames``:
-    the frame each recording gives (shots that take other frames of one recording, such
-    as hand-held shots from one video, are not copies)."""
+    would blame the scale or the datasheet. Only files of one :func:`fingerprint` (size
+    and sampled blocks) are read in full. ``frames``: the frame each recording gives
+    (shots that take other frames of one recording, such as hand-held shots from one
+    video, are not copies)."""
     frames = frames or {}
-    by_size: dict[tuple[int, int | None], list[str]] = {}
-    for shot, path in files.items():
-        by_size.setdefault((path.stat().st_size, frames.get(shot)), []).append(shot)
-    for (size, _), shots in by_size.items():
-        if len(shots) < 2:
-            continue
-        seen: dict[bytes, str] = {}
-        for shot in sorted(shots):
-            key = _samples(files[shot], size)
-            first = seen.setdefault(key, shot)
-            if first != shot and _same_bytes(files[first], files[shot]):
-                raise CaptureError(
-                    f"{folder}/: {files[shot].name} holds the same bytes as "
-                    f"{files[first].name}: a copy, not a shot of its own (registration A "
-                    f"would put {shot} where {first} is); put {shot}'s own lenslet image "
-                    "there")
+    seen: dict[tuple[str, int | None], str] = {}
+    for shot in sorted(files):
+        first = seen.setdefault((fingerprint(files[shot]), frames.get(shot)), shot)
+        if first != shot and _same_bytes(files[first], files[shot]):
+            raise CaptureError(
+                f"{folder}/: {files[shot].name} holds the same bytes as "
+                f"{files[first].name}: a copy, not a shot of its own (registration A "
+                f"would put {shot} where {first} is); put {shot}'s own lenslet image "
+                "there")
 
 
 def check_capture_shots(shots: list[str], dataset: str, folder: str | Path) -> None:
