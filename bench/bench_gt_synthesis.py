@@ -27,7 +27,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import os
 import zlib
 from pathlib import Path
 
@@ -35,6 +34,7 @@ import cv2  # noqa: F401  (first: see DESIGN.md on cv2/pycolmap)
 import numpy as np
 import yaml
 from bench_accuracy import require_kept_capture
+from benchmd import binary_problem
 
 from plenocal.artifacts.cameras import read_cameras
 from plenocal.artifacts.rig import read_rig
@@ -65,9 +65,7 @@ def main() -> None:
     ap.add_argument("--rvs", help="an RVS 4.0 binary: also render with RVS")
     args = ap.parse_args()
     if args.rvs:  # before the first DIBR pass, which the missing binary came after
-        rvs = Path(args.rvs)
-        what = ("no such file" if not rvs.is_file() else
-                "not executable" if not os.access(rvs, os.X_OK) else None)
+        what = binary_problem(Path(args.rvs))
         if what:
             ap.error(f"--rvs {args.rvs}: {what}; build RVS 4.0 from its source (README, 'MPEG "
                      "exports and RVS'): python -m plenocal.verify.rvs <rvs-4.0-src.tar.gz> "

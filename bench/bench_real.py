@@ -88,7 +88,13 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from benchmd import Lines, add_keep_history, positive_int, update_sections  # noqa: E402
+from benchmd import (  # noqa: E402
+    Lines,
+    add_keep_history,
+    binary_problem,
+    positive_int,
+    update_sections,
+)
 
 from plenocal.cli import command_line_block  # noqa: E402
 from plenocal.convert import ConvertSettings, ShotConversion  # noqa: E402
@@ -421,14 +427,9 @@ def tlct_problem(path: Path) -> str | None:
     """Why ``path`` cannot be TLCT's binary (not a file, not executable), None where it
     can: checked before any frame, as a run per round reported it only as "failed" (and on
     a frame without a TLCT cfg not at all)."""
-    if not path.is_file():
-        what = "a folder" if path.is_dir() else "no such file"
-    elif not os.access(path, os.X_OK):
-        what = "not executable"
-    else:
-        return None
-    return (f"{what}; give TLCT's binary (built by shared/tools/tlct/build.sh, its "
-            "README.md)")
+    what = binary_problem(path)
+    return what and (f"{what}; give TLCT's binary (built by shared/tools/tlct/build.sh, its "
+                     "README.md)")
 
 
 def speed_main(args: argparse.Namespace, frames: list[str]) -> None:

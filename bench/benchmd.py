@@ -6,6 +6,7 @@ and the hand-written paragraphs about them below it."""
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 TITLE = "# Benchmarks"
@@ -25,6 +26,16 @@ class Lines(list):
         """A Markdown table's header and its left-aligned separator row."""
         self.say("| " + " | ".join(columns) + " |")
         self.say("|" + "---|" * len(columns))
+
+
+def binary_problem(path: Path) -> str | None:
+    """Why ``path`` cannot be run as a program (a folder, no such file, not executable), or
+    None: the benches that run another tool check it before any work."""
+    if not path.is_file():
+        return "a folder" if path.is_dir() else "no such file"
+    if not os.access(path, os.X_OK):
+        return "not executable"
+    return None
 
 
 def positive_int(text: str) -> int:
