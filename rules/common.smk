@@ -217,7 +217,9 @@ def capture_fingerprints(dataset, shots):
     sources = lenslet_sources(dataset)
     return {
         shot: fingerprint(
-            sources[shot].path if isinstance(sources[shot], VideoShot) else sources[shot]
+            sources[shot].path
+            if isinstance(sources[shot], VideoShot)
+            else sources[shot]
         )
         for shot in shots
     }
